@@ -1,0 +1,210 @@
+"""Command-line interface: ``dualfem list | export | solve | ...``.
+
+Every input error exits with status 2 and one line on stderr (no traceback). ``--json`` prints
+exactly one JSON object on stdout.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any, Callable
+
+from .errors import InputError, MissingDependency
+
+DEFAULT_SOLVER = "clarabel"
+_COMMANDS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {}
+
+
+def command(name: str, help: str):
+    """Register a sub-command: decorate ``run(args) -> exit code``; ``configure`` adds options."""
+    def deco(configure):
+        def wrap(run):
+            _COMMANDS[name] = (help, configure, run)
+            return run
+        return wrap
+    return deco
+
+
+def add_scene_args(p: argparse.ArgumentParser) -> None:
+    """SCENE and ``--set KEY=VALUE`` (shared by every scene-taking command)."""
+    p.add_argument("scene", metavar="SCENE", help="built-in scene (f1, f2, f3) or a .toml scene file")
+    p.add_argument("--set", dest="set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene parameter (N, delta, plane, E, nu, load, ...)")
+
+
+def add_param_args(p: argparse.ArgumentParser) -> None:
+    """``--param KEY=VALUE`` for solver parameters."""
+    p.add_argument("-p", "--param", action="append", default=[], metavar="KEY=VALUE",
+                   help="set a solver parameter (e.g. r=1e7, tol_outer=1e-5)")
+
+
+def scene_from_args(args: argparse.Namespace):
+    """Problem instance from SCENE + --set."""
+    from .scene import load_scene, parse_set
+
+    return load_scene(args.scene, parse_set(args.set))
+
+
+def dumps(obj: Any) -> str:
+    """JSON with NaN/inf written as null (valid JSON for every consumer)."""
+    return json.dumps(_clean(obj), indent=None)
+
+
+def _clean(o: Any) -> Any:
+    import math
+
+    import numpy as np
+
+    if isinstance(o, dict):
+        return {str(k): _clean(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_clean(v) for v in o]
+    if isinstance(o, (np.floating, float)):
+        return float(o) if math.isfinite(o) else None
+    if isinstance(o, np.integer):
+        return int(o)
+    if isinstance(o, np.bool_):
+        return bool(o)
+    if isinstance(o, np.ndarray):
+        return _clean(o.tolist())
+    return o
+
+
+# --------------------------------------------------------------------------- list
+def _cfg_list(p):
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+@command("list", "list problems, scenes and solvers (and whether each is installed)")(_cfg_list)
+def cmd_list(args) -> int:
+    from .registry import entry_point_errors, problems, solvers
+    from .scene import presets
+
+    sol = {n: {"installed": c.missing() is None, "missing": c.missing(), "description": c.description,
+               "exact": c.exact, "parameters": c.defaults} for n, c in sorted(solvers().items())}
+    prb = {n: {"description": c.description, "parameters": {k: str(v) for k, v in c.defaults.items()}}
+           for n, c in sorted(problems().items())}
+    scn = {n: {"problem": pn, **{k: str(v) for k, v in prm.items()}} for n, (pn, prm) in sorted(presets().items())}
+    if args.json:
+        print(dumps({"problems": prb, "scenes": scn, "solvers": sol, "plugin_errors": entry_point_errors()}))
+        return 0
+    print("problems:")
+    for n, d in prb.items():
+        print(f"  {n:14s} {d['description']}")
+    print("scenes:")
+    for n, d in scn.items():
+        print(f"  {n:14s} {d}")
+    print("solvers:")
+    for n, d in sol.items():
+        state = "installed" if d["installed"] else f"NOT INSTALLED ({d['missing']})"
+        print(f"  {n:14s} {state:10s} {d['description']}")
+    for e in entry_point_errors():
+        print(f"  plugin failed to load: {e}")
+    return 0
+
+
+# ------------------------------------------------------------------------- export
+def _cfg_export(p):
+    add_scene_args(p)
+    p.add_argument("-o", "--output", required=True, metavar="FILE", help="output .npz or .mat file")
+
+
+@command("export", "write a scene's QP to .npz or .mat")(_cfg_export)
+def cmd_export(args) -> int:
+    from pathlib import Path
+
+    if Path(args.output).suffix not in (".npz", ".mat"):
+        raise InputError(f"-o must name a .npz or .mat file, got {args.output!r}")
+    qp = scene_from_args(args).build()
+    qp.save(args.output)
+    print(f"wrote {args.output}: n={qp.n} unknowns, m={qp.m} constraints", file=sys.stderr)
+    return 0
+
+
+# -------------------------------------------------------------------------- solve
+def _cfg_solve(p):
+    add_scene_args(p)
+    p.add_argument("--solver", default=DEFAULT_SOLVER, help=f"solver name (default {DEFAULT_SOLVER})")
+    add_param_args(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+
+
+@command("solve", "solve one scene with one solver")(_cfg_solve)
+def cmd_solve(args) -> int:
+    from .runner import make_solver, run, summary
+    from .scene import parse_set
+    from .solution import Status
+
+    solver = make_solver(args.solver, parse_set(args.param))  # validate before the (slow) assembly
+    problem = scene_from_args(args)
+    qp = problem.build()
+    sol = run(solver, qp)
+    rec = summary(qp, sol)
+    post = getattr(args, "_post", None)
+    if post:
+        post(problem, qp, sol, rec)
+    if args.json:
+        print(dumps(rec))
+    else:
+        print(human_summary(rec))
+    return 0 if sol.status == Status.SOLVED else 1
+
+
+def human_summary(rec: dict) -> str:
+    """A few lines for a person."""
+    lines = [f"{rec['problem']}: {rec['ndof']} unknowns, {rec['n_defect_nodes']} defect nodes",
+             f"solver {rec['solver']}: {rec['status']}  {rec['message']}",
+             f"iterations {rec['iterations']}  time setup {rec['time_s']['setup']:.3g} s, "
+             f"solve {rec['time_s']['solve']:.3g} s"]
+    if rec.get("residuals"):
+        r = rec["residuals"]
+        lines.append(f"energy {rec['energy']:.10g}  max jump {rec['max_jump']:.4g}  "
+                     f"contact nodes {rec['n_contact']}/{rec['n_defect_nodes']}")
+        lines.append("residuals (evaluator): " + "  ".join(f"{k} {v:.2e}" for k, v in r.items()))
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- main
+def build_parser() -> argparse.ArgumentParser:
+    """The argparse parser with every registered sub-command."""
+    _import_commands()
+    parser = argparse.ArgumentParser(prog="dualfem", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, (help_, configure, _) in _COMMANDS.items():
+        configure(sub.add_parser(name, help=help_, description=help_))
+    return parser
+
+
+def _import_commands() -> None:
+    """Import every ``dualfem/cmd_*.py`` module: each registers sub-commands with :func:`command`."""
+    import importlib
+    import pkgutil
+
+    import dualfem
+
+    for info in pkgutil.iter_modules(dualfem.__path__):
+        if info.name.startswith("cmd_"):
+            importlib.import_module(f"dualfem.{info.name}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point; returns the exit status."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    run = _COMMANDS[args.command][2]
+    try:
+        return run(args)
+    except (InputError, MissingDependency) as exc:
+        print(f"dualfem {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"dualfem {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

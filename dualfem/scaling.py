@@ -1,0 +1,53 @@
+"""Normalise a QP once at the boundary, for the third-party backends.
+
+With ``x = D y`` (D = diag(K)^(-1/2)), objective multiplied by c = 1 / max|D F| and constraint
+rows scaled by R (unit infinity norm of R B D), the scaled QP
+
+    min 1/2 y' (c D K D) y - (c D F)' y   s.t.  (R B D) y >= 0
+
+has a unit diagonal, a unit load and unit constraint rows, whatever the units or delta. Its
+multiplier nu maps back to ours by ``mu = R nu / c`` (from ``c D (K x - F) = D B' R nu``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .qp import QP
+
+
+@dataclass
+class ScaledQP:
+    """Scaled data (P, q, A) and the factors to map (y, nu) back to (x, mu)."""
+
+    P: sp.csc_matrix
+    q: np.ndarray
+    A: sp.csr_matrix
+    d: np.ndarray
+    r: np.ndarray
+    c: float
+
+    def unscale(self, y: np.ndarray, nu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(x, mu) in the units of the original QP."""
+        return self.d * y, self.r * nu / self.c
+
+
+def scale(qp: QP, enable: bool = True) -> ScaledQP:
+    """Jacobi/objective/row scaling of ``qp`` (identity factors if ``enable`` is False)."""
+    n, m = qp.n, qp.m
+    if not enable:
+        return ScaledQP(qp.K.tocsc(), -qp.F, qp.B.tocsr(), np.ones(n), np.ones(m), 1.0)
+    d = 1.0 / np.sqrt(qp.K.diagonal())
+    Dm = sp.diags(d)
+    qd = d * qp.F
+    c = 1.0 / max(np.abs(qd).max(initial=0.0), 1e-300)
+    if not np.isfinite(c) or np.abs(qd).max(initial=0.0) == 0.0:
+        c = 1.0
+    A = (qp.B @ Dm).tocsr()
+    rn = np.abs(A).max(axis=1).toarray().ravel()
+    r = 1.0 / np.where(rn > 0, rn, 1.0)
+    A = (sp.diags(r) @ A).tocsr()
+    P = (c * (Dm @ qp.K @ Dm)).tocsc()
+    return ScaledQP(P, -c * qd, A, d, r, c)

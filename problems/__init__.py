@@ -1,0 +1,1 @@
+"""Problem plugins of dualfem: every module here not starting with ``_`` is registered."""
