@@ -62,6 +62,15 @@ class Solver:
                 return f"solver {cls.name!r} needs the Python module {mod!r}: {hint}"
         return None
 
+    @classmethod
+    def tolerance_params(cls, tol: float) -> dict[str, Any]:
+        """Solver parameters that target a relative accuracy ``tol`` (for benchmark tiers).
+
+        Plugins map ``tol`` to their own options (e.g. OSQP's eps_abs/eps_rel); the default
+        returns no change.
+        """
+        return {}
+
     def skip(self, qp: QP) -> str | None:
         """Reason why this solver does not apply to ``qp``, or None."""
         return None

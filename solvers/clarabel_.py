@@ -53,6 +53,10 @@ class ClarabelSolver(Solver):
     def validate(self) -> None:
         positive(self, "tol_gap_abs", "tol_gap_rel", "tol_feas", "tol_ktratio", "max_iter")
 
+    @classmethod
+    def tolerance_params(cls, tol: float) -> dict:
+        return {"tol_gap_abs": tol, "tol_gap_rel": tol, "tol_feas": tol}
+
     def setup(self, qp) -> None:
         import clarabel
 

@@ -52,6 +52,10 @@ class OSQPSolver(Solver):
     def validate(self) -> None:
         positive(self, "eps_abs", "eps_rel", "max_iter")
 
+    @classmethod
+    def tolerance_params(cls, tol: float) -> dict:
+        return {"eps_abs": tol, "eps_rel": tol}
+
     def setup(self, qp) -> None:
         import osqp
 

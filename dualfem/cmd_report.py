@@ -1,0 +1,50 @@
+"""``dualfem report KIND [ARGS...]``: regenerate a report in reports/.
+
+Report kinds are registered by modules ``dualfem/report_*.py`` with :func:`register_report`;
+each kind is a function ``run(argv: list[str]) -> int`` with its own argparse.
+"""
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from typing import Callable
+
+from .cli import command
+from .errors import InputError
+
+_REPORTS: dict[str, tuple[str, Callable[[list[str]], int]]] = {}
+
+
+def register_report(kind: str, help: str):
+    """Decorator: register ``run(argv) -> exit code`` as ``dualfem report KIND``."""
+    def deco(fn):
+        _REPORTS[kind] = (help, fn)
+        return fn
+    return deco
+
+
+def reports() -> dict[str, tuple[str, Callable[[list[str]], int]]]:
+    """All report kinds (imports every ``dualfem/report_*.py``)."""
+    import dualfem
+
+    for info in pkgutil.iter_modules(dualfem.__path__):
+        if info.name.startswith("report_"):
+            importlib.import_module(f"dualfem.{info.name}")
+    return dict(_REPORTS)
+
+
+def _cfg(p):
+    p.add_argument("kind", metavar="KIND", help="which report (see 'dualfem report list')")
+    p.add_argument("rest", nargs="*", metavar="ARGS", help="arguments of that report")
+
+
+@command("report", "regenerate a report in reports/ (KIND: paper, bench, figures, ...)")(_cfg)
+def cmd_report(args) -> int:
+    kinds = reports()
+    if args.kind == "list":
+        for k, (h, _) in sorted(kinds.items()):
+            print(f"{k:12s} {h}")
+        return 0
+    if args.kind not in kinds:
+        raise InputError(f"unknown report {args.kind!r}; known: {', '.join(sorted(kinds)) or '(none)'}")
+    return kinds[args.kind][1](list(args.rest))
