@@ -1,0 +1,291 @@
+"""The paper's method: Uzawa on the modified Lagrangian with a generalized Newton-Armijo inner loop.
+
+Zhiltsov & Maksimova (2023), sections 3-4. With l the contact pressure (units of stress, the
+paper's alpha_j at defect node j) and w_j the trapezoid weights, the discrete modified Lagrangian is
+
+    M(x, l) = 1/2 x'Kx - F'x + sum_j w_j / (2 r) ( ((l_j - r [x_nu]_j)^+)^2 - l_j^2 ),
+
+(K already holds the 1/delta interface term). Uzawa (outer, counter k):
+
+    x^{k+1} = argmin_x M(x, l^k),      l^{k+1} = (l^k - r [x^{k+1}_nu])^+,
+
+stopping when max_j |l^{k+1}_j - l^k_j| <= tol_outer. The inner minimization is the generalized
+Newton method (counter m, summed over all outer iterations): with lambda = l - r B x and the
+active set A = {lambda_j > 0},
+
+    gradient  G(x) = K x - F - B' (w * lambda^+),
+    Hessian   H(x) = K + r B' diag(w * [j in A]) B,
+    x <- x - s d,  d = H^-1 G,
+
+with s = 1 divided by ``step_factor`` until the Armijo test
+``M(x - s d) <= M(x) - armijo_c * s * G'd`` holds, and the inner stop
+``||x^{m+1} - x^m|| / ||x^{m+1}|| < tol_inner``.
+
+Choices where the paper is silent or misprinted (documented here once):
+
+* The printed gradient beta(t) uses t_{i+} alone where the energy gives the jump t_{i+} - t_{i-};
+  we use the jump. The printed Armijo test has no constant and the wrong sign for the descent
+  direction -d; we use the standard sufficient decrease with ``armijo_c`` (default 1e-4).
+* lambda_j = 0 counts as inactive (the paper lists > 0 and < 0 only).
+* The norm of the inner stop test is the paper's V^h norm; we take the energy norm
+  ||x||^2 = x'Kx (``inner_norm="energy"``, the natural norm of V^h for this problem and the one
+  that is exact and cheap in the reduced space). ``inner_norm="euclidean"`` (the plain
+  vector norm) is available with ``linalg="full"``.
+* The first Newton iterate is the unconstrained minimizer K^-1 F (the paper does not say; it
+  apparently starts from 0, which costs one extra Newton step: its m = 2 for f3). Every later
+  inner loop is warm-started from the previous outer iterate.
+* Shortcut (``shortcut=True``, with l^0 = 0): if the unconstrained minimizer has no negative
+  jump, it already is the answer of the first Uzawa iteration and l^1 = 0; we return it with
+  k = 1, m = 1 (one solve).
+
+Linear algebra (``linalg``): ``"reduced"`` (default) works on the local unknowns only via the
+exact Schur reduction of :class:`dualfem.linalg.LocalReduction` (K_fixed factorized once,
+reused across delta, loads and solvers); each generalized Hessian is a small dense SPD matrix
+whose Cholesky factor is cached by active set. ``"full"`` is the textbook path: it refactorizes
+the sparse 2n x 2n Hessian at every Newton step. Both compute the same iterates: every iterate
+after the first is exactly optimal in the non-local unknowns, so the Newton steps, Armijo tests
+and stop tests are the same numbers, computed in a smaller space.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.linalg as la
+import scipy.sparse as sp
+import scipy.sparse.linalg as sla
+
+from dualfem.errors import InputError
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver, positive
+
+
+class _ReducedSpace:
+    """Dense linear algebra on the local unknowns I (exact reduction)."""
+
+    def __init__(self, qp, norm: str):
+        from dualfem.linalg import LocalReduction
+
+        if norm != "energy":
+            raise InputError("parameter 'inner_norm' of solver 'uzawa' must be 'energy' with "
+                             "linalg='reduced' ('euclidean' needs linalg='full')")
+        self.red = red = LocalReduction(qp)
+        self.Q, self.q, self.B = red.S, red.g, red.BI
+        self.c0 = red.c0
+        self._chol_S = la.cho_factor(self.Q, lower=True, check_finite=False)
+        self._cache: dict[bytes, tuple] = {}
+        self.factorizations = 0
+
+    def start(self) -> np.ndarray:
+        return la.cho_solve(self._chol_S, self.q, check_finite=False)
+
+    def qgrad(self, z):
+        return self.Q @ z - self.q
+
+    def qform(self, d):
+        return float(d @ (self.Q @ d))
+
+    def norm2(self, z):
+        return float(z @ (self.Q @ z) - 2.0 * self.c0)
+
+    def newton(self, coef: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+        """Solve (Q + B' diag(coef) B) d = rhs; coef = r*w on the active set, 0 elsewhere."""
+        key = coef.tobytes()
+        fac = self._cache.get(key)
+        if fac is None:
+            A = np.flatnonzero(coef)
+            BA = self.B[A]
+            H = self.Q + BA.T @ (coef[A, None] * BA)
+            fac = la.cho_factor(H, lower=True, check_finite=False)
+            self.factorizations += 1
+            if len(self._cache) >= 64:
+                self._cache.pop(next(iter(self._cache)))
+            self._cache[key] = fac
+        return la.cho_solve(fac, rhs, check_finite=False)
+
+    def full(self, z):
+        return self.red.full(z)
+
+
+class _FullSpace:
+    """Textbook sparse linear algebra on all unknowns (refactorizes every Newton step)."""
+
+    def __init__(self, qp, norm: str):
+        self.Q, self.q, self.B = qp.K.tocsc(), qp.F, qp.B.tocsr()
+        self.norm = norm
+        self.factorizations = 0
+
+    def start(self):
+        self.factorizations += 1
+        return sla.splu(self.Q, permc_spec="MMD_AT_PLUS_A").solve(self.q)
+
+    def qgrad(self, z):
+        return self.Q @ z - self.q
+
+    def qform(self, d):
+        return float(d @ (self.Q @ d))
+
+    def norm2(self, z):
+        return float(z @ (self.Q @ z)) if self.norm == "energy" else float(z @ z)
+
+    def newton(self, coef, rhs):
+        H = (self.Q + self.B.T @ sp.diags(coef) @ self.B).tocsc()
+        self.factorizations += 1
+        return sla.splu(H, permc_spec="MMD_AT_PLUS_A").solve(rhs)
+
+    def full(self, z):
+        return z
+
+
+@register_solver
+class Uzawa(Solver):
+    """Uzawa on the modified Lagrangian + generalized Newton-Armijo (the paper's method)."""
+
+    name = "uzawa"
+    description = "Uzawa / modified Lagrangian + generalized Newton-Armijo (Zhiltsov & Maksimova 2023)"
+    tolerance = 1e-6
+    defaults = {
+        "r": 1e7,                 # augmentation parameter (stress / length)
+        "tol_outer": 1e-5,        # on max_j |l^{k+1}_j - l^k_j| (stress units, absolute, as the paper)
+        "tol_inner": 1e-7,        # on ||x^{m+1} - x^m|| / ||x^{m+1}||
+        "step_factor": 2.0,       # Armijo backtracking divides s by this (paper: 2 or 1.1)
+        "armijo_c": 1e-4,         # sufficient-decrease constant
+        "max_outer": 20000,
+        "max_inner": 200,         # Newton steps per outer iteration
+        "max_backtracks": 80,
+        "l0": 0.0,                # starting pressure l^0 (same at every defect node)
+        "linalg": "reduced",      # "reduced" (fast, exact) or "full" (textbook)
+        "inner_norm": "energy",   # norm of the inner stop test
+        "shortcut": True,         # return the unconstrained minimizer when it is admissible
+        "stall_window": 1000,     # stop with 'stagnation' if the dual change has not improved for this many outer its
+        "time_limit": 0.0,        # seconds, 0 = none
+    }
+
+    def validate(self) -> None:
+        positive(self, "r", "tol_outer", "tol_inner", "armijo_c", "max_outer", "max_inner",
+                 "max_backtracks", "stall_window")
+        p = self.params
+        if not p["step_factor"] > 1 or not np.isfinite(p["step_factor"]):
+            raise InputError(f"parameter 'step_factor' of solver 'uzawa' must be a finite number > 1, got {p['step_factor']!r}")
+        if not p["armijo_c"] < 1:
+            raise InputError(f"parameter 'armijo_c' of solver 'uzawa' must be in (0, 1), got {p['armijo_c']!r}")
+        if not (np.isfinite(p["l0"]) and p["l0"] >= 0):
+            raise InputError(f"parameter 'l0' of solver 'uzawa' must be a finite number >= 0, got {p['l0']!r}")
+        if p["linalg"] not in ("reduced", "full"):
+            raise InputError(f"parameter 'linalg' of solver 'uzawa' must be 'reduced' or 'full', got {p['linalg']!r}")
+        if p["inner_norm"] not in ("energy", "euclidean"):
+            raise InputError(f"parameter 'inner_norm' of solver 'uzawa' must be 'energy' or 'euclidean', got {p['inner_norm']!r}")
+        if p["inner_norm"] == "euclidean" and p["linalg"] != "full":
+            raise InputError("parameter 'inner_norm' of solver 'uzawa' must be 'energy' with "
+                             "linalg='reduced' ('euclidean' needs linalg='full')")
+        if not (np.isfinite(p["time_limit"]) and p["time_limit"] >= 0):
+            raise InputError(f"parameter 'time_limit' of solver 'uzawa' must be >= 0, got {p['time_limit']!r}")
+
+    @classmethod
+    def tolerance_params(cls, tol: float) -> dict:
+        return {"tol_outer": tol * 10.0, "tol_inner": tol * 1e-2}
+
+    def setup(self, qp) -> None:
+        self.qp = qp
+        space = _ReducedSpace if self.params["linalg"] == "reduced" else _FullSpace
+        self.space = space(qp, self.params["inner_norm"])
+
+    def solve(self) -> Solution:
+        p, qp, sp_ = self.params, self.qp, self.space
+        r, w = float(p["r"]), qp.weights
+        t_start = time.perf_counter()
+        deadline = t_start + p["time_limit"] if p["time_limit"] > 0 else np.inf
+        z = sp_.start()
+        l = np.full(qp.m, float(p["l0"]))
+        k = m_total = 0
+        history: list[dict] = []
+
+        def result(status, msg=""):
+            x = sp_.full(z)
+            return Solution(solver=self.name, status=status, x=x, multipliers=w * l,
+                            iterations={"outer": k, "inner": m_total}, history=history, message=msg,
+                            info={"factorizations": sp_.factorizations, "r": r, "linalg": p["linalg"]})
+
+        if p["shortcut"] and p["l0"] == 0.0 and np.all(sp_.B @ z >= 0):
+            k, m_total = 1, 1
+            history.append({"k": 1, "dual_change": 0.0, "inner_steps": 1, "steps": [1.0], "active": 0,
+                            "shortcut": True})
+            return result(Status.SOLVED, "unconstrained minimizer is admissible (shortcut)")
+
+        best, best_k = np.inf, 0
+        while k < p["max_outer"]:
+            z, steps, inner_ok, msg = self._inner(z, l, r, w, deadline)
+            m_total += len(steps)
+            if not np.all(np.isfinite(z)):
+                return result(Status.NUMERICAL_ERROR, "NaN/inf in the Newton iterate")
+            l_new = np.maximum(0.0, l - r * (sp_.B @ z))
+            change = float(np.abs(l_new - l).max(initial=0.0))
+            k += 1
+            history.append({"k": k, "dual_change": change, "inner_steps": len(steps), "steps": steps,
+                            "active": int(np.count_nonzero(l_new > 0)), "inner_converged": inner_ok,
+                            "inner_ratios": list(self._ratios)})
+            l = l_new
+            if not np.isfinite(change):
+                return result(Status.NUMERICAL_ERROR, "NaN/inf in the multiplier update")
+            if change <= p["tol_outer"]:
+                if inner_ok:
+                    return result(Status.SOLVED)
+                return result(Status.INACCURATE, f"outer test met but last inner loop failed: {msg}")
+            if change < best:
+                best, best_k = change, k
+            elif k - best_k >= p["stall_window"]:
+                return result(Status.STAGNATION, f"dual change has not improved on {best:.3g} for "
+                                                 f"{p['stall_window']} outer iterations")
+            if time.perf_counter() > deadline:
+                return result(Status.TIME_LIMIT, f"time limit {p['time_limit']} s reached")
+        return result(Status.MAX_ITER, f"max_outer={p['max_outer']} reached; last dual change {change:.3g}")
+
+    def _inner(self, z, l, r, w, deadline):
+        """Generalized Newton-Armijo for min_x M(x, l); returns (z, step sizes, converged, msg)."""
+        p, sp_ = self.params, self.space
+        B = sp_.B
+        steps: list[float] = []
+        self._ratios = ratios = []
+        for _ in range(int(p["max_inner"])):
+            lam = l - r * (B @ z)
+            lp = np.maximum(lam, 0.0)
+            qg = sp_.qgrad(z)
+            G = qg - B.T @ (w * lp)
+            coef = np.where(lam > 0, r * w, 0.0)
+            d = sp_.newton(coef, G)
+            Gd = float(G @ d)
+            dQd = sp_.qform(d)
+            rBd = r * (B @ d)
+            s = 1.0
+            if Gd > 0:
+                # M(x - s d) - M(x) = -s G'd + s^2/2 d'Qd + sum_j w_j/(2r) D_j, with the remainder of
+                # the penalty's linearization D_j = ((lam_j + s r Bd_j)^+)^2 - (lam_j^+)^2 - 2 s r Bd_j lam_j^+
+                # evaluated in a cancellation-free form, so a Newton step at round-off level is
+                # accepted or refused the same way whatever the linear algebra.
+                for _ in range(int(p["max_backtracks"])):
+                    eps = s * rBd
+                    lps = lam + eps
+                    rem = np.where((lam > 0) & (lps > 0), eps * eps,
+                                   np.maximum(lps, 0.0) ** 2 - lp * lp - 2.0 * eps * lp)
+                    dM = -s * Gd + 0.5 * s * s * dQd + float(w @ rem) / (2.0 * r)
+                    if dM <= -p["armijo_c"] * s * Gd:
+                        break
+                    s /= p["step_factor"]
+                else:
+                    return z, steps, False, "Armijo backtracking failed"
+            # Gd <= 0 only happens when G is at round-off level: the full step is taken and the
+            # stop test below ends the inner loop.
+            z = z - s * d
+            steps.append(s)
+            nz2 = sp_.norm2(z)
+            ratio = s * np.sqrt(max(dQd, 0.0) if p["inner_norm"] == "energy" else float(d @ d)) \
+                / np.sqrt(max(nz2, 1e-300))
+            ratios.append(float(ratio))
+            if ratio < p["tol_inner"]:
+                return z, steps, True, ""
+            if not np.isfinite(nz2):
+                return z, steps, False, "NaN/inf"
+            if time.perf_counter() > deadline:
+                return z, steps, False, "time limit"
+        return z, steps, False, f"max_inner={p['max_inner']} Newton steps without meeting tol_inner"
