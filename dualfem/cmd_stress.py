@@ -1,0 +1,108 @@
+"""``dualfem stress [--quick] [--out DIR]``: the numerical-stability grid (see :mod:`dualfem.stress`)."""
+from __future__ import annotations
+
+import math
+import sys
+import time
+from pathlib import Path
+
+from .cli import command
+from .errors import InputError
+
+
+def _cfg(p):
+    p.add_argument("--quick", action="store_true",
+                   help="small version: N=16 base scene, load f2 only on the delta axis, N up to 128, "
+                        "20 s per-run time limit (default: N=32, loads f1/f2/f3, N up to 1024, 120 s)")
+    p.add_argument("--out", default="results/stress", metavar="DIR",
+                   help="results directory (runs.jsonl, meta.json); default results/stress")
+    p.add_argument("--solvers", default=None, metavar="A,B",
+                   help="comma-separated solver names (default: every registered, installed solver)")
+    p.add_argument("--axes", default=None, metavar="A,B",
+                   help="which axes: delta, r, units, load, nu, N (default all)")
+    p.add_argument("--time-limit", type=str, default=None, metavar="SECONDS",
+                   help="per-run solver time limit (passed to solvers that take one; the harness kills "
+                        "a run after 2x this plus an assembly allowance)")
+    p.add_argument("--max-n", type=str, default=None, metavar="N", help="largest N on the N axis")
+    p.add_argument("-j", "--jobs", type=str, default="1", metavar="J", help="worker processes (default 1)")
+    p.add_argument("--resume", action="store_true", help="keep finished runs in DIR/runs.jsonl, run the rest")
+    p.add_argument("--dry-run", action="store_true", help="print the number of runs per axis and exit")
+
+
+@command("stress", "run the numerical-stability grid (delta, r, units, load, nu, N) over every solver")(_cfg)
+def cmd_stress(args) -> int:
+    from . import stress
+    from .errors import check_int, check_positive
+    from .registry import solvers
+
+    reg = solvers()
+    if args.solvers:
+        names = [s.strip() for s in args.solvers.split(",") if s.strip()]
+        unknown = [s for s in names if s not in reg]
+        if unknown or not names:
+            raise InputError(f"--solvers: unknown solver {unknown[0] if unknown else '(empty)'!r}; "
+                             f"known solvers: {', '.join(sorted(reg))}")
+    else:
+        names = sorted(reg)
+    axes = tuple(stress.AXES)
+    if args.axes:
+        axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
+        bad = [a for a in axes if a not in stress.AXES]
+        if bad or not axes:
+            raise InputError(f"--axes: unknown axis {bad[0] if bad else '(empty)'!r}; allowed: "
+                             f"{', '.join(stress.AXES)}")
+    tl = None if args.time_limit is None else check_positive("--time-limit", args.time_limit)
+    max_n = None if args.max_n is None else check_int("--max-n", args.max_n, 8, 4096)
+    jobs = check_int("--jobs", args.jobs, 1, 64)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out must be a directory, {str(out)!r} is a file")
+
+    tasks = stress.build_grid(names, quick=args.quick, axes=axes, time_limit=tl, max_n=max_n)
+    if args.dry_run:
+        from collections import Counter
+
+        for ax, n in Counter(t.axis for t in tasks).items():
+            print(f"{ax:6s} {n} runs")
+        print(f"total  {len(tasks)} runs, solvers: {', '.join(names)}")
+        return 0
+    refs = stress.reference_solvers()
+    meta = {"quick": bool(args.quick), "solvers": names, "axes": list(axes), "safety": stress.SAFETY,
+            "ref_kkt": stress.REF_KKT, "references": [r[0] for r in refs],
+            "tolerances": {n: reg[n].tolerance for n in names},
+            "exact": {n: reg[n].exact for n in names},
+            "third_party": {n: bool(reg[n].requires) for n in names},
+            "missing": {n: reg[n].missing() for n in names if reg[n].missing()},
+            "base": stress.BASE, "time_limit": tasks[0].time_limit if tasks else None,
+            "command": "dualfem " + " ".join(sys.argv[1:]) if sys.argv and "dualfem" in sys.argv[0] else None,
+            "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            "environment": stress.environment()}
+    tty = sys.stderr.isatty()
+    t0 = time.monotonic()
+
+    def progress(i, n, rec):
+        err = rec.get("err")
+        e = f"err {err:.1e}" if isinstance(err, float) and math.isfinite(err) else ""
+        line = (f"[{i}/{n} {time.monotonic() - t0:6.0f}s] {rec['axis']:5s} {rec['solver']:9s} "
+                f"{_coords(rec['coords']):32s} {rec.get('status', ''):15s} {rec['outcome']:12s} {e}")
+        print(("\r" + line[:150]) if tty else line, file=sys.stderr, end="" if tty else "\n", flush=True)
+
+    print(f"dualfem stress: {len(tasks)} runs ({', '.join(names)}), reference "
+          f"{refs[0][0] if refs else 'NONE'} -> {out}", file=sys.stderr)
+    recs = stress.run_grid(tasks, out, jobs=jobs, resume=args.resume, progress=progress,
+                           meta={**meta})
+    if tty:
+        print(file=sys.stderr)
+    from collections import Counter
+
+    c = Counter(r["outcome"] for r in recs)
+    stress._write_meta(out, {**meta, "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                             "complete": len(recs) == len(tasks), "n_tasks": len(tasks),
+                             "outcomes": dict(c)})
+    print("outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(c.items())), file=sys.stderr)
+    print(f"results in {out}/runs.jsonl; report: dualfem report stability {out}", file=sys.stderr)
+    return 0
+
+
+def _coords(c: dict) -> str:
+    return " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in c.items())
