@@ -31,7 +31,7 @@ def parse_set(items: list[str] | None) -> dict[str, str]:
 
 
 def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
-    """Return the problem instance for a preset name or a ``.toml`` scene file.
+    """Return the problem instance for a preset name, a ``.toml`` scene file or a ``.npz``/``.mat`` QP file.
 
     A TOML scene file holds scene keys at top level; ``problem = "NAME"`` picks the problem
     plugin (default ``thin_defect``) and ``scene = "f2"`` starts from a built-in preset.
@@ -40,6 +40,9 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
     pre = presets()
     if spec in pre:
         pname, params = pre[spec]
+    elif Path(spec).suffix in (".npz", ".mat"):
+        # a QP file (generic ``min 1/2 x'Px + q'x s.t. Gx >= h`` or a ``dualfem export``): problems/generic_qp.py
+        pname, params = "qp_file", {"path": spec}
     elif spec.endswith(".toml") or Path(spec).is_file():
         path = Path(spec)
         if not path.is_file():
@@ -62,6 +65,6 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
         params.update(data)
     else:
         raise InputError(f"unknown scene {spec!r}; use a built-in scene "
-                         f"({', '.join(sorted(pre))}) or a path to a .toml scene file")
+                         f"({', '.join(sorted(pre))}) or a path to a .toml scene file or a .npz/.mat QP file")
     params.update(overrides)
     return get_problem(pname)(**params)

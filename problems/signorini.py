@@ -1,0 +1,200 @@
+"""Signorini contact: an elastic rectangle pressed onto a rigid foundation (frictionless).
+
+Body: the rectangle (0, width) x (0, height), isotropic linear elasticity (E, nu, plane strain or
+stress), P1 elements on an ``N x round(N height / width)`` grid of squares cut by the (1, 1)
+diagonal (``MeshTri.init_tensor``). Loading by a rigid flat punch on the top side: ``u2 = -indent``
+on every top node, ``u1`` free there (frictionless punch) except at the top node nearest to
+``width / 2``, where ``u1 = 0`` removes the horizontal rigid motion. Left and right sides are
+traction-free.
+
+Foundation: a rigid obstacle below the bottom side. ``obstacle`` is the initial gap ``g(x)`` >= 0
+between the bottom point ``(x, 0)`` of the body and the obstacle surface, measured along
+``-x2`` (a numpy expression in ``x``, e.g. ``"0.5*(x-0.5)**2"``, a cylinder-like bump; ``"0"`` a
+flat foundation touching the whole bottom). Non-penetration at every bottom node j:
+``u2_j + g_j >= 0``.
+
+QP (see :mod:`dualfem.qp`): the unknowns are the free dofs; B row j picks ``u2`` of bottom node j
+(so its normal is (0, -1) seen from the foundation, and ``Bx`` is the current gap). Because the
+QP type has no constraint offset, the gap is removed by the shift ``u = x + x_shift`` with
+``x_shift = -B'g`` (``B x_shift = -g``): the solvers' ``x`` is that shifted vector, ``Bx`` is
+the gap, and ``maps["x_shift"]`` / ``maps["objective_offset"]`` recover the displacement and the
+potential energy (``Pi(u) = qp.energy(x) + objective_offset``). With ``obstacle = "0"`` the shift
+is zero. The multipliers are the nodal contact forces (>= 0, force per unit thickness); the
+contact pressure is ``mu / weights`` with trapezoid weights along the bottom side.
+
+Checkable physics (tests/test_signorini.py):
+
+* ``obstacle = "0"``: the exact solution is homogeneous uniaxial compression, reproduced exactly
+  by P1: contact pressure ``p = E' indent / height`` on the whole bottom, with ``E' = E / (1 - nu^2)``
+  (plane strain) or ``E`` (plane stress).
+* any obstacle: global equilibrium, total contact force = the punch force (:meth:`Signorini.punch_force`,
+  computed from the rows of the full stiffness matrix for the prescribed dofs, which the QP does
+  not contain), and zero horizontal reaction at the pin (frictionless contact).
+"""
+from __future__ import annotations
+
+import ast
+
+import numpy as np
+import scipy.sparse as sp
+
+from dualfem.errors import InputError, check_int, check_open_interval, check_positive
+from dualfem.problem import Problem
+from dualfem.qp import QP
+from dualfem.registry import register_problem
+
+from .loads import _ALLOWED
+from .thin_defect import PLANES, lame
+
+
+def gap_function(expr: str):
+    """The initial gap ``g(x)`` from a numpy expression in ``x`` (AST-checked, no builtins)."""
+    if callable(expr):
+        return expr
+    if not isinstance(expr, (str, int, float)) or isinstance(expr, bool):
+        raise InputError(f"obstacle must be a numpy expression in x (e.g. '0.5*(x-0.5)**2'), got {expr!r}")
+    text = str(expr).strip()
+    try:
+        tree = ast.parse(text, mode="eval")
+    except SyntaxError:
+        raise InputError(f"obstacle {text!r} is not a valid expression in x (e.g. '0.5*(x-0.5)**2')") from None
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name) and node.id not in _ALLOWED and node.id != "x":
+            raise InputError(f"obstacle {text!r}: name {node.id!r} is not allowed "
+                             f"(use x and {', '.join(sorted(_ALLOWED))})")
+        if isinstance(node, (ast.Attribute, ast.Lambda, ast.Subscript, ast.Starred, ast.Call)) and \
+                not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)):
+            raise InputError(f"obstacle {text!r}: only arithmetic and the functions "
+                             f"{', '.join(sorted(_ALLOWED))} are allowed")
+    code = compile(tree, "<obstacle>", "eval")
+
+    def g(x):
+        with np.errstate(all="ignore"):
+            val = eval(code, {"__builtins__": {}}, {**_ALLOWED, "x": x})  # noqa: S307 - AST-checked
+        return np.broadcast_to(np.asarray(val, dtype=float), np.shape(x)).copy()
+
+    return g
+
+
+@register_problem
+class Signorini(Problem):
+    """Elastic rectangle pressed by a flat punch onto a rigid foundation (Signorini contact)."""
+
+    name = "signorini"
+    description = "elastic rectangle pressed onto a rigid foundation (Signorini contact, frictionless)"
+    defaults = {
+        "N": 32,
+        "E": 69000.0,
+        "nu": 0.3,
+        "plane": "strain",
+        "width": 1.0,
+        "height": 0.5,
+        "indent": 0.005,
+        "obstacle": "0.05*(x-0.5)**2",
+    }
+    presets = {"signorini": {}, "signorini_flat": {"obstacle": "0"}}
+
+    def validate(self) -> None:
+        p = self.params
+        p["N"] = check_int("N", p["N"], 2, 4096)
+        p["E"] = check_positive("E", p["E"])
+        p["nu"] = check_open_interval("nu", p["nu"], -1.0, 0.5)
+        p["width"] = check_positive("width", p["width"])
+        p["height"] = check_positive("height", p["height"])
+        p["indent"] = check_positive("indent", p["indent"], allow_zero=True)
+        if p["plane"] not in PLANES:
+            raise InputError(f"plane must be one of {', '.join(PLANES)}, got {p['plane']!r}")
+        self._gap = gap_function(p["obstacle"])
+        xs = np.linspace(0.0, p["width"], 9)
+        try:
+            g = self._gap(xs)
+        except Exception as exc:
+            raise InputError(f"obstacle {p['obstacle']!r} cannot be evaluated: {exc}") from None
+        if not np.all(np.isfinite(g)):
+            raise InputError(f"obstacle {p['obstacle']!r} gives NaN or infinite gaps on [0, {p['width']:g}]")
+        if np.any(g < 0):
+            raise InputError(f"obstacle {p['obstacle']!r} gives a negative initial gap (the foundation would "
+                             f"already penetrate the body); the gap g(x) must be >= 0 on [0, {p['width']:g}]")
+
+    def mesh(self):
+        """The scikit-fem mesh of the rectangle."""
+        from skfem import MeshTri
+
+        p = self.params
+        ny = max(1, int(round(p["N"] * p["height"] / p["width"])))
+        return MeshTri.init_tensor(np.linspace(0, p["width"], p["N"] + 1), np.linspace(0, p["height"], ny + 1))
+
+    def build(self) -> QP:
+        from skfem import Basis, ElementTriP1, ElementVector, asm
+        from skfem.models.elasticity import linear_elasticity
+
+        p = self.params
+        mesh = self.mesh()
+        basis = Basis(mesh, ElementVector(ElementTriP1()))
+        lam, mu = lame(p["E"], p["nu"], p["plane"])
+        K_all = asm(linear_elasticity(lam, mu), basis).tocsr()
+        X = mesh.p
+        W, H = p["width"], p["height"]
+        tol = 1e-9 * max(W, H)
+        nd = basis.nodal_dofs                       # (2, nnodes) global dof ids
+        top = np.flatnonzero(np.abs(X[1] - H) < tol)
+        bottom = np.flatnonzero(np.abs(X[1]) < tol)
+        bottom = bottom[np.argsort(X[0, bottom])]
+        pin = top[np.argmin(np.abs(X[0, top] - 0.5 * W))]
+        prescribed = np.concatenate([nd[1, top], [nd[0, pin]]])
+        values = np.concatenate([np.full(top.size, -p["indent"]), [0.0]])
+        free = np.setdiff1d(np.arange(basis.N), prescribed)
+        g2f = np.full(basis.N, -1, dtype=np.int64)
+        g2f[free] = np.arange(free.size)
+        node_dofs = g2f[nd]
+
+        K = K_all[free][:, free].tocsc()
+        K_fc = K_all[free][:, prescribed]
+        F = -(K_fc @ values)                        # load from the prescribed punch displacement
+
+        m = bottom.size
+        cols = node_dofs[1, bottom]
+        B = sp.csr_matrix((np.ones(m), (np.arange(m), cols)), shape=(m, free.size))
+        xb = X[0, bottom]
+        seg = np.diff(xb)
+        weights = 0.5 * (np.r_[0.0, seg] + np.r_[seg, 0.0])
+        gap = self._gap(xb)
+        shift = -(B.T @ gap)                        # u = x + shift, B shift = -gap
+        F_qp = F - K @ shift
+        offset = float(0.5 * shift @ (K @ shift) - F @ shift)
+        local = np.unique(node_dofs[:, bottom][node_dofs[:, bottom] >= 0])
+
+        # what the punch-force check needs and the QP does not contain
+        self._K_pf = K_all[prescribed][:, free].tocsr()
+        self._K_pp = K_all[prescribed][:, prescribed].tocsr()
+        self._values = values
+        self._n_top = top.size
+        self._shift = shift
+        maps = {
+            "nodes": X, "triangles": mesh.t, "node_dofs": node_dofs,
+            "contact_nodes": bottom, "contact_x": xb, "gap": gap, "normal": np.array([0.0, -1.0]),
+            "top_nodes": top, "pin_node": np.array(pin),
+            "x_shift": shift, "objective_offset": np.array(offset),
+        }
+        params = {k: (v if isinstance(v, (int, float, str)) else str(v)) for k, v in p.items()}
+        return QP(K=K, F=F_qp, B=B, weights=weights, K_fixed=K, local_dofs=local,
+                  name=f"signorini[{'flat' if not np.any(gap) else 'obstacle'}]", params=params, maps=maps)
+
+    def displacement(self, x: np.ndarray) -> np.ndarray:
+        """The displacement of the free dofs, ``u = x + x_shift`` (call :meth:`build` first)."""
+        return np.asarray(x) + self._shift
+
+    def punch_force(self, x: np.ndarray) -> tuple[float, float]:
+        """(total vertical force of the punch on the body, horizontal force at the pin).
+
+        Reactions at the prescribed dofs, ``K_pf u_f + K_pp u_p``, from rows of the full
+        stiffness matrix that the QP does not hold. Equilibrium: vertical force + sum(mu) = 0.
+        """
+        r = self._K_pf @ self.displacement(x) + self._K_pp @ self._values
+        return float(r[: self._n_top].sum()), float(r[self._n_top])
+
+    def flat_pressure(self) -> float:
+        """Exact contact pressure on a flat foundation: E' indent / height."""
+        p = self.params
+        Eeff = p["E"] / (1 - p["nu"] ** 2) if p["plane"] == "strain" else p["E"]
+        return Eeff * p["indent"] / p["height"]

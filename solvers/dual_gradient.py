@@ -1,0 +1,158 @@
+"""Projected gradient on the dual: the template solver (simple, exact in the limit, slow).
+
+For ``min 1/2 x'Kx - F'x  s.t.  Bx >= 0`` the Lagrangian ``1/2 x'Kx - F'x - mu'Bx`` is minimized
+over x by ``x(mu) = K^-1 (F + B'mu)``, which leaves the dual problem
+
+    minimize over mu >= 0    f(mu) = 1/2 (F + B'mu)' K^-1 (F + B'mu),    grad f(mu) = B x(mu).
+
+The iteration ``mu <- max(0, mu - t B x(mu))`` is projected gradient with the fixed step
+``t = 1 / L``, ``L = lambda_max(B K^-1 B')`` (estimated once by Lanczos). With ``accelerate``
+(default) it is FISTA with O'Donoghue-Candes gradient restarts. Because x is affine in mu, the
+primal iterate at the extrapolated point is a combination of the last two primal iterates, so each
+iteration costs exactly one solve with the (once factorized) K.
+
+Honest about cost: the number of iterations grows with the condition number of the Delassus
+matrix ``B K^-1 B'`` (plain gradient ~ kappa, accelerated ~ sqrt(kappa) per digit), so this is
+orders of magnitude slower than the active-set or interior-point solvers on fine meshes. It exists
+as a readable reference and as the starting point of ``docs/plugins.md``; ``skip`` refuses QPs with
+more than ``max_n`` unknowns.
+
+Stopping test: the evaluator's own scale-free residuals (:mod:`dualfem.evaluator`) of
+``(x(mu), mu)``. Stationarity and dual feasibility hold by construction (up to the solve's
+round-off), so the test is ``primal <= tol`` and ``complementarity <= tol``. Without convergence
+the status is ``MAX_ITER`` or ``TIME_LIMIT`` and the last iterate is returned (the runner still
+attaches its true residuals).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.sparse.linalg as sla
+
+from dualfem.errors import InputError
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver, positive
+
+
+@register_solver
+class DualGradient(Solver):
+    """Projected (optionally accelerated) gradient method on the dual of the contact QP."""
+
+    name = "dual_gradient"
+    description = "projected gradient / FISTA on the dual (template solver; slow, small QPs only)"
+    defaults = {
+        "tol": 1e-10,          # stopping threshold on the evaluator's primal & complementarity residuals
+        "max_iter": 20000,
+        "time_limit": 60.0,    # seconds of solve time; <= 0 means no limit
+        "accelerate": True,    # FISTA with gradient restart; False: plain projected gradient
+        "step_safety": 1.0,    # step = step_safety / L; must be in (0, 2)
+        "max_n": 20000,        # skip QPs with more unknowns than this
+    }
+    tolerance = 1e-6
+    exact = True
+
+    def validate(self) -> None:
+        positive(self, "tol", "max_iter", "max_n")
+        s = self.params["step_safety"]
+        if not (isinstance(s, (int, float)) and 0 < s < 2):
+            raise InputError(f"parameter 'step_safety' of solver {self.name!r} must be in (0, 2), got {s!r}")
+        if not isinstance(self.params["time_limit"], (int, float)):
+            raise InputError(f"parameter 'time_limit' of solver {self.name!r} must be a number of seconds")
+
+    @classmethod
+    def tolerance_params(cls, tol: float) -> dict:
+        # the KKT residual threshold needed for a relative error ~tol in x is smaller than tol
+        return {"tol": min(1e-2 * tol, 1e-4)}
+
+    def skip(self, qp) -> str | None:
+        if qp.n > self.params["max_n"]:
+            return (f"dual_gradient needs one sparse solve per iteration and thousands of iterations: "
+                    f"n = {qp.n} > max_n = {self.params['max_n']} (raise max_n to force it)")
+        return None
+
+    def setup(self, qp) -> None:
+        self.qp = qp
+        self._lu = sla.splu(qp.K.tocsc(), permc_spec="MMD_AT_PLUS_A")
+        B = qp.B
+        if qp.m == 0:
+            self.L = 1.0
+            return
+        op = sla.LinearOperator((qp.m, qp.m), dtype=float,
+                                matvec=lambda v: B @ self._lu.solve(np.asarray(B.T @ np.ravel(v))))
+        if qp.m <= 3:
+            D = np.column_stack([op.matvec(e) for e in np.eye(qp.m)])
+            self.L = float(np.linalg.eigvalsh(0.5 * (D + D.T)).max())
+        else:
+            self.L = float(sla.eigsh(op, k=1, which="LA", tol=1e-3, return_eigenvectors=False,
+                                     v0=np.ones(qp.m))[0])
+        if not np.isfinite(self.L) or self.L <= 0:
+            raise RuntimeError(f"the Delassus matrix B K^-1 B' has largest eigenvalue {self.L}: K is not SPD")
+
+    def _x(self, mu: np.ndarray) -> np.ndarray:
+        return self._lu.solve(self.qp.F + self.qp.B.T @ mu)
+
+    def _residuals(self, x: np.ndarray, mu: np.ndarray) -> tuple[float, float]:
+        """The evaluator's primal and complementarity residuals (same scales, recomputed cheaply)."""
+        qp = self.qp
+        gap = qp.B @ x
+        Bmu = qp.B.T @ mu
+        fs = max(np.abs(qp.F).max(initial=0.0), np.abs(qp.F + Bmu).max(initial=0.0),
+                 np.abs(Bmu).max(initial=0.0), 1e-300)
+        ls = max(np.abs(x).max(initial=0.0), 1e-300)
+        primal = max(0.0, -gap.min(initial=0.0)) / ls
+        compl = float(np.abs(mu * gap).max(initial=0.0)) / (fs * ls)
+        return primal, compl
+
+    def solve(self) -> Solution:
+        qp, p = self.qp, self.params
+        t_start = time.perf_counter()
+        step = p["step_safety"] / self.L
+        tol, max_iter = p["tol"], int(p["max_iter"])
+        limit = p["time_limit"] if p["time_limit"] > 0 else np.inf
+        mu = np.zeros(qp.m)
+        x = self._x(mu)
+        mu_old, x_old = mu, x
+        theta = 1.0
+        history: list[dict] = []
+        status, restarts = Status.MAX_ITER, 0
+        primal, compl = self._residuals(x, mu)
+        it = 0
+        if max(primal, compl) <= tol:
+            status = Status.SOLVED
+        while status != Status.SOLVED and it < max_iter:
+            if time.perf_counter() - t_start > limit:
+                status = Status.TIME_LIMIT
+                break
+            it += 1
+            if p["accelerate"]:
+                theta_new = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * theta * theta))
+                beta = (theta - 1.0) / theta_new
+                y = mu + beta * (mu - mu_old)
+                xy = x + beta * (x - x_old)          # x is affine in mu: no extra solve
+            else:
+                theta_new, y, xy = theta, mu, x
+            mu_new = np.maximum(0.0, y - step * (qp.B @ xy))
+            x_new = self._x(mu_new)
+            if p["accelerate"] and (y - mu_new) @ (mu_new - mu) > 0:
+                theta_new = 1.0                      # gradient restart (O'Donoghue & Candes 2015)
+                restarts += 1
+            mu_old, x_old, mu, x, theta = mu, x, mu_new, x_new, theta_new
+            primal, compl = self._residuals(x, mu)
+            if it % 100 == 0 or it <= 10:
+                history.append({"iter": it, "primal": primal, "complementarity": compl})
+            if not (np.all(np.isfinite(x)) and np.all(np.isfinite(mu))):
+                status = Status.NUMERICAL_ERROR
+                break
+            if max(primal, compl) <= tol:
+                status = Status.SOLVED
+        msg = {Status.SOLVED: f"converged: primal {primal:.1e}, complementarity {compl:.1e} <= tol {tol:.1e}",
+               Status.MAX_ITER: f"not converged after max_iter = {max_iter} iterations "
+                                f"(primal {primal:.1e}, complementarity {compl:.1e} > tol {tol:.1e})",
+               Status.TIME_LIMIT: f"time_limit = {p['time_limit']} s reached after {it} iterations "
+                                  f"(primal {primal:.1e}, complementarity {compl:.1e})",
+               Status.NUMERICAL_ERROR: "iterate became NaN/inf"}[status]
+        return Solution(solver=self.name, status=status, x=x, multipliers=mu,
+                        iterations={"gradient": it, "restarts": restarts}, history=history,
+                        message=msg, info={"L": self.L, "step": step})
