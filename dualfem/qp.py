@@ -188,6 +188,7 @@ class QP:
         except ValueError as exc:
             raise InputError(f"QP file {str(path)!r} has inconsistent arrays: {exc}") from None
         maps = {k[4:]: v for k, v in d.items() if k.startswith("map_")}
-        qp = cls(K=K, F=F, B=B, weights=w, name=path.stem, maps=maps)
+        params = {k[6:]: v.item() if np.ndim(v) == 0 else v for k, v in d.items() if k.startswith("param_")}
+        qp = cls(K=K, F=F, B=B, weights=w, name=path.stem, maps=maps, params=params)
         qp.check()
         return qp

@@ -174,17 +174,19 @@ class ThinDefect(Problem):
         mesh, _ = self.mesh()
         return Basis(mesh, ElementVector(ElementTriP1()))
 
-    def build(self) -> QP:
-        """Assemble K (elastic + interface/delta), F (top traction), B (normal jumps)."""
+    def assemble(self):
+        """Elastic stiffness and top-traction load on all DOFs (before boundary conditions).
+
+        Returns ``(K_all, F_all, basis)``; scikit-fem's DOF numbering (``basis.nodal_dofs``).
+        """
         from skfem import FacetBasis, LinearForm, asm
         from skfem.models.elasticity import linear_elasticity
 
         p = self.params
-        mesh, dfc = self.mesh()
+        mesh, _ = self.mesh()
         basis = self.basis()
         lam, mu = lame(p["E"], p["nu"], p["plane"])
         K_all = asm(linear_elasticity(lam, mu), basis)
-
         H = p["height"]
         top = mesh.facets_satisfying(lambda x: np.isclose(x[1], H), boundaries_only=True)
         fb = FacetBasis(mesh, basis.elem, facets=top, intorder=6)
@@ -195,11 +197,17 @@ class ThinDefect(Problem):
         def traction(v, w):
             val = g(w.x[0], w.x[1])
             if isinstance(val, tuple):
-                return scale * (val[0] * v.value[0] + val[1] * v.value[1])
-            return scale * val * v.value[1]
+                return scale * (val[0] * v[0] + val[1] * v[1])
+            return scale * val * v[1]
 
-        F_all = asm(traction, fb)
+        return K_all, asm(traction, fb), basis
 
+    def build(self) -> QP:
+        """Assemble K (elastic + interface/delta), F (top traction), B (normal jumps)."""
+        p = self.params
+        _, dfc = self.mesh()
+        mesh = self._mesh
+        K_all, F_all, basis = self.assemble()
         clamped = basis.get_dofs(lambda x: np.isclose(x[1], 0.0)).all()
         free = np.setdiff1d(np.arange(basis.N), clamped)
         g2f = np.full(basis.N, -1, dtype=np.int64)

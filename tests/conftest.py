@@ -1,0 +1,20 @@
+"""Shared fixtures: small scenes built once per session."""
+from __future__ import annotations
+
+import functools
+
+import pytest
+
+from dualfem.scene import load_scene
+
+
+@functools.lru_cache(maxsize=None)
+def _scene(name: str, N: int, delta: float, plane: str = "strain"):
+    problem = load_scene(name, {"N": N, "delta": delta, "plane": plane})
+    return problem, problem.build()
+
+
+@pytest.fixture
+def scene():
+    """``scene(name, N, delta) -> (problem, qp)``, cached across tests (do not mutate)."""
+    return _scene

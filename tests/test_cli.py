@@ -1,0 +1,71 @@
+"""The CLI: JSON contract of ``solve``, ``list``, ``export``; clean errors."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from dualfem.cli import main
+
+FIELDS = {"solver", "status", "ndof", "n_defect_nodes", "energy", "max_jump", "n_contact", "iterations",
+          "time_s", "residuals"}
+
+
+def test_solve_json(capsys):
+    assert main(["solve", "f2", "--set", "N=16", "--set", "delta=1e-5", "--solver", "clarabel", "--json"]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 1
+    rec = json.loads(out[0])
+    assert FIELDS <= set(rec)
+    assert rec["status"] == "solved" and rec["ndof"] > 0 and rec["n_defect_nodes"] == 7
+    assert set(rec["time_s"]) >= {"setup", "solve"}
+    assert set(rec["residuals"]) == {"stationarity", "primal", "dual", "complementarity"}
+    assert max(rec["residuals"].values()) < 1e-6
+    assert 0 < rec["n_contact"] < 7
+
+
+def test_solve_human(capsys):
+    assert main(["solve", "f3", "--set", "N=8", "--solver", "osqp"]) == 0
+    out = capsys.readouterr().out
+    assert "solved" in out and "residuals" in out
+
+
+def test_toml_scene_and_export(tmp_path, capsys):
+    scene = tmp_path / "s.toml"
+    scene.write_text('scene = "f2"\nN = 8\ndelta = 1e-3\nplane = "stress"\n')
+    out = tmp_path / "q.npz"
+    assert main(["export", str(scene), "-o", str(out)]) == 0
+    from dualfem.qp import QP
+
+    qp = QP.load(out)
+    assert qp.m == 3 and qp.params["plane"] == "stress"
+
+
+def test_list(capsys):
+    assert main(["list", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert {"osqp", "clarabel", "uzawa"} <= set(d["solvers"]) and {"f1", "f2", "f3"} <= set(d["scenes"])
+    assert d["solvers"]["osqp"]["installed"] is True
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["solve", "f2", "--set", "delta=0"], "delta"),
+    (["solve", "f2", "--set", "nu=0.7"], "nu"),
+    (["solve", "f2", "--set", "N=10"], "N=10"),
+    (["solve", "f2", "--solver", "nope"], "unknown solver"),
+    (["solve", "f2", "--set", "colour=red"], "unknown scene key"),
+    (["solve", "f2", "--set", "N"], "KEY=VALUE"),
+    (["solve", "f2", "--solver", "uzawa", "-p", "r=-1"], "'r'"),
+    (["export", "f2", "-o", "x.csv"], ".npz or .mat"),
+])
+def test_bad_input_one_line(capsys, argv, words):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0] and "Traceback" not in err[0]
+
+
+def test_malformed_toml(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("N = [\n")
+    assert main(["solve", str(bad)]) == 2
+    assert "malformed TOML" in capsys.readouterr().err

@@ -1,0 +1,165 @@
+"""The problem layer: stiffness, kernel, patch test, interface term, defect doubling, loads."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as sla
+
+from dualfem import evaluator
+from dualfem.errors import InputError
+from dualfem.scene import load_scene
+from problems.thin_defect import lame
+
+
+@pytest.mark.parametrize("plane", ["strain", "stress"])
+def test_stiffness_symmetric_spd_after_bc(scene, plane):
+    _, qp = scene("f2", 8, 1e-5, plane)
+    K = qp.K.toarray()
+    assert np.abs(K - K.T).max() <= 1e-12 * np.abs(K).max()
+    assert np.linalg.eigvalsh(K).min() > 0
+    # the elastic part alone (delta-independent) is SPD too: the cracked body stays connected
+    assert np.linalg.eigvalsh(qp.K_fixed.toarray()).min() > 0
+
+
+def test_rigid_motions_in_kernel_before_bc():
+    problem = load_scene("f2", {"N": 8})
+    K_all, _, basis = problem.assemble()
+    x, y = problem.mesh()[0].p
+    nd = basis.nodal_dofs
+    for ux, uy in ((np.ones_like(x), 0 * x), (0 * x, np.ones_like(x)), (-y, x)):
+        u = np.zeros(basis.N)
+        u[nd[0]], u[nd[1]] = ux, uy
+        assert np.abs(K_all @ u).max() <= 1e-9 * np.abs(K_all).max()
+    # and nothing else: exactly three zero eigenvalues (the doubled nodes do not add any)
+    ev = np.linalg.eigvalsh(K_all.toarray())
+    assert np.sum(ev < 1e-9 * ev.max()) == 3
+
+
+@pytest.mark.parametrize("plane", ["strain", "stress"])
+def test_patch_uniaxial_stress_reproduced_exactly(plane):
+    """u linear with sigma_11 = s only: the defect faces are traction free and the jump is 0,
+    so prescribing u on the outer boundary must give u exactly at every node (both copies)."""
+    E, nu = 69000.0, 0.3
+    problem = load_scene("f2", {"N": 8, "E": E, "nu": nu, "plane": plane})
+    K_all, _, basis = problem.assemble()
+    mesh = problem.mesh()[0]
+    lam, mu = lame(E, nu, plane)
+    s11 = 5.0
+    # sigma_22 = lam (e11 + e22) + 2 mu e22 = 0  ->  e22 = -lam e11 / (lam + 2 mu)
+    e11 = s11 / (lam + 2 * mu - lam**2 / (lam + 2 * mu))
+    e22 = -lam * e11 / (lam + 2 * mu)
+    x, y = mesh.p
+    u = np.zeros(basis.N)
+    u[basis.nodal_dofs[0]] = e11 * x + 0.1
+    u[basis.nodal_dofs[1]] = e22 * y - 0.2
+    bnd = np.unique(basis.nodal_dofs[:, mesh.boundary_nodes()].ravel())
+    # the defect faces are (internal) boundary facets of the doubled mesh: keep them free
+    outer = np.flatnonzero((np.isclose(x, 0) | np.isclose(x, 1) | np.isclose(y, 0) | np.isclose(y, 1)))
+    D = np.unique(basis.nodal_dofs[:, outer].ravel())
+    assert D.size < bnd.size  # the defect faces really are boundary here
+    I = np.setdiff1d(np.arange(basis.N), D)
+    uI = sla.spsolve(K_all[I][:, I].tocsc(), -K_all[I][:, D] @ u[D])
+    assert np.abs(uI - u[I]).max() <= 1e-12 * np.abs(u).max()
+
+
+def test_interface_term_is_trapezoid_rule_of_jump_squared():
+    delta = 1e-3
+    problem = load_scene("f2", {"N": 8, "delta": delta})
+    qp = problem.build()
+    nd = qp.maps["node_dofs"]
+    up, lo = qp.maps["defect_upper"], qp.maps["defect_lower"]
+    s = qp.maps["defect_s"]
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=qp.n)
+    jx = x[nd[0, up]] - x[nd[0, lo]]
+    jy = x[nd[1, up]] - x[nd[1, lo]]
+    # by hand: trapezoid rule over the defect edges, jump = 0 at the two (undoubled) tips
+    f = np.r_[0.0, jx**2 + jy**2, 0.0]
+    nodes_s = np.r_[0.0, s, 0.5]
+    hand = np.sum(np.diff(nodes_s) * 0.5 * (f[:-1] + f[1:]))
+    Kp = qp.K - qp.K_fixed
+    assert x @ (Kp @ x) == pytest.approx(hand / delta, rel=1e-12)
+    # weights: m interior nodes, spacing 1/N
+    assert qp.m == 3 and np.allclose(qp.weights, 1 / 8)
+    assert np.allclose(s, [1 / 8, 2 / 8, 3 / 8])
+
+
+def test_defect_doubling_structure(scene):
+    _, qp = scene("f2", 16, 1e-5)
+    p, t = qp.maps["nodes"], qp.maps["triangles"]
+    up, lo = qp.maps["defect_upper"], qp.maps["defect_lower"]
+    assert np.allclose(p[:, up], p[:, lo])                 # same place
+    assert np.allclose(p[1, up], 0.5)
+    cen = p[:, t].mean(axis=1)
+    uses_up = np.isin(t, up).any(axis=0)
+    uses_lo = np.isin(t, lo).any(axis=0)
+    assert np.all(cen[1, uses_up] > 0.5) and np.all(cen[1, uses_lo & ~uses_up] < 0.5)
+    assert not np.any(uses_up & uses_lo)
+    tips = qp.maps["defect_tips"]
+    assert np.allclose(p[:, tips].T, [[0.25, 0.5], [0.75, 0.5]])
+    # B is the normal (x2) jump: +1 on the upper y-DOF, -1 on the lower one
+    nd = qp.maps["node_dofs"]
+    B = qp.B.toarray()
+    for j in range(qp.m):
+        assert B[j, nd[1, up[j]]] == 1 and B[j, nd[1, lo[j]]] == -1 and np.count_nonzero(B[j]) == 2
+
+
+def test_diagonal_defect_normal_not_x2():
+    problem = load_scene("f2", {"N": 8, "defect": [[0.25, 0.25], [0.75, 0.75]]})
+    qp = problem.build()
+    assert qp.m == 3
+    assert np.allclose(qp.maps["normal"], [-np.sqrt(0.5), np.sqrt(0.5)])
+    assert np.allclose(qp.weights, np.sqrt(2) / 8)
+
+
+@pytest.mark.parametrize("solver", ["clarabel"])
+def test_f3_opens_and_f1_closes(solver):
+    from dualfem.runner import run
+
+    qp3 = load_scene("f3", {"N": 16, "delta": 0.1}).build()
+    s3 = run(solver, qp3)
+    assert s3.ok and np.all(qp3.B @ s3.x > 0) and not evaluator.contact_set(qp3, s3.x).any()
+    assert np.abs(s3.multipliers).max() <= 1e-8 * np.abs(qp3.F).max()
+    qp1 = load_scene("f1", {"N": 16, "delta": 0.1}).build()
+    s1 = run(solver, qp1)
+    assert s1.ok and evaluator.contact_set(qp1, s1.x).all()
+    assert np.all(s1.multipliers > 0)
+
+
+def test_load_cases_resultant():
+    # f1: -3 on a unit top side; f2: -10 / +10 halves; f3: +3
+    for name, total in (("f1", -3.0), ("f2", 0.0), ("f3", 3.0)):
+        problem = load_scene(name, {"N": 8})
+        _, F_all, basis = problem.assemble()
+        assert F_all[basis.nodal_dofs[1]].sum() == pytest.approx(total, abs=1e-12)
+        assert np.abs(F_all[basis.nodal_dofs[0]]).max() == 0
+    # user expression and callable give the same load vector
+    a = load_scene("f2", {"N": 8, "load": "-10*sin(pi*x)"}).assemble()[1]
+    b = load_scene("f2", {"N": 8, "load": lambda x, y: -10 * np.sin(np.pi * x)}).assemble()[1]
+    assert np.allclose(a, b) and abs(a.sum() + 20 / np.pi) < 1e-3
+
+
+def test_plane_stress_softer_than_plane_strain():
+    from dualfem.runner import run
+
+    e = {}
+    for plane in ("strain", "stress"):
+        qp = load_scene("f3", {"N": 8, "plane": plane}).build()
+        e[plane] = run("clarabel", qp).residuals["energy"]
+    assert e["stress"] < e["strain"] < 0  # more compliant -> lower (more negative) energy
+
+
+@pytest.mark.parametrize("params, words", [
+    ({"N": 10}, "cannot carry the defect"),
+    ({"N": 4, "defect": [[0.25, 0.5], [0.5, 0.5]]}, "too coarse"),
+    ({"defect": [[0.25, 0.5], [0.75, 0.625]]}, "does not run along mesh edges"),
+    ({"defect": [[0.0, 0.5], [0.5, 0.5]]}, "strictly inside"),
+    ({"defect": [[0.5, 0.5], [0.5, 0.5]]}, "zero length"),
+    ({"delta": 0}, "delta"), ({"delta": float("nan")}, "delta"), ({"E": -1}, "E"),
+    ({"nu": 0.5}, "nu"), ({"nu": -1}, "nu"), ({"plane": "axi"}, "plane"), ({"load": "f9"}, "load"),
+    ({"load": "__import__('os')"}, "load"), ({"N": 3.5}, "N"),
+])
+def test_bad_scene_parameters(params, words):
+    with pytest.raises(InputError, match=words):
+        load_scene("f2", params).build()
