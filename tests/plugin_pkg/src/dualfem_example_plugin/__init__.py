@@ -1,0 +1,1 @@
+"""Example third-party plugins for dualfem (registered through entry points, see pyproject.toml)."""
