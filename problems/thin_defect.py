@@ -58,6 +58,10 @@ def _parse_defect(value) -> np.ndarray:
     return arr
 
 
+def _load_label(load) -> str:
+    return repr(load) if isinstance(load, str) else getattr(load, "__name__", "function")
+
+
 @register_problem
 class ThinDefect(Problem):
     """Elastic rectangle with a straight thin defect (fracture parameter delta)."""
@@ -92,7 +96,8 @@ class ThinDefect(Problem):
         if p["plane"] not in PLANES:
             raise InputError(f"plane must be one of {', '.join(PLANES)}, got {p['plane']!r}")
         p["defect"] = _parse_defect(p["defect"])
-        self._traction = resolve_load(p["load"], p["width"])
+        with np.errstate(all="ignore"):  # a NaN-producing expression is refused below, without warnings
+            self._traction = resolve_load(p["load"], p["width"])
         self._geometry_checks()
 
     def _geometry_checks(self) -> None:
@@ -100,7 +105,7 @@ class ThinDefect(Problem):
         a, b = p["defect"]
         W, H = p["width"], p["height"]
         if np.linalg.norm(b - a) <= 1e-12 * max(W, H):
-            raise InputError(f"defect has zero length: both ends at {tuple(a)}")
+            raise InputError(f"defect has zero length: both ends at {tuple(float(c) for c in a)}")
         for pt in (a, b):
             if not (0 < pt[0] < W and 0 < pt[1] < H):
                 raise InputError(f"defect must lie strictly inside the domain (0, {W:g}) x (0, {H:g}); "
@@ -200,7 +205,18 @@ class ThinDefect(Problem):
                 return scale * (val[0] * v[0] + val[1] * v[1])
             return scale * val * v[1]
 
-        return K_all, asm(traction, fb), basis
+        with np.errstate(all="ignore"):
+            try:
+                F_all = asm(traction, fb)
+            except InputError:
+                raise
+            except Exception as exc:  # a user-given load function that breaks
+                raise InputError(f"load {_load_label(p['load'])} cannot be evaluated on the top side: "
+                                 f"{type(exc).__name__}: {exc}") from None
+        if not np.all(np.isfinite(F_all)):
+            raise InputError(f"load {_load_label(p['load'])} gives NaN or infinite values on the top side "
+                             f"(x2 = {H:g}, 0 <= x1 <= {p['width']:g}); it must be finite there")
+        return K_all, F_all, basis
 
     def build(self) -> QP:
         """Assemble K (elastic + interface/delta), F (top traction), B (normal jumps)."""

@@ -1,0 +1,341 @@
+"""``dualfem report stability RESULTS [OUTPUT.md]``: reports/stability.md from a ``dualfem stress`` run.
+
+Colour maps (outcome, error, iterations, time) per axis of the grid, the boundaries where each
+solver stops being correct (with the solver's own message), the list of silent wrong answers
+(ours and third-party, with their scenes), and Uzawa's r x delta map beside its default setting.
+Figures go to ``reports/stability/`` next to the Markdown file; every file is written atomically.
+"""
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import math
+from collections import Counter, defaultdict
+from pathlib import Path
+
+from .cmd_report import register_report
+from .errors import InputError
+
+COLORS = {"correct": "#2e9d4f", "failed": "#f0a030", "flagged": "#f5d040", "timeout": "#c77c2a",
+          "crashed": "#8c4a1a", "silent_wrong": "#d62728", "unverified": "#9ecae1", "skipped": "#d9d9d9"}
+SYMBOL = {"correct": "ok", "failed": "F", "flagged": "FL", "timeout": "T", "crashed": "X",
+          "silent_wrong": "WRONG", "unverified": "?", "skipped": "-"}
+AXIS_TITLE = {
+    "delta": "fracture parameter delta (default solver parameters)",
+    "r": "Uzawa augmentation parameter r x delta",
+    "units": "units (same physics, entries scaled by up to 1e6)",
+    "load": "load magnitude (x the paper's f2)",
+    "nu": "Poisson ratio nu (plane strain)",
+    "N": "mesh size N (unknowns ~ 2 N^2)",
+}
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:g}"
+    return str(v)
+
+
+def _sortkey(v):
+    return (0, v) if isinstance(v, (int, float)) else (1, str(v))
+
+
+def _grid(recs, rowf, colf):
+    rows = sorted({rowf(r) for r in recs}, key=_sortkey)
+    cols = sorted({colf(r) for r in recs}, key=_sortkey)
+    cell = {(rowf(r), colf(r)): r for r in recs}
+    return rows, cols, cell
+
+
+def _heatmaps(recs, rowf, colf, title, rowlabel, collabel, path: Path, keep_col_order=None) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib import patheffects
+    import numpy as np
+    from matplotlib.colors import ListedColormap
+
+    rows, cols, cell = _grid(recs, rowf, colf)
+    if keep_col_order:
+        cols = [c for c in keep_col_order if c in cols]
+    nr, nc = len(rows), len(cols)
+    fig, axs = plt.subplots(1, 4, figsize=(4.2 * 4, 0.45 * nr + 2.2), constrained_layout=True)
+    outs = list(COLORS)
+    cmap = ListedColormap([COLORS[o] for o in outs])
+    A = np.full((nr, nc), np.nan)
+    E = np.full((nr, nc), np.nan)
+    IT = np.full((nr, nc), np.nan)
+    TM = np.full((nr, nc), np.nan)
+    for i, rv in enumerate(rows):
+        for j, cv in enumerate(cols):
+            r = cell.get((rv, cv))
+            if r is None:
+                continue
+            A[i, j] = outs.index(r["outcome"])
+            if r.get("err") is not None and r["err"] > 0:
+                E[i, j] = math.log10(max(r["err"], 1e-17))
+            if r.get("iters"):
+                IT[i, j] = math.log10(r["iters"])
+            t = (r.get("time_setup") or 0) + (r.get("time_solve") or 0)
+            if t > 0 and r["outcome"] not in ("skipped", "timeout", "crashed"):
+                TM[i, j] = math.log10(t)
+    panels = [(A, "outcome", cmap, (-0.5, len(outs) - 0.5)), (E, "log10 rel. energy-norm error", "viridis", None),
+              (IT, "log10 iterations (main counter)", "magma_r", None), (TM, "log10 time setup+solve [s]", "cividis", None)]
+    for ax, (M, name, cm, lim) in zip(axs, panels):
+        kw = {"vmin": lim[0], "vmax": lim[1]} if lim else {}
+        im = ax.imshow(np.ma.masked_invalid(M), cmap=cm, aspect="auto", **kw)
+        ax.set_xticks(range(nc), [_fmt(c) for c in cols], rotation=45, ha="right", fontsize=8)
+        ax.set_yticks(range(nr), [_fmt(r) for r in rows], fontsize=8)
+        ax.set_xlabel(collabel, fontsize=8)
+        ax.set_title(name, fontsize=9)
+        for i in range(nr):
+            for j in range(nc):
+                if np.isnan(M[i, j]):
+                    continue
+                txt = SYMBOL[outs[int(M[i, j])]] if name == "outcome" else f"{M[i, j]:.1f}"
+                ax.text(j, i, txt, ha="center", va="center", fontsize=6.5, color="black",
+                        path_effects=[patheffects.withStroke(linewidth=1.5, foreground="white")])
+        if name != "outcome":
+            fig.colorbar(im, ax=ax, shrink=0.8)
+    axs[0].set_ylabel(rowlabel, fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    from .io import atomic_write
+
+    def write(tmp):
+        with open(tmp, "wb") as fh:
+            fh.write(buf.getvalue())
+    atomic_write(path, write)
+    return path
+
+
+def _table(recs, rowf, colf, keep_col_order=None) -> str:
+    rows, cols, cell = _grid(recs, rowf, colf)
+    if keep_col_order:
+        cols = [c for c in keep_col_order if c in cols]
+    out = ["| | " + " | ".join(_fmt(c) for c in cols) + " |", "|---" * (len(cols) + 1) + "|"]
+    for rv in rows:
+        cells = []
+        for cv in cols:
+            r = cell.get((rv, cv))
+            if r is None:
+                cells.append("")
+                continue
+            s = SYMBOL[r["outcome"]]
+            if r.get("err") is not None:
+                s += f" {r['err']:.0e}"
+            if r.get("iters"):
+                s += f" ({int(r['iters'])})"
+            cells.append(s)
+        out.append(f"| {_fmt(rv)} | " + " | ".join(cells) + " |")
+    return "\n".join(out)
+
+
+def _scene_str(r: dict) -> str:
+    s = dict(r["scene"])
+    keep = {k: v for k, v in s.items() if k in ("load", "N", "delta", "E", "nu", "plane", "load_scale", "width")}
+    txt = ", ".join(f"{k}={_fmt(v)}" for k, v in keep.items())
+    if r.get("params"):
+        txt += "; " + ", ".join(f"{k}={_fmt(v)}" for k, v in r["params"].items())
+    return txt
+
+
+def _boundaries(recs, colf, colname) -> list[str]:
+    """Per solver: where it is correct, and the first values where it is not (with its message)."""
+    lines = []
+    by = defaultdict(list)
+    for r in recs:
+        by[r["solver"] + (" " + ",".join(f"{k}={_fmt(v)}" for k, v in r["params"].items()) if r.get("params") else "")].append(r)
+    for s, rs in sorted(by.items()):
+        rs = sorted(rs, key=lambda r: _sortkey(colf(r)))
+        good = [colf(r) for r in rs if r["outcome"] == "correct"]
+        bad = [r for r in rs if r["outcome"] not in ("correct", "skipped")]
+        skipped = [r for r in rs if r["outcome"] == "skipped"]
+        if not bad and not skipped:
+            lines.append(f"- **{s}**: correct at every {colname} tried ({', '.join(_fmt(c) for c in good)}).")
+            continue
+        parts = []
+        if good:
+            parts.append(f"correct at {colname} = {', '.join(_fmt(c) for c in good)}")
+        for r in bad:
+            why = (r.get("message") or "").strip() or (r.get("reason") or "")
+            e = f", error {r['err']:.1e}" if r.get("err") is not None else ""
+            k = f", KKT {r['kkt']:.1e}" if r.get("kkt") is not None else ""
+            parts.append(f"{colname} = {_fmt(colf(r))}: **{r['outcome']}** (status {r.get('status')}{e}{k}"
+                         f"{'; ' + why[:160] if why else ''})")
+        if skipped:
+            parts.append(f"skipped at {colname} = {', '.join(_fmt(colf(r)) for r in skipped)} "
+                         f"({(skipped[0].get('message') or '')[:140]})")
+        lines.append(f"- **{s}**: " + "; ".join(parts) + ".")
+    return lines
+
+
+def render(meta: dict, recs: list[dict], md_path: Path) -> str:
+    """Write the figures next to ``md_path`` and return the Markdown text."""
+    fig_dir = md_path.parent / "stability"
+    rel = fig_dir.name
+    L: list[str] = []
+    safety = meta.get("safety", 10)
+    L += ["# Numerical stability under stress", "",
+          "Generated by `dualfem report stability RESULTS` from the runs of `dualfem stress` "
+          f"({'QUICK grid' if meta.get('quick') else 'full grid'}"
+          f"{'' if meta.get('complete', True) else ', INCOMPLETE: not every run finished'}; "
+          f"started {meta.get('started', '?')}, finished {meta.get('finished', '?')}; "
+          f"{len(recs)} runs). Do not edit by hand: rerun the two commands.", ""]
+    env = meta.get("environment", {})
+    if env:
+        L += [f"Machine: {env.get('cpus')} CPUs, Python {env.get('python')}, "
+              + ", ".join(f"{k} {v}" for k, v in env.get("versions", {}).items()) + ".", ""]
+    refs = meta.get("references") or []
+    L += ["## How a run is classified", "",
+          f"Every run is compared with a reference solution of the same QP: the registered "
+          f"`{refs[0] if refs else '?'}` solver"
+          + (f" (runs of `{refs[0]}` itself are compared with `{refs[1]}` at tolerances 1e-12)" if len(refs) > 1 else "")
+          + f". A reference is trusted only if its own independent KKT residual is below {meta.get('ref_kkt', 1e-7):g}. "
+          "On the *units* and *load* axes the reference is the base scene's reference mapped by exact physics "
+          "(change of units; x(sF) = s x(F)), so no solver is trusted on scaled data.", "",
+          f"The error is the relative energy-norm error |x - x_ref|_K / |x_ref|_K. With the solver's declared "
+          f"`tolerance` t (class attribute) and the safety factor {safety:g}:", "",
+          f"- **correct** (`ok`): status solved and error <= {safety:g} t;",
+          "- **failed** (`F`, honest): the status says not solved (max_iter, stagnation, numerical_error, ...);",
+          f"- **flagged** (`FL`, honest): status solved, error > {safety:g} t, but the evaluator's largest KKT residual "
+          f"is > {safety:g} t, so a user checking residuals sees it;",
+          "- **timeout** (`T`) / **crashed** (`X`): the harness killed the run or the process died (honest: no answer);",
+          f"- **silent wrong answer** (`WRONG`): status solved, KKT residuals <= {safety:g} t, error > {safety:g} t;",
+          "- **unverified** (`?`): no trusted reference, or the difference is within the reference's own accuracy "
+          f"({safety:g} x the reference solver's declared tolerance);",
+          "- **skipped** (`-`): the solver does not apply, or the previous N already exceeded the time limit.", "",
+          "Declared tolerances: " + ", ".join(f"`{k}` {v:g}" for k, v in sorted(meta.get("tolerances", {}).items()))
+          + ". Solvers wrapping a third-party library (non-empty `requires`): "
+          + ", ".join(f"`{k}`" for k, v in sorted(meta.get("third_party", {}).items()) if v) + ".", "",
+          "Cells of the tables: outcome symbol, error, (main iteration counter: `outer` for Uzawa, else the "
+          "solver's only counter).", ""]
+    # ---------------------------------------------------------------- summary
+    solvers = sorted({r["solver"] for r in recs})
+    c = {s: Counter(r["outcome"] for r in recs if r["solver"] == s) for s in solvers}
+    outs = [o for o in COLORS if any(c[s][o] for s in solvers)]
+    L += ["## Summary", "", "| solver | " + " | ".join(outs) + " |", "|---" * (len(outs) + 1) + "|"]
+    for s in solvers:
+        L.append(f"| {s} | " + " | ".join(str(c[s][o]) for o in outs) + " |")
+    L.append("")
+    wrong = [r for r in recs if r["outcome"] == "silent_wrong"]
+    ours = [r for r in wrong if not r.get("third_party")]
+    theirs = [r for r in wrong if r.get("third_party")]
+    L += ["## Silent wrong answers", "",
+          f"**Our solvers: {len(ours)}** (target 0). **Third-party solvers: {len(theirs)}.**", ""]
+    if wrong:
+        L += ["| solver | axis | scene; solver params | status | error | KKT | message |", "|---|---|---|---|---|---|---|"]
+        for r in sorted(wrong, key=lambda r: (bool(r.get("third_party")), r["solver"], r["axis"])):
+            L.append(f"| {r['solver']}{'' if r.get('third_party') else ' (ours)'} | {r['axis']} | {_scene_str(r)} | "
+                     f"{r.get('status')} | {r['err']:.1e} | {r['kkt']:.1e} | {(r.get('message') or '')[:80]} |")
+        L.append("")
+    unv = [r for r in recs if r["outcome"] == "unverified"]
+    if unv:
+        L += [f"Unverified runs ({len(unv)}): " + "; ".join(
+            f"{r['solver']} {r['axis']} {_scene_str(r)} ({(r.get('reason') or '')[:120]})" for r in unv[:20]), ""]
+    # ---------------------------------------------------------------- axes
+    fig_dir.mkdir(parents=True, exist_ok=True)
+
+    def section(axis, rowf, colf, rowlabel, collabel, colname, extra=None, subset=None, suffix="", col_order=None):
+        rs = subset if subset is not None else [r for r in recs if r["axis"] == axis]
+        if not rs:
+            return
+        name = f"{axis}{suffix}"
+        _heatmaps(rs, rowf, colf, AXIS_TITLE.get(axis, axis) + (f" [{suffix.strip('_')}]" if suffix else ""),
+                  rowlabel, collabel, fig_dir / f"{name}.png", col_order)
+        L.extend([f"### {AXIS_TITLE.get(axis, axis)}{(' - ' + suffix.strip('_')) if suffix else ''}", "",
+                  f"![{name}]({rel}/{name}.png)", "", _table(rs, rowf, colf, col_order), ""])
+        if extra:
+            L.extend(extra)
+        L.extend(["Boundaries:", ""] + _boundaries(rs, colf, colname) + [""])
+
+    def solver_row(r):
+        p = r.get("params") or {}
+        return r["solver"] + ("" if not p else " " + ",".join(f"{k}={_fmt(v)}" for k, v in p.items()))
+
+    L += ["## The grid", ""]
+    base = meta.get("base", {})
+    L += [f"Base scene: the paper's f2 (E = 69000, nu = 0.3, plane strain, delta = 1e-5) at N = "
+          f"{16 if meta.get('quick') else 32}; each axis varies one thing. Per-run solver time limit "
+          f"{meta.get('time_limit')} s.", ""]
+    d = [r for r in recs if r["axis"] == "delta"]
+    for load in sorted({r["coords"]["load"] for r in d}):
+        sub = [r for r in d if r["coords"]["load"] == load]
+        ratio = sorted({(r["coords"]["delta"], r.get("stiffness_ratio")) for r in sub if r.get("stiffness_ratio")})
+        extra = []
+        if ratio:
+            extra = ["Interface stiffness over elastic stiffness (max diagonal of the 1/delta part of K / max "
+                     "diagonal of the elastic part), the source of ill-conditioning at small delta: "
+                     + ", ".join(f"delta={_fmt(a)}: {b:.1e}" for a, b in ratio) + ".", ""]
+        section("delta", solver_row, lambda r: r["coords"]["delta"], "solver", "delta", "delta", extra,
+                subset=sub, suffix=f"_{load}")
+    rr = [r for r in recs if r["axis"] == "r"]
+    for s in sorted({r["solver"] for r in rr}):
+        sub = [r for r in rr if r["solver"] == s]
+        dflt = [dict(r, coords={**r["coords"], "r": "default"}) for r in d
+                if r["solver"] == s and r["coords"].get("load") == "f2"]
+        dparams = dflt[0].get("params_used", {}).get("r") if dflt else None
+        extra = [f"Rows: r (stress per length); the row `default` is `{s}` with its default parameters "
+                 f"(from the delta axis, f2{'' if dparams is None else ', r = ' + str(dparams)}); the paper used "
+                 "r = 1e7 at every delta. The table below gives the outer iterations against r x delta "
+                 "(dimensionless: the augmentation r compared with the interface stiffness 1/delta).", ""]
+        its = defaultdict(dict)
+        for r in sub:
+            its[r["coords"]["r"]][r["coords"]["delta"]] = r
+        deltas = sorted({r["coords"]["delta"] for r in sub})
+        tab = ["| r \\ delta | " + " | ".join(_fmt(x) for x in deltas) + " |", "|---" * (len(deltas) + 1) + "|"]
+        for rv in sorted(its):
+            tab.append(f"| {_fmt(rv)} | " + " | ".join(
+                f"r delta = {_fmt(rv * dv)}: {int(its[rv][dv]['iters']) if its[rv].get(dv, {}).get('iters') else '-'} its"
+                for dv in deltas) + " |")
+        extra = extra + tab + [""]
+        section("r", lambda r: r["coords"]["r"], lambda r: r["coords"]["delta"], "r", "delta", "delta", extra,
+                subset=sub + dflt, suffix=f"_{s}")
+    section("units", solver_row, lambda r: r["coords"]["units"] + ("" if r["coords"].get("r") == "default" else ""),
+            "solver", "unit system", "units", [
+                "Unit systems relative to the paper's (MPa, length unit read as m): MPa-mm multiplies lengths by "
+                "1e3, Pa-m stresses by 1e6, Pa-mm both, GPa-km divides both by 1e3. delta (a length per stress) "
+                "and the load are converted; the reference is the MPa-m reference mapped exactly. Rows with "
+                "`r=1e+07` keep the paper's number unconverted, to show what a fixed r does.", ""],
+            col_order=["MPa-m", "MPa-mm", "Pa-m", "Pa-mm", "GPa-km"])
+    section("load", solver_row, lambda r: r["coords"]["load_scale"], "solver", "load scale", "load scale",
+            ["The QP is positively homogeneous in the load: the reference is s x the reference at s = 1.", ""])
+    section("nu", solver_row, lambda r: r["coords"]["nu"], "solver", "nu", "nu",
+            ["P1 elements lock as nu -> 0.5 (lambda / mu = 2 nu / (1 - 2 nu) = 5000 at nu = 0.4999): the "
+             "discrete problem stays well posed but K's conditioning grows with lambda / mu.", ""])
+    section("N", solver_row, lambda r: r["coords"]["N"], "solver", "N", "N",
+            [f"Large N only for the solvers that fit the time limit: a solver is not attempted at 2N when its "
+             f"time at N times the growth factor exceeds the limit (reason in the table).", ""])
+    return "\n".join(L) + "\n"
+
+
+@register_report("stability", "numerical-stability grid: colour maps and silent wrong answers (from dualfem stress)")
+def run(argv: list[str]) -> int:
+    from .io import atomic_write_text
+    from .stress import load_results
+
+    ap = argparse.ArgumentParser(prog="dualfem report stability",
+                                 description="write reports/stability.md from a dualfem stress results directory")
+    ap.add_argument("results", metavar="RESULTS", help="directory written by dualfem stress (runs.jsonl, meta.json)")
+    ap.add_argument("output", nargs="?", default=None, metavar="OUTPUT.md",
+                    help="Markdown file to write (default reports/stability.md; figures go to <its folder>/stability/)")
+    ap.add_argument("-o", "--output", dest="output_opt", default=None, metavar="FILE",
+                    help="same as OUTPUT.md (needs 'dualfem report stability -- RESULTS -o FILE')")
+    try:
+        args = ap.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    out = Path(args.output_opt or args.output or "reports/stability.md")
+    if out.suffix != ".md":
+        raise InputError(f"OUTPUT must name a .md file, got {str(out)!r}")
+    meta, recs = load_results(args.results)
+    if not recs:
+        raise InputError(f"RESULTS {args.results!r} holds no runs")
+    text = render(meta, recs, out)
+    atomic_write_text(out, text)
+    print(f"wrote {out} and {out.parent / 'stability'}/*.png ({len(recs)} runs)")
+    return 0
