@@ -128,6 +128,9 @@ def _cfg_solve(p):
     p.add_argument("--solver", default=DEFAULT_SOLVER, help=f"solver name (default {DEFAULT_SOLVER})")
     add_param_args(p)
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.add_argument("--vtk", metavar="FILE.vtu", default=None,
+                   help="also write the solution for ParaView (displacement, stresses, defect jump/pressure)")
+    p.add_argument("--xdmf", metavar="FILE.xdmf", default=None, help="the same as XDMF + HDF5 (needs h5py)")
 
 
 @command("solve", "solve one scene with one solver")(_cfg_solve)
@@ -137,6 +140,12 @@ def cmd_solve(args) -> int:
     from .solution import Status
 
     solver = make_solver(args.solver, parse_set(args.param))  # validate before the (slow) assembly
+    if args.vtk or args.xdmf:
+        from .vtk import check_path
+
+        for path, kind in ((args.vtk, "vtu"), (args.xdmf, "xdmf")):
+            if path:
+                check_path(path, kind)
     problem = scene_from_args(args)
     qp = problem.build()
     sol = run(solver, qp)
@@ -144,6 +153,14 @@ def cmd_solve(args) -> int:
     post = getattr(args, "_post", None)
     if post:
         post(problem, qp, sol, rec)
+    if args.vtk or args.xdmf:
+        from .vtk import write_outputs
+
+        if sol.x is None:
+            print(f"dualfem solve: no solution ({sol.status}): --vtk/--xdmf not written", file=sys.stderr)
+        else:
+            for path in write_outputs(qp, sol, vtk=args.vtk, xdmf=args.xdmf):
+                print(f"wrote {path}", file=sys.stderr)
     if args.json:
         print(dumps(rec))
     else:

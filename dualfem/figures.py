@@ -1,0 +1,195 @@
+"""Figures of a thin-defect solution (the paper's Figs 2-7 and convergence histories).
+
+Every function draws from the library's own objects, ``qp`` (a scene's QP: it carries the mesh
+maps and the material) and a :class:`~dualfem.solution.Solution`, on a matplotlib ``Axes``
+(a new figure when ``ax`` is None), and returns the ``Axes``; the same calls work in a
+notebook::
+
+    from dualfem.scene import load_scene
+    from dualfem.runner import run
+    from dualfem import figures
+    qp = load_scene("f2", {"N": 64, "delta": 1e-1}).build()
+    sol = run(figures.pick_solver(), qp)
+    figures.plot_deformed(qp, sol, scale=300)
+
+matplotlib is imported lazily, so importing this module is cheap.
+"""
+from __future__ import annotations
+
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from .errors import InputError
+from .post import Post
+
+#: solvers tried in this order by :func:`pick_solver` (fast and exact first)
+PREFERRED = ("pdas", "uzawa", "clarabel")
+
+
+def pick_solver(name: str | None = None, *, exact: bool = True, order: Sequence[str] = PREFERRED) -> str:
+    """Name of the solver to use: ``name`` if given (checked), else the first registered and
+    installed solver of ``order`` (with ``exact`` True, only solvers declaring ``exact``)."""
+    from .registry import get_solver, solvers
+
+    if name is not None:
+        cls = get_solver(name)
+        if cls.missing():
+            raise InputError(cls.missing())
+        return name
+    reg = solvers()
+    for n in order:
+        cls = reg.get(n)
+        if cls is not None and cls.missing() is None and (cls.exact or not exact):
+            return n
+    raise InputError(f"none of the solvers {', '.join(order)} is registered and installed")
+
+
+def _axes(ax, figsize=(6.4, 4.8)):
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=figsize)
+    return ax
+
+
+def _post(qp, sol) -> Post:
+    return sol if isinstance(sol, Post) else Post(qp, sol)
+
+
+def _units(qp) -> str:
+    return str((getattr(qp, "params", {}) or {}).get("units", "MPa"))
+
+
+def _along(post: Post) -> tuple[np.ndarray, str]:
+    """Abscissa along the defect: x1 for a horizontal defect (as in the paper), else s."""
+    d = post.defect
+    tau = np.asarray(post.qp.maps.get("tangent", (1.0, 0.0)), dtype=float)
+    if abs(abs(tau[0]) - 1) < 1e-12:
+        return d["X"][0], "x1"
+    return d["s"], "s (distance from the first tip)"
+
+
+def plot_deformed(qp, sol, ax=None, *, scale: float = 300.0, title: str | None = None, vmax: float | None = None,
+                  cmap: str = "jet", colorbar: bool = True, edges: bool = False):
+    """The deformed body X + scale u, triangles coloured by the von Mises stress (colour bar in
+    the units of E); the defect faces are drawn in white on top."""
+    ax = _axes(ax)
+    p = _post(qp, sol)
+    xy = p.deformed(scale)
+    vm = p.von_mises
+    coll = ax.tripcolor(xy[0], xy[1], p.triangles.T, facecolors=vm, cmap=cmap, vmin=0.0,
+                        vmax=vmax if vmax is not None else float(vm.max()),
+                        edgecolors="k" if edges else "none", linewidth=0.1 if edges else 0.0)
+    if "defect_upper" in qp.maps:
+        d = p.defect
+        for ids in (d["upper"], d["lower"]):
+            ax.plot(xy[0, ids], xy[1, ids], "w-", lw=0.8)
+    if colorbar:
+        ax.figure.colorbar(coll, ax=ax, label=f"von Mises stress [{_units(qp)}]")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x1 + {:g} u1".format(scale))
+    ax.set_ylabel("x2 + {:g} u2".format(scale))
+    if title:
+        ax.set_title(title, fontsize=10)
+    return ax
+
+
+def plot_jump(cases: Iterable[tuple[str, object, object]], ax=None, *, unit: float = 1e-5, component: str = "normal"):
+    """Jump [u_nu] (or [u_tau]) along the defect for several solutions; ``cases`` are
+    ``(label, qp, sol)``; values are plotted in multiples of ``unit`` (paper: 1e-5)."""
+    ax = _axes(ax)
+    key = {"normal": "jump_normal", "tangent": "jump_tangent"}.get(component)
+    if key is None:
+        raise InputError(f"component must be 'normal' or 'tangent', got {component!r}")
+    xlabel = "s"
+    for label, qp, sol in cases:
+        p = _post(qp, sol)
+        x, xlabel = _along(p)
+        ax.plot(x, p.defect[key] / unit, ".-", ms=3, lw=1, label=label)
+    ax.axhline(0, color="k", lw=0.5)
+    sym = "[u_nu]" if component == "normal" else "[u_tau]"
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(f"{sym} / {unit:g}")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return ax
+
+
+def plot_faces(qp, sol, ax=None, *, scale: float = 300.0, title: str | None = None):
+    """Shapes of the upper and lower faces of the defect, X + scale u, with the undeformed defect."""
+    ax = _axes(ax)
+    p = _post(qp, sol)
+    d = p.defect
+    X = d["X"]
+    for key, style, label in (("u_upper", "r.-", "upper face (+)"), ("u_lower", "b.-", "lower face (-)")):
+        ax.plot(X[0] + scale * d[key][:, 0], X[1] + scale * d[key][:, 1], style, ms=3, lw=1, label=label)
+    ax.plot(X[0], X[1], "k--", lw=0.7, label="undeformed")
+    ax.set_xlabel(f"x1 + {scale:g} u1")
+    ax.set_ylabel(f"x2 + {scale:g} u2")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return ax
+
+
+def plot_pressure(cases: Iterable[tuple[str, object, object]], ax=None):
+    """Contact pressure l = mu / w (units of E) along the defect; ``cases`` are ``(label, qp, sol)``."""
+    ax = _axes(ax)
+    xlabel, units = "s", "MPa"
+    for label, qp, sol in cases:
+        p = _post(qp, sol)
+        if p.multipliers is None:
+            raise InputError(f"case {label!r} has no multipliers")
+        x, xlabel = _along(p)
+        units = _units(qp)
+        ax.plot(x, p.defect["pressure"], ".-", ms=3, lw=1, label=label)
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(f"contact pressure mu/w [{units}]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return ax
+
+
+def history_series(sol, key: str) -> tuple[np.ndarray, np.ndarray] | None:
+    """(iteration numbers, values) of ``key`` in ``sol.history``, or None if it has none."""
+    hist = getattr(sol, "history", None) or []
+    rows = [h for h in hist if isinstance(h, dict) and key in h and h[key] is not None]
+    if not rows:
+        return None
+    it = np.array([h.get("k", h.get("iter", i + 1)) for i, h in enumerate(rows)], dtype=float)
+    return it, np.array([float(h[key]) for h in rows])
+
+
+def plot_history(runs: Iterable[tuple[str, object]], ax=None, *, key: str = "dual_change", ylabel: str | None = None,
+                 title: str | None = None, floor: float = 1e-300, logx: bool = False):
+    """Convergence histories: ``key`` of each run's ``Solution.history`` per iteration, on a log
+    scale; ``runs`` are ``(label, Solution)``. Runs without that key are listed as skipped in
+    the legend; raises InputError if none has it. ``logx`` puts the iterations on a log scale
+    (useful when one run takes hundreds of iterations and the others a few)."""
+    ax = _axes(ax)
+    n = 0
+    skipped = []
+    for label, sol in runs:
+        ser = history_series(sol, key)
+        if ser is None:
+            skipped.append(label)
+            continue
+        it, val = ser
+        ax.plot(it, np.maximum(np.abs(val), floor), "-", marker="." if len(it) < 60 else None, ms=3, lw=1,
+                    label=f"{label} ({len(it)} its)")
+        n += 1
+    if n == 0:
+        raise InputError(f"no run has a history with {key!r}")
+    ax.set_yscale("log")
+    if logx:
+        ax.set_xscale("log")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel(ylabel or key)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=7, title=("no history: " + ", ".join(skipped)) if skipped else None, title_fontsize=7)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return ax

@@ -1,0 +1,342 @@
+"""Post-processing of a thin-defect solution: nodal displacements, strains and stresses per
+triangle, von Mises stress, fields along the defect, deformed coordinates.
+
+Everything is computed from the QP's mesh maps (``qp.maps``: ``nodes``, ``triangles``,
+``node_dofs``, ``defect_upper``/``defect_lower``/``defect_tips``/``defect_s``, ``normal``,
+``tangent``) and the material in ``qp.params`` (``E``, ``nu``, ``plane``), so a QP built by a
+scene is enough; a QP read back from a file may pass ``E``, ``nu``, ``plane`` explicitly.
+Nothing is computed until asked for: :class:`Post` evaluates each field on first access and
+caches it.
+
+Conventions:
+
+* P1 elements: strains and stresses are constant per triangle (Voigt order 11, 22, 12; the
+  engineering shear ``gamma12 = 2 eps12`` is *not* used: ``eps12`` is the tensor component).
+* Stress in the units of ``E`` (MPa for the paper's scenes). Plane strain: ``sigma33 =
+  lambda (eps11 + eps22)``; plane stress: ``sigma33 = 0`` and ``lambda`` is replaced by
+  ``lambda* = 2 lambda mu / (lambda + 2 mu)`` (see :func:`problems.thin_defect.lame`). The von
+  Mises stress always uses all three normal components.
+* Along the defect the coordinate ``s`` runs from the first tip (s = 0) to the second; the
+  tips are single (not doubled) nodes, so the jump is zero there. ``jump_normal = [u.nu] =
+  (u+ - u-).nu`` ("+" = the face the normal points to, the upper face for the default scene),
+  ``jump_tangent = (u+ - u-).tau``. ``pressure = mu / w`` (the paper's ``l = -sigma_nu +
+  [u_nu]/delta``, units of stress), ``force = mu`` (nodal contact forces).
+"""
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+
+from .errors import InputError
+
+_REQUIRED_MAPS = ("nodes", "triangles", "node_dofs")
+
+
+def _maps(qp) -> dict:
+    missing = [k for k in _REQUIRED_MAPS if k not in qp.maps]
+    if missing:
+        raise InputError(f"post-processing needs the mesh maps of the QP ({', '.join(missing)} missing): "
+                         f"build the QP from a scene (or export it with its maps)")
+    return qp.maps
+
+
+def material(qp, E: float | None = None, nu: float | None = None, plane: str | None = None) -> tuple[float, float, str]:
+    """(E, nu, plane) from the arguments, else from ``qp.params``; InputError if unknown."""
+    p = getattr(qp, "params", {}) or {}
+    E = p.get("E") if E is None else E
+    nu = p.get("nu") if nu is None else nu
+    plane = p.get("plane", "strain") if plane is None else plane
+    if E is None or nu is None:
+        raise InputError("post-processing needs the material: pass E and nu (the QP has no params 'E', 'nu')")
+    if plane not in ("strain", "stress"):
+        raise InputError(f"plane must be 'strain' or 'stress', got {plane!r}")
+    return float(E), float(nu), str(plane)
+
+
+def nodal_displacement(qp, x: np.ndarray) -> np.ndarray:
+    """Displacement of every mesh node, shape (nnodes, 2); clamped components are 0."""
+    nd = np.asarray(_maps(qp)["node_dofs"])
+    x = np.asarray(x, dtype=float)
+    if x.shape != (qp.n,):
+        raise InputError(f"x must have length {qp.n}, got shape {x.shape}")
+    u = np.zeros(nd.shape[::-1])
+    mask = nd >= 0
+    u.T[mask] = x[nd[mask]]
+    return u
+
+
+def free_vector(qp, u: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`nodal_displacement`: the vector x of free unknowns from nodal values."""
+    nd = np.asarray(_maps(qp)["node_dofs"])
+    x = np.zeros(qp.n)
+    mask = nd >= 0
+    x[nd[mask]] = np.asarray(u).T[mask]
+    return x
+
+
+def shape_gradients(nodes: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gradients of the three P1 basis functions per triangle, shape (ntri, 3, 2), and areas."""
+    p = np.asarray(nodes)[:, np.asarray(tri)]  # (2, 3, ntri)
+    x, y = p[0], p[1]
+    # d(lambda_i)/dx = (y_j - y_k) / (2A), d/dy = (x_k - x_j) / (2A), (i, j, k) cyclic
+    twoA = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0])
+    if np.any(np.abs(twoA) <= 0):
+        raise InputError("mesh has a degenerate triangle")
+    j, k = [1, 2, 0], [2, 0, 1]
+    gx = (y[j] - y[k]) / twoA
+    gy = (x[k] - x[j]) / twoA
+    return np.stack([gx.T, gy.T], axis=2), 0.5 * np.abs(twoA)
+
+
+def strains(qp, x: np.ndarray) -> np.ndarray:
+    """Strain per triangle, shape (ntri, 3): eps11, eps22, eps12 (tensor shear)."""
+    m = _maps(qp)
+    tri = np.asarray(m["triangles"])
+    grad, _ = shape_gradients(m["nodes"], tri)
+    u = nodal_displacement(qp, x)[tri.T]  # (ntri, 3, 2)
+    du = np.einsum("tic,tid->tcd", u, grad)  # du[t, c, d] = d u_c / d x_d
+    return np.stack([du[:, 0, 0], du[:, 1, 1], 0.5 * (du[:, 0, 1] + du[:, 1, 0])], axis=1)
+
+
+def stresses(qp, x: np.ndarray, E: float | None = None, nu: float | None = None,
+             plane: str | None = None) -> dict[str, np.ndarray]:
+    """Stress per triangle: ``s11, s22, s12, s33`` and ``von_mises`` (units of E)."""
+    from problems.thin_defect import lame
+
+    E, nu, plane = material(qp, E, nu, plane)
+    lam, mu = lame(E, nu, plane)
+    eps = strains(qp, x)
+    tr = eps[:, 0] + eps[:, 1]
+    s11 = lam * tr + 2 * mu * eps[:, 0]
+    s22 = lam * tr + 2 * mu * eps[:, 1]
+    s12 = 2 * mu * eps[:, 2]
+    s33 = lam * tr if plane == "strain" else np.zeros_like(tr)
+    return {"s11": s11, "s22": s22, "s12": s12, "s33": s33, "von_mises": von_mises(s11, s22, s12, s33)}
+
+
+def von_mises(s11, s22, s12, s33=0.0) -> np.ndarray:
+    """sqrt(1/2 [(s11-s22)^2 + (s22-s33)^2 + (s33-s11)^2] + 3 s12^2)."""
+    s11, s22, s12, s33 = (np.asarray(a, dtype=float) for a in (s11, s22, s12, s33))
+    return np.sqrt(0.5 * ((s11 - s22) ** 2 + (s22 - s33) ** 2 + (s33 - s11) ** 2) + 3 * s12 ** 2)
+
+
+def deformed_nodes(qp, x: np.ndarray, scale: float = 1.0) -> np.ndarray:
+    """Node coordinates of the deformed body, ``X + scale * u``, shape (2, nnodes)."""
+    return np.asarray(_maps(qp)["nodes"]) + scale * nodal_displacement(qp, x).T
+
+
+def defect_fields(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Fields along the defect, ordered by the defect coordinate ``s``.
+
+    Node arrays with the two tips included (first and last entry): ``s``, ``X`` (2, k)
+    reference positions, ``upper``/``lower`` node ids (the tip id on both), ``u_upper``,
+    ``u_lower`` (k, 2), ``jump_normal``, ``jump_tangent`` (0 at the tips), ``pressure`` and
+    ``force`` (NaN at the tips, which carry no constraint; only when ``multipliers`` given).
+    ``interior`` is a boolean mask of the constrained (doubled) nodes.
+    """
+    m = _maps(qp)
+    for k in ("defect_upper", "defect_lower", "defect_s"):
+        if k not in m:
+            raise InputError(f"post-processing of the defect needs qp.maps[{k!r}]")
+    up = np.asarray(m["defect_upper"], dtype=np.int64)
+    lo = np.asarray(m["defect_lower"], dtype=np.int64)
+    s_in = np.asarray(m["defect_s"], dtype=float)
+    nodes = np.asarray(m["nodes"])
+    nrm = np.asarray(m.get("normal", (0.0, 1.0)), dtype=float)
+    tau = np.asarray(m.get("tangent", (nrm[1], -nrm[0])), dtype=float)
+    tips = np.asarray(m.get("defect_tips", []), dtype=np.int64)
+    if tips.size == 2:
+        # tips: the single nodes at s = 0 and s = L
+        t0, t1 = tips
+        L = float(tau @ (nodes[:, t1] - nodes[:, t0]))
+        s = np.r_[0.0, s_in, L]
+        upper = np.r_[t0, up, t1]
+        lower = np.r_[t0, lo, t1]
+        interior = np.r_[False, np.ones(up.size, bool), False]
+    else:
+        s, upper, lower, interior = s_in, up, lo, np.ones(up.size, bool)
+    u = nodal_displacement(qp, x)
+    uu, ul = u[upper], u[lower]
+    d = uu - ul
+    out = {"s": s, "X": nodes[:, lower], "upper": upper, "lower": lower, "interior": interior,
+           "u_upper": uu, "u_lower": ul, "jump_normal": d @ nrm, "jump_tangent": d @ tau}
+    if multipliers is not None:
+        mu = np.asarray(multipliers, dtype=float)
+        if mu.shape != (qp.m,):
+            raise InputError(f"multipliers must have length {qp.m}, got shape {mu.shape}")
+        force = np.full(s.size, np.nan)
+        press = np.full(s.size, np.nan)
+        force[interior] = mu
+        press[interior] = qp.pressure(mu)
+        out["force"] = force
+        out["pressure"] = press
+    return out
+
+
+def contact_length(s: np.ndarray, jump: np.ndarray, tol: float) -> float:
+    """Measure of {s : P1 interpolant of the normal jump <= tol} along the defect.
+
+    With the jump piecewise linear between defect nodes this is the total length of the
+    defect edges whose two end nodes are both closed (|jump| <= tol); the tips count as closed
+    (their jump is zero by construction).
+    """
+    closed = np.asarray(jump) <= tol
+    both = closed[:-1] & closed[1:]
+    return float(np.sum(np.diff(np.asarray(s))[both]))
+
+
+class Post:
+    """Lazy post-processing of one solution: each attribute is computed on first access.
+
+    ``Post(qp, sol)`` or ``Post(qp, x=..., multipliers=...)``; ``E``, ``nu``, ``plane``
+    override the material stored in ``qp.params``.
+    """
+
+    def __init__(self, qp, sol=None, *, x=None, multipliers=None, E=None, nu=None, plane=None):
+        if sol is not None:
+            x = sol.x if x is None else x
+            multipliers = sol.multipliers if multipliers is None else multipliers
+        if x is None:
+            raise InputError("post-processing needs a solution with displacements (x is None: the solve failed?)")
+        _maps(qp)
+        self.qp = qp
+        self.x = np.asarray(x, dtype=float)
+        self.multipliers = None if multipliers is None else np.asarray(multipliers, dtype=float)
+        self._material = (E, nu, plane)
+
+    @cached_property
+    def material(self) -> tuple[float, float, str]:
+        """(E, nu, plane)."""
+        return material(self.qp, *self._material)
+
+    @property
+    def nodes(self) -> np.ndarray:
+        """Reference node coordinates (2, nnodes)."""
+        return np.asarray(self.qp.maps["nodes"])
+
+    @property
+    def triangles(self) -> np.ndarray:
+        """Triangles (3, ntri) as node ids."""
+        return np.asarray(self.qp.maps["triangles"])
+
+    @cached_property
+    def displacement(self) -> np.ndarray:
+        """(nnodes, 2)."""
+        return nodal_displacement(self.qp, self.x)
+
+    @cached_property
+    def strain(self) -> np.ndarray:
+        """(ntri, 3): eps11, eps22, eps12."""
+        return strains(self.qp, self.x)
+
+    @cached_property
+    def stress(self) -> dict[str, np.ndarray]:
+        """Per triangle: s11, s22, s12, s33, von_mises."""
+        return stresses(self.qp, self.x, *self.material)
+
+    @property
+    def von_mises(self) -> np.ndarray:
+        """Von Mises stress per triangle."""
+        return self.stress["von_mises"]
+
+    @cached_property
+    def defect(self) -> dict[str, np.ndarray]:
+        """See :func:`defect_fields`."""
+        return defect_fields(self.qp, self.x, self.multipliers)
+
+    def deformed(self, scale: float = 1.0) -> np.ndarray:
+        """X + scale u, (2, nnodes)."""
+        return self.nodes + scale * self.displacement.T
+
+
+# ----------------------------------------------------------------------------- transfer
+def _grid_spacing(coord: np.ndarray) -> tuple[float, float]:
+    c = np.unique(np.round(coord, 12))
+    return float(c[0]), float(np.diff(c).min()) if c.size > 1 else 1.0
+
+
+def locate(qp_coarse, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For points (2, k) strictly inside coarse triangles: the triangle index and barycentrics (k, 3).
+
+    The coarse mesh must be a structured (tensor) triangulation such as the thin-defect scene's:
+    its triangles are bucketed by the grid cell containing their centroid and each point is tested
+    against the triangles of its cell. A point on the defect would be ambiguous (two coincident
+    copies), so pass points that are strictly inside triangles (e.g. fine-triangle centroids).
+    """
+    m = _maps(qp_coarse)
+    P = np.asarray(m["nodes"], dtype=float)
+    T = np.asarray(m["triangles"], dtype=np.int64)
+    x0, hx = _grid_spacing(P[0])
+    y0, hy = _grid_spacing(P[1])
+    ny = int(round((P[1].max() - y0) / hy)) + 2
+    cen = P[:, T].mean(axis=1)
+    key_t = np.floor((cen[0] - x0) / hx).astype(np.int64) * ny + np.floor((cen[1] - y0) / hy).astype(np.int64)
+    order = np.argsort(key_t, kind="stable")
+    keys = key_t[order]
+    pts = np.asarray(points, dtype=float)
+    kx = np.clip(np.floor((pts[0] - x0) / hx).astype(np.int64), 0, None)
+    ky = np.clip(np.floor((pts[1] - y0) / hy).astype(np.int64), 0, None)
+    key_p = kx * ny + ky
+    lo = np.searchsorted(keys, key_p, "left")
+    cnt = np.searchsorted(keys, key_p, "right") - lo
+    found = np.full(pts.shape[1], -1, dtype=np.int64)
+    bary = np.zeros((pts.shape[1], 3))
+    for k in range(int(cnt.max(initial=0))):
+        idx = np.flatnonzero((cnt > k) & (found < 0))
+        if idx.size == 0:
+            break
+        cand = order[lo[idx] + k]
+        b = barycentric(P[:, T[:, cand]], pts[:, idx])
+        ok = b.min(axis=1) >= -1e-9
+        found[idx[ok]] = cand[ok]
+        bary[idx[ok]] = b[ok]
+    if np.any(found < 0):
+        raise InputError(f"{int(np.sum(found < 0))} points are not inside the coarse mesh "
+                         f"(meshes must cover the same domain; the transfer needs tensor meshes)")
+    return found, bary
+
+
+def barycentric(tri_xy: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates (k, 3) of points (2, k) in triangles given as (2, 3, k) vertices."""
+    a, b, c = tri_xy[:, 0], tri_xy[:, 1], tri_xy[:, 2]
+    v0, v1, v2 = b - a, c - a, pts - a
+    det = v0[0] * v1[1] - v0[1] * v1[0]
+    l1 = (v2[0] * v1[1] - v2[1] * v1[0]) / det
+    l2 = (v0[0] * v2[1] - v0[1] * v2[0]) / det
+    return np.stack([1 - l1 - l2, l1, l2], axis=1)
+
+
+def prolongate(qp_coarse, x_coarse: np.ndarray, qp_fine) -> np.ndarray:
+    """Interpolate a coarse P1 solution onto the nodes of a nested finer mesh, side by side.
+
+    Each fine triangle is located by its centroid in the coarse triangle that contains it (so
+    on the correct side of the defect); the coarse P1 field of that triangle is evaluated at the
+    fine triangle's three vertices. A fine node on the defect thus gets the value of the coarse
+    field on its own face (upper copies from above, lower copies from below). Returns the vector
+    of the fine QP's free unknowns (clamped values are zero on both meshes).
+    """
+    uc = nodal_displacement(qp_coarse, x_coarse)
+    mf = _maps(qp_fine)
+    Pf = np.asarray(mf["nodes"], dtype=float)
+    Tf = np.asarray(mf["triangles"], dtype=np.int64)
+    tc, _ = locate(qp_coarse, Pf[:, Tf].mean(axis=1))
+    Tc = np.asarray(_maps(qp_coarse)["triangles"], dtype=np.int64)
+    Pc = np.asarray(qp_coarse.maps["nodes"], dtype=float)
+    tri_xy = Pc[:, Tc[:, tc]]
+    U = np.zeros((Pf.shape[1], 2))
+    for i in range(3):
+        b = barycentric(tri_xy, Pf[:, Tf[i]])  # (ntri_f, 3)
+        val = np.einsum("tk,tkc->tc", b, uc[Tc[:, tc].T])
+        U[Tf[i]] = val
+    return free_vector(qp_fine, U)
+
+
+def mass_norm2(qp, x: np.ndarray) -> float:
+    """Squared L2 norm of the P1 displacement field, sum over triangles of A/12 (sum e_i^2 + (sum e_i)^2)."""
+    m = _maps(qp)
+    T = np.asarray(m["triangles"], dtype=np.int64)
+    _, area = shape_gradients(m["nodes"], T)
+    u = nodal_displacement(qp, x)[T]  # (3, ntri, 2)
+    per = (u ** 2).sum(axis=0) + u.sum(axis=0) ** 2
+    return float(np.sum(area[:, None] / 12.0 * per))

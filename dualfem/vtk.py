@@ -1,0 +1,147 @@
+"""ParaView output of a thin-defect solution (VTU and XDMF via meshio).
+
+One unstructured grid holds
+
+* the points: every mesh node, doubled defect nodes included (so the crack opens when the
+  mesh is warped), with z = 0;
+* point data ``displacement`` (3 components, z = 0: use *Warp By Vector*), and the nodal
+  defect fields ``jump_normal``, ``jump_tangent``, ``pressure`` (NaN away from the defect; at a
+  defect node both copies carry the same value; the tips carry jump 0 and no pressure);
+* two cell blocks: the triangles, then the defect's ``line`` cells: the upper-face edges
+  followed by the lower-face edges (ordered along the defect from the first tip);
+* cell data ``von_mises``, ``s11``, ``s22``, ``s12``, ``s33`` (constant per P1 triangle, units
+  of E; NaN on the line cells), ``jump_normal``, ``jump_tangent``, ``pressure`` on the line
+  cells (mean of the edge's two end nodes, ignoring the tips' undefined pressure; NaN on the
+  triangles), and ``face`` (0 triangle, +1 upper face, -1 lower face) to threshold them.
+
+Files are written atomically (:func:`dualfem.io.atomic_write`). XDMF needs h5py (the
+``xdmf`` extra); its heavy data go to a ``.h5`` file next to the ``.xdmf``.
+"""
+from __future__ import annotations
+
+import importlib.util
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError, MissingDependency
+from .io import atomic_write
+from .post import Post
+
+SUFFIXES = {"vtu": (".vtu",), "xdmf": (".xdmf", ".xmf")}
+
+
+def check_path(path: str | os.PathLike, kind: str) -> Path:
+    """Validate an output file name of ``kind`` ('vtu' or 'xdmf'); raise InputError /
+    MissingDependency before any slow work."""
+    path = Path(path)
+    if path.suffix.lower() not in SUFFIXES[kind]:
+        opt = "--vtk" if kind == "vtu" else "--xdmf"
+        raise InputError(f"{opt} must name a {' or '.join(SUFFIXES[kind])} file, got {str(path)!r}")
+    if path.parent != Path("") and path.parent.exists() and not path.parent.is_dir():
+        raise InputError(f"cannot write {str(path)!r}: {str(path.parent)!r} is not a directory")
+    if importlib.util.find_spec("meshio") is None:
+        raise MissingDependency("writing VTK/XDMF needs meshio: pip install meshio")
+    if kind == "xdmf" and importlib.util.find_spec("h5py") is None:
+        raise MissingDependency("writing XDMF needs h5py: pip install 'dualfem[xdmf]'")
+    return path
+
+
+def to_meshio(qp, sol=None, *, post: Post | None = None):
+    """The meshio.Mesh described in the module docstring."""
+    import meshio
+
+    p = post if post is not None else Post(qp, sol)
+    nodes = p.nodes
+    npts = nodes.shape[1]
+    points = np.zeros((npts, 3))
+    points[:, :2] = nodes.T
+    disp = np.zeros((npts, 3))
+    disp[:, :2] = p.displacement
+    ntri = p.triangles.shape[1]
+    cells = [("triangle", p.triangles.T.astype(np.int64))]
+    point_data = {"displacement": disp}
+    st = p.stress
+    cell_data = {k: [np.asarray(st[k], dtype=float)] for k in ("von_mises", "s11", "s22", "s12", "s33")}
+    face = [np.zeros(ntri, dtype=np.int32)]
+    defect_keys = ("jump_normal", "jump_tangent", "pressure")
+    if "defect_upper" in qp.maps:
+        d = p.defect
+        nodal = {"jump_normal": d["jump_normal"], "jump_tangent": d["jump_tangent"],
+                 "pressure": d.get("pressure", np.full(d["s"].size, np.nan))}
+        for k, v in nodal.items():
+            arr = np.full(npts, np.nan)
+            arr[d["lower"]] = v
+            arr[d["upper"]] = v
+            point_data[k] = arr
+        edge_vals = {}
+        for k, v in nodal.items():
+            pair = np.stack([v[:-1], v[1:]])
+            with np.errstate(invalid="ignore"):
+                cnt = np.sum(np.isfinite(pair), axis=0)
+                edge_vals[k] = np.where(cnt > 0, np.nansum(pair, axis=0) / np.maximum(cnt, 1), np.nan)
+        up, lo = d["upper"], d["lower"]
+        edges = np.vstack([np.stack([up[:-1], up[1:]], axis=1), np.stack([lo[:-1], lo[1:]], axis=1)])
+        ne = len(up) - 1
+        cells.append(("line", edges.astype(np.int64)))
+        for k in cell_data:
+            cell_data[k].append(np.full(2 * ne, np.nan))
+        face.append(np.r_[np.ones(ne, dtype=np.int32), -np.ones(ne, dtype=np.int32)])
+        for k in defect_keys:
+            cell_data[k] = [np.full(ntri, np.nan), np.r_[edge_vals[k], edge_vals[k]]]
+    cell_data["face"] = face
+    return meshio.Mesh(points, cells, point_data=point_data, cell_data=cell_data)
+
+
+def write_vtu(path: str | os.PathLike, qp, sol=None, *, post: Post | None = None) -> Path:
+    """Write the solution as a VTU file (binary, zlib-compressed), atomically."""
+    import meshio
+
+    path = check_path(path, "vtu")
+    mesh = to_meshio(qp, sol, post=post)
+    atomic_write(path, lambda tmp: meshio.write(tmp, mesh, file_format="vtu"))
+    return path
+
+
+def write_xdmf(path: str | os.PathLike, qp, sol=None, *, post: Post | None = None) -> Path:
+    """Write the solution as XDMF + HDF5 (``<name>.h5`` beside it).
+
+    Both files are first written under their final names in a temporary directory next to
+    ``path`` and then renamed into place, the ``.h5`` first: a reader never sees an ``.xdmf``
+    whose data file is missing or incomplete.
+    """
+    import meshio
+
+    path = check_path(path, "xdmf")
+    mesh = to_meshio(qp, sol, post=post)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmpdir = tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.")
+    try:
+        tmp = Path(tmpdir) / path.name
+        meshio.write(str(tmp), mesh, file_format="xdmf")
+        h5 = tmp.with_suffix(".h5")
+        if h5.exists():
+            os.replace(h5, path.with_suffix(".h5"))
+        os.replace(tmp, path)
+    finally:
+        for f in Path(tmpdir).glob("*"):
+            f.unlink()
+        os.rmdir(tmpdir)
+    return path
+
+
+def write_outputs(qp, sol, *, vtk: str | None = None, xdmf: str | None = None) -> list[Path]:
+    """Write the requested files (post-processing is computed once and shared)."""
+    if not (vtk or xdmf):
+        return []
+    if sol.x is None:
+        raise InputError(f"no solution to write (solver status {sol.status}: {sol.message})")
+    post = Post(qp, sol)
+    out = []
+    if vtk:
+        out.append(write_vtu(vtk, qp, post=post))
+    if xdmf:
+        out.append(write_xdmf(xdmf, qp, post=post))
+    return out

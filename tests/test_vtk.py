@@ -1,0 +1,114 @@
+"""ParaView output: VTU/XDMF written, read back with meshio, fields and sizes checked; CLI options."""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+meshio = pytest.importorskip("meshio")
+
+from dualfem.cli import main  # noqa: E402
+from dualfem.figures import pick_solver  # noqa: E402
+from dualfem.post import Post  # noqa: E402
+from dualfem.runner import run  # noqa: E402
+from dualfem.scene import load_scene  # noqa: E402
+from dualfem.vtk import to_meshio, write_vtu, write_xdmf  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def case():
+    qp = load_scene("f2", {"N": 16, "delta": 1e-1}).build()
+    sol = run(pick_solver(), qp)
+    assert sol.ok
+    return qp, sol
+
+
+def _check(mesh, qp, sol):
+    p = Post(qp, sol)
+    nn = qp.maps["nodes"].shape[1]
+    ntri = qp.maps["triangles"].shape[1]
+    m = qp.m
+    assert mesh.points.shape == (nn, 3)
+    assert np.allclose(mesh.points[:, :2], qp.maps["nodes"].T)
+    types = [c.type for c in mesh.cells]
+    assert types == ["triangle", "line"]
+    tri, line = mesh.cells[0].data, mesh.cells[1].data
+    assert tri.shape == (ntri, 3) and np.array_equal(tri, qp.maps["triangles"].T)
+    assert line.shape == (2 * (m + 1), 2)  # m + 1 edges per face, two faces
+    # displacement: 3 components, z = 0, equal to the solution
+    d = mesh.point_data["displacement"]
+    assert d.shape == (nn, 3) and np.all(d[:, 2] == 0)
+    assert np.allclose(d[:, :2], p.displacement)
+    # stresses on triangles, NaN on lines
+    for k in ("von_mises", "s11", "s22", "s12", "s33"):
+        assert np.allclose(mesh.cell_data[k][0], p.stress[k]), k
+        assert np.all(np.isnan(mesh.cell_data[k][1])), k
+    # defect fields on lines
+    jn = mesh.cell_data["jump_normal"][1]
+    face = mesh.cell_data["face"][1]
+    assert np.all(np.isnan(mesh.cell_data["jump_normal"][0]))
+    assert set(face[: m + 1]) == {1} and set(face[m + 1:]) == {-1}
+    nodal = p.defect["jump_normal"]
+    assert np.allclose(jn[: m + 1], 0.5 * (nodal[:-1] + nodal[1:]))
+    pr = mesh.cell_data["pressure"][1]
+    press = qp.pressure(sol.multipliers)
+    assert np.isclose(pr[0], press[0]) and np.isclose(pr[m], press[-1])  # tip edges: interior value
+    assert np.allclose(pr[1:m], 0.5 * (press[:-1] + press[1:]))
+    # nodal defect fields: both copies carry the value, NaN elsewhere
+    pj = mesh.point_data["jump_normal"]
+    assert np.allclose(pj[qp.maps["defect_upper"]], qp.B @ sol.x)
+    assert np.allclose(pj[qp.maps["defect_lower"]], qp.B @ sol.x)
+    assert np.isnan(pj).sum() == nn - 2 * m - 2
+    assert np.nanmax(mesh.point_data["pressure"]) > 0  # f2 has a contact zone
+
+
+def test_vtu_roundtrip(case, tmp_path):
+    qp, sol = case
+    path = write_vtu(tmp_path / "out.vtu", qp, sol)
+    assert sorted(os.listdir(tmp_path)) == ["out.vtu"]  # no temporary left behind
+    _check(meshio.read(path), qp, sol)
+
+
+def test_xdmf_roundtrip(case, tmp_path):
+    pytest.importorskip("h5py")
+    qp, sol = case
+    path = write_xdmf(tmp_path / "sub" / "out.xdmf", qp, sol)
+    assert sorted(os.listdir(tmp_path / "sub")) == ["out.h5", "out.xdmf"]
+    _check(meshio.read(path), qp, sol)
+
+
+def test_to_meshio_without_defect_maps(case):
+    qp, sol = case
+    maps = {k: v for k, v in qp.maps.items() if not k.startswith("defect")}
+    bare = type(qp)(K=qp.K, F=qp.F, B=qp.B, weights=qp.weights, maps=maps, params=qp.params)
+    mesh = to_meshio(bare, sol)
+    assert [c.type for c in mesh.cells] == ["triangle"]
+    assert "jump_normal" not in mesh.cell_data
+
+
+def test_cli_solve_writes_vtk(tmp_path, capsys):
+    vtu, xdmf = tmp_path / "a.vtu", tmp_path / "a.xdmf"
+    argv = ["solve", "f2", "--set", "N=16", "--set", "delta=0.1", "--solver", pick_solver(), "--vtk", str(vtu)]
+    try:
+        import h5py  # noqa: F401
+        argv += ["--xdmf", str(xdmf)]
+    except ImportError:
+        xdmf = None
+    assert main(argv) == 0
+    assert "wrote" in capsys.readouterr().err
+    mesh = meshio.read(vtu)
+    assert mesh.cells[0].data.shape[0] == 2 * 16 * 16
+    assert np.nanmax(mesh.cell_data["von_mises"][0]) > 0
+    if xdmf is not None:
+        assert meshio.read(xdmf).points.shape == mesh.points.shape
+
+
+def test_cli_rejects_bad_names_before_solving(tmp_path, capsys):
+    bad = tmp_path / "a.vtk"
+    assert main(["solve", "f2", "--set", "N=16", "--vtk", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "--vtk" in err and ".vtu" in err and len(err.strip().splitlines()) == 1
+    assert not bad.exists()
+    assert main(["solve", "f2", "--set", "N=16", "--xdmf", str(tmp_path / "a.h5")]) == 2
+    assert "--xdmf" in capsys.readouterr().err
