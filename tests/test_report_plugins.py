@@ -1,0 +1,26 @@
+"""``dualfem report plugins`` (small sizes): the report and its figure are written."""
+from pathlib import Path
+
+import pytest
+
+from dualfem.cli import main
+from dualfem.errors import InputError
+from dualfem.report_plugins import run as report
+
+
+def test_report_plugins_small(tmp_path):
+    out = tmp_path / "rep"
+    assert main(["report", "plugins", "--", "--N", "8", "--sizes", "8", "--out", str(out), "--dpi", "40"]) == 0
+    text = (out / "plugins.md").read_text()
+    png = out / "figures" / "plugins_signorini.png"
+    assert png.is_file() and png.stat().st_size > 5000
+    assert "| dual_gradient | solved |" in text and "figures/plugins_signorini.png" in text
+    # the flat-foundation rows show errors at round-off level
+    flat = [ln for ln in text.splitlines() if ln.startswith("| 8 | strain |")]
+    assert flat and float(flat[0].split("|")[4]) < 1e-10
+
+
+@pytest.mark.parametrize("argv", [["--sizes", "10"], ["--sizes", "a,b"], ["--N", "2"]])
+def test_report_plugins_bad_args(argv, tmp_path):
+    with pytest.raises(InputError):
+        report(argv + ["--out", str(tmp_path)])
