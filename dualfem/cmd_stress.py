@@ -14,8 +14,8 @@ def _cfg(p):
     p.add_argument("--quick", action="store_true",
                    help="small version: N=16 base scene, load f2 only on the delta axis, N up to 128, "
                         "20 s per-run time limit (default: N=32, loads f1/f2/f3, N up to 1024, 120 s)")
-    p.add_argument("--out", default="results/stress", metavar="DIR",
-                   help="results directory (runs.jsonl, meta.json); default results/stress")
+    p.add_argument("--out", default="benchmarks/results/stress", metavar="DIR",
+                   help="results directory (runs.jsonl, meta.json); default benchmarks/results/stress")
     p.add_argument("--solvers", default=None, metavar="A,B",
                    help="comma-separated solver names (default: every registered, installed solver)")
     p.add_argument("--axes", default=None, metavar="A,B",

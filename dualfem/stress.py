@@ -427,20 +427,21 @@ def run_grid(tasks: list[Task], out: Path, *, jobs: int = 1, resume: bool = Fals
     """Execute ``tasks``; append records to ``out/runs.jsonl``; return all records."""
     out.mkdir(parents=True, exist_ok=True)
     runs_path = out / "runs.jsonl"
-    done: dict[str, dict] = {}
+    kept: dict[str, dict] = {}
     if resume and runs_path.exists():
         for line in runs_path.read_text(encoding="utf-8").splitlines():
             try:
                 r = json.loads(line)
             except json.JSONDecodeError:
                 continue  # a line cut by a kill: rerun that task
-            done[r["id"]] = r
+            if not r.get("skip_budget"):  # scheduling decisions are re-made on every run
+                kept[r["id"]] = r
+        # keep every complete record (also of axes/solvers not in this run), drop cut lines
+        _atomic_lines(runs_path, list(kept.values()))
     elif runs_path.exists():
         runs_path.unlink()
     ids = {t.id for t in tasks}
-    done = {k: v for k, v in done.items() if k in ids}
-    if resume and runs_path.exists():  # keep only complete lines of tasks still in the grid
-        _atomic_lines(runs_path, list(done.values()))
+    done = {k: v for k, v in kept.items() if k in ids}
     todo = [t for t in tasks if t.id not in done]
     _write_meta(out, {**(meta or {}), "complete": False, "n_tasks": len(tasks)})
     fh = open(runs_path, "a", encoding="utf-8")
@@ -482,29 +483,29 @@ def run_grid(tasks: list[Task], out: Path, *, jobs: int = 1, resume: bool = Fals
 
     try:
         while any(queues) or any(w.task for w in workers):
+            progressed = False
             for i, w in enumerate(workers):
-                if w.task is not None:
-                    continue
                 q = queues[i]
-                for j, t in enumerate(q):
+                j = 0
+                while w.task is None and j < len(q):
+                    t = q[j]
                     g = gate(t)
                     if g == "wait":
+                        j += 1
                         continue
                     q.pop(j)
+                    progressed = True
                     if g is not None:
                         finish(_skipped(t, g))
-                        break
-                    n = t.scene.get("N", 32)
-                    prev_n = n // 2
+                        continue
+                    prev_n = t.scene.get("N", 32) // 2
                     if prev_n in ref_time and ref_time[prev_n] * GROWTH > _ref_budget(t):
                         t.ref_ok = False
                     w.submit(t)
-                    break
             busy = [w for w in workers if w.task is not None]
             if not busy:
-                if any(queues):
-                    # every head waits on a task queued on another idle worker: cannot happen
-                    # with the ordering above, but never spin forever
+                if any(queues) and not progressed:
+                    # every remaining task waits on one that can no longer run: never spin forever
                     for q in queues:
                         while q:
                             finish(_skipped(q.pop(0), "dependency never ran"))
