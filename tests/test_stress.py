@@ -1,0 +1,109 @@
+"""The stress-grid harness (dualfem.stress) and its report (dualfem report stability)."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from dualfem import stress
+from dualfem.cli import main
+from dualfem.stress import Task, classify
+
+
+@pytest.mark.parametrize("status,err,kkt,tol,expected", [
+    ("solved", 1e-8, 1e-9, 1e-6, "correct"),
+    ("solved", 9.9e-6, 1e-12, 1e-6, "correct"),            # within SAFETY x tolerance
+    ("solved", 1e-3, 1e-12, 1e-6, "silent_wrong"),          # solved, residuals clean, answer wrong
+    ("solved", 1e-3, 1e-2, 1e-6, "flagged"),               # the evaluator sees it
+    ("solved", 1e-3, float("nan"), 1e-6, "flagged"),
+    ("max_iter", 1e-12, 1e-12, 1e-6, "failed"),            # never 'correct' without a solved status
+    ("stagnation", 1.0, 1.0, 1e-6, "failed"),
+    ("skipped", None, None, 1e-6, "skipped"),
+    ("solved", None, 1e-12, 1e-6, "unverified"),           # no reference
+])
+def test_classify(status, err, kkt, tol, expected):
+    assert classify(status, err, kkt, tol) == expected
+
+
+def test_units_map_the_physics():
+    s = stress.scene_in_units(stress.BASE, 1e6, 1e-3)
+    assert s["E"] == pytest.approx(6.9e10) and s["delta"] == pytest.approx(1e-5 * 1e-9)
+    assert s["width"] == pytest.approx(1e-3) and s["defect"][1][0] == pytest.approx(0.75e-3)
+
+
+def test_grid_covers_the_issue(monkeypatch):
+    tasks = stress.build_grid(["clarabel", "uzawa"], quick=False)
+    deltas = {t.coords["delta"] for t in tasks if t.axis == "delta"}
+    assert deltas == {1e-12, 1e-9, 1e-6, 1e-3, 1.0, 1e3}
+    rs = {t.params["r"] for t in tasks if t.axis == "r"}
+    assert rs == {1e0, 1e3, 1e5, 1e7, 1e9, 1e12} and all(t.solver == "uzawa" for t in tasks if t.axis == "r")
+    assert {t.coords["nu"] for t in tasks if t.axis == "nu"} == {0.0, 0.3, 0.45, 0.49, 0.4999}
+    assert {t.scene["plane"] for t in tasks if t.axis == "nu"} == {"strain"}
+    assert min(stress.LOAD_SCALES) == 1e-6 and max(stress.LOAD_SCALES) == 1e6
+    assert {t.coords["N"] for t in tasks if t.axis == "N"} == {8, 16, 32, 64, 128, 256, 512, 1024}
+    assert len({t.id for t in tasks}) == len(tasks)
+    # N chain: each solver's N waits for its previous N
+    chain = {t.id: t for t in tasks if t.axis == "N" and t.solver == "uzawa"}
+    assert sum(t.after is None for t in chain.values()) == 1
+    # units and load runs are graded against the mapped base reference, not a solve of scaled data
+    assert all(t.ref["mode"] == "transform" for t in tasks if t.axis in ("units", "load"))
+
+
+def _tasks():
+    base = {**stress.BASE, "N": 8}
+    out = []
+    for s in ("pdas", "clarabel", "osqp"):
+        out.append(Task(id=f"nu:{s}", axis="nu", coords={"nu": 0.3}, scene=base, solver=s, params={},
+                        ref={"mode": "solve"}, time_limit=20.0))
+        out.append(Task(id=f"load:{s}", axis="load", coords={"load_scale": 1e3}, scene={**base, "load_scale": 1e3},
+                        solver=s, params={}, ref={"mode": "transform", "base": base, "x": 1e3, "mu": 1e3},
+                        time_limit=20.0))
+    return out
+
+
+def test_run_grid_end_to_end_and_report(tmp_path):
+    out = tmp_path / "res"
+    recs = stress.run_grid(_tasks(), out, jobs=1)
+    assert len(recs) == 6 and all(r["outcome"] == "correct" for r in recs), [
+        (r["id"], r["outcome"], r.get("message")) for r in recs]
+    for r in recs:
+        assert r["err"] < 1e-5 and r["reference"]["name"]
+    # the reference solver (pdas) is graded against the second reference, never itself
+    assert next(r for r in recs if r["id"] == "nu:pdas")["reference"]["name"] == "clarabel"
+    assert "mapped exactly" in next(r for r in recs if r["id"] == "load:osqp")["reference"]["name"]
+    lines = (out / "runs.jsonl").read_text().splitlines()
+    assert len(lines) == 6 and json.loads((out / "meta.json").read_text())["complete"]
+    # resume runs nothing again and keeps every record
+    again = stress.run_grid(_tasks(), out, jobs=1, resume=True)
+    assert [r["id"] for r in again] == [r["id"] for r in recs]
+    assert (out / "runs.jsonl").read_text().splitlines() == lines
+
+    # a silent wrong answer added by hand must be listed with its scene
+    fake = dict(recs[0], id="fake", solver="osqp", third_party=True, outcome="silent_wrong", err=0.5, kkt=1e-12,
+                status="solved", message="osqp: solved")
+    with open(out / "runs.jsonl", "a") as fh:
+        fh.write(json.dumps(fake) + "\n")
+    md = tmp_path / "rep" / "stability.md"
+    assert main(["report", "stability", str(out), str(md)]) == 0
+    text = md.read_text()
+    assert "Our solvers: 0" in text and "Third-party solvers: 1" in text
+    assert "| osqp | nu | load=f2, N=8" in text
+    assert (md.parent / "stability" / "nu.png").stat().st_size > 1000
+    assert (md.parent / "stability" / "load.png").exists()
+
+
+def test_harness_kills_a_run_past_its_hard_limit(tmp_path, monkeypatch):
+    monkeypatch.setattr(stress, "hard_limit", lambda task: 0.0)
+    recs = stress.run_grid(_tasks()[:1], tmp_path / "r", jobs=1)
+    assert recs[0]["outcome"] == "timeout" and "killed" in recs[0]["message"]
+
+
+def test_n_axis_skips_with_a_reason_when_too_slow(tmp_path):
+    tasks = [t for t in stress.build_grid(["pdas"], quick=True, axes=("N",), max_n=32, time_limit=1e-6)]
+    recs = stress.run_grid(tasks, tmp_path / "n", jobs=1)
+    by_n = {r["scene"]["N"]: r for r in recs}
+    assert by_n[8]["outcome"] in ("correct", "failed")
+    assert by_n[16]["outcome"] == by_n[32]["outcome"] == "skipped"
+    assert "exceeds" in by_n[16]["message"] or "exceeded" in by_n[16]["message"]
+    assert np.isfinite(by_n[8]["wall_s"])
