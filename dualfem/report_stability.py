@@ -174,6 +174,46 @@ def _boundaries(recs, colf, colname) -> list[str]:
     return lines
 
 
+def _by_product(recs) -> dict:
+    out = defaultdict(list)
+    for r in recs:
+        if r["outcome"] == "correct" and r.get("iters"):
+            out[float(f"{r['coords']['r'] * r['coords']['delta']:.3g}")].append(r["iters"])
+    return out
+
+
+def _scatter_r_delta(recs, solver: str, path: Path) -> None:
+    """Outer iterations against the dimensionless r x delta, one colour per outcome."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), constrained_layout=True)
+    for o in COLORS:
+        pts = [(r["coords"]["r"] * r["coords"]["delta"], r["iters"]) for r in recs
+               if r["outcome"] == o and r.get("iters")]
+        if pts:
+            x, y = zip(*pts)
+            ax.scatter(x, y, s=28, color=COLORS[o], edgecolor="k", linewidth=0.4, label=o)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("r x delta  (augmentation / interface stiffness 1/delta)")
+    ax.set_ylabel("outer iterations")
+    ax.set_title(f"{solver}: outer iterations against r x delta (all r, all delta)", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    from .io import atomic_write
+
+    def write(tmp):
+        with open(tmp, "wb") as fh:
+            fh.write(buf.getvalue())
+    atomic_write(path, write)
+
+
 def render(meta: dict, recs: list[dict], md_path: Path) -> str:
     """Write the figures next to ``md_path`` and return the Markdown text."""
     fig_dir = md_path.parent / "stability"
@@ -279,20 +319,24 @@ def render(meta: dict, recs: list[dict], md_path: Path) -> str:
         dflt = [dict(r, coords={**r["coords"], "r": "default"}) for r in d
                 if r["solver"] == s and r["coords"].get("load") == "f2"]
         dparams = dflt[0].get("params_used", {}).get("r") if dflt else None
+        # variants of the same method that choose r themselves (e.g. uzawa_auto), side by side
+        variants = sorted({r["solver"] for r in d if r["solver"].startswith(s + "_")})
+        for v in variants:
+            dflt += [dict(r, coords={**r["coords"], "r": f"{v} (default)"}) for r in d
+                     if r["solver"] == v and r["coords"].get("load") == "f2"]
         extra = [f"Rows: r (stress per length); the row `default` is `{s}` with its default parameters "
                  f"(from the delta axis, f2{'' if dparams is None else ', r = ' + str(dparams)}); the paper used "
-                 "r = 1e7 at every delta. The table below gives the outer iterations against r x delta "
+                 "r = 1e7 at every delta"
+                 + (f"; the rows {', '.join('`' + v + ' (default)`' for v in variants)} are the variants that "
+                    "choose r from the problem itself (their tolerance may differ)" if variants else "")
+                 + ". The table below gives the outer iterations against r x delta "
                  "(dimensionless: the augmentation r compared with the interface stiffness 1/delta).", ""]
-        its = defaultdict(dict)
-        for r in sub:
-            its[r["coords"]["r"]][r["coords"]["delta"]] = r
-        deltas = sorted({r["coords"]["delta"] for r in sub})
-        tab = ["| r \\ delta | " + " | ".join(_fmt(x) for x in deltas) + " |", "|---" * (len(deltas) + 1) + "|"]
-        for rv in sorted(its):
-            tab.append(f"| {_fmt(rv)} | " + " | ".join(
-                f"r delta = {_fmt(rv * dv)}: {int(its[rv][dv]['iters']) if its[rv].get(dv, {}).get('iters') else '-'} its"
-                for dv in deltas) + " |")
-        extra = extra + tab + [""]
+        _scatter_r_delta(sub, s, fig_dir / f"r_delta_{s}.png")
+        tab = [f"![r x delta]({rel}/r_delta_{s}.png)", "",
+               "Outer iterations of the correct runs against r x delta: "
+               + "; ".join(f"r delta = {_fmt(k)}: {', '.join(str(int(x)) for x in v)}"
+                           for k, v in sorted(_by_product(sub).items())) + ".", ""]
+        extra = extra + tab
         section("r", lambda r: r["coords"]["r"], lambda r: r["coords"]["delta"], "r", "delta", "delta", extra,
                 subset=sub + dflt, suffix=f"_{s}")
     section("units", solver_row, lambda r: r["coords"]["units"] + ("" if r["coords"].get("r") == "default" else ""),

@@ -148,7 +148,9 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = 
                           ref=ref or {"mode": "solve"}, time_limit=tl, after=after))
         return tid
 
-    r_solvers = [s for s in solver_names if "r" in reg[s].defaults]
+    # the r axis: solvers with a parameter r that is used as given (not chosen by an r_rule)
+    r_solvers = [s for s in solver_names
+                 if "r" in reg[s].defaults and reg[s].defaults.get("r_rule", "fixed") == "fixed"]
     if "delta" in axes:
         for load in (["f2"] if quick else ["f1", "f2", "f3"]):
             for d in DELTAS:
@@ -436,7 +438,12 @@ def run_grid(tasks: list[Task], out: Path, *, jobs: int = 1, resume: bool = Fals
                 continue  # a line cut by a kill: rerun that task
             if not r.get("skip_budget"):  # scheduling decisions are re-made on every run
                 kept[r["id"]] = r
-        # keep every complete record (also of axes/solvers not in this run), drop cut lines
+        # keep every complete record of axes/solvers not in this run; drop cut lines, and records
+        # this run's axes and solvers would cover but its grid no longer holds (stale)
+        ids_now = {t.id for t in tasks}
+        axes_now, solvers_now = {t.axis for t in tasks}, {t.solver for t in tasks}
+        kept = {k: r for k, r in kept.items()
+                if k in ids_now or r.get("axis") not in axes_now or r.get("solver") not in solvers_now}
         _atomic_lines(runs_path, list(kept.values()))
     elif runs_path.exists():
         runs_path.unlink()
