@@ -93,3 +93,33 @@ def compare(qp: QP, x: np.ndarray, mu: np.ndarray, x_ref: np.ndarray, mu_ref: np
         "energy": float(abs(qp.energy(x) - e_ref) / max(abs(e_ref), TINY)),
         "contact_mismatch": int(np.count_nonzero(c1 != c2)),
     }
+
+
+def active_set_solution(qp: QP, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The exact minimizer with ``B_A x = 0`` on the active set A (one sparse KKT solve).
+
+    Returns (x, mu) with mu = 0 off A. If A is the true contact set, this is the exact QP
+    solution (check with :func:`certify`): a way to certify a reference without trusting
+    any iterative solver.
+    """
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as sla
+
+    A = np.flatnonzero(active)
+    BA = qp.B[A]
+    kkt = sp.bmat([[qp.K, BA.T], [BA, None]], format="csc")
+    sol = sla.splu(kkt).solve(np.r_[qp.F, np.zeros(A.size)])
+    mu = np.zeros(qp.m)
+    mu[A] = -sol[qp.n:]
+    return sol[:qp.n], mu
+
+
+def certify(qp: QP, x: np.ndarray, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Exact active-set solution for the contact set of ``x``, and whether it satisfies KKT.
+
+    Returns (x*, mu*, ok): ok is True when the exact solution for that contact set has
+    every KKT residual below ``tol``, i.e. the contact set is right and (x*, mu*) is the QP's
+    solution up to round-off.
+    """
+    xs, mus = active_set_solution(qp, contact_set(qp, x))
+    return xs, mus, kkt_error(residuals(qp, xs, mus)) <= tol

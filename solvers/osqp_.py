@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from dualfem.quiet import c_stdout_to_stderr
 from dualfem.registry import register_solver
 from dualfem.scaling import scale
 from dualfem.solution import Solution, Status
@@ -64,11 +65,13 @@ class OSQPSolver(Solver):
         settings = {k: v for k, v in self.params.items()
                     if k != "scale" and not (k == "time_limit" and v <= 0)}
         self._solver = osqp.OSQP()
-        self._solver.setup(P=sp.triu(s.P, format="csc"), q=s.q, A=s.A.tocsc(), l=np.zeros(qp.m),
-                           u=np.full(qp.m, np.inf), **settings)
+        with c_stdout_to_stderr():
+            self._solver.setup(P=sp.triu(s.P, format="csc"), q=s.q, A=s.A.tocsc(), l=np.zeros(qp.m),
+                               u=np.full(qp.m, np.inf), **settings)
 
     def solve(self) -> Solution:
-        res = self._solver.solve(raise_error=False) if _accepts_raise(self._solver) else self._solver.solve()
+        with c_stdout_to_stderr():
+            res = self._solver.solve(raise_error=False) if _accepts_raise(self._solver) else self._solver.solve()
         text = str(res.info.status).lower()
         status = _STATUS.get(text, Status.ERROR)
         ok = res.x is not None and np.all(np.isfinite(res.x))

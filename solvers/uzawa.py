@@ -34,9 +34,21 @@ Choices where the paper is silent or misprinted (documented here once):
 * The first Newton iterate is the unconstrained minimizer K^-1 F (the paper does not say; it
   apparently starts from 0, which costs one extra Newton step: its m = 2 for f3). Every later
   inner loop is warm-started from the previous outer iterate.
+* Honest stop: the paper's outer test bounds only the last change of l. With an observed linear
+  rate rho (last few ratios of changes) the remaining error of l is about change * rho / (1 - rho);
+  when that exceeds ``error_factor * tol_outer`` the status is ``inaccurate`` (with the rate in the
+  message) instead of ``solved``. The iterates and the counts k, m are not affected.
 * Shortcut (``shortcut=True``, with l^0 = 0): if the unconstrained minimizer has no negative
   jump, it already is the answer of the first Uzawa iteration and l^1 = 0; we return it with
   k = 1, m = 1 (one solve).
+
+Choosing r (``r_rule``): Uzawa on the modified Lagrangian is a proximal-point method on the
+dual; a dual mode with compliance mu (an eigenvalue of G W, G = B K^-1 B', W = diag(w)) contracts
+by 1 / (1 + r mu) per outer iteration. The interface term makes mu ~ delta for small delta, so the
+paper's fixed r = 1e7 gives r mu ~ 1e-2 at delta = 1e-9: the ~900 iterations of its Table 2.
+``r_rule="auto"`` takes r = r_factor / mu_min, computed from the QP itself (scale-invariant: the
+same r mu in MPa/mm and Pa/m), so every mode contracts by 1 / (1 + r_factor). The solver
+``uzawa_auto`` is this method with ``r_rule="auto"``; ``uzawa`` keeps the paper's r = 1e7.
 
 Linear algebra (``linalg``): ``"reduced"`` (default) works on the local unknowns only via the
 exact Schur reduction of :class:`dualfem.linalg.LocalReduction` (K_fixed factorized once,
@@ -61,6 +73,14 @@ from dualfem.solution import Solution, Status
 from dualfem.solver import Solver, positive
 
 
+def _contraction(history: list[dict], last: int = 5) -> float:
+    """Observed linear rate of the dual iteration: geometric mean of the last change ratios."""
+    ch = [h["dual_change"] for h in history[-(last + 1):]]
+    if len(ch) < 3 or min(ch) <= 0:
+        return 0.0
+    return float(np.exp(np.mean(np.diff(np.log(ch)))))
+
+
 class _ReducedSpace:
     """Dense linear algebra on the local unknowns I (exact reduction)."""
 
@@ -79,6 +99,10 @@ class _ReducedSpace:
 
     def start(self) -> np.ndarray:
         return la.cho_solve(self._chol_S, self.q, check_finite=False)
+
+    def dual_compliance(self, w: np.ndarray) -> np.ndarray:
+        """G W with G = B K^-1 B' (jump per nodal force): the Hessian of the dual in l."""
+        return (self.B @ la.cho_solve(self._chol_S, self.B.T, check_finite=False)) * w[None, :]
 
     def qgrad(self, z):
         return self.Q @ z - self.q
@@ -113,7 +137,7 @@ class _FullSpace:
 
     def __init__(self, qp, norm: str):
         self.Q, self.q, self.B = qp.K.tocsc(), qp.F, qp.B.tocsr()
-        self.norm = norm
+        self.qp, self.norm = qp, norm
         self.factorizations = 0
 
     def start(self):
@@ -137,6 +161,9 @@ class _FullSpace:
     def full(self, z):
         return z
 
+    def dual_compliance(self, w):
+        return _ReducedSpace(self.qp, "energy").dual_compliance(w)
+
 
 @register_solver
 class Uzawa(Solver):
@@ -146,8 +173,11 @@ class Uzawa(Solver):
     description = "Uzawa / modified Lagrangian + generalized Newton-Armijo (Zhiltsov & Maksimova 2023)"
     tolerance = 1e-6
     defaults = {
-        "r": 1e7,                 # augmentation parameter (stress / length)
-        "tol_outer": 1e-5,        # on max_j |l^{k+1}_j - l^k_j| (stress units, absolute, as the paper)
+        "r": 1e7,                 # augmentation parameter (stress / length), used with r_rule="fixed"
+        "r_rule": "fixed",        # "fixed": r as given (paper); "auto": r = r_factor / mu_min(B K^-1 B' W)
+        "r_factor": 100.0,        # with r_rule="auto": slowest dual mode contracts by 1/(1 + r_factor) per outer it
+        "tol_outer": 1e-5,        # on max_j |l^{k+1}_j - l^k_j| (stress units if tol_mode="absolute", as the paper)
+        "tol_mode": "absolute",   # "relative": tol_outer is relative to max_j l^{k+1}_j (unit-free)
         "tol_inner": 1e-7,        # on ||x^{m+1} - x^m|| / ||x^{m+1}||
         "step_factor": 2.0,       # Armijo backtracking divides s by this (paper: 2 or 1.1)
         "armijo_c": 1e-4,         # sufficient-decrease constant
@@ -160,27 +190,32 @@ class Uzawa(Solver):
         "shortcut": True,         # return the unconstrained minimizer when it is admissible
         "stall_window": 1000,     # stop with 'stagnation' if the dual change has not improved for this many outer its
         "time_limit": 0.0,        # seconds, 0 = none
+        "error_factor": 10.0,     # 'inaccurate' if the estimated dual error exceeds this x tol_outer
     }
 
     def validate(self) -> None:
-        positive(self, "r", "tol_outer", "tol_inner", "armijo_c", "max_outer", "max_inner",
+        positive(self, "r", "r_factor", "error_factor", "tol_outer", "tol_inner", "armijo_c", "max_outer", "max_inner",
                  "max_backtracks", "stall_window")
         p = self.params
         if not p["step_factor"] > 1 or not np.isfinite(p["step_factor"]):
-            raise InputError(f"parameter 'step_factor' of solver 'uzawa' must be a finite number > 1, got {p['step_factor']!r}")
+            raise InputError(f"parameter 'step_factor' of solver '{self.name}' must be a finite number > 1, got {p['step_factor']!r}")
         if not p["armijo_c"] < 1:
-            raise InputError(f"parameter 'armijo_c' of solver 'uzawa' must be in (0, 1), got {p['armijo_c']!r}")
+            raise InputError(f"parameter 'armijo_c' of solver '{self.name}' must be in (0, 1), got {p['armijo_c']!r}")
         if not (np.isfinite(p["l0"]) and p["l0"] >= 0):
-            raise InputError(f"parameter 'l0' of solver 'uzawa' must be a finite number >= 0, got {p['l0']!r}")
+            raise InputError(f"parameter 'l0' of solver '{self.name}' must be a finite number >= 0, got {p['l0']!r}")
+        if p["tol_mode"] not in ("absolute", "relative"):
+            raise InputError(f"parameter 'tol_mode' of solver '{self.name}' must be 'absolute' or 'relative', got {p['tol_mode']!r}")
+        if p["r_rule"] not in ("fixed", "auto"):
+            raise InputError(f"parameter 'r_rule' of solver '{self.name}' must be 'fixed' or 'auto', got {p['r_rule']!r}")
         if p["linalg"] not in ("reduced", "full"):
-            raise InputError(f"parameter 'linalg' of solver 'uzawa' must be 'reduced' or 'full', got {p['linalg']!r}")
+            raise InputError(f"parameter 'linalg' of solver '{self.name}' must be 'reduced' or 'full', got {p['linalg']!r}")
         if p["inner_norm"] not in ("energy", "euclidean"):
-            raise InputError(f"parameter 'inner_norm' of solver 'uzawa' must be 'energy' or 'euclidean', got {p['inner_norm']!r}")
+            raise InputError(f"parameter 'inner_norm' of solver '{self.name}' must be 'energy' or 'euclidean', got {p['inner_norm']!r}")
         if p["inner_norm"] == "euclidean" and p["linalg"] != "full":
-            raise InputError("parameter 'inner_norm' of solver 'uzawa' must be 'energy' with "
+            raise InputError(f"parameter 'inner_norm' of solver '{self.name}' must be 'energy' with "
                              "linalg='reduced' ('euclidean' needs linalg='full')")
         if not (np.isfinite(p["time_limit"]) and p["time_limit"] >= 0):
-            raise InputError(f"parameter 'time_limit' of solver 'uzawa' must be >= 0, got {p['time_limit']!r}")
+            raise InputError(f"parameter 'time_limit' of solver '{self.name}' must be >= 0, got {p['time_limit']!r}")
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -190,10 +225,14 @@ class Uzawa(Solver):
         self.qp = qp
         space = _ReducedSpace if self.params["linalg"] == "reduced" else _FullSpace
         self.space = space(qp, self.params["inner_norm"])
+        self.r = float(self.params["r"])
+        if self.params["r_rule"] == "auto" and qp.m:
+            mu = np.linalg.eigvals(self.space.dual_compliance(qp.weights)).real
+            self.r = float(self.params["r_factor"] / max(mu.min(), 1e-300))
 
     def solve(self) -> Solution:
         p, qp, sp_ = self.params, self.qp, self.space
-        r, w = float(p["r"]), qp.weights
+        r, w = self.r, qp.weights
         t_start = time.perf_counter()
         deadline = t_start + p["time_limit"] if p["time_limit"] > 0 else np.inf
         z = sp_.start()
@@ -228,10 +267,19 @@ class Uzawa(Solver):
             l = l_new
             if not np.isfinite(change):
                 return result(Status.NUMERICAL_ERROR, "NaN/inf in the multiplier update")
-            if change <= p["tol_outer"]:
-                if inner_ok:
-                    return result(Status.SOLVED)
-                return result(Status.INACCURATE, f"outer test met but last inner loop failed: {msg}")
+            tol = p["tol_outer"] * (1.0 if p["tol_mode"] == "absolute" else max(np.abs(l).max(initial=0.0), 1e-300))
+            if change <= tol:
+                if not inner_ok:
+                    return result(Status.INACCURATE, f"outer test met but last inner loop failed: {msg}")
+                rho = _contraction(history)
+                est = change * rho / (1.0 - rho) if rho < 1 else np.inf
+                history[-1]["dual_error_estimate"] = est
+                if est > p["error_factor"] * tol:
+                    return result(Status.INACCURATE,
+                                  f"outer test met, but the dual iteration contracts slowly (rate {rho:.4f}): "
+                                  f"estimated multiplier error {est:.2g} > {p['error_factor']:g} x tol_outer; "
+                                  f"use r_rule='auto' (solver uzawa_auto) or a smaller tol_outer")
+                return result(Status.SOLVED)
             if change < best:
                 best, best_k = change, k
             elif k - best_k >= p["stall_window"]:
@@ -289,3 +337,17 @@ class Uzawa(Solver):
             if time.perf_counter() > deadline:
                 return z, steps, False, "time limit"
         return z, steps, False, f"max_inner={p['max_inner']} Newton steps without meeting tol_inner"
+
+
+@register_solver
+class UzawaAuto(Uzawa):
+    """The same method with r chosen from the problem's dual compliance (see module docstring)."""
+
+    name = "uzawa_auto"
+    description = "Uzawa / modified Lagrangian + Newton-Armijo, r = 100 / (min dual compliance), relative tolerance"
+    tolerance = 1e-8
+    defaults = {**Uzawa.defaults, "r_rule": "auto", "tol_mode": "relative", "tol_outer": 1e-10}
+
+    @classmethod
+    def tolerance_params(cls, tol: float) -> dict:
+        return {"tol_outer": tol * 1e-2, "tol_inner": tol * 1e-2}
