@@ -12,7 +12,7 @@ from typing import Any, Callable
 
 from .errors import InputError, MissingDependency
 
-DEFAULT_SOLVER = "clarabel"
+DEFAULT_SOLVER = "uzawa"
 _COMMANDS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {}
 
 
