@@ -1,0 +1,353 @@
+"""``dualfem report convergence``: measured mesh convergence of the f2 scene (reports/convergence.md).
+
+For each delta, the scene is solved on the meshes N = 16 ... 512 and on a fine reference mesh
+(N = 1024 by default) with an exact solver from the registry. Every coarse solution is
+interpolated onto the fine mesh (:func:`dualfem.post.prolongate`: per fine triangle, from the
+coarse triangle containing its centroid, hence on the correct side of the defect), and
+
+* energy-norm error  |e|_E = sqrt(e' K_el e),  e = x_ref - I x_N,  K_el = elastic stiffness of
+  the fine mesh (the H^1-type norm of Theorem 1, on the cut domain Omega_0);
+* the same with the interface term, sqrt(e' K e), K = K_el + (1/delta) interface;
+* L2 error  |e|_L2 from the exact P1 mass matrix of the fine mesh;
+
+all divided by the reference's own norm, with observed rates log2(e_N / e_2N). Also the
+energy Pi_N, the contact-zone length and the total contact force, and their differences from
+the reference. The raw numbers go to reports/convergence.json.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .cmd_report import register_report
+from .errors import InputError
+
+DEFAULT_DELTAS = (1e-1, 1e-5, 1e-9)
+DEFAULT_NS = (16, 32, 64, 128, 256, 512)
+DEFAULT_REF = 1024
+
+
+def _floats(text: str, name: str) -> list[float]:
+    try:
+        vals = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise InputError(f"{name} must be a comma-separated list of numbers, got {text!r}") from None
+    if not vals or any(not (math.isfinite(v) and v > 0) for v in vals):
+        raise InputError(f"{name} must be positive numbers, got {text!r}")
+    return vals
+
+
+def _ints(text: str, name: str) -> list[int]:
+    vals = _floats(text, name)
+    if any(v != int(v) or v < 4 for v in vals):
+        raise InputError(f"{name} must be integers >= 4, got {text!r}")
+    return [int(v) for v in vals]
+
+
+def level_quantities(qp, sol) -> dict:
+    """Energy, contact-zone length, total contact force and contact nodes of one solution."""
+    from . import evaluator
+    from .post import contact_length, defect_fields
+
+    d = defect_fields(qp, sol.x)
+    tol = evaluator.CONTACT_RTOL * max(np.abs(sol.x).max(initial=0.0), evaluator.TINY)
+    return {
+        "energy": qp.energy(sol.x),
+        "contact_length": contact_length(d["s"], d["jump_normal"], tol),
+        "total_force": float(np.sum(sol.multipliers)),
+        "n_contact": int(evaluator.contact_set(qp, sol.x).sum()),
+        "max_jump": float(np.max(d["jump_normal"])),
+    }
+
+
+def errors(qp_f, x_f: np.ndarray, qp_c, x_c: np.ndarray) -> dict:
+    """Relative energy-norm, full-K-norm and L2 errors of a coarse solution against the fine one."""
+    from .post import mass_norm2, prolongate
+
+    e = x_f - prolongate(qp_c, x_c, qp_f)
+    Kel = qp_f.K_fixed
+    ref_el = math.sqrt(max(x_f @ (Kel @ x_f), 0.0))
+    ref_k = math.sqrt(max(x_f @ (qp_f.K @ x_f), 0.0))
+    ref_l2 = math.sqrt(mass_norm2(qp_f, x_f))
+    return {
+        "energy_norm": math.sqrt(max(e @ (Kel @ e), 0.0)) / ref_el,
+        "K_norm": math.sqrt(max(e @ (qp_f.K @ e), 0.0)) / ref_k,
+        "L2": math.sqrt(mass_norm2(qp_f, e)) / ref_l2,
+    }
+
+
+def rates(values: list[float]) -> list[float | None]:
+    """Observed rates log2(v_i / v_{i+1}) for successive halvings of h (None where undefined)."""
+    out: list[float | None] = [None]
+    for a, b in zip(values[:-1], values[1:]):
+        out.append(math.log2(a / b) if a > 0 and b > 0 else None)
+    return out
+
+
+def study(deltas, Ns, ref_N, solver: str, scene: str = "f2", progress=print) -> dict:
+    """Run the study; returns the JSON-able result dict.
+
+    Memory-lean: one delta at a time, the reference QP is dropped after its delta, and the
+    solvers' cached factorizations are freed (:func:`dualfem.linalg.clear_cache`) after every
+    reference solve, so the peak is one fine QP plus one fine factorization (a reference at
+    N = 1024 holding three of them was killed for lack of memory on a 24 GB machine).
+    """
+    from .linalg import clear_cache
+    from .runner import run
+    from .scene import load_scene
+
+    res = {"scene": scene, "solver": solver, "ref_N": ref_N, "Ns": list(Ns), "deltas": {}}
+    t_start = time.perf_counter()
+    for delta in deltas:
+        t0 = time.perf_counter()
+        qpf = load_scene(scene, {"N": ref_N, "delta": delta}).build()
+        tb = time.perf_counter() - t0
+        sf = run(solver, qpf)
+        clear_cache()
+        if not sf.ok:
+            raise RuntimeError(f"reference solve failed at N={ref_N}, delta={delta:g}: {sf.status} {sf.message}")
+        ref = {"N": ref_N, "ndof": qpf.n, "time_build_s": tb, "time_s": sf.time_s, "iterations": sf.iterations,
+               "residuals": {k: sf.residuals[k] for k in ("stationarity", "primal", "dual", "complementarity")},
+               **level_quantities(qpf, sf)}
+        progress(f"delta={delta:g} reference N={ref_N}: {qpf.n} unknowns, build {tb:.1f} s, "
+                 f"setup {sf.time_s['setup']:.1f} s, solve {sf.time_s['solve']:.2f} s")
+        xf = sf.x
+        del sf
+        levels = []
+        for N in sorted(Ns):
+            qpc = load_scene(scene, {"N": N, "delta": delta}).build()
+            sc = run(solver, qpc)
+            if not sc.ok:
+                raise RuntimeError(f"solve failed at N={N}, delta={delta:g}: {sc.status} {sc.message}")
+            lev = {"N": N, "h": 1.0 / N, "ndof": qpc.n, "time_s": sc.time_s,
+                   **level_quantities(qpc, sc), **errors(qpf, xf, qpc, sc.x)}
+            levels.append(lev)
+            progress(f"delta={delta:g} N={N}: energy-norm error {lev['energy_norm']:.3e}, L2 {lev['L2']:.3e} "
+                     f"({time.perf_counter() - t_start:.0f} s so far)")
+        clear_cache()
+        del qpf, xf
+        for key in ("energy_norm", "K_norm", "L2"):
+            for lev, r in zip(levels, rates([lv[key] for lv in levels])):
+                lev[f"rate_{key}"] = r
+        for key in ("energy", "contact_length", "total_force"):
+            diffs = [abs(lv[key] - ref[key]) for lv in levels]
+            for lev, dv, r in zip(levels, diffs, rates(diffs)):
+                lev[f"diff_{key}"] = dv
+                lev[f"rate_diff_{key}"] = r
+        res["deltas"][f"{delta:g}"] = {"reference": ref, "levels": levels, "time_s": time.perf_counter() - t0}
+    return res
+
+
+# ----------------------------------------------------------------------------- output
+def _fmt(v, spec=".3e") -> str:
+    return "–" if v is None else format(v, spec)
+
+
+def plot(res: dict, outdir: Path) -> list[str]:
+    """convergence_errors.png and convergence_quantities.png; returns the file names."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .io import atomic_write
+
+    names = []
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for ax, key, title in ((axes[0], "energy_norm", "energy-norm error sqrt(e'K_el e) (relative)"),
+                           (axes[1], "L2", "L2 error (relative)")):
+        for dl, d in res["deltas"].items():
+            h = [lv["h"] for lv in d["levels"]]
+            ax.loglog(h, [lv[key] for lv in d["levels"]], "o-", label=f"delta = {dl}")
+        h = np.array([lv["h"] for lv in next(iter(res["deltas"].values()))["levels"]])
+        first = max(d["levels"][0][key] for d in res["deltas"].values())
+        ax.loglog(h, first * (h / h[0]) ** 0.5, "k--", lw=1, label="h^1/2 (Theorem 1)")
+        ax.loglog(h, first * (h / h[0]) ** 1.0, "k:", lw=1, label="h^1")
+        if key == "L2":
+            ax.loglog(h, first * (h / h[0]) ** 2.0, "k-.", lw=1, label="h^2")
+        ax.set_xlabel("h = 1/N")
+        ax.set_title(title, fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{res['scene']}: error against the N = {res['ref_N']} reference", fontsize=11)
+    fig.tight_layout()
+    atomic_write(outdir / "convergence_errors.png", lambda t: fig.savefig(t, dpi=100, format="png"))
+    plt.close(fig)
+    names.append("convergence_errors.png")
+
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
+    for ax, key, title in ((axes[0], "energy", "relative energy difference"),
+                           (axes[1], "contact_length", "|contact length_N - ref|"),
+                           (axes[2], "total_force", "|total force_N - ref| / |ref|")):
+        for dl, d in res["deltas"].items():
+            ref = d["reference"][key]
+            scale = abs(ref) if key != "contact_length" and ref != 0 else 1.0
+            h = [lv["h"] for lv in d["levels"]]
+            vals = [lv[f"diff_{key}"] / scale for lv in d["levels"]]
+            h2 = [a for a, v in zip(h, vals) if v > 0]
+            ax.loglog(h2, [v for v in vals if v > 0], "o-", label=f"delta = {dl}")
+        ax.set_xlabel("h = 1/N")
+        ax.set_title(title, fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    atomic_write(outdir / "convergence_quantities.png", lambda t: fig.savefig(t, dpi=100, format="png"))
+    plt.close(fig)
+    names.append("convergence_quantities.png")
+    return names
+
+
+def markdown(res: dict, pngs: list[str], cmdline: str) -> str:
+    """The text of reports/convergence.md."""
+    L = []
+    ref_N = res["ref_N"]
+    L.append("# Mesh convergence of the thin-defect scene f2\n")
+    L.append(f"Generated by `{cmdline}` (solver `{res['solver']}`, wall time {res['time_s'] / 60:.1f} min). "
+             f"Raw numbers: `convergence.json`.\n")
+    L.append("## Setup\n")
+    L.append(f"- Scene `{res['scene']}` (unit square, E = 69000 MPa, nu = 0.3, plane strain, defect "
+             "(1/4, 1/2)-(3/4, 1/2), clamped bottom, traction -10 / +10 MPa on the left / right half of the "
+             "top), at delta in {" + ", ".join(res["deltas"]) + "}, on meshes N = "
+             + ", ".join(str(n) for n in res["Ns"]) + " (h = 1/N: leg of the right triangles).")
+    refs = [d["reference"] for d in res["deltas"].values()]
+    L.append(f"- **Reference**: the same scene on the finest mesh N = {ref_N} ({refs[0]['ndof']} unknowns), "
+             f"solved with the exact solver `{res['solver']}` (evaluator KKT residuals at most "
+             f"{max(max(r['residuals'].values()) for r in refs):.1e}). It is a discrete solution, not the exact "
+             f"one: errors at the finest coarse levels are underestimated (the reference's own error is not "
+             f"included), so the last rate is the least reliable.")
+    L.append("- **Comparison**: the meshes are nested (N divides the reference N, same diagonal direction), so "
+             "every fine triangle lies inside one coarse triangle. A coarse P1 solution is interpolated onto the "
+             "fine nodes triangle by triangle: the coarse triangle is found from the fine triangle's centroid, "
+             "hence on the same side of the defect, and its P1 field is evaluated at the fine triangle's "
+             "vertices; a fine node on the defect thus gets the coarse value of its own face (upper or lower "
+             "copy). With e = x_ref - I x_N on the fine mesh:")
+    L.append("  - energy-norm error ||e||_E = sqrt(e' K_el e) with K_el the elastic stiffness (no interface term): "
+             "the H^1-type norm of Theorem 1 on the cut domain; `K-norm` adds the interface term (1/delta) "
+             "int |[e]|^2;")
+    L.append("  - L2 error from the exact P1 mass matrix of the fine mesh;")
+    L.append("  - each divided by the same norm of the reference solution; rate = log2(e_N / e_2N).")
+    L.append("- Contact zone: the defect nodes whose normal jump is <= 1e-6 |x|_inf (the evaluator's rule); its "
+             "length is the total length of the defect edges with both ends closed (the P1 jump vanishes "
+             "exactly there). Total contact force: sum of the nodal multipliers (force per unit thickness, "
+             "MPa x length).\n")
+    L.append("## Errors against the reference\n")
+    for p in pngs[:1]:
+        L.append(f"![errors](figures/{p})\n")
+    for dl, d in res["deltas"].items():
+        L.append(f"### delta = {dl}\n")
+        L.append("| N | unknowns | energy-norm error | rate | K-norm error | rate | L2 error | rate |")
+        L.append("|---|---|---|---|---|---|---|---|")
+        for lv in d["levels"]:
+            L.append(f"| {lv['N']} | {lv['ndof']} | {_fmt(lv['energy_norm'])} | {_fmt(lv['rate_energy_norm'], '.2f')} | "
+                     f"{_fmt(lv['K_norm'])} | {_fmt(lv['rate_K_norm'], '.2f')} | {_fmt(lv['L2'])} | "
+                     f"{_fmt(lv['rate_L2'], '.2f')} |")
+        L.append("")
+    L.append("## Energy, contact zone and total contact force\n")
+    for p in pngs[1:2]:
+        L.append(f"![quantities](figures/{p})\n")
+    for dl, d in res["deltas"].items():
+        ref = d["reference"]
+        L.append(f"### delta = {dl}\n")
+        L.append(f"Reference (N = {ref_N}): energy {ref['energy']:.10e}, contact-zone length "
+                 f"{ref['contact_length']:.6f} ({ref['n_contact']} closed nodes), total contact force "
+                 f"{ref['total_force']:.6e}, max jump {ref['max_jump']:.4e}.\n")
+        L.append("| N | energy Pi_N | abs. diff. | rate | contact length | diff. | total force | rel. diff. | rate |")
+        L.append("|---|---|---|---|---|---|---|---|---|")
+        for lv in d["levels"]:
+            rel_f = lv["diff_total_force"] / abs(ref["total_force"]) if ref["total_force"] else None
+            L.append(f"| {lv['N']} | {lv['energy']:.8e} | {_fmt(lv['diff_energy'])} | "
+                     f"{_fmt(lv['rate_diff_energy'], '.2f')} | {lv['contact_length']:.5f} | "
+                     f"{lv['diff_contact_length']:.5f} | {lv['total_force']:.5e} | {_fmt(rel_f)} | "
+                     f"{_fmt(lv['rate_diff_total_force'], '.2f')} |")
+        L.append("")
+    L.append("## Timing of the reference solves\n")
+    L.append("| delta | unknowns | build (s) | solver setup (s) | solve (s) |")
+    L.append("|---|---|---|---|---|")
+    for dl, d in res["deltas"].items():
+        r = d["reference"]
+        L.append(f"| {dl} | {r['ndof']} | {r['time_build_s']:.1f} | {r['time_s']['setup']:.1f} | {r['time_s']['solve']:.2f} |")
+    L.append("")
+    L.append(_discussion(res))
+    return "\n".join(L) + "\n"
+
+
+def _discussion(res: dict) -> str:
+    """Observed rates summarised (computed from the numbers, not hard-coded)."""
+    L = ["## Observed rates and Theorem 1\n"]
+    Ns = res["Ns"]
+    L.append(f"Mean observed rates over the halvings N = {Ns[0]} -> {Ns[-2]} (the last halving "
+             f"{Ns[-2]} -> {Ns[-1]}, against a reference only {res['ref_N'] // Ns[-1]} times finer, is excluded "
+             f"from the mean):\n")
+    L.append("| delta | energy norm | L2 | energy difference Pi_N - Pi_ref |")
+    L.append("|---|---|---|---|")
+
+    def mean_rate(levels, key):
+        vals = [lv[key] for lv in levels[:-1] if lv[key] is not None]
+        return sum(vals) / len(vals) if vals else None
+
+    for dl, d in res["deltas"].items():
+        lv = d["levels"]
+        L.append(f"| {dl} | {_fmt(mean_rate(lv, 'rate_energy_norm'), '.2f')} | {_fmt(mean_rate(lv, 'rate_L2'), '.2f')} | "
+                 f"{_fmt(mean_rate(lv, 'rate_diff_energy'), '.2f')} |")
+    L.append("")
+    L.append(
+        "Theorem 1 of the paper bounds the H^1 error by C h^(1/2) under the assumption u in H^2. That assumption "
+        "fails near the ends of the defect: where the faces separate (delta large, a crack) the displacement "
+        "behaves like r^(1/2) at the crack tip (r = distance to the tip), which is in H^(3/2 - eps) but not in "
+        "H^2, and on uniform meshes the best P1 approximation then converges like h^(1/2) in the energy norm "
+        "(and about h in L2). The bound h^(1/2) is therefore the rate to expect for a genuine crack; for "
+        "delta -> 0 the interface term glues the faces, the tip singularity weakens, and the remaining "
+        "singularities (the corners where the clamped bottom meets the free sides, the jump of the traction "
+        "at the middle of the top side) limit the rate instead. The energy error |Pi_N - Pi_ref| behaves like "
+        "the square of the energy-norm error (Galerkin orthogonality for the unconstrained part). The contact "
+        "length is resolved to within a mesh edge: its error is O(h) at best and not monotone.")
+    return "\n".join(L)
+
+
+@register_report("convergence", "mesh-convergence study of f2 against a fine reference (slow: ~10-30 min)")
+def run(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(prog="dualfem report convergence", description=__doc__.splitlines()[0])
+    ap.add_argument("--deltas", default=",".join(f"{d:g}" for d in DEFAULT_DELTAS), help="comma-separated deltas")
+    ap.add_argument("--N", dest="Ns", default=",".join(map(str, DEFAULT_NS)), help="comma-separated coarse N")
+    ap.add_argument("--ref-N", type=int, default=DEFAULT_REF, help="N of the fine reference mesh (default 1024)")
+    ap.add_argument("--solver", default=None, help="exact solver (default: pdas, else clarabel)")
+    ap.add_argument("--scene", default="f2")
+    ap.add_argument("--out", default="reports", help="output directory (default reports/)")
+    ap.add_argument("--from-json", default=None, metavar="FILE",
+                    help="re-render the report and plots from a convergence.json written earlier (no solves)")
+    args = ap.parse_args(argv)
+    from .cli import dumps
+    from .io import atomic_write_text
+
+    out = Path(args.out)
+    if args.from_json:
+        try:
+            res = json.loads(Path(args.from_json).read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise InputError(f"--from-json: cannot read {args.from_json!r}: {exc}") from None
+        pngs = plot(res, out / "figures")
+        atomic_write_text(out / "convergence.md", markdown(res, pngs, res.get("command", "dualfem report convergence")))
+        print(f"wrote {out / 'convergence.md'} from {args.from_json}", file=sys.stderr)
+        return 0
+    from .figures import pick_solver
+
+    deltas = _floats(args.deltas, "--deltas")
+    Ns = sorted(_ints(args.Ns, "--N"))
+    if any(args.ref_N % n or args.ref_N <= n for n in Ns):
+        raise InputError(f"--ref-N ({args.ref_N}) must be a multiple of, and larger than, every coarse N ({Ns})")
+    solver = pick_solver(args.solver, exact=True)
+    t0 = time.perf_counter()
+    res = study(deltas, Ns, args.ref_N, solver, args.scene, progress=lambda m: print(m, file=sys.stderr, flush=True))
+    res["time_s"] = time.perf_counter() - t0
+    res["command"] = ("dualfem report convergence -- " + " ".join(argv)).strip(" -") if argv else "dualfem report convergence"
+    atomic_write_text(out / "convergence.json", dumps(res) + "\n")
+    pngs = plot(res, out / "figures")
+    atomic_write_text(out / "convergence.md", markdown(res, pngs, res["command"]))
+    print(f"wrote {out / 'convergence.md'}", file=sys.stderr)
+    return 0

@@ -1,0 +1,137 @@
+"""Figures drawn from the library API (Agg), the history plot on a fake Solution, and the two
+report generators on tiny meshes."""
+from __future__ import annotations
+
+import json
+import re
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from dualfem import figures as F  # noqa: E402
+from dualfem.errors import InputError  # noqa: E402
+from dualfem.post import Post  # noqa: E402
+from dualfem.registry import solvers  # noqa: E402
+from dualfem.runner import run  # noqa: E402
+from dualfem.scene import load_scene  # noqa: E402
+from dualfem.solution import Solution, Status  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def cases():
+    out = []
+    for d in (1e-1, 1e-7):
+        qp = load_scene("f2", {"N": 16, "delta": d}).build()
+        out.append((f"delta = {d:g}", qp, run(F.pick_solver(), qp)))
+    return out
+
+
+@pytest.fixture(autouse=True)
+def _close():
+    yield
+    plt.close("all")
+
+
+def test_pick_solver():
+    name = F.pick_solver()
+    assert name in solvers() and solvers()[name].exact
+    assert F.pick_solver(order=("no-such-solver", "clarabel")) == "clarabel"
+    with pytest.raises(InputError, match="none of the solvers"):
+        F.pick_solver(order=("no-such-solver",))
+    with pytest.raises(InputError, match="unknown solver"):
+        F.pick_solver("no-such-solver")
+
+
+def test_plot_deformed(cases):
+    _, qp, sol = cases[0]
+    ax = F.plot_deformed(qp, sol, scale=300.0)
+    p = Post(qp, sol)
+    coll = ax.collections[0]
+    assert np.allclose(coll.get_array(), p.von_mises)
+    # the drawn triangles sit at X + 300 u
+    xy = p.deformed(300.0)
+    tri0 = coll.get_paths()[0].vertices[:3]
+    assert np.allclose(tri0, xy[:, qp.maps["triangles"][:, 0]].T)
+    cbar_ax = [a for a in ax.figure.axes if a is not ax]
+    assert cbar_ax and "MPa" in cbar_ax[0].get_ylabel() and "von Mises" in cbar_ax[0].get_ylabel()
+    assert coll.get_clim() == (0.0, pytest.approx(p.von_mises.max()))
+
+
+def test_plot_jump_faces_pressure(cases):
+    ax = F.plot_jump(cases, unit=1e-5)
+    lines = [ln for ln in ax.get_lines() if ln.get_label().startswith("delta")]
+    assert len(lines) == 2
+    for ln, (_, qp, sol) in zip(lines, cases):
+        d = Post(qp, sol).defect
+        assert np.allclose(ln.get_xdata(), d["X"][0])
+        assert np.allclose(ln.get_ydata(), d["jump_normal"] / 1e-5)
+    assert ax.get_xlabel() == "x1"
+
+    _, qp, sol = cases[0]
+    ax = F.plot_faces(qp, sol, scale=100.0)
+    d = Post(qp, sol).defect
+    up, lo, ref = ax.get_lines()[:3]
+    assert np.allclose(up.get_ydata(), d["X"][1] + 100.0 * d["u_upper"][:, 1])
+    assert np.allclose(lo.get_xdata(), d["X"][0] + 100.0 * d["u_lower"][:, 0])
+    assert np.allclose(ref.get_ydata(), 0.5)
+
+    ax = F.plot_pressure(cases)
+    ln = ax.get_lines()[0]
+    assert np.allclose(ln.get_ydata()[1:-1], qp.pressure(sol.multipliers))
+    assert "MPa" in ax.get_ylabel()
+    with pytest.raises(InputError, match="component"):
+        F.plot_jump(cases, component="shear")
+
+
+def test_plot_history_fake_solution():
+    vals = [1.0, 0.1, 1e-3, 1e-6]
+    fake = Solution(solver="uzawa", status=Status.SOLVED,
+                    history=[{"k": k + 1, "dual_change": v, "inner_steps": 1} for k, v in enumerate(vals)])
+    other = Solution(solver="pdas", status=Status.SOLVED, history=[{"iter": 1, "residual": 1e-16}])
+    ax = F.plot_history([("delta = 1e-5", fake), ("no history", other)], key="dual_change", logx=True)
+    (ln,) = ax.get_lines()
+    assert np.allclose(ln.get_xdata(), [1, 2, 3, 4]) and np.allclose(ln.get_ydata(), vals)
+    assert ax.get_yscale() == "log" and ax.get_xscale() == "log"
+    assert "no history" in ax.get_legend().get_title().get_text()
+    with pytest.raises(InputError, match="dual_change"):
+        F.plot_history([("x", other)], key="dual_change")
+    assert F.history_series(other, "residual")[1][0] == 1e-16
+
+
+@pytest.mark.skipif("uzawa" not in solvers(), reason="the uzawa solver is not registered")
+def test_report_figures_small(tmp_path):
+    from dualfem.report_figures import generate
+
+    text = generate(tmp_path, N=8, sweep=(1e-1, 1e-5), history_solvers=["pdas"] if "pdas" in solvers() else [],
+                    progress=lambda m: None)
+    images = re.findall(r"\(figures/([^)]+\.png)\)", text)
+    assert len(images) == 5 + 3 + 3  # deformed bodies, jump/faces/pressure, three histories
+    for name in images:
+        assert (tmp_path / "figures" / name).stat().st_size > 1000
+    assert "| f2 |" in text and "Agreement of the Uzawa solutions" in text
+
+
+def test_report_convergence_small(tmp_path):
+    from dualfem.report_convergence import run as report
+
+    assert report(["--deltas", "0.1", "--N", "8,16", "--ref-N", "32", "--out", str(tmp_path)]) == 0
+    res = json.loads((tmp_path / "convergence.json").read_text())
+    lv = res["deltas"]["0.1"]["levels"]
+    assert [x["N"] for x in lv] == [8, 16]
+    assert lv[1]["energy_norm"] < lv[0]["energy_norm"]
+    assert lv[1]["rate_energy_norm"] == pytest.approx(np.log2(lv[0]["energy_norm"] / lv[1]["energy_norm"]))
+    md = (tmp_path / "convergence.md").read_text()
+    assert "| 16 |" in md and "h^(1/2)" in md
+    for name in ("convergence_errors.png", "convergence_quantities.png"):
+        assert (tmp_path / "figures" / name).stat().st_size > 1000
+    # re-render from the JSON
+    (tmp_path / "convergence.md").unlink()
+    assert report(["--from-json", str(tmp_path / "convergence.json"), "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "convergence.md").read_text() == md
+    with pytest.raises(InputError, match="ref-N"):
+        report(["--N", "8,12", "--ref-N", "32", "--out", str(tmp_path)])
