@@ -66,7 +66,7 @@ def generate(out: Path, N: int = 32, dpi: int = 110, sizes=(16, 32, 64, 128)) ->
     md += [f"## Signorini contact: every solver\n",
            f"`problems/signorini.py`: elastic rectangle {p['width']:g} x {p['height']:g} (E = {p['E']:g}, nu = "
            f"{p['nu']:g}, plane {p['plane']}), N = {N} ({qp.n} unknowns, {qp.m} bottom nodes), pressed by a flat "
-           f"frictionless punch (u2 = -{p['indent']:g} on the top) onto a rigid obstacle with initial gap "
+           f"frictionless punch (indentation {p['indent']:g}) onto a rigid obstacle with initial gap "
            f"g(x) = {p['obstacle']}. Reference: `{ref_name}`. `x error` = relative energy-norm difference to the "
            f"reference; `punch + sum(mu)` = global vertical equilibrium (the punch force comes from rows of the full "
            f"stiffness matrix that the QP does not contain), relative to sum(mu).\n",
@@ -114,8 +114,7 @@ def generate(out: Path, N: int = 32, dpi: int = 110, sizes=(16, 32, 64, 128)) ->
     for c in range(2):
         has = nd[c] >= 0
         u[c, has] = full[nd[c, has]]
-    top = np.abs(X[1] - p["height"]) < 1e-9
-    u[1, top] = -p["indent"]
+    u[1] -= p["indent"]          # from the punch's frame to the foundation's (a rigid translation)
     scale = 0.1 * p["height"] / max(np.abs(u).max(), 1e-300)
     ax.triplot(X[0] + scale * u[0], X[1] + scale * u[1], qp.maps["triangles"].T, lw=0.3, color="0.4")
     xs = np.linspace(0, p["width"], 400)

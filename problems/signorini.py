@@ -2,33 +2,39 @@
 
 Body: the rectangle (0, width) x (0, height), isotropic linear elasticity (E, nu, plane strain or
 stress), P1 elements on an ``N x round(N height / width)`` grid of squares cut by the (1, 1)
-diagonal (``MeshTri.init_tensor``). Loading by a rigid flat punch on the top side: ``u2 = -indent``
-on every top node, ``u1`` free there (frictionless punch) except at the top node nearest to
-``width / 2``, where ``u1 = 0`` removes the horizontal rigid motion. Left and right sides are
-traction-free.
+diagonal (``MeshTri.init_tensor``). Left and right sides are traction-free.
 
-Foundation: a rigid obstacle below the bottom side. ``obstacle`` is the initial gap ``g(x)`` >= 0
-between the bottom point ``(x, 0)`` of the body and the obstacle surface, measured along
-``-x2`` (a numpy expression in ``x``, e.g. ``"0.5*(x-0.5)**2"``, a cylinder-like bump; ``"0"`` a
-flat foundation touching the whole bottom). Non-penetration at every bottom node j:
-``u2_j + g_j >= 0``.
+Loading: a rigid flat frictionless punch on the top side pushes the body down by ``indent``
+onto a fixed rigid foundation. Displacements are measured in the frame of the punch (they
+differ from those in the frame of the foundation by the rigid translation ``(0, -indent)``,
+which changes neither strains, stresses nor contact forces): ``u2 = 0`` on every top node,
+``u1`` free there (frictionless punch) except at the top node nearest to ``width / 2``, where
+``u1 = 0`` removes the horizontal rigid motion. So every eliminated (Dirichlet) component is
+zero, as in the thin-defect scene, and tools that read ``maps["node_dofs"]`` need nothing new.
+
+Foundation: ``obstacle`` is the initial gap ``g(x)`` >= 0 between the bottom point ``(x, 0)``
+of the undeformed body and the foundation, measured along ``-x2`` (a numpy expression in ``x``;
+default ``"0.05*(x-0.5)**2"``, a cylinder-like bump; ``"0"`` a flat foundation). In the frame of
+the punch the foundation surface is at ``x2 = indent - g(x1)``; non-penetration at every bottom
+node j is ``u2_j + g_j - indent >= 0``.
 
 QP (see :mod:`dualfem.qp`): the unknowns are the free dofs; B row j picks ``u2`` of bottom node j
-(so its normal is (0, -1) seen from the foundation, and ``Bx`` is the current gap). Because the
-QP type has no constraint offset, the gap is removed by the shift ``u = x + x_shift`` with
-``x_shift = -B'g`` (``B x_shift = -g``): the solvers' ``x`` is that shifted vector, ``Bx`` is
-the gap, and ``maps["x_shift"]`` / ``maps["objective_offset"]`` recover the displacement and the
-potential energy (``Pi(u) = qp.energy(x) + objective_offset``). With ``obstacle = "0"`` the shift
-is zero. The multipliers are the nodal contact forces (>= 0, force per unit thickness); the
-contact pressure is ``mu / weights`` with trapezoid weights along the bottom side.
+and ``Bx`` is the current gap to the foundation. Because the QP type has no constraint offset,
+the offset is removed by the shift ``u = x + x_shift``, ``x_shift = B'(indent - g)``
+(``B x_shift = indent - g``): the solvers' ``x`` is that shifted vector and
+``K x - F = B'mu`` with ``F = -K x_shift``. ``maps["x_shift"]`` and ``maps["objective_offset"]``
+recover the displacement ``u = x + x_shift`` and the potential energy
+``Pi(u) = 1/2 u'Ku = qp.energy(x) + objective_offset``. The multipliers are the nodal contact
+forces (>= 0, force per unit thickness); the contact pressure is ``mu / weights`` with trapezoid
+weights along the bottom side.
 
 Checkable physics (tests/test_signorini.py):
 
 * ``obstacle = "0"``: the exact solution is homogeneous uniaxial compression, reproduced exactly
   by P1: contact pressure ``p = E' indent / height`` on the whole bottom, with ``E' = E / (1 - nu^2)``
-  (plane strain) or ``E`` (plane stress).
+  (plane strain) or ``E`` (plane stress), and ``u2 = indent (1 - x2 / height)``.
 * any obstacle: global equilibrium, total contact force = the punch force (:meth:`Signorini.punch_force`,
-  computed from the rows of the full stiffness matrix for the prescribed dofs, which the QP does
+  computed from the rows of the full stiffness matrix for the clamped dofs, which the QP does
   not contain), and zero horizontal reaction at the pin (frictionless contact).
 """
 from __future__ import annotations
@@ -141,17 +147,13 @@ class Signorini(Problem):
         bottom = np.flatnonzero(np.abs(X[1]) < tol)
         bottom = bottom[np.argsort(X[0, bottom])]
         pin = top[np.argmin(np.abs(X[0, top] - 0.5 * W))]
-        prescribed = np.concatenate([nd[1, top], [nd[0, pin]]])
-        values = np.concatenate([np.full(top.size, -p["indent"]), [0.0]])
+        prescribed = np.concatenate([nd[1, top], [nd[0, pin]]])     # all held at 0
         free = np.setdiff1d(np.arange(basis.N), prescribed)
         g2f = np.full(basis.N, -1, dtype=np.int64)
         g2f[free] = np.arange(free.size)
         node_dofs = g2f[nd]
 
         K = K_all[free][:, free].tocsc()
-        K_fc = K_all[free][:, prescribed]
-        F = -(K_fc @ values)                        # load from the prescribed punch displacement
-
         m = bottom.size
         cols = node_dofs[1, bottom]
         B = sp.csr_matrix((np.ones(m), (np.arange(m), cols)), shape=(m, free.size))
@@ -159,15 +161,13 @@ class Signorini(Problem):
         seg = np.diff(xb)
         weights = 0.5 * (np.r_[0.0, seg] + np.r_[seg, 0.0])
         gap = self._gap(xb)
-        shift = -(B.T @ gap)                        # u = x + shift, B shift = -gap
-        F_qp = F - K @ shift
-        offset = float(0.5 * shift @ (K @ shift) - F @ shift)
+        shift = B.T @ (p["indent"] - gap)           # u = x + shift, B shift = indent - gap
+        F = -(K @ shift)                            # no external load: the indentation drives it
+        offset = float(0.5 * shift @ (K @ shift))
         local = np.unique(node_dofs[:, bottom][node_dofs[:, bottom] >= 0])
 
         # what the punch-force check needs and the QP does not contain
         self._K_pf = K_all[prescribed][:, free].tocsr()
-        self._K_pp = K_all[prescribed][:, prescribed].tocsr()
-        self._values = values
         self._n_top = top.size
         self._shift = shift
         maps = {
@@ -177,7 +177,7 @@ class Signorini(Problem):
             "x_shift": shift, "objective_offset": np.array(offset),
         }
         params = {k: (v if isinstance(v, (int, float, str)) else str(v)) for k, v in p.items()}
-        return QP(K=K, F=F_qp, B=B, weights=weights, K_fixed=K, local_dofs=local,
+        return QP(K=K, F=F, B=B, weights=weights, K_fixed=K, local_dofs=local,
                   name=f"signorini[{'flat' if not np.any(gap) else 'obstacle'}]", params=params, maps=maps)
 
     def displacement(self, x: np.ndarray) -> np.ndarray:
@@ -187,10 +187,10 @@ class Signorini(Problem):
     def punch_force(self, x: np.ndarray) -> tuple[float, float]:
         """(total vertical force of the punch on the body, horizontal force at the pin).
 
-        Reactions at the prescribed dofs, ``K_pf u_f + K_pp u_p``, from rows of the full
-        stiffness matrix that the QP does not hold. Equilibrium: vertical force + sum(mu) = 0.
+        Reactions at the clamped dofs, ``K_pf u_f`` (their own displacements are 0), from rows of
+        the full stiffness matrix that the QP does not hold. Equilibrium: vertical force + sum(mu) = 0.
         """
-        r = self._K_pf @ self.displacement(x) + self._K_pp @ self._values
+        r = self._K_pf @ self.displacement(x)
         return float(r[: self._n_top].sum()), float(r[self._n_top])
 
     def flat_pressure(self) -> float:

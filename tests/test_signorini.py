@@ -36,11 +36,16 @@ def test_flat_foundation_uniform_pressure_is_exact(plane):
     # P1 reproduces the homogeneous uniaxial state exactly: pressure at every bottom node
     np.testing.assert_allclose(qp.pressure(sol.multipliers), expected, rtol=1e-7)
     assert evaluator.contact_set(qp, sol.x).all()
-    # u2 varies linearly from 0 (bottom) to -indent (top)
+    # in the punch's frame u2 varies linearly from indent (bottom) to 0 (top)
     nodes, nd = qp.maps["nodes"], qp.maps["node_dofs"]
     u = pr.displacement(sol.x)
     has = nd[1] >= 0
-    np.testing.assert_allclose(u[nd[1, has]], -0.01 * nodes[1, has] / 0.5, atol=1e-9 * 0.01)
+    np.testing.assert_allclose(u[nd[1, has]], 0.01 * (1 - nodes[1, has] / 0.5), atol=1e-9 * 0.01)
+    # lateral expansion: eps11 = -nu/(1-nu) eps22 (plane strain) or -nu eps22 (plane stress)
+    nu_eff = 0.25 / (1 - 0.25) if plane == "strain" else 0.25
+    has1 = nd[0] >= 0
+    slope = np.polyfit(nodes[0, has1], u[nd[0, has1]], 1)[0]
+    assert slope == pytest.approx(nu_eff * 0.01 / 0.5, rel=1e-7)
 
 
 def test_curved_obstacle_equilibrium_and_partial_contact():
@@ -58,9 +63,10 @@ def test_curved_obstacle_equilibrium_and_partial_contact():
     c = evaluator.contact_set(qp, sol.x)
     assert 0 < c.sum() < qp.m                        # partial contact
     assert c[qp.m // 2] and not c[0] and not c[-1]   # in contact under the bump's top only
-    # in contact <=> (displacement + gap) = 0; the shift maps the QP's x to the displacement
+    # in contact <=> the bottom node lies on the foundation surface x2 = indent - g(x) (punch frame)
     u2_bottom = pr.displacement(sol.x)[qp.maps["node_dofs"][1, qp.maps["contact_nodes"]]]
-    np.testing.assert_allclose((u2_bottom + qp.maps["gap"])[c], 0.0, atol=1e-9 * 0.005)
+    np.testing.assert_allclose((u2_bottom + qp.maps["gap"] - 0.005)[c], 0.0, atol=1e-9 * 0.005)
+    assert np.all((u2_bottom + qp.maps["gap"] - 0.005)[~c] > 0)
     assert np.all(mu[~c] <= 1e-8 * mu.max())
     # the QP energy plus the stored offset is the potential energy of the displacement
     K, F = qp.K, qp.F + qp.K @ qp.maps["x_shift"]
