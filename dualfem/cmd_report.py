@@ -5,6 +5,7 @@ each kind is a function ``run(argv: list[str]) -> int`` with its own argparse.
 """
 from __future__ import annotations
 
+import argparse
 import importlib
 import pkgutil
 from typing import Callable
@@ -35,7 +36,8 @@ def reports() -> dict[str, tuple[str, Callable[[list[str]], int]]]:
 
 def _cfg(p):
     p.add_argument("kind", metavar="KIND", help="which report (see 'dualfem report list')")
-    p.add_argument("rest", nargs="*", metavar="ARGS", help="arguments of that report")
+    p.add_argument("rest", nargs=argparse.REMAINDER, metavar="ARGS",
+                   help="arguments of that report (see 'dualfem report KIND --help')")
 
 
 @command("report", "regenerate a report in reports/ (KIND: paper, bench, figures, ...)")(_cfg)
