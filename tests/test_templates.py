@@ -1,0 +1,100 @@
+"""The copy-ready templates docs/templates/*.py: the in-tree path ("copy the file into solvers/ or
+problems/, nothing else") end to end, and the templates' own correctness."""
+import importlib.util
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dualfem import evaluator, registry
+from dualfem.runner import run
+
+REPO = Path(__file__).resolve().parents[1]
+TEMPLATES = REPO / "docs" / "templates"
+
+
+@pytest.fixture
+def templates():
+    """Import both templates (they register themselves) and unregister them afterwards."""
+    registry._load()
+    before_s, before_p = dict(registry._SOLVERS), dict(registry._PROBLEMS)
+    mods = {}
+    for name in ("solver_template", "problem_template"):
+        spec = importlib.util.spec_from_file_location(f"_dualfem_tmpl_{name}", TEMPLATES / f"{name}.py")
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        mods[name] = mod
+    yield mods
+    registry._SOLVERS.clear()
+    registry._SOLVERS.update(before_s)
+    registry._PROBLEMS.clear()
+    registry._PROBLEMS.update(before_p)
+
+
+def test_in_tree_copy_is_all_it_takes(tmp_path):
+    """A checkout whose solvers/ and problems/ hold the copied templates (first on the path)."""
+    for pkg in ("solvers", "problems"):
+        shutil.copytree(REPO / pkg, tmp_path / pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(TEMPLATES / "solver_template.py", tmp_path / "solvers" / "my_pg.py")
+    shutil.copy(TEMPLATES / "problem_template.py", tmp_path / "problems" / "membrane.py")
+    env = dict(os.environ, PYTHONPATH=str(tmp_path), MPLBACKEND="Agg")
+
+    def dualfem(*args):
+        r = subprocess.run([sys.executable, "-m", "dualfem", *args], env=env, capture_output=True, text=True,
+                           timeout=600, cwd=tmp_path)
+        assert r.returncode == 0, (args, r.stdout, r.stderr)
+        return r.stdout
+
+    listing = json.loads(dualfem("list", "--json"))
+    assert "my_pg" in listing["solvers"] and "membrane" in listing["problems"]
+    assert listing["scenes"]["membrane_heavy"]["problem"] == "membrane"
+    for args in (["membrane_heavy", "--set", "N=8", "--solver", "my_pg"],
+                 ["membrane", "--set", "N=8", "--solver", "dual_gradient"],
+                 ["f2", "--set", "N=8", "--solver", "my_pg"]):
+        rec = json.loads(dualfem("solve", *args, "--json"))
+        assert rec["status"] == "solved" and max(rec["residuals"].values()) < 1e-8, rec
+
+
+def test_membrane_touches_the_floor_only_above_the_threshold(templates):
+    M = templates["problem_template"].MembraneOverFloor
+    # continuum threshold: 0.0737 q / T = lift = 0.05 -> q = 0.678
+    light, heavy = M(N=16, q=0.6).build(), M(N=16, q=0.8).build()
+    s_light, s_heavy = run("my_pg", light), run("my_pg", heavy)
+    assert s_light.ok and s_heavy.ok
+    assert not evaluator.contact_set(light, s_light.x).any() and s_light.multipliers.max() == 0
+    c = evaluator.contact_set(heavy, s_heavy.x)
+    assert 0 < c.sum() < heavy.m
+    nodes = heavy.maps["nodes"][:, heavy.maps["node_dofs"][0] >= 0]
+    centre = np.argmin(np.linalg.norm(nodes - 0.5, axis=0))
+    assert c[centre]                                   # touches first in the middle
+
+
+def test_membrane_point_symmetry(templates):
+    """The (1,1)-diagonal mesh is symmetric under (x, y) -> (1 - x, 1 - y): so is the solution."""
+    qp = templates["problem_template"].MembraneOverFloor(N=12, q=2.0).build()
+    s = run("my_pg", qp)
+    nd = qp.maps["node_dofs"][0]
+    X = qp.maps["nodes"]
+    free = np.flatnonzero(nd >= 0)
+    key = {tuple(np.round(X[:, i], 12)): nd[i] for i in free}
+    partner = np.array([key[tuple(np.round(1.0 - X[:, i], 12))] for i in free])
+    np.testing.assert_allclose(s.x[nd[free]], s.x[partner], atol=1e-8 * np.abs(s.x).max())
+
+
+@pytest.mark.parametrize("scene", ["f2", "signorini"])
+def test_solver_template_agrees_and_fails_honestly(templates, scene):
+    from dualfem.scene import load_scene
+    from dualfem.solution import Status
+
+    qp = load_scene(scene, {"N": 8}).build()
+    ref = run("pdas" if "pdas" in registry.solvers() else "clarabel", qp)
+    s = run("my_pg", qp)
+    d = evaluator.compare(qp, s.x, s.multipliers, ref.x, ref.multipliers)
+    assert s.ok and d["x_energy"] < templates["solver_template"].MyProjectedGradient.tolerance
+    short = run("my_pg", qp, {"max_iter": 1})
+    assert short.status == Status.MAX_ITER and short.residuals is not None
