@@ -1,0 +1,47 @@
+"""``dualfem bench SPEC.toml [--jobs N] [--dask ADDRESS] [--out DIR]``: run or resume a sweep."""
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+
+from .cli import command
+from .errors import InputError
+
+
+def _cfg(p):
+    p.add_argument("spec", metavar="SPEC.toml", help="sweep spec (see benchmarks/default.toml)")
+    p.add_argument("--jobs", type=int, default=1, metavar="N",
+                   help="parallel worker processes (joblib/loky); default 1 (timings are cleanest serially)")
+    p.add_argument("--dask", metavar="ADDRESS", default=None,
+                   help="send the tasks to this dask.distributed scheduler (e.g. tcp://10.0.0.1:8786)")
+    p.add_argument("--out", metavar="DIR", default=None,
+                   help="results directory (default benchmarks/results/<spec name>); rerun to resume")
+    p.add_argument("--retry-failed", action="store_true",
+                   help="also redo finished runs whose status is not solved/inaccurate")
+    p.add_argument("--no-progress-bar", action="store_true",
+                   help="plain progress lines even on a terminal")
+
+
+@command("bench", "run (or resume) a benchmark sweep: every solver, error against time")(_cfg)
+def cmd_bench(args) -> int:
+    from .bench import load_spec, run_sweep
+
+    if args.jobs < 1:
+        raise InputError(f"--jobs must be an integer >= 1, got {args.jobs}")
+    if args.dask is not None and args.jobs != 1:
+        raise InputError("--jobs and --dask exclude each other: the dask scheduler decides the parallelism")
+    spec = load_spec(args.spec)
+    out = Path(args.out) if args.out else Path("benchmarks") / "results" / spec.name
+    if sys.argv[1:2] == ["bench"]:
+        command = "dualfem bench " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+    else:   # called through main(argv) from Python: rebuild it from the parsed arguments
+        command = f"dualfem bench {shlex.quote(args.spec)} --jobs {args.jobs}" + \
+            (f" --dask {shlex.quote(args.dask)}" if args.dask else "") + (f" --out {shlex.quote(str(out))}")
+    summary = run_sweep(spec, out, jobs=args.jobs, dask=args.dask, command=command,
+                        progress=not args.no_progress_bar, retry_failed=args.retry_failed)
+    st = ", ".join(f"{k} {v}" for k, v in sorted(summary.statuses.items())) or "nothing to do"
+    print(f"{summary.out}/results.csv: {summary.total} runs in the spec, {summary.skipped_done} already done, "
+          f"{summary.ran} executed now ({st}); {summary.aux} reference/floor tasks", file=sys.stderr)
+    print(f"report: dualfem report bench {summary.out}/results.csv", file=sys.stderr)
+    return 0

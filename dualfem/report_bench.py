@@ -1,0 +1,459 @@
+"""``dualfem report bench RESULTS``: reports/benchmark.md and PNG figures from a sweep's results.
+
+RESULTS is a ``results.csv`` written by ``dualfem bench`` (or its directory). Definitions used
+in the report (also printed in it):
+
+* time of a run = setup + solve (median over the timed repeats; the factorization cache of
+  :mod:`dualfem.linalg` is cleared before every repeat when the sweep had ``cold_setup``);
+* success at a tier of tolerance tol = the solver's status is ``solved`` AND the evaluator's
+  largest KKT residual is <= tol;
+* correct = the solver's claim agrees with the evaluator: (status == solved) == (KKT <= tol);
+* shifted geometric mean of time (qpbenchmark): exp(mean(log(t + 10))) - 10 with t in seconds,
+  failures counted at the time limit, over the scenes that every solver of the tier ran;
+  normalised to the best solver of the tier (1.00 = best).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from collections import defaultdict
+from pathlib import Path
+
+from .cmd_report import register_report
+from .errors import InputError
+
+COMPETITORS = ("clarabel", "osqp")
+
+
+def _f(v) -> float:
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return float("nan")
+    return f
+
+
+def _fmt(v, spec=".3g") -> str:
+    f = _f(v)
+    return "n/a" if not math.isfinite(f) else format(f, spec)
+
+
+def _sgm(times: list[float], shift: float) -> float:
+    if not times:
+        return float("nan")
+    return math.exp(sum(math.log(t + shift) for t in times) / len(times)) - shift
+
+
+def tier_table(runs: list[dict], tier: str, tol: float, shift: float) -> tuple[list[dict], int]:
+    """Per-variant statistics at one tier (rows of tier ``tier`` plus tolerance-free 'any' rows)."""
+    rows = [r for r in runs if r["tier"] in (tier, "any") and r["status"] != "skipped"]
+    by_var: dict[str, dict[str, dict]] = defaultdict(dict)
+    for r in rows:
+        by_var[r["variant"]][r["scene_key"]] = r
+    if not by_var:
+        return [], 0
+    common = set.intersection(*(set(d) for d in by_var.values()))
+    stats = []
+    for var, d in sorted(by_var.items()):
+        n = len(d)
+        succ = corr = 0
+        times = []
+        for key, r in d.items():
+            k = _f(r.get("kkt_error"))
+            within = math.isfinite(k) and k <= tol
+            claims = r["status"] == "solved"
+            ok = claims and within
+            succ += ok
+            corr += claims == within
+            if key in common:
+                tl = _f(r.get("time_limit"))
+                t = _f(r.get("total_s"))
+                times.append(t if ok and math.isfinite(t) else (tl if math.isfinite(tl) else t))
+        stats.append({"variant": var, "n": n, "success": succ / n, "correct": corr / n,
+                      "sgm": _sgm([t for t in times if math.isfinite(t)], shift),
+                      "gm": _sgm([max(t, 1e-6) for t in times if math.isfinite(t)], 0.0)})
+    for key in ("sgm", "gm"):
+        best = min((s[key] for s in stats if math.isfinite(s[key])), default=float("nan"))
+        for s in stats:
+            s[key + "_rel"] = s[key] / best if best and math.isfinite(best) and best > 0 else float("nan")
+    return stats, len(common)
+
+
+def _scene_of(r: dict) -> tuple:
+    return (str(r.get("scene")), _f(r.get("scene_N")), _f(r.get("scene_delta")))
+
+
+def _plots(runs, floors, figdir: Path) -> tuple[list[str], list[str]]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
+
+    figdir.mkdir(parents=True, exist_ok=True)
+    variants = sorted({r["variant"] for r in runs})
+    cmap = plt.get_cmap("tab10")
+    color = {v: cmap(i % 10) for i, v in enumerate(variants)}
+    floor_t = {}
+    for f in floors:
+        if f["status"] in ("solved", "inaccurate"):
+            floor_t[_f(f.get("scene_N"))] = (_f(f["n_unknowns"]), _f(f["total_s"]), f["solver"])
+    loads = sorted({str(r["scene"]) for r in runs})
+    Ns = sorted({_f(r.get("scene_N")) for r in runs if math.isfinite(_f(r.get("scene_N")))})
+    deltas = sorted({_f(r.get("scene_delta")) for r in runs if math.isfinite(_f(r.get("scene_delta")))},
+                    reverse=True)
+    wp_files, sc_files = [], []
+    has = [r for r in runs if r["status"] != "skipped"]
+    # ---------------- work-precision: one figure per (scene, N), one panel per delta
+    for load in loads:
+        for N in Ns:
+            sel = [r for r in has if r["scene"] == load and _f(r.get("scene_N")) == N]
+            if not sel:
+                continue
+            ds = [d for d in deltas if any(_f(r.get("scene_delta")) == d for r in sel)] or [float("nan")]
+            fig, axes = plt.subplots(1, len(ds), figsize=(3.6 * len(ds), 3.4), squeeze=False, sharey=True)
+            for ax, d in zip(axes[0], ds):
+                pts = [r for r in sel if _f(r.get("scene_delta")) == d or not math.isfinite(d)]
+                for var in variants:
+                    vr = [r for r in pts if r["variant"] == var and math.isfinite(_f(r.get("err_x_energy")))
+                          and math.isfinite(_f(r.get("total_s")))]
+                    if not vr:
+                        continue
+                    vr.sort(key=lambda r: -_f(r.get("tol")) if math.isfinite(_f(r.get("tol"))) else 0)
+                    x = [_f(r["total_s"]) for r in vr]
+                    y = [max(_f(r["err_x_energy"]), 1e-16) for r in vr]
+                    ax.plot(x, y, "-", color=color[var], lw=1, alpha=0.7)
+                    for r, xi, yi in zip(vr, x, y):
+                        ok = r["status"] == "solved"
+                        ax.plot([xi], [yi], "o", color=color[var], mfc=color[var] if ok else "none",
+                                label=var if r is vr[0] else None)
+                if N in floor_t:
+                    ax.axvline(floor_t[N][1], color="k", ls="--", lw=0.8, label="floor")
+                ax.set_xscale("log")
+                ax.set_yscale("log")
+                ax.xaxis.set_minor_formatter(NullFormatter())
+                ax.set_title(f"{load} N={N:g} delta={d:g}", fontsize=9)
+                ax.set_xlabel("time (setup + solve) [s]")
+                ax.grid(True, which="major", alpha=0.3)
+            axes[0][0].set_ylabel("relative energy-norm error of x")
+            h, lab = axes[0][0].get_legend_handles_labels()
+            for ax in axes[0][1:]:
+                for hh, ll in zip(*ax.get_legend_handles_labels()):
+                    if ll not in lab:
+                        h.append(hh)
+                        lab.append(ll)
+            fig.legend(h, lab, loc="upper center", ncol=min(len(lab), 8), fontsize=8, bbox_to_anchor=(0.5, 1.08))
+            fig.tight_layout()
+            name = f"wp_{load}_N{int(N)}.png"
+            fig.savefig(figdir / name, dpi=90, bbox_inches="tight")
+            plt.close(fig)
+            wp_files.append(name)
+    # ---------------- scaling: one figure per scene, one panel per delta
+    for load in loads:
+        sel = [r for r in has if r["scene"] == load]
+        ds = [d for d in deltas if any(_f(r.get("scene_delta")) == d for r in sel)]
+        if not ds or len(Ns) < 2:
+            continue
+        fig, axes = plt.subplots(1, len(ds), figsize=(3.6 * len(ds), 3.4), squeeze=False, sharey=True)
+        for ax, d in zip(axes[0], ds):
+            for var in variants:
+                pts = {}
+                for r in sel:
+                    if r["variant"] != var or _f(r.get("scene_delta")) != d or r["status"] != "solved":
+                        continue
+                    n, t, tol = _f(r.get("n_unknowns")), _f(r.get("total_s")), _f(r.get("tol"))
+                    tol = tol if math.isfinite(tol) else 0.0
+                    if n not in pts or tol < pts[n][1]:     # the tightest solved tier
+                        pts[n] = (t, tol)
+                if pts:
+                    ns = sorted(pts)
+                    ax.plot(ns, [pts[n][0] for n in ns], "o-", color=color[var], label=var, ms=4)
+            if floor_t:
+                fl = sorted(floor_t.values())
+                ax.plot([a for a, _, _ in fl], [b for _, b, _ in fl], "k--", lw=1.2, label="floor: factor+solve K")
+                ax.plot([a for a, _, _ in fl], [1.5 * b for _, b, _ in fl], "k:", lw=0.8, label="1.5 x floor")
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.xaxis.set_minor_formatter(NullFormatter())
+            ax.set_title(f"{load} delta={d:g}", fontsize=9)
+            ax.set_xlabel("unknowns")
+            ax.grid(True, which="major", alpha=0.3)
+        axes[0][0].set_ylabel("time (setup + solve) [s], tightest solved tier")
+        h, lab = [], []
+        for ax in axes[0]:
+            for hh, ll in zip(*ax.get_legend_handles_labels()):
+                if ll not in lab:
+                    h.append(hh)
+                    lab.append(ll)
+        fig.legend(h, lab, loc="upper center", ncol=min(len(lab), 8), fontsize=8, bbox_to_anchor=(0.5, 1.08))
+        fig.tight_layout()
+        name = f"scaling_{load}.png"
+        fig.savefig(figdir / name, dpi=90, bbox_inches="tight")
+        plt.close(fig)
+        sc_files.append(name)
+    return wp_files, sc_files
+
+
+def targets(runs, floors, ours: list[str], err_target: float, floor_target: float, speed_target: float,
+            top: int = 2) -> list[str]:
+    """Markdown lines checking the performance targets at the largest N of the sweep."""
+    lines = []
+    floor_t = {_f(f.get("scene_N")): f for f in floors if f["status"] in ("solved", "inaccurate")}
+    Ns = sorted({_f(r.get("scene_N")) for r in runs if r["status"] != "skipped"
+                 and math.isfinite(_f(r.get("scene_N")))})[-top:]
+    present = sorted({r["solver"] for r in runs if r["solver"] in ours and r["status"] != "skipped"})
+    if not present:
+        return [f"No run of {', '.join(ours)} in these results: the targets cannot be checked."]
+    lines.append(f"Checked at N in {{{', '.join(f'{n:g}' for n in Ns)}}} (the largest sizes of this sweep), "
+                 f"for {', '.join(present)}. A run counts when its status is solved and its relative "
+                 f"energy-norm error against the reference is <= {err_target:g}; its time is setup + solve.")
+    lines.append("")
+    lines.append(f"| scene | N | delta | solver | time [s] (setup + solve) | floor [s] | x floor (target <= {floor_target:g}) "
+                 f"| fastest of {'/'.join(COMPETITORS)} at error <= {err_target:g} [s] | speed-up (target >= {speed_target:g}) |")
+    lines.append("|---|---|---|---|---|---|---|---|---|")
+    misses = []
+    scenes = sorted({_scene_of(r) for r in runs if _f(r.get("scene_N")) in Ns}, key=lambda s: (s[1], s[0], -s[2]))
+    for sc in scenes:
+        srows = [r for r in runs if _scene_of(r) == sc and r["status"] != "skipped"]
+        comp = [r for r in srows if r["solver"] in COMPETITORS]
+        comp_ok = [r for r in comp if r["status"] == "solved" and _f(r.get("err_x_energy")) <= err_target]
+        fl = floor_t.get(sc[1])
+        flt = _f(fl["total_s"]) if fl else float("nan")
+        for s in present:
+            mine = [r for r in srows if r["solver"] == s and r["status"] == "solved"
+                    and _f(r.get("err_x_energy")) <= err_target]
+            if not mine:
+                st = sorted({r["status"] for r in srows if r["solver"] == s}) or ["not run"]
+                lines.append(f"| {sc[0]} | {sc[1]:g} | {sc[2]:g} | {s} | no run reached {err_target:g} ({', '.join(st)}) "
+                             f"| {_fmt(flt)} | MISSED | | |")
+                misses.append(f"{s} at {sc[0]} N={sc[1]:g} delta={sc[2]:g}: no run reached error {err_target:g}")
+                continue
+            best = min(mine, key=lambda r: _f(r["total_s"]))
+            t = _f(best["total_s"])
+            ratio = t / flt if math.isfinite(flt) and flt > 0 else float("nan")
+            fmark = "" if not math.isfinite(ratio) else (" ok" if ratio <= floor_target else " MISSED")
+            if math.isfinite(ratio) and ratio > floor_target:
+                misses.append(f"{s} at {sc[0]} N={sc[1]:g} delta={sc[2]:g}: {ratio:.2f} x the floor "
+                              f"({ratio / floor_target:.2f} x over the target); setup {_fmt(best.get('setup_s'))} s, "
+                              f"solve {_fmt(best.get('solve_s'))} s, floor {_fmt(flt)} s")
+            if comp_ok:
+                cb = min(comp_ok, key=lambda r: _f(r["total_s"]))
+                ct = _f(cb["total_s"])
+                sp = ct / t
+                cmp_txt = f"{ct:.3g} ({cb['variant']}, tier {cb['tier']})"
+                sp_txt = f"{sp:.1f}" + (" ok" if sp >= speed_target else " MISSED")
+                if sp < speed_target:
+                    misses.append(f"{s} at {sc[0]} N={sc[1]:g} delta={sc[2]:g}: {sp:.1f} x faster than "
+                                  f"{cb['variant']} ({speed_target / sp:.1f} x short of the target)")
+            elif comp:
+                slowest = max(_f(r.get("total_s")) for r in comp)
+                errs = [_f(r.get("err_x_energy")) for r in comp if math.isfinite(_f(r.get("err_x_energy")))]
+                be = f"best error {min(errs):.1e}" if errs else "no error measured"
+                cmp_txt = f"none reached {err_target:g} ({be}; statuses {', '.join(sorted({r['status'] for r in comp}))})"
+                sp_txt = f"> {slowest / t:.1f} (lower bound)" if math.isfinite(slowest) else "n/a"
+            else:
+                cmp_txt, sp_txt = "not run at this size (spec limit or skipped)", "n/a"
+            lines.append(f"| {sc[0]} | {sc[1]:g} | {sc[2]:g} | {s} | {t:.3g} ({_fmt(best.get('setup_s'))} + "
+                         f"{_fmt(best.get('solve_s'))}) | {_fmt(flt)} | {_fmt(ratio, '.2f')}{fmark} | {cmp_txt} | {sp_txt} |")
+    lines.append("")
+    if misses:
+        lines.append(f"**Targets missed ({len(misses)}):**")
+        lines.append("")
+        lines += [f"- {m}" for m in misses]
+    else:
+        lines.append("All targets that could be checked in these results were met.")
+    return lines
+
+
+def build_report(results: str | Path, md: str | Path, figdir: str | Path, *, ours: list[str],
+                 shift: float = 10.0, err_target: float = 1e-8, floor_target: float = 1.5,
+                 speed_target: float = 10.0, command: str = "") -> Path:
+    """Write the markdown report and its figures; returns the markdown path."""
+    from .bench import read_results
+    from .io import atomic_write_text
+
+    rows = read_results(results)
+    if not rows:
+        raise InputError(f"results file {str(results)!r} has no rows")
+    res_path = Path(results)
+    res_dir = res_path if res_path.is_dir() else res_path.parent
+    meta = {}
+    if (res_dir / "sweep.json").is_file():
+        try:
+            meta = json.loads((res_dir / "sweep.json").read_text(encoding="utf-8"))
+        except ValueError:
+            meta = {}
+    for r in rows:
+        r["tier"] = str(r.get("tier")) if r.get("tier") is not None else ""
+        r["variant"] = str(r.get("variant") or r.get("solver"))
+        r["solver"] = str(r.get("solver"))
+    runs = [r for r in rows if r["kind"] == "run"]
+    refs = [r for r in rows if r["kind"] == "reference"]
+    floors = [r for r in rows if r["kind"] == "floor"]
+    md, figdir = Path(md), Path(figdir)
+    wp, sc = _plots(runs, floors, figdir)
+    try:
+        figrel = figdir.resolve().relative_to(md.parent.resolve())
+    except ValueError:
+        figrel = figdir.resolve()
+
+    L = ["# Benchmark: run time against error", ""]
+    L.append(f"Generated by `{command or 'dualfem report bench ' + str(results)}` from `{results}`.")
+    if meta.get("command"):
+        L.append(f"The results were produced by `{meta['command']}` (spec `{meta.get('spec')}`, "
+                 f"jobs {meta.get('jobs')}, dask {meta.get('dask') or 'no'}; started {meta.get('started_utc')}, "
+                 f"finished {meta.get('finished_utc', 'not finished')}).")
+    L.append("")
+    # -------------------------------------------------------------- machine
+    L += ["## Machine and versions", ""]
+    mach = defaultdict(set)
+    for r in rows:
+        for k in ("cpu", "cores", "affinity", "threads", "python", "platform", "versions", "git"):
+            if r.get(k) is not None:
+                mach[k].add(str(r[k]))
+    for k in ("cpu", "cores", "affinity", "threads", "python", "platform", "git"):
+        L.append(f"- {k}: {'; '.join(sorted(mach.get(k, {'?'})))}")
+    loads = sorted(_f(r.get("loadavg")) for r in rows if math.isfinite(_f(r.get("loadavg"))))
+    if loads:
+        L.append(f"- 1-minute load average when a task started: min {loads[0]:.1f}, median "
+                 f"{loads[len(loads) // 2]:.1f}, max {loads[-1]:.1f} (above the core count, other processes "
+                 "shared the machine and every time is inflated; compare ratios measured together, not seconds)")
+    for v in sorted(mach.get("versions", [])):
+        try:
+            L.append("- versions: " + ", ".join(f"{a} {b}" for a, b in sorted(json.loads(v).items())))
+        except ValueError:
+            L.append(f"- versions: {v}")
+    L.append("")
+    # -------------------------------------------------------------- method
+    cold = {str(r.get("cold_setup")) for r in runs}
+    reps = sorted({str(r.get("repeats")) for r in runs})
+    L += ["## How it was measured", "",
+          f"- Time of a run = setup (assembly of solver data, scaling, factorizations) + solve, median of "
+          f"{'/'.join(reps)} timed repeats after one untimed warm-up run (per scene block of the spec). "
+          f"Assembly of the QP itself (scikit-fem) is excluded and recorded separately (`assembly_s`).",
+          f"- Cold setup: {'yes' if cold == {'True'} else 'no' if cold == {'False'} else 'mixed'} - "
+          "`dualfem.linalg.clear_cache()` is called before every timed repeat, so a solver that factorizes "
+          "K_fixed pays for it in every repeat (the cache that shares it across delta and loads is not "
+          "allowed to hide it).",
+          "- Floor: one sparse factorization + one solve of the unconstrained K of the same size (scipy "
+          "`splu` with `permc_spec=\"MMD_AT_PLUS_A\"`, symmetric mode; CHOLMOD too when scikit-sparse is "
+          "installed, the faster one is the floor).",
+          "- Errors: against a reference per scene, solved once by a certified exact solver and checked by "
+          "the evaluator (KKT error below the spec's `reference.certify`); relative energy-norm error of x, "
+          "relative max error of the multipliers, relative objective gap. A run of the reference's own solver "
+          "is compared against itself (error 0 or near): its accuracy is certified by the KKT residuals only.",
+          f"- Success at a tier: status solved and the evaluator's KKT error <= the tier's tolerance. Correct: "
+          f"(status == solved) == (KKT error <= tolerance). Shifted geometric mean of time: shift {shift:g} s, "
+          "failures counted at the time limit, over the scenes every solver of the tier ran, normalised to the "
+          "best (1.00). Solvers without tolerance options (tier `any`) are scored in every tier with one run.",
+          "- Failed runs (error, time_limit, max_iter, ...) are rows with their status and message, never "
+          "results: they have no error columns unless the solver returned an iterate.", ""]
+    # -------------------------------------------------------------- references
+    L += ["## References", ""]
+    ok_refs = [r for r in refs if r["status"] == "solved"]
+    bad_refs = [r for r in refs if r["status"] != "solved"]
+    L.append(f"{len(ok_refs)} certified references computed in this results directory "
+             f"({', '.join(sorted({r['solver'] for r in ok_refs})) or 'none'}); references cached by an earlier "
+             "sweep are not listed again.")
+    if ok_refs:
+        ks = [_f(r.get("kkt_error")) for r in ok_refs]
+        L.append(f"KKT error of the references: max {_fmt(max(ks), '.1e')}, median {_fmt(sorted(ks)[len(ks) // 2], '.1e')}.")
+    for r in bad_refs:
+        L.append(f"- NO certified reference for {r['label']}: {r.get('message')}")
+    L.append("")
+    # -------------------------------------------------------------- tiers
+    tiers = sorted({(r["tier"], _f(r.get("tol"))) for r in runs if r["tier"] not in ("any", "")},
+                   key=lambda t: -t[1])
+    L += ["## Per tolerance tier", ""]
+    for tier, tol in tiers:
+        stats, ncommon = tier_table(runs, tier, tol, shift)
+        L.append(f"### tier {tier} (tol {tol:g})")
+        L.append("")
+        L.append(f"Shifted geometric means over {ncommon} scenes that every solver of this tier ran.")
+        L.append("")
+        L.append("| solver | runs | success rate | correct rate | shifted GM of time (rel.) | plain GM of time (rel.) |")
+        L.append("|---|---|---|---|---|---|")
+        for s in stats:
+            L.append(f"| {s['variant']} | {s['n']} | {100 * s['success']:.0f} % | {100 * s['correct']:.0f} % "
+                     f"| {_fmt(s['sgm_rel'], '.2f')} ({_fmt(s['sgm'])} s) | {_fmt(s['gm_rel'], '.2f')} |")
+        L.append("")
+    # -------------------------------------------------------------- targets
+    L += ["## Performance targets", ""]
+    L += targets(runs, floors, ours, err_target, floor_target, speed_target)
+    L.append("")
+    # -------------------------------------------------------------- figures
+    L += ["## Work-precision", "",
+          "Relative energy-norm error of x against time (setup + solve), one curve per solver through its "
+          "tiers; hollow markers: status not solved; dashed line: the floor. Errors below 1e-16 are drawn at 1e-16.", ""]
+    largest = {}
+    for name in wp:
+        load, n = name[3:-4].rsplit("_N", 1)
+        if int(n) >= largest.get(load, (0, ""))[0]:
+            largest[load] = (int(n), name)
+    for load, (n, name) in sorted(largest.items()):
+        L.append(f"![work-precision {load} N={n}]({figrel}/{name})")
+        L.append("")
+    others = [n for n in wp if n not in {v[1] for v in largest.values()}]
+    if others:
+        L.append("Other sizes: " + ", ".join(f"[{n[3:-4]}]({figrel}/{n})" for n in others))
+        L.append("")
+    L += ["## Scaling", "",
+          "Time of the tightest solved tier against the number of unknowns; dashed: the floor (one "
+          "factorization + one solve of K), dotted: 1.5 x the floor.", ""]
+    for name in sc:
+        L.append(f"![scaling {name[8:-4]}]({figrel}/{name})")
+        L.append("")
+    # -------------------------------------------------------------- statuses
+    L += ["## Statuses", ""]
+    variants = sorted({r["variant"] for r in runs})
+    statuses = sorted({r["status"] for r in runs})
+    L.append("| solver | " + " | ".join(statuses) + " |")
+    L.append("|---|" + "---|" * len(statuses))
+    for v in variants:
+        cnt = defaultdict(int)
+        for r in runs:
+            if r["variant"] == v:
+                cnt[r["status"]] += 1
+        L.append(f"| {v} | " + " | ".join(str(cnt[s]) for s in statuses) + " |")
+    L.append("")
+    msgs = defaultdict(list)
+    for r in runs:
+        if r["status"] not in ("solved",):
+            msgs[(r["variant"], r["status"], str(r.get("message") or "")[:160])].append(r["label"])
+    if msgs:
+        L.append("Messages of the runs that did not end solved (first scene of each):")
+        L.append("")
+        for (v, st, m), labels in sorted(msgs.items())[:60]:
+            L.append(f"- {v} / {st} x{len(labels)} ({labels[0]}): {m}")
+        L.append("")
+    atomic_write_text(md, "\n".join(L) + "\n")
+    return md
+
+
+@register_report("bench", "benchmark report (work-precision, scaling, tiers) from a 'dualfem bench' results.csv")
+def run(argv: list[str]) -> int:
+    import shlex
+    import sys
+
+    p = argparse.ArgumentParser(prog="dualfem report bench",
+                                description="reports/benchmark.md + PNGs from a dualfem bench results.csv")
+    p.add_argument("results", metavar="RESULTS", help="results.csv (or the sweep's output directory)")
+    p.add_argument("--md", default="reports/benchmark.md", help="markdown output (default reports/benchmark.md)")
+    p.add_argument("--figdir", default="reports/bench", help="figure directory (default reports/bench)")
+    p.add_argument("--ours", default="uzawa,pdas", help="comma-separated solvers checked against the targets")
+    p.add_argument("--shift", type=float, default=10.0, help="shift of the geometric mean in seconds (10)")
+    p.add_argument("--error", type=float, default=1e-8, help="equal-error level of the targets (1e-8)")
+    try:
+        a = p.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    if not (a.shift >= 0 and math.isfinite(a.shift)):
+        raise InputError(f"--shift must be a finite number >= 0, got {a.shift}")
+    if not (a.error > 0 and math.isfinite(a.error)):
+        raise InputError(f"--error must be a finite number > 0, got {a.error}")
+    cmd = "dualfem report bench " + " ".join(shlex.quote(x) for x in argv)
+    md = build_report(a.results, a.md, a.figdir, ours=[s for s in a.ours.split(",") if s], shift=a.shift,
+                      err_target=a.error, command=cmd)
+    print(f"wrote {md} and figures in {a.figdir}", file=sys.stderr)
+    return 0

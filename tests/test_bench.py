@@ -1,0 +1,380 @@
+"""Benchmark sweeps: spec validation, rows and statuses, references, resume after a kill, the
+wall-clock guard, joblib and dask executors, the report. Small scenes only (N <= 32)."""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from dualfem import bench
+from dualfem.errors import InputError
+
+SMALL = """
+name = "t"
+repeats = 2
+time_limit = 60
+[tiers]
+low = 1e-3
+high = 1e-8
+[[scenes]]
+scene = ["f1", "f3"]
+N = [8, 16]
+delta = [1e-3, 1e-9]
+[[solvers]]
+name = "osqp"
+[[solvers]]
+name = "clarabel"
+tiers = ["high"]
+max = {N = 8}
+[[solvers]]
+name = "no_such_solver_xyz"
+optional = true
+"""
+
+RUN_STATUSES = {"solved", "inaccurate", "max_iter", "time_limit", "stagnation", "numerical_error", "infeasible",
+                "error", "skipped"}
+
+
+def write(tmp_path: Path, text: str, name: str = "spec.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(text, encoding="utf-8")
+    return p
+
+
+def run_rows(out: Path) -> dict[str, dict]:
+    return {json.loads(p.read_text())["run_id"]: json.loads(p.read_text()) for p in (out / "rows").glob("*.json")}
+
+
+# ------------------------------------------------------------------ spec validation
+@pytest.mark.parametrize("text, words", [
+    (SMALL.replace('name = "osqp"', 'name = "osqq"'), ["unknown solver", "osqq"]),
+    (SMALL + "\nbogus = 1\n", ["unknown key", "bogus"]),
+    (SMALL.replace('tiers = ["high"]', 'tiers = ["ultra"]'), ["tier", "ultra"]),
+    (SMALL.replace('name = "clarabel"', 'name = "clarabel"\nparams = {no_param = 1}'), ["no_param"]),
+    (SMALL.replace("repeats = 2", "repeats = 0"), ["repeats"]),
+    (SMALL.replace("time_limit = 60", "time_limit = -1"), ["time_limit"]),
+    (SMALL.replace("low = 1e-3", "low = 0"), ["tier 'low'"]),
+])
+def test_bad_spec_is_input_error(tmp_path, text, words):
+    with pytest.raises(InputError) as exc:
+        bench.load_spec(write(tmp_path, text))
+    for w in words:
+        assert w in str(exc.value)
+
+
+def test_bad_scene_parameter_is_input_error(tmp_path):
+    spec = bench.load_spec(write(tmp_path, SMALL.replace("N = [8, 16]", "N = [8, 1]")))
+    with pytest.raises(InputError, match="N"):
+        bench.expand_tasks(spec)
+
+
+def test_cli_bad_spec_exit_2(tmp_path, capsys):
+    from dualfem.cli import main
+
+    rc = main(["bench", str(write(tmp_path, SMALL.replace('name = "osqp"', 'name = "osqq"'))),
+               "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "osqq" in err[0]
+    assert main(["bench", str(tmp_path / "missing.toml")]) == 2
+
+
+def test_task_expansion(tmp_path):
+    spec = bench.load_spec(write(tmp_path, SMALL))
+    tasks = bench.expand_tasks(spec)
+    # 8 scenes x (osqp: 2 tiers, missing solver: 2 tiers) + clarabel (1 tier) on the 4 scenes with N <= 8
+    assert len(tasks) == 8 * 4 + 4
+    assert len({t["run_id"] for t in tasks}) == len(tasks)
+    osqp = [t for t in tasks if t["solver"] == "osqp"]
+    assert {t["params"]["eps_abs"] for t in osqp} == {1e-3, 1e-8}      # tiers via tolerance_params
+    assert all(t["params"]["time_limit"] == 60.0 for t in osqp)          # solver's own time limit
+    clar = [t for t in tasks if t["solver"] == "clarabel"]
+    assert len(clar) == 4 and all(t["scene_params"]["N"] == 8 and t["skip"] is None for t in clar)
+    missing = [t for t in tasks if t["solver"] == "no_such_solver_xyz"]
+    assert all("not registered" in t["skip"] for t in missing)
+    # the run id is a function of the run's definition: same spec -> same ids, other repeats -> other ids
+    assert [t["run_id"] for t in bench.expand_tasks(spec)] == [t["run_id"] for t in tasks]
+    spec3 = bench.load_spec(write(tmp_path, SMALL.replace("repeats = 2", "repeats = 3"), "s3.toml"))
+    assert not {t["run_id"] for t in bench.expand_tasks(spec3)} & {t["run_id"] for t in tasks}
+
+
+# ------------------------------------------------------------------ a whole small sweep
+@pytest.fixture(scope="module")
+def small_sweep(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sweep")
+    spec = bench.load_spec(write(d, SMALL))
+    summary = bench.run_sweep(spec, d / "out", progress=False, stream=open(os.devnull, "w"))
+    return spec, d / "out", summary
+
+
+def test_sweep_rows_and_statuses(small_sweep):
+    spec, out, summary = small_sweep
+    rows = bench.read_results(out / "results.csv")
+    runs = [r for r in rows if r["kind"] == "run"]
+    assert len(runs) == summary.total == 36
+    assert {r["status"] for r in runs} <= RUN_STATUSES
+    skipped = [r for r in runs if r["status"] == "skipped"]
+    assert len(skipped) == 16 and all("not registered" in r["message"] for r in skipped)
+    done = [r for r in runs if r["status"] != "skipped"]
+    for r in done:
+        assert r["cpu"] and r["cores"] >= 1 and "numpy" in json.loads(r["versions"])
+        assert r["repeats_done"] >= 1 and r["setup_s"] >= 0 and r["solve_s"] >= 0
+        assert math.isclose(r["setup_s"] + r["solve_s"], r["total_s"], rel_tol=0.5)
+        assert len(json.loads(r["solve_s_all"])) == r["repeats_done"]
+        if r["status"] == "solved":
+            assert r["kkt_error"] is not None and r["err_x_energy"] is not None
+            assert r["ref_solver"] in ("pdas", "clarabel")
+            assert r["within_tol"] == (r["kkt_error"] <= r["tol"])
+    # OSQP at 1e-8 must actually be close to the certified reference on these tiny scenes
+    hi = [r for r in done if r["solver"] == "osqp" and r["tier"] == "high" and r["status"] == "solved"]
+    assert hi and max(r["err_x_energy"] for r in hi) < 1e-4
+    refs = [r for r in rows if r["kind"] == "reference"]
+    assert len(refs) == 8 and all(r["status"] == "solved" and r["kkt_error"] <= 1e-8 for r in refs)
+    assert len(list((out / "refs").glob("*.npz"))) == 8
+    floors = [r for r in rows if r["kind"] == "floor"]
+    assert {r["scene_N"] for r in floors} == {8, 16} and all(r["total_s"] > 0 for r in floors)
+
+
+def test_rerun_recomputes_nothing(small_sweep):
+    spec, out, _ = small_sweep
+    before = {p.name: p.read_bytes() for p in (out / "rows").glob("*.json")}
+    s2 = bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+    assert s2.ran == 0 and s2.aux == 0                      # no run, reference or floor redone
+    after = {p.name: p.read_bytes() for p in (out / "rows").glob("*.json")}
+    for name, data in before.items():                       # every finished row kept byte for byte
+        if json.loads(data)["status"] != "skipped":
+            assert after[name] == data
+
+
+def test_report(small_sweep, tmp_path):
+    from dualfem.report_bench import build_report
+
+    _, out, _ = small_sweep
+    md = build_report(out / "results.csv", tmp_path / "benchmark.md", tmp_path / "bench", ours=["osqp"])
+    text = md.read_text()
+    for section in ("## Machine and versions", "## Per tolerance tier", "### tier high", "## Performance targets",
+                    "## Work-precision", "## Scaling", "shifted GM", "dualfem bench"):
+        assert section in text
+    pngs = sorted(p.name for p in (tmp_path / "bench").glob("*.png"))
+    assert "wp_f1_N16.png" in pngs and "scaling_f3.png" in pngs
+    assert all((tmp_path / "bench" / p).stat().st_size > 1000 for p in pngs)
+
+
+def test_report_cli(small_sweep, tmp_path):
+    from dualfem.cli import main
+
+    _, out, _ = small_sweep
+    assert main(["report", "bench", "--", str(out), "--md", str(tmp_path / "b.md"),
+                 "--figdir", str(tmp_path / "f")]) == 0
+    assert (tmp_path / "b.md").is_file()
+    assert main(["report", "bench", str(tmp_path / "nothing.csv")]) == 2
+
+
+def test_tier_statistics_by_hand():
+    from dualfem.report_bench import tier_table
+
+    def row(var, scene, status, kkt, t):
+        return {"variant": var, "scene_key": scene, "tier": "x", "status": status, "kkt_error": kkt,
+                "total_s": t, "time_limit": 100.0}
+
+    runs = [row("a", "s1", "solved", 1e-9, 1.0), row("a", "s2", "solved", 1e-3, 2.0),     # 2nd: claims, wrong
+            row("b", "s1", "solved", 1e-9, 4.0), row("b", "s2", "max_iter", 1e-3, 3.0),    # honest failure
+            row("c", "s1", "solved", 1e-9, 0.5)]                                           # s2 not run by c
+    stats, ncommon = tier_table(runs, "x", 1e-6, shift=10.0)
+    s = {d["variant"]: d for d in stats}
+    assert ncommon == 1                                       # only s1 was run by every solver
+    assert s["a"]["success"] == 0.5 and s["a"]["correct"] == 0.5
+    assert s["b"]["success"] == 0.5 and s["b"]["correct"] == 1.0
+    assert s["c"]["sgm_rel"] == 1.0
+    assert math.isclose(s["b"]["sgm"], 4.0) and math.isclose(s["b"]["sgm_rel"], 4.0 / 0.5)
+    # failures count at the time limit in the shifted geometric mean
+    stats2, _ = tier_table([row("a", "s1", "solved", 1e-9, 1.0), row("b", "s1", "error", None, 0.1)], "x", 1e-6, 10.0)
+    assert math.isclose({d["variant"]: d for d in stats2}["b"]["sgm"], 100.0)
+
+
+# ------------------------------------------------------------------ failed references
+def test_failed_reference_is_never_cached(tmp_path):
+    text = SMALL.replace('N = [8, 16]', 'N = [8]').replace('delta = [1e-3, 1e-9]', 'delta = [1e-3]') \
+        .replace('scene = ["f1", "f3"]', 'scene = "f1"') + \
+        '\n[reference]\nsolvers = ["clarabel"]\nparams = {clarabel = {max_iter = 1}}\n'
+    out = tmp_path / "out"
+    for attempt, reps in enumerate((2, 1)):    # the 2nd sweep has new runs on the same scene
+        spec = bench.load_spec(write(tmp_path, text.replace("repeats = 2", f"repeats = {reps}")))
+        s = bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+        assert s.refs == 1                                  # the failed reference is tried again every time
+        assert not list((out / "refs").glob("*.npz"))
+        rows = bench.read_results(out)
+        ref = [r for r in rows if r["kind"] == "reference"]
+        assert len(ref) == 1 and ref[0]["status"] == "error" and "no certified reference" in ref[0]["message"]
+        assert "max_iter" in ref[0]["message"]
+        runs = [r for r in rows if r["kind"] == "run" and r["status"] == "solved"]
+        assert len(runs) == 3 * (attempt + 1)
+        assert all(r["err_x_energy"] is None and "no certified reference" in r["message"] for r in runs)
+
+
+# ------------------------------------------------------------------ wall-clock guard
+def test_guard_kills_a_run_over_its_budget(tmp_path):
+    spec = bench.load_spec(write(tmp_path, SMALL))
+    task = next(t for t in bench.expand_tasks(spec) if t["solver"] == "clarabel" and not t["skip"])
+    task = {**task, "scene_params": {"N": 32, "delta": 1e-9}, "hard_limit": 1e-4, "ref": None}
+    w = bench.GuardedWorker()
+    try:
+        row, payload = w.run(task)
+        assert row["status"] == "time_limit" and "wall-clock guard" in row["message"] and payload is None
+        assert w.proc is None                                 # the child was killed
+        ok, _ = w.run({**task, "scene_params": {"N": 8, "delta": 1e-3}, "hard_limit": 60.0})
+        assert ok["status"] in ("solved", "inaccurate") and ok["n_unknowns"] > 0   # a fresh child serves on
+    finally:
+        w.close()
+
+
+def test_worker_exception_becomes_error_row(tmp_path):
+    spec = bench.load_spec(write(tmp_path, SMALL))
+    task = next(t for t in bench.expand_tasks(spec) if t["solver"] == "osqp")
+    row, _ = bench.run_guarded({**task, "scene": "no_such_scene", "ref": None})
+    assert row["status"] == "error" and "no_such_scene" in row["message"]
+    bench._close_local_worker()
+
+
+# ------------------------------------------------------------------ kill and resume
+RESUME = """
+name = "resume"
+repeats = 3
+time_limit = 60
+[tiers]
+low = 1e-3
+high = 1e-8
+[floor]
+enabled = false
+[[scenes]]
+scene = ["f1", "f2", "f3"]
+N = [16, 32]
+delta = [1e-3, 1e-9]
+[[solvers]]
+name = "osqp"
+[[solvers]]
+name = "clarabel"
+tiers = ["high"]
+"""
+
+
+def test_resume_after_killing_a_sweep(tmp_path):
+    spec_path = write(tmp_path, RESUME)
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "dualfem", "bench", str(spec_path), "--out", str(out)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    total = len(bench.expand_tasks(bench.load_spec(spec_path)))
+    try:
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline:
+            n = [p for p in (out / "rows").glob("*.json") if not p.name.startswith(("ref-", "floor-", "."))] \
+                if (out / "rows").is_dir() else []
+            if len(n) >= 3 or proc.poll() is not None:
+                break
+            time.sleep(0.005)
+        assert proc.poll() is None, "the sweep finished before it could be killed"
+        os.killpg(proc.pid, signal.SIGKILL)                 # the sweep and its worker child
+        proc.wait()
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    # whatever was written is complete: every row file parses, the CSV (if any) parses
+    kept = {}
+    for p in (out / "rows").glob("[!.]*.json"):
+        r = json.loads(p.read_text())
+        kept[r["run_id"]] = p.read_bytes()
+    if (out / "results.csv").exists():
+        with open(out / "results.csv", newline="") as fh:
+            list(csv.DictReader(fh))
+    finished_runs = [k for k, v in kept.items() if not k.startswith(("ref-", "floor-"))
+                     and json.loads(v)["status"] in bench.FINAL_STATUSES]
+    assert 3 <= len(finished_runs) < total
+    # run again: completes the sweep, recomputes nothing finished
+    s = bench.run_sweep(bench.load_spec(spec_path), out, progress=False, stream=open(os.devnull, "w"))
+    assert s.total == total and s.skipped_done == len(finished_runs) and s.ran == total - len(finished_runs)
+    for rid in finished_runs:
+        assert (out / "rows" / f"{rid}.json").read_bytes() == kept[rid]
+    rows = bench.read_results(out)
+    assert {r["run_id"] for r in rows if r["kind"] == "run"} == {t["run_id"] for t in
+                                                                 bench.expand_tasks(bench.load_spec(spec_path))}
+    assert not [p for p in out.rglob(".*") if p.is_file()]   # no temporary file left behind
+
+
+# ------------------------------------------------------------------ executors
+PAR = SMALL.replace('N = [8, 16]', 'N = [8]').replace("repeats = 2", "repeats = 1")
+
+
+def _statuses(out: Path) -> dict[str, str]:
+    return {r["run_id"]: r["status"] for r in bench.read_results(out)}
+
+
+@pytest.fixture(scope="module")
+def serial_par(tmp_path_factory):
+    d = tmp_path_factory.mktemp("par")
+    spec = bench.load_spec(write(d, PAR))
+    bench.run_sweep(spec, d / "serial", progress=False, stream=open(os.devnull, "w"))
+    return spec, _statuses(d / "serial")
+
+
+def test_joblib_executor(serial_par, tmp_path):
+    pytest.importorskip("joblib")
+    spec, expected = serial_par
+    s = bench.run_sweep(spec, tmp_path / "out", jobs=2, progress=False, stream=open(os.devnull, "w"))
+    assert s.skipped_done == 0 and s.ran == 12 and _statuses(tmp_path / "out") == expected
+
+
+def test_dask_executor_on_local_cluster(serial_par, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    spec, expected = serial_par
+    with distributed.LocalCluster(processes=False, n_workers=1, threads_per_worker=1, host="127.0.0.1",
+                                  protocol="tcp", dashboard_address=None) as cluster:      # loopback TCP
+        s = bench.run_sweep(spec, tmp_path / "out", dask=cluster.scheduler_address, progress=False,
+                            stream=open(os.devnull, "w"))
+    bench._close_local_worker()
+    assert s.skipped_done == 0 and s.ran == 12 and _statuses(tmp_path / "out") == expected
+
+
+def test_dask_bad_address_is_input_error(serial_par, tmp_path):
+    pytest.importorskip("distributed")
+    spec, _ = serial_par
+    with pytest.raises(InputError, match="dask"):
+        bench.run_sweep(spec, tmp_path / "out", dask="tcp://127.0.0.1:9", progress=False,
+                        stream=open(os.devnull, "w"))
+
+
+# ------------------------------------------------------------------ progress
+def test_progress_plain_lines_and_bar():
+    import io
+
+    s = io.StringIO()
+    p = bench.Progress(2, "x", s, tty=False)
+    p.update("one")
+    p.update("two")
+    assert s.getvalue().count("\n") == 2 and "[1/2] one" in s.getvalue() and "[2/2] two" in s.getvalue()
+    s = io.StringIO()
+    p = bench.Progress(2, "x", s, tty=True)
+    p.update("one")
+    assert "\r" in s.getvalue() and "\n" not in s.getvalue()
+    p.update("two")
+    assert s.getvalue().endswith("\n")
+
+
+def test_shipped_specs_are_valid():
+    root = Path(__file__).resolve().parent.parent / "benchmarks"
+    for name in ("default.toml", "small.toml"):
+        spec = bench.load_spec(root / name)
+        tasks = bench.expand_tasks(spec)
+        assert tasks and len({t["run_id"] for t in tasks}) == len(tasks)
+    spec = bench.load_spec(root / "default.toml")
+    scenes = bench.expand_scenes(spec)
+    assert {s.scene for s in scenes} == {"f1", "f2", "f3"}
+    assert {1e-1, 1e-3, 1e-5, 1e-7, 1e-9} <= {s.params.get("delta") for s in scenes}
+    assert max(s.params.get("N", 0) for s in scenes) >= 512
