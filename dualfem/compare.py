@@ -1,0 +1,205 @@
+"""Cross-check several solvers on one QP against a certified reference.
+
+:func:`compare_solvers` runs the chosen (default: every registered and installed) solvers on one
+QP, through :func:`dualfem.runner.run` (so statuses, timings and the evaluator's independent
+residuals are the same as for ``dualfem solve``), picks the reference, and judges each run.
+
+Reference ("the certified most accurate solution"): among the runs of *exact* solvers
+(``Solver.exact``) that claim success with finite residuals, the one with the smallest
+a-posteriori energy-norm error certificate (:func:`dualfem.certify.certified_error`, computed
+from the QP alone, not from the solver's word: the smaller of the rigorous duality-gap bound on
+|x - x*|_K / |x|_K and, when the active set is verified with margins, the first-order size of an
+exact refinement step on it), ties broken by the evaluator's KKT error. The record's
+``error_bound`` is that value, ``certificate`` holds both parts. It is cross-checked against the next best certified exact run: their
+difference must lie within the second one's declared tolerance plus both bounds.
+
+Verdict of each run (``verdict`` field):
+
+* ``reference``: the reference itself;
+* ``ok``: claims success and is right: evaluator KKT error <= its declared ``tolerance`` and
+  relative energy-norm difference to the reference <= ``tolerance`` + the reference's bound;
+* ``wrong``: claims success (status ``solved``) but fails one of those tests -- a *silent wrong
+  answer*: the only verdict that makes ``dualfem compare`` exit non-zero;
+* ``failed``: reports a non-success status (honest; the differences are still shown when it
+  returned an x);
+* ``skipped``: not applicable or not installed (reason in ``message``);
+* ``unchecked``: claims success but no certified reference exists to check it against.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+from typing import Any, Callable
+
+import numpy as np
+
+from . import evaluator
+from .certify import certified_error, solver_for
+from .qp import QP
+from .registry import get_solver, solvers as registered
+from .solution import Solution, Status
+
+#: fields of each run record (stable JSON interface of ``dualfem compare --json``)
+RUN_FIELDS = ("solver", "status", "verdict", "exact", "tolerance", "iterations", "energy", "time_s",
+              "residuals", "kkt_error", "error_bound", "certificate", "diff", "n_contact", "message", "params")
+
+
+def default_solvers() -> list[str]:
+    """Every registered solver, in name order (missing dependencies show up as ``skipped``)."""
+    return sorted(registered())
+
+
+def _jsonable(d: dict) -> dict:
+    return {k: (v if isinstance(v, (int, float, str, bool, type(None))) else str(v)) for k, v in d.items()}
+
+
+def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, dict] | None = None,
+                    progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Run ``names`` on ``qp``; return the comparison record (see module docstring).
+
+    ``params`` maps a solver name to its parameters. ``progress`` receives one line per finished
+    solver.
+    """
+    from .runner import make_solver, run
+
+    names = list(names) if names is not None else default_solvers()
+    params = params or {}
+    insts = {nm: make_solver(nm, params.get(nm)) for nm in names}  # validate all before solving
+    ksolve = solver_for(qp)
+    runs: list[dict[str, Any]] = []
+    sols: dict[str, Solution] = {}
+    for nm, inst in insts.items():
+        t0 = time.perf_counter()
+        sol = run(inst, qp)
+        sols[nm] = sol
+        finite = sol.residuals is not None and sol.residuals.get("finite", False)
+        rec = {
+            "solver": nm,
+            "status": str(sol.status),
+            "exact": bool(getattr(inst, "exact", True)),
+            "tolerance": float(getattr(inst, "tolerance", get_solver(nm).tolerance)),
+            "iterations": sol.iterations,
+            "energy": sol.residuals["energy"] if finite else None,
+            "time_s": {**sol.time_s, "total": sum(v for k, v in sol.time_s.items() if k in ("setup", "solve"))},
+            "residuals": ({k: sol.residuals[k] for k in ("stationarity", "primal", "dual", "complementarity")}
+                          if finite else None),
+            "kkt_error": evaluator.kkt_error(sol.residuals) if finite else None,
+            "error_bound": None,
+            "certificate": None,
+            "n_contact": int(evaluator.contact_set(qp, sol.x).sum()) if finite else None,
+            "message": sol.message,
+            "params": _jsonable(sol.params),
+            "diff": None,
+            "verdict": None,
+        }
+        if finite:
+            cert = certified_error(qp, sol.x, sol.multipliers, ksolve)
+            rec["certificate"] = cert
+            rec["error_bound"] = cert["value"]
+        runs.append(rec)
+        if progress:
+            progress(f"{nm}: {rec['status']} in {time.perf_counter() - t0:.2f} s")
+
+    ref_name, cross = _choose_reference(runs)
+    out: dict[str, Any] = {"problem": qp.name, "ndof": qp.n, "n_defect_nodes": qp.m,
+                           "params": _jsonable(qp.params), "reference": None, "runs": runs}
+    if ref_name is not None:
+        ref = sols[ref_name]
+        rrec = next(r for r in runs if r["solver"] == ref_name)
+        for rec in runs:
+            s = sols[rec["solver"]]
+            if rec["energy"] is not None:
+                rec["diff"] = evaluator.compare(qp, s.x, s.multipliers, ref.x, ref.multipliers)
+        out["reference"] = {
+            "solver": ref_name,
+            "error_bound": rrec["error_bound"],
+            "kkt_error": rrec["kkt_error"],
+            "why": (f"exact solver with the smallest certified energy-norm error bound "
+                    f"({rrec['error_bound']:.1e}) among exact solvers claiming success"),
+            "cross_check": cross,
+        }
+        if cross is not None:
+            c = next(r for r in runs if r["solver"] == cross["solver"])
+            d = c["diff"]["x_energy"]
+            allowed = c["tolerance"] + (rrec["error_bound"] or 0.0) + (c["error_bound"] or 0.0)
+            cross.update({"x_energy": d, "multipliers": c["diff"]["multipliers"],
+                          "allowed": allowed, "agrees": bool(d <= allowed)})
+    for rec in runs:
+        rec["verdict"] = _verdict(rec, out["reference"])
+    out["silent_wrong"] = [r["solver"] for r in runs if r["verdict"] == "wrong"]
+    return out
+
+
+def _choose_reference(runs: list[dict]) -> tuple[str | None, dict | None]:
+    cands = [r for r in runs if r["exact"] and r["status"] == str(Status.SOLVED)
+             and r["error_bound"] is not None and math.isfinite(r["error_bound"])]
+    if not cands:
+        return None, None
+    cands.sort(key=lambda r: (r["error_bound"], r["kkt_error"]))
+    cross = {"solver": cands[1]["solver"]} if len(cands) > 1 else None
+    return cands[0]["solver"], cross
+
+
+def _verdict(rec: dict, ref: dict | None) -> str:
+    if rec["status"] == str(Status.SKIPPED):
+        return "skipped"
+    if ref is not None and rec["solver"] == ref["solver"]:
+        return "reference"
+    if rec["status"] != str(Status.SOLVED):
+        return "failed"
+    if rec["energy"] is None:
+        return "wrong"            # claims success without a finite answer
+    if ref is None:
+        return "unchecked"
+    tol = rec["tolerance"]
+    slack = ref["error_bound"] or 0.0
+    if rec["kkt_error"] > tol or rec["diff"]["x_energy"] > tol + slack:
+        return "wrong"
+    return "ok"
+
+
+# ------------------------------------------------------------------------ printing
+def table(result: dict) -> str:
+    """The comparison as a fixed-width table for a person."""
+    lines = [f"{result['problem']}: {result['ndof']} unknowns, {result['n_defect_nodes']} defect nodes"]
+    ref = result["reference"]
+    if ref:
+        lines.append(f"reference: {ref['solver']} -- {ref['why']}; KKT error {ref['kkt_error']:.1e}")
+        cc = ref.get("cross_check")
+        if cc:
+            lines.append(f"cross-check: {cc['solver']} differs by {cc['x_energy']:.1e} (energy norm), "
+                         f"allowed {cc['allowed']:.1e}: {'agrees' if cc['agrees'] else 'DISAGREES'}")
+        else:
+            lines.append("cross-check: no second exact solver claimed success")
+    else:
+        lines.append("reference: none (no exact solver claimed success with finite residuals)")
+    w = max([10] + [len(r["solver"]) for r in result["runs"]])
+    hdr = (f"{'solver':{w}s} {'status':15s} {'verdict':9s} {'iterations':22s} {'setup_s':>8s} {'solve_s':>8s} "
+           f"{'energy':>17s} {'kkt':>8s} {'bound':>8s} {'tol':>7s} {'dx_K':>8s} {'dmu':>8s} {'contact':>7s}")
+    lines += [hdr, "-" * len(hdr)]
+    for r in result["runs"]:
+        it = ",".join(f"{k}={v}" for k, v in r["iterations"].items()) or "-"
+        d = r["diff"] or {}
+        f = (lambda v: f"{v:8.1e}" if isinstance(v, (int, float)) and v is not None and math.isfinite(v) else f"{'-':>8s}")
+        en = f"{r['energy']:17.10e}" if r["energy"] is not None else f"{'-':>17s}"
+        cm = "-" if not d else ("same" if d["contact_mismatch"] == 0 else f"{d['contact_mismatch']} off")
+        lines.append(f"{r['solver']:{w}s} {r['status']:15s} {r['verdict']:9s} {it[:22]:22s} "
+                     f"{r['time_s'].get('setup', 0):8.3f} {r['time_s'].get('solve', 0):8.3f} {en} "
+                     f"{f(r['kkt_error'])} {f(r['error_bound'])} {r['tolerance']:7.0e} {f(d.get('x_energy'))} "
+                     f"{f(d.get('multipliers'))} {cm:>7s}")
+    for r in result["runs"]:
+        if (r["status"] != "solved" or r["verdict"] == "wrong") and r["message"]:
+            lines.append(f"  {r['solver']}: {r['message']}")
+    lines.append("dx_K: relative energy-norm difference to the reference; dmu: multipliers, relative to "
+                 "max(|mu_ref|, |F|); bound: certified relative energy-norm error bound (- where x is infeasible); "
+                 "tol: the solver's declared tolerance; contact: contact set vs the reference")
+    if result["silent_wrong"]:
+        lines.append("SILENT WRONG ANSWER: " + ", ".join(result["silent_wrong"]) +
+                     " claim(s) success but are wrong beyond their declared tolerance")
+    return "\n".join(lines)
+
+
+def stderr_progress() -> Callable[[str], None]:
+    """One plain line per finished solver on stderr."""
+    return lambda line: print(line, file=sys.stderr, flush=True)

@@ -1,0 +1,167 @@
+"""The QP through cvxpy, solved by any installed cvxpy backend (``solver`` parameter).
+
+Formulation (on the normalised QP of :mod:`dualfem.scaling` when ``scale`` is true):
+
+    minimize 1/2 y' P y + q' y   subject to   A y >= 0.
+
+cvxpy's dual value of a constraint ``expr >= 0`` is >= 0 with the Lagrangian ``f - nu' expr``
+(stationarity ``P y + q = A' nu``), so with the scaling undone our nodal contact force is
+``mu = R nu / c`` (see :class:`dualfem.scaling.ScaledQP`), ``K x - F = B' mu``; the sign is
+checked in tests/test_cvxpy.py.
+
+cvxpy's status is reported as it is: ``optimal`` -> solved, ``optimal_inaccurate`` ->
+inaccurate, ``user_limit`` -> max_iter (cvxpy's status for an iteration or time cap),
+``infeasible*`` -> infeasible, ``unbounded*`` -> numerical_error (a convex QP with K positive
+definite cannot be unbounded), and a ``SolverError`` raised by the backend -> numerical_error
+with its message. ``eps`` is passed to the backend under its own option names (CLARABEL:
+tol_gap_abs, tol_gap_rel, tol_feas; OSQP and SCS: eps_abs, eps_rel; others: not passed).
+The declared ``tolerance`` of an instance depends on the backend (interior point vs ADMM).
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import warnings
+
+import numpy as np
+
+from dualfem.errors import InputError
+from dualfem.registry import register_solver
+from dualfem.scaling import scale
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver, positive
+
+#: accuracy promised per backend at default settings (relative energy-norm error of x)
+BACKEND_TOLERANCE = {"CLARABEL": 1e-5, "ECOS": 1e-5, "MOSEK": 1e-5, "GUROBI": 1e-5,
+                     "OSQP": 1e-3, "SCS": 1e-3, "PIQP": 1e-5, "PROXQP": 1e-3}
+_DEFAULT_TOLERANCE = 1e-3
+
+_STATUS = {
+    "optimal": Status.SOLVED,
+    "optimal_inaccurate": Status.INACCURATE,
+    "user_limit": Status.MAX_ITER,
+    "infeasible": Status.INFEASIBLE,
+    "infeasible_inaccurate": Status.INFEASIBLE,
+    "unbounded": Status.NUMERICAL_ERROR,
+    "unbounded_inaccurate": Status.NUMERICAL_ERROR,
+    "infeasible_or_unbounded": Status.NUMERICAL_ERROR,
+    "solver_error": Status.NUMERICAL_ERROR,
+}
+
+
+def _eps_options(backend: str, eps: float) -> dict:
+    if backend == "CLARABEL":
+        return {"tol_gap_abs": eps, "tol_gap_rel": eps, "tol_feas": eps}
+    if backend in ("OSQP", "SCS"):
+        return {"eps_abs": eps, "eps_rel": eps}
+    return {}
+
+
+def _iter_options(backend: str, max_iter: int) -> dict:
+    if backend in ("CLARABEL", "OSQP"):
+        return {"max_iter": max_iter}
+    if backend == "SCS":
+        return {"max_iters": max_iter}
+    return {}
+
+
+@contextlib.contextmanager
+def _stdout_to_stderr(enable: bool = True):
+    """Send C-level writes to stdout (backends print, e.g. OSQP's polish note) to stderr.
+
+    Keeps ``--json`` output on stdout clean; a no-op when stdout has no file descriptor.
+    """
+    if not enable:
+        yield
+        return
+    try:
+        fd = sys.stdout.fileno()
+        err = sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(fd)
+    try:
+        os.dup2(err, fd)
+        yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(saved, fd)
+        os.close(saved)
+
+
+@register_solver
+class CvxpySolver(Solver):
+    """cvxpy modelling layer over a chosen backend (default CLARABEL)."""
+
+    name = "cvxpy"
+    description = "cvxpy with a chosen backend (CLARABEL, OSQP, SCS, ... as installed)"
+    requires = ("cvxpy",)
+    tolerance = BACKEND_TOLERANCE["CLARABEL"]
+    exact = True
+    defaults = {
+        "solver": "CLARABEL",
+        "eps": 1e-10,
+        "max_iter": 10000,
+        "scale": True,
+        "verbose": False,
+    }
+
+    def validate(self) -> None:
+        positive(self, "eps", "max_iter")
+        backend = str(self.params["solver"]).upper()
+        self.params["solver"] = backend
+        if self.missing() is None:
+            import cvxpy as cp
+
+            installed = cp.installed_solvers()
+            if backend not in installed:
+                raise InputError(f"parameter 'solver' of solver 'cvxpy' must be an installed cvxpy "
+                                 f"backend ({', '.join(installed)}), got {backend!r}")
+        # an instance promises what its backend can deliver
+        self.tolerance = BACKEND_TOLERANCE.get(backend, _DEFAULT_TOLERANCE)
+
+    @classmethod
+    def tolerance_params(cls, tol: float) -> dict:
+        return {"eps": float(tol)}
+
+    def setup(self, qp) -> None:
+        import cvxpy as cp
+        import scipy.sparse as sp
+
+        self.qp = qp
+        self._scaled = s = scale(qp, self.params["scale"])
+        y = cp.Variable(qp.n)
+        P = sp.csc_matrix(0.5 * (s.P + s.P.T))
+        self._cons = [s.A @ y >= 0]
+        self._prob = cp.Problem(cp.Minimize(0.5 * cp.quad_form(y, cp.psd_wrap(P)) + s.q @ y), self._cons)
+        self._y = y
+
+    def solve(self) -> Solution:
+        import cvxpy as cp
+
+        backend = self.params["solver"]
+        opts = {**_eps_options(backend, self.params["eps"]), **_iter_options(backend, self.params["max_iter"])}
+        try:
+            with warnings.catch_warnings(), _stdout_to_stderr(not self.params["verbose"]):
+                # cvxpy warns "Solution may be inaccurate": the status says it already
+                warnings.simplefilter("ignore", UserWarning)
+                self._prob.solve(solver=backend, verbose=bool(self.params["verbose"]), **opts)
+        except cp.error.SolverError as exc:
+            return Solution(solver=self.name, status=Status.NUMERICAL_ERROR,
+                            message=f"cvxpy/{backend}: SolverError: {exc}", info={"backend": backend})
+        text = str(self._prob.status)
+        status = _STATUS.get(text, Status.ERROR)
+        yv, nu = self._y.value, self._cons[0].dual_value
+        stats = self._prob.solver_stats
+        iters = {"backend": int(stats.num_iters)} if stats is not None and stats.num_iters is not None else {}
+        info = {"backend": backend, "cvxpy_status": text,
+                "backend_solve_time_s": getattr(stats, "solve_time", None)}
+        if yv is None or nu is None:
+            return Solution(solver=self.name, status=status if status != Status.SOLVED else Status.ERROR,
+                            iterations=iters, message=f"cvxpy/{backend}: {text} (no solution returned)", info=info)
+        x, mu = self._scaled.unscale(np.asarray(yv, float).ravel(), np.asarray(nu, float).ravel())
+        return Solution(solver=self.name, status=status, x=x, multipliers=mu, iterations=iters,
+                        message=f"cvxpy/{backend}: {text}", info=info)

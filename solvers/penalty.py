@@ -1,0 +1,215 @@
+"""Penalty method: semismooth Newton with line search and continuation in the penalty parameter.
+
+For a penalty parameter rho (units stress / length, like the paper's r) minimise, with no
+constraint,
+
+    P_rho(x) = Pi(x) + rho/2 sum_j w_j ((-[x_nu]_j)^+)^2,       [x_nu] = B x,
+
+whose minimiser penetrates by about mu_j / (rho w_j): that penetration is the method's intrinsic
+error and is reported (``info["penetration"]``, absolute, and relative to |x|_inf). There is no
+multiplier update (that would be the augmented Lagrangian, i.e. the Uzawa plugin); the
+multiplier estimate is the penalty force ``mu_j = rho w_j (-[x_nu]_j)^+ >= 0``, which satisfies
+``K x - F = B' mu`` at the minimiser exactly, so the evaluator's stationarity, dual and
+complementarity residuals are small and its primal residual is the relative penetration.
+
+Linear algebra: on the defect unknowns I (:class:`dualfem.linalg.LocalReduction`), P_rho is
+``1/2 xI'S xI - g'xI + rho/2 sum_j w_j ((-BI xI)_j^+)^2``; its generalized Hessian on the
+active set A = {j : (BI xI)_j < 0} is ``S + rho BI_A' W_A BI_A``, applied through the Woodbury
+identity with one Cholesky factorization of S (made in setup) and the m x m Delassus matrix
+``D = BI S^-1 BI'``: the Newton system costs one |A| x |A| solve of ``D_AA + (rho W_A)^-1``,
+which stays well conditioned as rho grows (no 1/rho cancellation in the large matrix).
+
+Continuation: rho_0 = ``rho0_factor`` * median(diag K on I) / median(w) -- the penalty
+stiffness rho w of one node equal to the elastic stiffness of its unknowns, i.e. of order E/h,
+taken from the QP itself (so it works for any QP and any units). rho is multiplied by
+``rho_growth`` (warm-started Newton each time) until the relative penetration is at most
+``penetration_tol`` or rho reaches ``rho_max_factor`` * rho_0; in the latter case the status is
+``INACCURATE`` (the penetration is then reported, never hidden).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver, positive
+
+from .pdas import MAX_LOCAL, reduced_dual
+
+
+@register_solver
+class PenaltySolver(Solver):
+    """Quadratic penalty of the non-penetration constraint with rho-continuation."""
+
+    name = "penalty"
+    description = "quadratic penalty, semismooth Newton + line search, continuation in rho (inexact)"
+    exact = False
+    # x error is of the order of the relative penetration (<= penetration_tol = 1e-10 by
+    # default, measured <= 1e-9 relative in energy norm on f1/f2/f3, delta 1e-9..1e-1)
+    tolerance = 1e-7
+    defaults = {
+        "penetration_tol": 1e-10,
+        "rho0_factor": 1.0,
+        "rho_growth": 100.0,
+        "rho_max_factor": 1e14,
+        "newton_tol": 1e-12,
+        "max_newton": 50,
+        "sigma": 1e-4,
+        "max_backtracks": 40,
+    }
+
+    def validate(self) -> None:
+        positive(self, "penetration_tol", "rho0_factor", "rho_growth", "rho_max_factor",
+                 "newton_tol", "max_newton", "sigma", "max_backtracks")
+        from dualfem.errors import InputError
+
+        if self.params["rho_growth"] <= 1:
+            raise InputError(f"parameter 'rho_growth' of solver 'penalty' must be > 1, "
+                             f"got {self.params['rho_growth']!r}")
+        if not self.params["sigma"] < 0.5:
+            raise InputError(f"parameter 'sigma' of solver 'penalty' must be in (0, 0.5), "
+                             f"got {self.params['sigma']!r}")
+
+    @classmethod
+    def tolerance_params(cls, tol: float) -> dict:
+        # the x error follows the relative penetration; ask for 100x less penetration than tol
+        return {"penetration_tol": float(tol) * 1e-2}
+
+    def skip(self, qp) -> str | None:
+        nI = int(np.asarray(qp.local_dofs).size)
+        if nI > MAX_LOCAL:
+            return f"{nI} local unknowns: the dense reduced matrix would exceed {MAX_LOCAL}^2"
+        return None
+
+    def setup(self, qp) -> None:
+        from dualfem.linalg import LocalReduction
+
+        self.qp = qp
+        self.red = LocalReduction(qp)
+        self.cho, self.D, self.b0 = reduced_dual(self.red)
+        kd = qp.K.diagonal()[self.red.I]
+        self.rho0 = self.params["rho0_factor"] * float(np.median(kd)) / float(np.median(qp.weights))
+
+    # ------------------------------------------------------------------ pieces
+    def _objective(self, xI, rho):
+        gap = self.red.BI @ xI
+        pen = np.minimum(gap, 0.0)
+        return 0.5 * xI @ (self.red.S @ xI) - self.red.g @ xI + 0.5 * rho * np.sum(self.qp.weights * pen * pen)
+
+    def _newton(self, xI, rho, history, stage):
+        """Minimise P_rho from xI; return (xI, newton steps, converged?)."""
+        red, w, p = self.red, self.qp.weights, self.params
+        S, BI, g = red.S, red.BI, red.g
+        gscale = max(np.abs(g).max(initial=0.0), 1e-300)
+        steps = 0
+        f = self._objective(xI, rho)
+        while True:
+            gap = BI @ xI
+            force = rho * w * np.maximum(-gap, 0.0)          # penalty force (>= 0)
+            grad = S @ xI - g - BI.T @ force
+            gn = np.abs(grad).max(initial=0.0) / max(gscale, np.abs(S @ xI).max(initial=0.0))
+            if gn <= p["newton_tol"]:
+                return xI, steps, True
+            if steps >= p["max_newton"]:
+                return xI, steps, False
+            steps += 1
+            A = gap < 0
+            # Newton direction: (S + rho BA' W BA) d = -grad, by Woodbury with S = L L'
+            z = sla.cho_solve(self.cho, -grad)
+            if A.any():
+                BA = BI[A]
+                M = self.D[np.ix_(A, A)] + np.diag(1.0 / (rho * w[A]))
+                y = sla.solve(M, BA @ z, assume_a="pos")
+                d = z - sla.cho_solve(self.cho, BA.T @ y)
+            else:
+                d = z
+            slope = grad @ d
+            xs = max(np.abs(xI).max(initial=0.0), 1e-300)
+            if slope >= 0 or np.abs(d).max(initial=0.0) <= 1e-13 * xs:
+                # the Newton step is at rounding level of x (or no longer a descent direction
+                # because of rounding): xI is the minimiser to working precision
+                return xI, steps, True
+            t = 1.0
+            for _ in range(int(p["max_backtracks"]) + 1):
+                ft = self._objective(xI + t * d, rho)
+                if ft <= f + p["sigma"] * t * slope:
+                    break
+                t *= 0.5
+            else:
+                # no decrease found: converged to rounding if the step is tiny, else a failure
+                return xI, steps, bool(np.abs(d).max(initial=0.0) <= 1e-10 * xs)
+            xI = xI + t * d
+            # stop when the step is at rounding level of x (P_rho is piecewise quadratic: a
+            # full step that keeps the active set is exact)
+            f = ft
+            history.append({"stage": stage, "rho": rho, "step": t, "active": int(A.sum()),
+                            "grad": float(gn)})
+            if t == 1.0 and np.array_equal((BI @ xI) < 0, A):
+                return xI, steps, True
+
+    def _polish(self, xI, rho):
+        """The minimiser of P_rho on the active set of xI, computed stably; None if inconsistent.
+
+        On the active set A the minimiser solves ``(D_AA + (rho W_A)^-1) mu_A = -b0_A`` for the
+        penalty force, then ``xI = S^-1 (g + BA' mu_A)``; its penetration is ``mu_A / (rho w_A)``
+        exactly, not a difference of rounded displacements.
+        """
+        red, w = self.red, self.qp.weights
+        A = (red.BI @ xI) < 0
+        mu = np.zeros(self.qp.m)
+        if A.any():
+            M = self.D[np.ix_(A, A)] + np.diag(1.0 / (rho * w[A]))
+            mu[A] = sla.solve(M, -self.b0[A], assume_a="pos")
+        xn = sla.cho_solve(self.cho, red.g + red.BI.T @ mu)
+        gap = red.BI @ xn
+        xs = max(np.abs(xn).max(initial=0.0), 1e-300)
+        if np.any(mu[A] <= 0) or np.any(gap[~A] < -1e-12 * xs):
+            return None
+        pen = float((mu[A] / (rho * w[A])).max(initial=0.0))
+        return xn, mu, pen
+
+    # ------------------------------------------------------------------ solve
+    def solve(self) -> Solution:
+        p, red, w = self.params, self.red, self.qp.weights
+        xI = sla.cho_solve(self.cho, red.g)             # unconstrained minimiser
+        rho = self.rho0
+        rho_max = self.rho0 * p["rho_max_factor"]
+        history: list[dict] = []
+        total, stage = 0, 0
+        status, message = Status.INACCURATE, ""
+        mu = np.zeros(self.qp.m)
+        pen = float("nan")
+        while True:
+            stage += 1
+            xI, steps, ok = self._newton(xI, rho, history, stage)
+            total += steps
+            if not ok:
+                status = Status.MAX_ITER
+                message = f"Newton did not converge at rho = {rho:.3g} ({steps} steps)"
+                mu = rho * w * np.maximum(-(red.BI @ xI), 0.0)
+                break
+            pol = self._polish(xI, rho)
+            if pol is None:   # active set not settled to rounding: keep the Newton iterate
+                mu = rho * w * np.maximum(-(red.BI @ xI), 0.0)
+                pen = float(max(0.0, -(red.BI @ xI).min(initial=0.0)))
+            else:
+                xI, mu, pen = pol
+            xs = max(np.abs(xI).max(initial=0.0), 1e-300)
+            if pen <= p["penetration_tol"] * xs:
+                status = Status.SOLVED
+                message = f"penetration {pen / xs:.1e} relative at rho = {rho:.3g}"
+                break
+            if rho * p["rho_growth"] > rho_max * (1 + 1e-12):
+                status = Status.INACCURATE
+                message = (f"rho reached its cap {rho:.3g} with penetration {pen / xs:.1e} relative "
+                           f"> penetration_tol {p['penetration_tol']:g}")
+                break
+            rho *= p["rho_growth"]
+        x = self.red.full(xI)
+        return Solution(
+            solver=self.name, status=status, x=x, multipliers=mu,
+            iterations={"newton": total, "continuation": stage}, history=history, message=message,
+            info={"rho": rho, "rho0": self.rho0, "penetration": pen,
+                  "penetration_rel": pen / max(np.abs(x).max(initial=0.0), 1e-300)},
+        )

@@ -1,0 +1,197 @@
+"""The solver contract: every registered solver, on small f1/f2/f3 scenes and delta in {1e-1, 1e-5, 1e-9}.
+
+A newly registered plugin is collected automatically (the parametrization reads the registry).
+For each solver and scene:
+
+* the result is well formed (shapes, finite numbers when it claims success, iteration counters,
+  setup/solve times);
+* the status is honest: a solver that claims ``solved`` must have evaluator KKT residuals within
+  its declared ``tolerance`` *and* agree with the reference within that tolerance (relative
+  energy-norm error of x); one that reports a failure status is not held to it (that is an honest
+  answer), but every solver must claim success on the easy scene f1, delta = 1e-1;
+* inexact solvers (``exact = False``) are held to the same declared tolerance.
+
+The reference does not come from any plugin: at N = 16 the defect has 7 nodes, so the dual
+linear complementarity problem ``gap = D mu + b0 >= 0, mu >= 0, mu.gap = 0`` (D = B K^-1 B') is
+solved by enumerating all 2^7 active sets with a sparse LU of K, and the unique solution is
+certified by the a-posteriori energy-norm estimate of :mod:`dualfem.certify`.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+import scipy.sparse.linalg as spla
+
+from dualfem import evaluator
+from dualfem.certify import certified_error
+from dualfem.errors import InputError
+from dualfem.registry import solvers
+from dualfem.runner import run
+from dualfem.scene import load_scene
+from dualfem.solution import Solution, Status
+
+N = 16
+LOADS = ("f1", "f2", "f3")
+DELTAS = (1e-1, 1e-5, 1e-9)
+SOLVERS = sorted(solvers())
+
+_QP: dict = {}
+_REF: dict = {}
+
+#: Known contract violations of plugins owned elsewhere, as strict xfails: the test still runs and
+#: turns red (XPASS strict) as soon as the plugin is fixed, so this list cannot go stale silently.
+KNOWN_VIOLATIONS = {
+    ("clarabel", "f2", 1e-9): "Clarabel (interior point) stops with x off by ~5e-6 in the energy norm at "
+                              "delta=1e-9 (duality-gap stop at near-degenerate open nodes), above its "
+                              "declared tolerance 1e-6; tighter tol_* settings end AlmostSolved. Needs an "
+                              "active-set polish in solvers/clarabel_.py or tolerance 1e-5 (issue 4 report).",
+}
+
+
+def qp_for(load: str, delta: float):
+    key = (load, delta)
+    if key not in _QP:
+        _QP[key] = load_scene(load, {"N": N, "delta": delta}).build()
+    return _QP[key]
+
+
+def enumerate_lcp(K, F, B):
+    """Exact solution of the QP by enumerating the active sets of its dual LCP (small m only)."""
+    lu = spla.splu(K.tocsc())
+    Bd = B.toarray()
+    KiBt = lu.solve(np.ascontiguousarray(Bd.T))
+    D = Bd @ KiBt
+    D = 0.5 * (D + D.T)
+    u0 = lu.solve(F)
+    b0 = Bd @ u0
+    m = B.shape[0]
+    assert m <= 12, "enumeration is for tiny defects only"
+    scale = max(np.abs(D).max() * 1.0, 1e-300)
+    sols = []
+    for k in range(m + 1):
+        for A in itertools.combinations(range(m), k):
+            A = list(A)
+            mu = np.zeros(m)
+            if A:
+                mu[A] = np.linalg.solve(D[np.ix_(A, A)], -b0[A])
+            gap = D @ mu + b0
+            tol = 1e-10 * max(np.abs(b0).max(), scale * np.abs(mu).max(), 1e-300)
+            if np.all(mu >= -tol) and np.all(gap >= -tol):
+                sols.append(mu)
+    assert sols, "no complementary solution found"
+    mu = np.maximum(sols[0], 0.0)
+    x = u0 + KiBt @ mu
+    # one step of iterative refinement of x in the full space
+    x = x + lu.solve(F + B.T @ mu - K @ x)
+    return x, mu, len(sols)
+
+
+def reference(load: str, delta: float):
+    key = (load, delta)
+    if key not in _REF:
+        qp = qp_for(load, delta)
+        x, mu, nsol = enumerate_lcp(qp.K, qp.F, qp.B)
+        _REF[key] = (x, mu, certified_error(qp, x, mu)["value"], nsol)
+    return _REF[key]
+
+
+@pytest.mark.parametrize("load", LOADS)
+@pytest.mark.parametrize("delta", DELTAS)
+def test_reference_is_certified(load, delta):
+    """The enumerated reference is unique and certified to near rounding level."""
+    x, mu, bound, nsol = reference(load, delta)
+    qp = qp_for(load, delta)
+    res = evaluator.residuals(qp, x, mu)
+    assert evaluator.kkt_error(res) < 1e-10
+    # duplicates of the same solution are possible only at degenerate nodes; they must coincide
+    assert nsol >= 1
+    assert bound < 1e-11, bound
+
+
+def _check_well_formed(sol: Solution, qp, cls) -> None:
+    assert isinstance(sol.status, Status)
+    assert sol.solver == cls.name
+    assert isinstance(sol.iterations, dict)
+    assert all(isinstance(v, (int, np.integer)) and v >= 0 for v in sol.iterations.values()), sol.iterations
+    assert sol.time_s.get("setup", -1) >= 0 and sol.time_s.get("solve", -1) >= 0
+    if sol.x is not None:
+        assert sol.x.shape == (qp.n,)
+        assert sol.multipliers is not None and sol.multipliers.shape == (qp.m,)
+    if sol.status == Status.SOLVED:
+        assert sol.x is not None, "a solver claiming success must return x"
+        assert sol.residuals is not None and sol.residuals["finite"]
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+@pytest.mark.parametrize("load", LOADS)
+@pytest.mark.parametrize("delta", DELTAS)
+def test_contract(name, load, delta, request):
+    if (name, load, delta) in KNOWN_VIOLATIONS:
+        request.applymarker(pytest.mark.xfail(strict=True, reason=KNOWN_VIOLATIONS[(name, load, delta)]))
+    cls = solvers()[name]
+    if cls.missing():
+        pytest.skip(cls.missing())
+    qp = qp_for(load, delta)
+    solver = cls()
+    sol = run(solver, qp)
+    if sol.status == Status.SKIPPED:
+        pytest.skip(sol.message)
+    assert sol.status != Status.ERROR, f"{name} raised: {sol.message}"
+    _check_well_formed(sol, qp, cls)
+    tol = float(getattr(solver, "tolerance", cls.tolerance))
+    assert 0 < tol < 1
+    if sol.status != Status.SOLVED:
+        # an honest failure; it must say why
+        assert sol.message, f"{name} returned {sol.status} without a message"
+        return
+    x_ref, mu_ref, bound, _ = reference(load, delta)
+    kkt = evaluator.kkt_error(sol.residuals)
+    diff = evaluator.compare(qp, sol.x, sol.multipliers, x_ref, mu_ref)
+    assert kkt <= tol, (f"{name} claims success on {load}, delta={delta} with evaluator KKT error "
+                        f"{kkt:.2e} > its declared tolerance {tol:.0e}: {sol.residuals}")
+    assert diff["x_energy"] <= tol + bound, (
+        f"{name} claims success on {load}, delta={delta} but differs from the reference by "
+        f"{diff['x_energy']:.2e} (energy norm) > its declared tolerance {tol:.0e}")
+    assert np.all(sol.multipliers >= -tol * max(np.abs(mu_ref).max(), np.abs(qp.F).max())), \
+        "contact forces must be >= 0 (compression)"
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_solves_the_easy_scene(name):
+    """Honesty is not enough: every solver must claim (and deliver) success on f1, delta = 1e-1."""
+    cls = solvers()[name]
+    if cls.missing():
+        pytest.skip(cls.missing())
+    qp = qp_for("f1", 1e-1)
+    sol = run(name, qp)
+    if sol.status == Status.SKIPPED:
+        pytest.skip(sol.message)
+    assert sol.status == Status.SOLVED, f"{name}: {sol.status} {sol.message}"
+
+
+@pytest.mark.parametrize("name", SOLVERS)
+def test_declares_its_contract(name):
+    cls = solvers()[name]
+    assert cls.name == name and cls.description
+    assert isinstance(cls.exact, bool)
+    assert 0 < cls.tolerance < 1
+    assert isinstance(cls.defaults, dict)
+    with pytest.raises(InputError):
+        cls(**{"no_such_parameter_xyz": 1})
+    if cls.missing():
+        return
+    for tol in (1e-4, 1e-8):
+        params = cls.tolerance_params(tol)
+        assert isinstance(params, dict)
+        assert set(params) <= set(cls.defaults), f"tolerance_params returns unknown keys {set(params) - set(cls.defaults)}"
+        cls(**params)  # valid parameters
+
+
+def test_every_solver_is_collected():
+    """The parametrization covers the registry as it is at collection time (plugins included)."""
+    assert set(SOLVERS) == set(solvers())
+    assert {"pdas", "penalty", "clarabel"} <= set(SOLVERS)
+    assert not math.isnan(N)
