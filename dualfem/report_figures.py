@@ -319,6 +319,9 @@ def run(argv: list[str]) -> int:
                     help="solvers besides uzawa whose histories are drawn (default: every registered one "
                          "that records a history, found by a solve of a tiny scene)")
     ap.add_argument("--out", default="reports", help="output directory (default reports/)")
+    argv = list(argv)
+    if argv[:1] == ["--"]:  # 'dualfem report KIND -- --opt ...' with older dispatchers
+        argv = argv[1:]
     args = ap.parse_args(argv)
     from .errors import check_int, check_positive
 
