@@ -107,7 +107,7 @@ def test_plot_history_fake_solution():
 def test_report_figures_small(tmp_path):
     from dualfem.report_figures import generate
 
-    text = generate(tmp_path, N=8, sweep=(1e-1, 1e-5), history_solvers=["pdas"] if "pdas" in solvers() else [],
+    text = generate(tmp_path, N=8, sweep=(1e-1, 1e-5), dpi=40, history_solvers=["pdas"] if "pdas" in solvers() else [],
                     progress=lambda m: None)
     images = re.findall(r"\(figures/([^)]+\.png)\)", text)
     assert len(images) == 5 + 3 + 3  # deformed bodies, jump/faces/pressure, three histories
