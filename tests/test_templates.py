@@ -98,3 +98,20 @@ def test_solver_template_agrees_and_fails_honestly(templates, scene):
     assert s.ok and d["x_energy"] < templates["solver_template"].MyProjectedGradient.tolerance
     short = run("my_pg", qp, {"max_iter": 1})
     assert short.status == Status.MAX_ITER and short.residuals is not None
+
+
+def test_every_exact_solver_on_a_fully_constrained_problem(templates):
+    """B = I (every unknown constrained, mesh maps present): an edge case for solvers that reduce
+    onto the constrained unknowns (nothing is left to eliminate)."""
+    qp = templates["problem_template"].MembraneOverFloor(N=10, q=2.0).build()
+    ref = run("my_pg", qp, {"tol": 1e-12})
+    assert ref.ok
+    for name, cls in sorted(registry.solvers().items()):
+        if not cls.exact or cls.missing():
+            continue
+        s = run(name, qp)
+        if s.status == "skipped":
+            continue
+        assert s.status == "solved", (name, s.status, s.message)
+        d = evaluator.compare(qp, s.x, s.multipliers, ref.x, ref.multipliers)
+        assert d["x_energy"] < max(cls.tolerance, 1e-6), (name, d)
