@@ -81,6 +81,10 @@ BASE = {"load": "f2", "N": 32, "delta": 1e-5, "E": 69000.0, "nu": 0.3, "plane": 
 PAPER_R = 1e7
 #: predicted time growth of one solve when N doubles (4x unknowns, sparse direct ~ n^1.3)
 GROWTH = 6.0
+#: predicted growth of a run's peak memory when N doubles (4x unknowns, some more fill)
+MEM_GROWTH = 5.0
+#: scenes from this N on are not cached next to others (memory)
+LARGE_N = 256
 
 OUTCOMES = ("correct", "failed", "flagged", "timeout", "crashed", "silent_wrong", "unverified", "skipped")
 HONEST = ("failed", "flagged", "timeout", "crashed")
@@ -216,6 +220,16 @@ class _Cache:
         from .scene import load_scene
 
         k = json.dumps(scene, sort_keys=True, default=str)
+        if k not in self.qps and int(scene.get("N", 32)) >= LARGE_N:
+            # a large scene: free every cached QP, reference and factorization first
+            import gc
+
+            from .linalg import clear_cache
+
+            self.qps.clear()
+            self.refs.clear()
+            clear_cache()
+            gc.collect()
         if k not in self.qps:
             t0 = time.perf_counter()
             qp = load_scene("f2", dict(scene)).build()
@@ -362,11 +376,44 @@ def execute(task: Task, cache: _Cache) -> dict:
 
 
 # ---------------------------------------------------------------------------- workers
+def _rss_gb() -> float:
+    """Resident memory of this process in GB (Linux /proc; 0 elsewhere)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e9
+    except (OSError, ValueError, IndexError):
+        return 0.0
+
+
+def mem_available_gb() -> float:
+    """MemAvailable of the machine in GB (Linux /proc/meminfo; inf elsewhere)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) / 1e6
+    except (OSError, ValueError):
+        pass
+    return float("inf")
+
+
 def _worker_main(conn) -> None:  # pragma: no cover - runs in a child process
+    import threading
     import warnings
 
     warnings.simplefilter("ignore")
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    parent = os.getppid()
+    peak = [0.0]
+
+    def watch() -> None:  # sample memory; exit if the parent died (never leave orphans)
+        while True:
+            if os.getppid() != parent:
+                os._exit(3)
+            peak[0] = max(peak[0], _rss_gb())
+            time.sleep(0.2)
+
+    threading.Thread(target=watch, daemon=True).start()
     cache = _Cache()
     while True:
         try:
@@ -376,12 +423,18 @@ def _worker_main(conn) -> None:  # pragma: no cover - runs in a child process
         if msg is None:
             return
         task = Task(**msg)
+        peak[0] = _rss_gb()
         try:
             rec = execute(task, cache)
+        except MemoryError:
+            rec = {"id": task.id, "axis": task.axis, "coords": task.coords, "scene": task.scene,
+                   "solver": task.solver, "params": task.params, "status": "error",
+                   "outcome": "failed", "message": "out of memory (MemoryError)"}
         except Exception as exc:  # the harness itself must not die; record it
             rec = {"id": task.id, "axis": task.axis, "coords": task.coords, "scene": task.scene,
                    "solver": task.solver, "params": task.params, "status": "error",
                    "outcome": "failed", "message": f"harness: {type(exc).__name__}: {exc}"}
+        rec["peak_rss_gb"] = max(peak[0], _rss_gb())
         conn.send(rec)
 
 
@@ -481,8 +534,16 @@ def run_grid(tasks: list[Task], out: Path, *, jobs: int = 1, resume: bool = Fals
         prev = results.get(t.after)
         if prev is None:
             return "wait"
-        if prev["outcome"] in ("timeout", "crashed") or prev.get("skip_budget"):
-            return f"not attempted: N={prev['scene']['N']} already exceeded the time limit"
+        if prev["outcome"] == "crashed" or "out of memory" in (prev.get("message") or ""):
+            return f"not attempted: N={prev['scene']['N']} already crashed or ran out of memory"
+        if prev["outcome"] == "timeout" or prev.get("skip_budget"):
+            return f"not attempted: N={prev['scene']['N']} already exceeded the time or memory budget"
+        mem = (prev.get("peak_rss_gb") or 0.0) * MEM_GROWTH
+        avail = mem_available_gb()
+        if mem > 0.8 * avail:
+            return (f"not attempted: predicted peak memory {mem:.1f} GB (x{MEM_GROWTH:g} per doubling of N from "
+                    f"{prev['peak_rss_gb']:.1f} GB at N={prev['scene']['N']}) exceeds 80% of the {avail:.1f} GB "
+                    f"available on this machine now")
         wall = (prev.get("time_setup") or 0) + (prev.get("time_solve") or 0)
         if prev.get("status") == "time_limit" or wall * GROWTH > t.time_limit:
             return (f"not attempted: predicted {wall * GROWTH:.0f} s (x{GROWTH:g} per doubling of N from "
