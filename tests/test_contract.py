@@ -18,12 +18,12 @@ certified by the a-posteriori energy-norm estimate of :mod:`dualfem.certify`.
 """
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
 import pytest
-import scipy.sparse.linalg as spla
+
+from _lcp import enumerate_lcp
 
 from dualfem import evaluator
 from dualfem.certify import certified_error
@@ -56,37 +56,6 @@ def qp_for(load: str, delta: float):
     if key not in _QP:
         _QP[key] = load_scene(load, {"N": N, "delta": delta}).build()
     return _QP[key]
-
-
-def enumerate_lcp(K, F, B):
-    """Exact solution of the QP by enumerating the active sets of its dual LCP (small m only)."""
-    lu = spla.splu(K.tocsc())
-    Bd = B.toarray()
-    KiBt = lu.solve(np.ascontiguousarray(Bd.T))
-    D = Bd @ KiBt
-    D = 0.5 * (D + D.T)
-    u0 = lu.solve(F)
-    b0 = Bd @ u0
-    m = B.shape[0]
-    assert m <= 12, "enumeration is for tiny defects only"
-    scale = max(np.abs(D).max() * 1.0, 1e-300)
-    sols = []
-    for k in range(m + 1):
-        for A in itertools.combinations(range(m), k):
-            A = list(A)
-            mu = np.zeros(m)
-            if A:
-                mu[A] = np.linalg.solve(D[np.ix_(A, A)], -b0[A])
-            gap = D @ mu + b0
-            tol = 1e-10 * max(np.abs(b0).max(), scale * np.abs(mu).max(), 1e-300)
-            if np.all(mu >= -tol) and np.all(gap >= -tol):
-                sols.append(mu)
-    assert sols, "no complementary solution found"
-    mu = np.maximum(sols[0], 0.0)
-    x = u0 + KiBt @ mu
-    # one step of iterative refinement of x in the full space
-    x = x + lu.solve(F + B.T @ mu - K @ x)
-    return x, mu, len(sols)
 
 
 def reference(load: str, delta: float):
