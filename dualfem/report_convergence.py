@@ -177,6 +177,14 @@ def _fmt(v, spec=".3e") -> str:
     return "–" if v is None else format(v, spec)
 
 
+def _h_ticks(ax, res: dict) -> None:
+    """x ticks at the mesh sizes, labelled 1/N."""
+    from matplotlib.ticker import NullLocator
+
+    ax.set_xticks([1.0 / n for n in res["Ns"]], [f"1/{n}" for n in res["Ns"]])
+    ax.xaxis.set_minor_locator(NullLocator())
+
+
 def plot(res: dict, outdir: Path) -> list[str]:
     """convergence_errors.png and convergence_quantities.png; returns the file names."""
     import matplotlib
@@ -200,6 +208,7 @@ def plot(res: dict, outdir: Path) -> list[str]:
         if key == "L2":
             ax.loglog(h, first * (h / h[0]) ** 2.0, "k-.", lw=1, label="h^2")
         ax.set_xlabel("h = 1/N")
+        _h_ticks(ax, res)
         ax.set_title(title, fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
@@ -227,6 +236,7 @@ def plot(res: dict, outdir: Path) -> list[str]:
                       (axes[1], f"contact-zone length (dashed: N = {res['ref_N']})"),
                       (axes[2], "|total force_N - ref| / |ref|")):
         ax.set_xlabel("h = 1/N")
+        _h_ticks(ax, res)
         ax.set_title(title, fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
@@ -250,6 +260,8 @@ def markdown(res: dict, pngs: list[str], cmdline: str) -> str:
              "top), at delta in {" + ", ".join(res["deltas"]) + "}, on meshes N = "
              + ", ".join(str(n) for n in res["Ns"]) + " (h = 1/N: leg of the right triangles).")
     refs = [d["reference"] for d in res["deltas"].values()]
+    if res.get("note"):
+        L.append(f"- **Note on the reference mesh**: {res['note']}")
     L.append(f"- **Reference**: the same scene on the finest mesh N = {ref_N} ({refs[0]['ndof']} unknowns), "
              f"solved with the exact solver `{res['solver']}` (evaluator KKT residuals at most "
              f"{max(max(r['residuals'].values()) for r in refs):.1e}). It is a discrete solution, not the exact "
@@ -358,29 +370,51 @@ def _discussion(res: dict) -> str:
                  f"{_fmt(mean_rate(lv, 'rate_L2'), '.2f')} | {_fmt(fp['L2'], '.2f')} | "
                  f"{_fmt(mean_rate(lv, 'rate_diff_energy'), '.2f')} |")
     L.append("")
-    lo = min(min(v for v in vals if v is not None) for vals in summary.values())
-    hi = max(max(v for v in vals if v is not None) for vals in summary.values())
-    L.append(f"**What the numbers show.** On these meshes the energy-norm error decreases at an order between "
-             f"{lo:.2f} and {hi:.2f} (raw or fitted, all three deltas), i.e. "
-             + ("at least as fast as" if lo >= 0.5 - 0.05 else "slower than")
-             + " the h^(1/2) of Theorem 1. ")
+    fitted = {dl: v[1] for dl, v in summary.items() if v[1] is not None}
+    facts = []
+    if fitted:
+        facts.append("energy-norm order (fitted) " + ", ".join(f"{p:.2f} at delta = {dl}" for dl, p in fitted.items()))
+        if min(fitted.values()) >= 0.45:
+            facts.append("every one at least the h^(1/2) of Theorem 1")
+        else:
+            facts.append("below the h^(1/2) of Theorem 1 for delta = "
+                         + ", ".join(dl for dl, p in fitted.items() if p < 0.45))
+        order = [fitted[dl] for dl in sorted(fitted, key=float, reverse=True)]
+        if all(a < b for a, b in zip(order[:-1], order[1:])):
+            facts.append("and the order grows as delta decreases")
+    spans = []
+    for dl, d in res["deltas"].items():
+        r = [lv["rate_energy_norm"] for lv in d["levels"][:-1] if lv["rate_energy_norm"] is not None]
+        if r:
+            spans.append(f"{min(r):.2f}-{max(r):.2f} at delta = {dl}")
+    L.append("**What the numbers show.** " + "; ".join(facts) + ". The raw rate of each halving (last one "
+             "excluded) stays within " + ", ".join(spans) + f", so on meshes up to N = {Ns[-1]} the order does "
+             "not visibly change with h.\n")
     L.append(
-        "Theorem 1 bounds the H^1 error by C h^(1/2) assuming u in H^2, an assumption that fails at the ends of "
-        "the defect: where the faces are separated (large delta: a crack; f2 opens the right part of the defect) "
-        "the displacement behaves like r^(1/2) near the tip (r = distance to the tip), which is not in H^2 (only "
-        "in H^(3/2 - eps)), and on uniform meshes such a singularity limits the energy-norm error of P1 elements "
-        "to O(h^(1/2)) asymptotically, and the L2 error to about O(h). The h^(1/2) bound is therefore sharp for a "
-        "crack in the limit h -> 0; a faster observed rate on moderate meshes means that the singular part "
-        "(its coefficient, the stress intensity) is small next to the smooth part of the error, which decreases "
-        "like h, so the observed rate lies between 1/2 and 1 and drifts toward 1/2 as h decreases. The other "
-        "singular points (the corners where the clamped bottom meets the free sides, the jump of the traction at "
-        "the middle of the top side) are present for every delta and also keep the rate below 1. For small delta "
-        "the interface term (1/delta) int |[u]|^2 nearly glues the faces and the tip singularity fades, which is "
-        "the difference between the delta rows above. The energy difference Pi_N - Pi_ref behaves like half the "
-        "squared K-norm error (the column 'ratio to 1/2 e'Ke' is close to 1 where orthogonality holds; the "
-        "trapezoid rule of the interface term and the contact constraint make it differ slightly), so its rate "
-        "is about twice the energy-norm rate. The contact-zone length is resolved only to within a mesh edge: its "
-        "error is O(h) at best and not monotone.")
+        "**Why.** Theorem 1 bounds the H^1 error by C h^(1/2) assuming u in H^2, an assumption that fails at the "
+        "ends of the defect: where the faces are separated (large delta: a crack; f2 opens the right part of the "
+        "defect, see the contact-zone lengths above) the displacement behaves like r^(1/2) near the tip "
+        "(r = distance to the tip), which is in H^(3/2 - eps) but not in H^2, and on uniform meshes such a "
+        "singularity limits the energy-norm error of P1 elements to O(h^(1/2)) as h -> 0 (and the L2 error to "
+        "about O(h)). So h^(1/2) is the asymptotic rate to expect for a genuine crack, not only a bound. An "
+        "order above 1/2 on moderate meshes, as measured here, reads as pre-asymptotic: the error of the "
+        "singular part (proportional to the stress intensity at the tip) is still outweighed by the error of "
+        "the smooth part, which decreases like h, so the measured order lies between the two; it is expected to "
+        "move toward 1/2 only on much finer (or tip-graded) meshes than this study can afford, which this "
+        "study does not show. Other singular points - the "
+        "corners where the clamped bottom meets the free sides, and the jump of the traction at the middle of "
+        "the top side - are present for every delta and keep the order below 1 even when the faces are glued. "
+        "As delta decreases, the interface term (1/delta) int |[u]|^2 glues the faces (max jump "
+        + ", ".join(f"{d['reference']['max_jump']:.1e} at delta = {dl}" for dl, d in res["deltas"].items())
+        + ") and the tip singularity fades, which is consistent with the higher order at small delta. "
+        "The energy difference Pi_N - Pi_ref equals half the squared K-norm error up to the ratio shown in the "
+        "energy tables (1 exactly for nested spaces without contact, by Galerkin orthogonality; the trapezoid "
+        "rule of the interface term and the contact constraint make it differ), so its order is about twice the "
+        "energy-norm order. The total contact force converges at a raw order of "
+        + ", ".join(f"{_fmt(mean_rate(d['levels'], 'rate_diff_total_force'), '.2f')} (delta = {dl})"
+                    for dl, d in res["deltas"].items())
+        + ", and the contact-zone length is resolved only to within one mesh edge: its error is O(h) at best "
+        "and not monotone.")
     return "\n".join(L)
 
 
