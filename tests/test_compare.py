@@ -1,0 +1,134 @@
+"""dualfem compare: reference choice, verdicts, JSON interface, exit status."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from dualfem import registry
+from dualfem.cli import main
+from dualfem.compare import RUN_FIELDS, compare_solvers
+from dualfem.scene import load_scene
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver
+
+
+@pytest.fixture(scope="module")
+def qp():
+    return load_scene("f2", {"N": 16, "delta": 1e-5}).build()
+
+
+class _WrongSolver(Solver):
+    """Returns a slightly wrong answer and claims success (a silent wrong answer)."""
+
+    name = "test_wrong"
+    description = "test double"
+    tolerance = 1e-6
+
+    def solve(self):
+        from dualfem.linalg import LocalReduction  # noqa: F401  (nothing to set up)
+
+        ref = registry.get_solver("pdas")()
+        ref.setup(self.qp)
+        s = ref.solve()
+        return Solution(solver=self.name, status=Status.SOLVED, x=s.x * (1 + 1e-3), multipliers=s.multipliers)
+
+
+class _HonestFailure(Solver):
+    """Returns a poor answer and says so."""
+
+    name = "test_honest"
+    description = "test double"
+
+    def solve(self):
+        return Solution(solver=self.name, status=Status.MAX_ITER, x=np.zeros(self.qp.n),
+                        multipliers=np.zeros(self.qp.m), message="gave up")
+
+
+@pytest.fixture
+def doubles(monkeypatch):
+    monkeypatch.setitem(registry._SOLVERS, "test_wrong", _WrongSolver)
+    monkeypatch.setitem(registry._SOLVERS, "test_honest", _HonestFailure)
+
+
+def test_reference_and_verdicts(qp):
+    res = compare_solvers(qp, ["pdas", "clarabel", "penalty"])
+    assert res["reference"]["solver"] == "pdas"
+    assert res["reference"]["error_bound"] < 1e-10
+    cc = res["reference"]["cross_check"]
+    assert cc["solver"] == "clarabel" and cc["agrees"]
+    v = {r["solver"]: r["verdict"] for r in res["runs"]}
+    assert v == {"pdas": "reference", "clarabel": "ok", "penalty": "ok"}
+    assert res["silent_wrong"] == []
+    for r in res["runs"]:
+        assert set(RUN_FIELDS) <= set(r)
+        assert r["diff"]["x_energy"] < 1e-6
+
+
+def test_silent_wrong_answer_is_caught_and_honest_failure_is_not(qp, doubles):
+    res = compare_solvers(qp, ["pdas", "test_wrong", "test_honest"])
+    v = {r["solver"]: r["verdict"] for r in res["runs"]}
+    assert v["test_wrong"] == "wrong"
+    assert v["test_honest"] == "failed"
+    assert res["silent_wrong"] == ["test_wrong"]
+    wrong = next(r for r in res["runs"] if r["solver"] == "test_wrong")
+    assert wrong["diff"]["x_energy"] == pytest.approx(1e-3, rel=1e-6)
+
+
+def test_no_exact_solver_means_no_reference(qp):
+    res = compare_solvers(qp, ["penalty"])
+    assert res["reference"] is None
+    assert res["runs"][0]["verdict"] == "unchecked"
+    assert res["silent_wrong"] == []
+
+
+def test_cli_json(capsys):
+    rc = main(["compare", "f2", "--set", "N=16", "--set", "delta=1e-9", "--solvers", "pdas,penalty,osqp", "--json"])
+    out = capsys.readouterr().out
+    data = json.loads(out)                       # exactly one JSON object on stdout
+    assert rc == 0
+    assert [r["solver"] for r in data["runs"]] == ["pdas", "penalty", "osqp"]
+    for r in data["runs"]:
+        for k in ("solver", "status", "iterations", "energy", "time_s", "residuals", "diff", "verdict"):
+            assert k in r
+        assert {"x_energy", "multipliers", "contact_mismatch"} <= set(r["diff"])
+    assert data["reference"]["solver"] == "pdas"
+    assert data["params"]["delta"] == 1e-9
+
+
+def test_cli_exit_1_on_silent_wrong_answer(doubles, capsys):
+    rc = main(["compare", "f2", "--set", "N=16", "--solvers", "pdas,test_wrong,test_honest"])
+    out = capsys.readouterr().out
+    assert rc == 1
+    assert "SILENT WRONG ANSWER: test_wrong" in out
+
+
+def test_cli_exit_0_on_honest_failure(doubles, capsys):
+    rc = main(["compare", "f2", "--set", "N=16", "--solvers", "pdas,test_honest"])
+    assert rc == 0
+    assert "gave up" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv", [
+    ["compare", "f2", "--set", "N=16", "--solvers", "pdas,nosuch"],
+    ["compare", "f2", "--set", "N=16", "--solvers", ","],
+    ["compare", "f2", "--set", "N=16", "--solvers", "pdas,pdas"],
+    ["compare", "f2", "--set", "N=16", "--solvers", "pdas", "--param", "tol=1"],
+    ["compare", "f2", "--set", "N=16", "--solvers", "pdas", "--param", "osqp.eps_abs=1"],
+    ["compare", "f2", "--set", "N=16", "--solvers", "pdas", "--param", "pdas.tol=-1"],
+    ["compare", "f2", "--set", "N=-3"],
+])
+def test_cli_input_errors(argv, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "error" in err
+
+
+def test_cli_solver_params(capsys):
+    rc = main(["compare", "f2", "--set", "N=16", "--solvers", "pdas,penalty", "--param", "penalty.rho_growth=10",
+               "--json"])
+    data = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    pen = next(r for r in data["runs"] if r["solver"] == "penalty")
+    assert pen["params"]["rho_growth"] == 10.0

@@ -1,0 +1,75 @@
+"""cvxpy plugin: backends, multiplier sign, honest status."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from _lcp import enumerate_lcp
+
+from dualfem import evaluator
+from dualfem.errors import InputError
+from dualfem.registry import get_solver
+from dualfem.runner import make_solver, run
+from dualfem.scene import load_scene
+from dualfem.solution import Status
+
+cp = pytest.importorskip("cvxpy")
+
+
+@pytest.fixture(scope="module")
+def f2():
+    qp = load_scene("f2", {"N": 16, "delta": 1e-5}).build()
+    x, mu, _ = enumerate_lcp(qp.K, qp.F, qp.B)
+    return qp, x, mu
+
+
+@pytest.mark.parametrize("backend", ["CLARABEL", "SCS", "OSQP"])
+def test_backends_and_multiplier_sign(f2, backend):
+    if backend not in cp.installed_solvers():
+        pytest.skip(f"{backend} not installed")
+    qp, x_ref, mu_ref = f2
+    solver = make_solver("cvxpy", {"solver": backend})
+    sol = run(solver, qp)
+    assert sol.status == Status.SOLVED, sol.message
+    assert sol.info["backend"] == backend and sol.message.startswith(f"cvxpy/{backend}")
+    # sign: contact forces >= 0 in compression and K x - F = B' mu
+    assert (sol.multipliers > 0).sum() > 0
+    assert np.all(sol.multipliers >= -1e-6 * np.abs(mu_ref).max())
+    assert sol.residuals["stationarity"] < 1e-6
+    d = evaluator.compare(qp, sol.x, sol.multipliers, x_ref, mu_ref)
+    assert d["x_energy"] <= solver.tolerance
+    assert d["multipliers"] < 1e-4
+    # a flipped sign would make stationarity O(1): guard the test itself
+    assert evaluator.residuals(qp, sol.x, -sol.multipliers)["stationarity"] > 1e-2
+
+
+def test_declared_tolerance_follows_backend():
+    assert make_solver("cvxpy", {"solver": "CLARABEL"}).tolerance < make_solver("cvxpy", {"solver": "SCS"}).tolerance
+
+
+def test_backend_name_is_case_insensitive_and_checked():
+    assert make_solver("cvxpy", {"solver": "clarabel"}).params["solver"] == "CLARABEL"
+    with pytest.raises(InputError, match="installed cvxpy backend"):
+        make_solver("cvxpy", {"solver": "NO_SUCH_BACKEND"})
+
+
+def test_iteration_cap_is_reported_honestly(f2):
+    qp, _, _ = f2
+    sol = run("cvxpy", qp, {"solver": "SCS", "max_iter": 2, "eps": 1e-12})
+    assert sol.status != Status.SOLVED
+    assert sol.status in (Status.MAX_ITER, Status.INACCURATE, Status.NUMERICAL_ERROR)
+    assert sol.message
+
+
+def test_tolerance_params():
+    cls = get_solver("cvxpy")
+    assert cls.tolerance_params(1e-7) == {"eps": 1e-7}
+    cls(**cls.tolerance_params(1e-7))
+
+
+def test_backend_output_does_not_reach_stdout(f2, capfd):
+    qp, _, _ = f2
+    if "OSQP" not in cp.installed_solvers():
+        pytest.skip("OSQP not installed")
+    run("cvxpy", load_scene("f3", {"N": 16, "delta": 1e-1}).build(), {"solver": "OSQP"})
+    out, _ = capfd.readouterr()
+    assert out == ""
