@@ -60,6 +60,9 @@ def _read(path: Path) -> dict:
             import scipy.io
 
             return {k: v for k, v in scipy.io.loadmat(path).items() if not k.startswith("__")}
+    except NotImplementedError as exc:  # scipy.io cannot read MATLAB v7.3 (HDF5) files
+        raise InputError(f"cannot read QP file {str(path)!r}: {exc}; save it from MATLAB with "
+                         f"save(..., '-v7') instead") from None
     except Exception as exc:  # corrupt or not a numpy/MATLAB file
         raise InputError(f"cannot read QP file {str(path)!r}: {type(exc).__name__}: {exc}") from None
     raise InputError(f"parameter 'path' must name a .npz or .mat file, got {str(path)!r}")

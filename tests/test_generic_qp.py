@@ -210,6 +210,11 @@ def test_missing_and_corrupt_files(tmp_path):
     bad.write_bytes(b"not a mat file at all")
     with pytest.raises(InputError, match="cannot read"):
         load_scene(str(bad)).build()
+    v73 = tmp_path / "v73.mat"               # MATLAB -v7.3 header (HDF5): scipy cannot read it
+    hdr = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Sun Nov 22 2026 HDF5 schema 1.00 ."
+    v73.write_bytes(hdr.ljust(116, b" ") + b"\x00" * 8 + b"\x00\x02" + b"IM" + b"\x00" * 384)
+    with pytest.raises(InputError, match="-v7"):
+        load_scene(str(v73)).build()
     from dualfem.registry import get_problem
 
     with pytest.raises(InputError, match="path"):
