@@ -95,9 +95,12 @@ def plot_deformed(qp, sol, ax=None, *, scale: float = 300.0, title: str | None =
     return ax
 
 
-def plot_jump(cases: Iterable[tuple[str, object, object]], ax=None, *, unit: float = 1e-5, component: str = "normal"):
+def plot_jump(cases: Iterable[tuple[str, object, object]], ax=None, *, unit: float = 1e-5, component: str = "normal",
+              log: bool = False, floor: float = 1e-16):
     """Jump [u_nu] (or [u_tau]) along the defect for several solutions; ``cases`` are
-    ``(label, qp, sol)``; values are plotted in multiples of ``unit`` (paper: 1e-5)."""
+    ``(label, qp, sol)``; values are plotted in multiples of ``unit`` (paper: 1e-5), or with
+    ``log=True`` as they are on a log scale (values below ``floor``, e.g. closed nodes, drawn
+    at the floor)."""
     ax = _axes(ax)
     key = {"normal": "jump_normal", "tangent": "jump_tangent"}.get(component)
     if key is None:
@@ -106,11 +109,18 @@ def plot_jump(cases: Iterable[tuple[str, object, object]], ax=None, *, unit: flo
     for label, qp, sol in cases:
         p = _post(qp, sol)
         x, xlabel = _along(p)
-        ax.plot(x, p.defect[key] / unit, ".-", ms=3, lw=1, label=label)
-    ax.axhline(0, color="k", lw=0.5)
+        if log:
+            ax.semilogy(x, np.maximum(np.abs(p.defect[key]), floor), ".-", ms=3, lw=1, label=label)
+        else:
+            ax.plot(x, p.defect[key] / unit, ".-", ms=3, lw=1, label=label)
     sym = "[u_nu]" if component == "normal" else "[u_tau]"
     ax.set_xlabel(xlabel)
-    ax.set_ylabel(f"{sym} / {unit:g}")
+    if log:
+        ax.set_ylim(bottom=floor * 1e3 if floor > 0 else None)
+        ax.set_ylabel(f"|{sym}| (log scale; closed nodes at the bottom)")
+    else:
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_ylabel(f"{sym} / {unit:g}")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return ax
@@ -163,31 +173,43 @@ def history_series(sol, key: str) -> tuple[np.ndarray, np.ndarray] | None:
     return it, np.array([float(h[key]) for h in rows])
 
 
-def plot_history(runs: Iterable[tuple[str, object]], ax=None, *, key: str = "dual_change", ylabel: str | None = None,
-                 title: str | None = None, floor: float = 1e-300, logx: bool = False):
-    """Convergence histories: ``key`` of each run's ``Solution.history`` per iteration, on a log
-    scale; ``runs`` are ``(label, Solution)``. Runs without that key are listed as skipped in
-    the legend; raises InputError if none has it. ``logx`` puts the iterations on a log scale
+def plot_history(runs: Iterable[tuple], ax=None, *, key: str | Sequence[str] = "dual_change",
+                 ylabel: str | None = None, title: str | None = None, floor: float = 1e-300, logx: bool = False):
+    """Convergence histories from ``Solution.history``, one line per run, on a log scale.
+
+    ``runs`` are ``(label, Solution)`` or ``(label, Solution, style)`` with ``style`` a dict of
+    matplotlib line properties. ``key`` names the history entry to draw (e.g. ``"dual_change"``
+    of the Uzawa solver), or is a sequence of names: then each run draws the first one its
+    history has, and the legend says which. Runs with none of them are listed as skipped in
+    the legend title; InputError if no run has any. ``logx`` puts the iterations on a log scale
     (useful when one run takes hundreds of iterations and the others a few)."""
     ax = _axes(ax)
+    keys = (key,) if isinstance(key, str) else tuple(key)
     n = 0
     skipped = []
-    for label, sol in runs:
-        ser = history_series(sol, key)
-        if ser is None:
+    for item in runs:
+        label, sol = item[0], item[1]
+        style = dict(item[2]) if len(item) > 2 and item[2] else {}
+        found = next(((k, ser) for k in keys if (ser := history_series(sol, k)) is not None), None)
+        if found is None:
             skipped.append(label)
             continue
-        it, val = ser
-        ax.plot(it, np.maximum(np.abs(val), floor), "-", marker="." if len(it) < 60 else None, ms=3, lw=1,
-                    label=f"{label} ({len(it)} its)")
+        k, (it, val) = found
+        what = f"{k}, " if len(keys) > 1 else ""
+        status = getattr(sol, "status", None)
+        style.setdefault("marker", "." if len(it) < 60 else None)
+        style.setdefault("ms", 3)
+        style.setdefault("lw", 1)
+        ax.plot(it, np.maximum(np.abs(val), floor),
+                label=f"{label} ({what}{len(it)} records{', ' + str(status) if status is not None else ''})", **style)
         n += 1
     if n == 0:
-        raise InputError(f"no run has a history with {key!r}")
+        raise InputError(f"no run has a history with {' or '.join(map(repr, keys))}")
     ax.set_yscale("log")
     if logx:
         ax.set_xscale("log")
     ax.set_xlabel("iteration")
-    ax.set_ylabel(ylabel or key)
+    ax.set_ylabel(ylabel or " / ".join(keys))
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7, title=("no history: " + ", ".join(skipped)) if skipped else None, title_fontsize=7)
     if title:

@@ -20,6 +20,8 @@ from .errors import InputError
 
 #: deltas of the jump / pressure / history figures (the paper's range)
 SWEEP = (1e-1, 1e-3, 1e-5, 1e-7, 1e-9)
+#: the same in plain text (Markdown)
+KEY_TEXT = {"dual_change": "max_j |l^{k+1}_j - l^k_j| in MPa"}
 #: radius around the defect tips for the "stress at the tips" column (triangle centroids)
 TIP_RADIUS = 0.05
 #: history quantity per solver, first one found in the solver's history rows
@@ -161,15 +163,7 @@ def generate(outdir: Path, N: int = 64, solver: str | None = None, scale: float 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     F.plot_jump(f2, ax=axes[0], unit=1e-5)
     axes[0].set_title("f2: normal jump [u_nu] along the defect", fontsize=10)
-    for label, qp, sol in f2:
-        p = Post(qp, sol)
-        x = p.defect["X"][0]
-        axes[1].semilogy(x, np.maximum(p.defect["jump_normal"], 1e-16), ".-", ms=3, lw=1, label=label)
-    axes[1].set_ylim(bottom=1e-13)
-    axes[1].set_xlabel("x1")
-    axes[1].set_ylabel("[u_nu] (log scale; closed nodes at the floor)")
-    axes[1].grid(alpha=0.3, which="both")
-    axes[1].legend(fontsize=8)
+    F.plot_jump(f2, ax=axes[1], log=True)
     axes[1].set_title("the same on a log scale", fontsize=10)
     fig.tight_layout()
     name = _save(fig, figdir / "jump_f2.png", dpi)
@@ -239,8 +233,8 @@ def generate(outdir: Path, N: int = 64, solver: str | None = None, scale: float 
             table.append(f"| {scene} | " + " | ".join(cells) + " |")
             F.plot_history(runs, ax=axes[0], key="dual_change", ylabel=KEY_LABEL["dual_change"],
                            title=f"{scene}: Uzawa, N = {N}", logx=True)
-            drawn = 0
             colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+            other_runs = []
             for i, name_s in enumerate(others):
                 for d, ls in ((1e-5, "-"), (1e-9, "--")):
                     s = cases.solve(name_s, scene, d)
@@ -249,19 +243,13 @@ def generate(outdir: Path, N: int = 64, solver: str | None = None, scale: float 
                         no_hist.add(name_s)
                         continue
                     measures[name_s] = key
-                    it, val = F.history_series(s, key)
-                    axes[1].semilogy(it, np.maximum(np.abs(val), 1e-300), ls,
-                                     color=colors[i % len(colors)], lw=1, marker=".", ms=3,
-                                     label=f"{name_s}, delta = {d:g}: {key} ({len(val)} records, {s.status})")
-                    drawn += 1
-            axes[1].set_xlabel("iteration (as recorded by the solver)")
-            axes[1].set_ylabel("solver's own progress measure")
-            axes[1].grid(alpha=0.3, which="both")
-            axes[1].set_title(f"{scene}: other iterative solvers", fontsize=10)
-            if drawn:
-                axes[1].legend(fontsize=7)
+                    other_runs.append((f"{name_s}, delta = {d:g}", s, {"color": colors[i % len(colors)], "ls": ls}))
+            if other_runs:
+                F.plot_history(other_runs, ax=axes[1], key=HISTORY_KEYS, ylabel="solver's own progress measure",
+                               title=f"{scene}: other iterative solvers", logx=True)
             else:
                 axes[1].text(0.5, 0.5, "no other solver records a history", ha="center", transform=axes[1].transAxes)
+            axes[1].set_xlabel("iteration (as recorded by the solver)")
             fig.tight_layout()
             name = _save(fig, figdir / f"history_{scene}.png", dpi)
             hist_md.append(f"![history {scene}](figures/{name})\n")
@@ -270,7 +258,7 @@ def generate(outdir: Path, N: int = 64, solver: str | None = None, scale: float 
             md.append("Progress measures drawn for the other solvers (the first of "
                       + ", ".join(f"`{k}`" for k in HISTORY_KEYS) + " found in each row of `Solution.history`):\n")
             for n_, k_ in sorted(measures.items()):
-                md.append(f"- `{n_}`: `{k_}` ({KEY_LABEL[k_]})")
+                md.append(f"- `{n_}`: `{k_}` ({KEY_TEXT.get(k_, KEY_LABEL[k_])})")
             md.append("")
         if no_hist - set(measures):
             no_hist -= set(measures)

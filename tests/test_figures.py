@@ -71,6 +71,10 @@ def test_plot_jump_faces_pressure(cases):
         assert np.allclose(ln.get_xdata(), d["X"][0])
         assert np.allclose(ln.get_ydata(), d["jump_normal"] / 1e-5)
     assert ax.get_xlabel() == "x1"
+    ax = F.plot_jump(cases, log=True, floor=1e-16)
+    assert ax.get_yscale() == "log"
+    d = Post(cases[0][1], cases[0][2]).defect
+    assert np.allclose(ax.get_lines()[0].get_ydata(), np.maximum(np.abs(d["jump_normal"]), 1e-16))
 
     _, qp, sol = cases[0]
     ax = F.plot_faces(qp, sol, scale=100.0)
@@ -101,6 +105,11 @@ def test_plot_history_fake_solution():
     with pytest.raises(InputError, match="dual_change"):
         F.plot_history([("x", other)], key="dual_change")
     assert F.history_series(other, "residual")[1][0] == 1e-16
+    # a sequence of keys: each run draws the first it has; per-run line styles are applied
+    ax = F.plot_history([("u", fake, {"color": "red", "ls": "--"}), ("p", other)], key=("dual_change", "residual"))
+    l1, l2 = ax.get_lines()
+    assert l1.get_color() == "red" and l1.get_linestyle() == "--" and "dual_change" in l1.get_label()
+    assert np.allclose(l2.get_ydata(), [1e-16]) and "residual" in l2.get_label()
 
 
 @pytest.mark.skipif("uzawa" not in solvers(), reason="the uzawa solver is not registered")
