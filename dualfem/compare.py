@@ -190,7 +190,8 @@ def table(result: dict) -> str:
                      f"{f(d.get('multipliers'))} {cm:>7s}")
     for r in result["runs"]:
         if (r["status"] != "solved" or r["verdict"] == "wrong") and r["message"]:
-            lines.append(f"  {r['solver']}: {r['message']}")
+            msg = r["message"]
+            lines.append(f"  {msg}" if msg.startswith(r["solver"]) else f"  {r['solver']}: {msg}")
     lines.append("dx_K: relative energy-norm difference to the reference; dmu: multipliers, relative to "
                  "max(|mu_ref|, |F|); bound: certified relative energy-norm error bound (- where x is infeasible); "
                  "tol: the solver's declared tolerance; contact: contact set vs the reference")

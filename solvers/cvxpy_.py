@@ -16,6 +16,14 @@ definite cannot be unbounded), and a ``SolverError`` raised by the backend -> nu
 with its message. ``eps`` is passed to the backend under its own option names (CLARABEL:
 tol_gap_abs, tol_gap_rel, tol_feas; OSQP and SCS: eps_abs, eps_rel; others: not passed).
 The declared ``tolerance`` of an instance depends on the backend (interior point vs ADMM).
+
+``polish`` (default true): after the backend, :func:`dualfem.polish.active_set_polish` guesses
+the active set from the backend's (x, mu), solves the equality-constrained problem on it exactly
+and keeps the result only if it is consistent (mu >= 0, open gaps >= 0); ``info["polish"]`` says
+what happened. Measured on f2, N = 64, delta = 1e-9: CLARABEL alone is 2.8e-6 off (energy norm),
+polished 2.4e-13. With polishing the instance promises 1e-8; when the polish is inconsistent a
+``solved`` status is downgraded to ``inaccurate`` (the backend's answer is then only as good as
+the backend's own tolerance, which the evaluator shows).
 """
 from __future__ import annotations
 
@@ -106,6 +114,7 @@ class CvxpySolver(Solver):
         "eps": 1e-10,
         "max_iter": 10000,
         "scale": True,
+        "polish": True,
         "verbose": False,
     }
 
@@ -120,8 +129,8 @@ class CvxpySolver(Solver):
             if backend not in installed:
                 raise InputError(f"parameter 'solver' of solver 'cvxpy' must be an installed cvxpy "
                                  f"backend ({', '.join(installed)}), got {backend!r}")
-        # an instance promises what its backend can deliver
-        self.tolerance = BACKEND_TOLERANCE.get(backend, _DEFAULT_TOLERANCE)
+        # an instance promises what its backend (and the polish) can deliver
+        self.tolerance = 1e-8 if self.params["polish"] else BACKEND_TOLERANCE.get(backend, _DEFAULT_TOLERANCE)
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -163,5 +172,23 @@ class CvxpySolver(Solver):
             return Solution(solver=self.name, status=status if status != Status.SOLVED else Status.ERROR,
                             iterations=iters, message=f"cvxpy/{backend}: {text} (no solution returned)", info=info)
         x, mu = self._scaled.unscale(np.asarray(yv, float).ravel(), np.asarray(nu, float).ravel())
+        msg = f"cvxpy/{backend}: {text}"
+        if self.params["polish"] and status in (Status.SOLVED, Status.INACCURATE):
+            from dualfem.polish import active_set_polish
+
+            try:
+                pol = active_set_polish(self.qp, x, mu)
+            except Exception as exc:  # noqa: BLE001 - the polish is optional; say why it failed
+                pol = None
+                info["polish_error"] = f"{type(exc).__name__}: {exc}"
+            if pol is not None:
+                x, mu, pinfo = pol
+                info["polish"] = {"applied": True, **pinfo}
+                msg += f"; polished on {pinfo['n_active']} contact nodes (x moved {pinfo['x_change_energy']:.1e})"
+            else:
+                info["polish"] = {"applied": False}
+                if status == Status.SOLVED:
+                    status = Status.INACCURATE
+                msg += "; active-set polish inconsistent: unpolished backend answer kept"
         return Solution(solver=self.name, status=status, x=x, multipliers=mu, iterations=iters,
-                        message=f"cvxpy/{backend}: {text}", info=info)
+                        message=msg, info=info)

@@ -27,7 +27,7 @@ def test_backends_and_multiplier_sign(f2, backend):
     if backend not in cp.installed_solvers():
         pytest.skip(f"{backend} not installed")
     qp, x_ref, mu_ref = f2
-    solver = make_solver("cvxpy", {"solver": backend})
+    solver = make_solver("cvxpy", {"solver": backend, "polish": False})
     sol = run(solver, qp)
     assert sol.status == Status.SOLVED, sol.message
     assert sol.info["backend"] == backend and sol.message.startswith(f"cvxpy/{backend}")
@@ -43,7 +43,22 @@ def test_backends_and_multiplier_sign(f2, backend):
 
 
 def test_declared_tolerance_follows_backend():
-    assert make_solver("cvxpy", {"solver": "CLARABEL"}).tolerance < make_solver("cvxpy", {"solver": "SCS"}).tolerance
+    assert make_solver("cvxpy", {"solver": "CLARABEL", "polish": False}).tolerance < \
+        make_solver("cvxpy", {"solver": "SCS", "polish": False}).tolerance
+    assert make_solver("cvxpy").tolerance == 1e-8
+
+
+def test_polish_makes_clarabel_exact_at_small_delta():
+    """Unpolished CLARABEL is ~1e-6 off at delta = 1e-9 (f2); the active-set polish is exact."""
+    qp = load_scene("f2", {"N": 16, "delta": 1e-9}).build()
+    x_ref, mu_ref, _ = enumerate_lcp(qp.K, qp.F, qp.B)
+    raw = run("cvxpy", qp, {"polish": False})
+    pol = run("cvxpy", qp)
+    assert pol.status == Status.SOLVED and pol.info["polish"]["applied"]
+    e_raw = evaluator.compare(qp, raw.x, raw.multipliers, x_ref, mu_ref)["x_energy"]
+    e_pol = evaluator.compare(qp, pol.x, pol.multipliers, x_ref, mu_ref)["x_energy"]
+    assert e_pol < 1e-11 < e_raw
+    assert e_pol <= make_solver("cvxpy").tolerance
 
 
 def test_backend_name_is_case_insensitive_and_checked():
@@ -73,3 +88,15 @@ def test_backend_output_does_not_reach_stdout(f2, capfd):
     run("cvxpy", load_scene("f3", {"N": 16, "delta": 1e-1}).build(), {"solver": "OSQP"})
     out, _ = capfd.readouterr()
     assert out == ""
+
+
+def test_polish_refuses_an_inconsistent_guess():
+    """f3 (faces open): guessing every node in contact gives negative forces -> no polish."""
+    from dualfem.polish import active_set_polish
+
+    qp = load_scene("f3", {"N": 16, "delta": 1e-1}).build()
+    x_open, mu_open, _ = enumerate_lcp(qp.K, qp.F, qp.B)
+    assert active_set_polish(qp, np.zeros(qp.n), np.ones(qp.m)) is None
+    x, mu, info = active_set_polish(qp, x_open, mu_open)
+    assert info["n_active"] == 0 and np.all(mu == 0)
+    assert evaluator.compare(qp, x, mu, x_open, mu_open)["x_energy"] < 1e-12

@@ -1,0 +1,61 @@
+"""Active-set polishing of an approximate solution (as OSQP's ``polishing``, for any backend).
+
+Interior-point and ADMM backends stop at a tolerance on their own residuals; at small delta the
+QP is nearly degenerate (open defect nodes with gaps of 1e-9 and tiny forces), and Clarabel's
+"Solved" answer was 2.8e-6 off in the energy norm at f2, N = 64, delta = 1e-9. Polishing guesses
+the active set from the approximate (x, mu) with the primal-dual active-set rule
+``A = {mu_j - c gap_j > 0}`` (c = 1 / mean diag of the Delassus matrix D = B K^-1 B'), solves
+the equality-constrained problem on A exactly (reduced space of
+:class:`dualfem.linalg.LocalReduction`: ``D_AA mu_A = -b0_A``, x from mu), refines once with
+full-space residuals, and accepts the result only if it is consistent: mu_A >= 0 and the
+gaps off A are >= 0 (to rounding). Otherwise it returns None and the caller keeps (and says it
+keeps) the unpolished answer.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+
+from .qp import QP
+
+
+def active_set_polish(qp: QP, x: np.ndarray, mu: np.ndarray, red=None):
+    """(x, mu, info) polished on the guessed active set, or None if the guess is inconsistent."""
+    from .certify import k_solve
+    from .linalg import LocalReduction
+
+    if x is None or mu is None or not (np.all(np.isfinite(x)) and np.all(np.isfinite(mu))):
+        return None
+    red = red or LocalReduction(qp)
+    if not hasattr(red, "_S_cho"):
+        red._S_cho = sla.cho_factor(red.S, lower=True)
+    cho = red._S_cho
+    D = red.BI @ sla.cho_solve(cho, red.BI.T)
+    D = 0.5 * (D + D.T)
+    b0 = red.BI @ sla.cho_solve(cho, red.g)
+    m = qp.m
+    c = 1.0 / np.diag(D).mean() if m else 1.0
+    A = (np.asarray(mu) - c * (qp.B @ x)) > 0
+    mu1 = np.zeros(m)
+    try:
+        if A.any():
+            mu1[A] = sla.solve(D[np.ix_(A, A)], -b0[A], assume_a="pos")
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    gap = D @ mu1 + b0
+    scale_gap = max(np.abs(b0).max(initial=0.0), 1e-300)
+    if np.any(mu1[A] < 0) or np.any(gap[~A] < -1e-12 * scale_gap):
+        return None
+    x1 = red.full(sla.cho_solve(cho, red.g + red.BI.T @ mu1))
+    # one step of iterative refinement on A with full-space residuals
+    dx = k_solve(red, qp.F + qp.B.T @ mu1 - qp.K @ x1)
+    dmu = np.zeros(m)
+    if A.any():
+        dmu[A] = sla.solve(D[np.ix_(A, A)], -(qp.B[A] @ (x1 + dx)), assume_a="pos")
+        dx = dx + k_solve(red, qp.B.T @ dmu)
+    if np.all(mu1[A] + dmu[A] >= 0):
+        x1, mu1 = x1 + dx, mu1 + dmu
+    nrm = float(np.sqrt(max(x1 @ (qp.K @ x1), 1e-300)))
+    dxx = x1 - x
+    change = float(np.sqrt(max(dxx @ (qp.K @ dxx), 0.0)) / nrm)
+    return x1, mu1, {"n_active": int(A.sum()), "x_change_energy": change}
