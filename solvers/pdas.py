@@ -264,10 +264,16 @@ class PDASSolver(Solver):
                             "residual": float(np.abs(Phi).max(initial=0.0) / max(scale0, np.abs(mu).max(initial=0.0)))})
         if status == Status.SOLVED:
             # polish on the final active set: the exact Newton point of the converged set
+            # (kept only if consistent: forces >= 0 on the set, gaps >= 0 off it, to rounding)
             A = mu > 0
-            mu = np.zeros(m)
+            mu_p = np.zeros(m)
             if A.any():
-                mu[A] = sla.solve(D[np.ix_(A, A)], -b0[A], assume_a="pos")
+                mu_p[A] = sla.solve(D[np.ix_(A, A)], -b0[A], assume_a="pos")
+            gap_p = D @ mu_p + b0
+            if np.all(mu_p >= 0) and np.all(gap_p[~A] >= -p["tol"] * max(np.abs(b0).max(initial=0.0), 1e-300)):
+                mu = mu_p
+            else:
+                mu = np.maximum(mu, 0.0)
         xI = sla.cho_solve(self.cho, self.red.g + self.red.BI.T @ mu)
         x = self.red.full(xI)
         refined = 0
@@ -275,5 +281,5 @@ class PDASSolver(Solver):
             x, mu, refined = self._refine(x, mu, int(p["refine"]))
         return Solution(solver=self.name, status=status, x=x, multipliers=mu,
                         iterations={"newton": k}, history=history, message=message,
-                        info={"c": c, "refinement_steps": refined, "n_active": int((mu > 0).sum()), "n_local": int(self.red.I.size),
-                              "reduction_time_s": self.red.time_s})
+                        info={"c": c, "refinement_steps": refined, "n_active": int((mu > 0).sum()),
+                              "n_local": int(self.red.I.size), "reduction_time_s": self.red.time_s})
