@@ -140,6 +140,9 @@ def cmd_solve(args) -> int:
     from .solution import Status
 
     solver = make_solver(args.solver, parse_set(args.param))  # validate before the (slow) assembly
+    missing = solver.missing()
+    if missing:
+        raise MissingDependency(missing)
     if args.vtk or args.xdmf:
         from .vtk import check_path
 

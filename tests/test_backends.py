@@ -71,3 +71,24 @@ def test_solver_parameter_errors():
         make_solver("osqp", {"eps_abs": -1})
     with pytest.raises(InputError, match="max_iter"):
         make_solver("clarabel", {"max_iter": "many"})
+
+
+def test_clarabel_polish_removes_its_small_delta_error(scene):
+    _, qp = scene("f2", 16, 1e-9)
+    xs, mus, ok = evaluator.certify(qp, run("uzawa_auto", qp).x)
+    assert ok
+    raw = run("clarabel", qp)
+    pol = run("clarabel", qp, {"polish": True})
+    e_raw = evaluator.compare(qp, raw.x, raw.multipliers, xs, mus)["x_energy"]
+    e_pol = evaluator.compare(qp, pol.x, pol.multipliers, xs, mus)["x_energy"]
+    assert pol.info["polished"] and e_pol < 1e-9 < e_raw < 1e-5
+
+
+def test_missing_dependency_is_one_line_exit_2(monkeypatch, capsys):
+    from dualfem.cli import main
+    from dualfem.registry import get_solver
+
+    monkeypatch.setattr(get_solver("osqp"), "requires", ("osqp_not_installed_here",))
+    assert main(["solve", "f2", "--set", "N=8", "--solver", "osqp"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "osqp_not_installed_here" in err[0] and "pip install" in err[0]
