@@ -234,9 +234,15 @@ def targets(runs, floors, ours: list[str], err_target: float, floor_target: floa
             ratio = t / flt if math.isfinite(flt) and flt > 0 else float("nan")
             fmark = "" if not math.isfinite(ratio) else (" ok" if ratio <= floor_target else " MISSED")
             if math.isfinite(ratio) and ratio > floor_target:
+                su, so = _f(best.get("setup_s")), _f(best.get("solve_s"))
+                why = ""
+                if math.isfinite(su) and math.isfinite(so) and t > 0:
+                    part = "setup (matrix factorizations)" if su >= so else "solve (iterations)"
+                    why = (f"; {part} dominates: setup {su:.3g} s = {su / flt:.2f} x the floor, "
+                           f"solve {so:.3g} s = {so / flt:.2f} x the floor")
                 misses.append(f"{s} at {sc[0]} N={sc[1]:g} delta={sc[2]:g}: {ratio:.2f} x the floor "
-                              f"({ratio / floor_target:.2f} x over the target); setup {_fmt(best.get('setup_s'))} s, "
-                              f"solve {_fmt(best.get('solve_s'))} s, floor {_fmt(flt)} s")
+                              f"({ratio / floor_target:.2f} x over the target){why}; floor {_fmt(flt)} s "
+                              f"({fl['solver']})")
             if comp_ok:
                 cb = min(comp_ok, key=lambda r: _f(r["total_s"]))
                 ct = _f(cb["total_s"])
@@ -247,7 +253,11 @@ def targets(runs, floors, ours: list[str], err_target: float, floor_target: floa
                     misses.append(f"{s} at {sc[0]} N={sc[1]:g} delta={sc[2]:g}: {sp:.1f} x faster than "
                                   f"{cb['variant']} ({speed_target / sp:.1f} x short of the target)")
             elif comp:
-                slowest = max(_f(r.get("total_s")) for r in comp)
+                slowest = max((_f(r.get("total_s")) for r in comp if math.isfinite(_f(r.get("total_s")))),
+                              default=float("nan"))
+                if any(r["status"] == "time_limit" for r in comp):
+                    slowest = max(slowest if math.isfinite(slowest) else 0.0,
+                                  max(_f(r.get("time_limit")) for r in comp))
                 errs = [_f(r.get("err_x_energy")) for r in comp if math.isfinite(_f(r.get("err_x_energy")))]
                 be = f"best error {min(errs):.1e}" if errs else "no error measured"
                 cmp_txt = f"none reached {err_target:g} ({be}; statuses {', '.join(sorted({r['status'] for r in comp}))})"
