@@ -102,6 +102,8 @@ def geometric_nested_dissection(coords: np.ndarray, adj: sp.spmatrix, leaf: int 
     vectorized numpy, so the cost is O(n log n) with no per-part Python overhead.
     """
     n = coords.shape[1]
+    if n == 0:
+        return np.zeros(0, np.int64)
     adj = sp.coo_matrix(adj)
     ei, ej = adj.row, adj.col
     keep = ei != ej

@@ -70,3 +70,13 @@ def test_generic_qp_without_mesh_maps():
     red = linalg.LocalReduction(qp)
     x = sla.spsolve(K, qp.F)
     assert np.abs(red.full(np.linalg.solve(red.S, red.g)) - x).max() <= 1e-10 * np.abs(x).max()
+
+
+def test_every_unknown_local(scene):
+    """B touching every unknown leaves nothing to dissect: the reduction is then dense K itself."""
+    _, qp = scene("f2", 8, 1e-5)
+    q = QP(K=qp.K, F=qp.F, B=sp.eye(qp.n, format="csr"), maps=qp.maps)
+    red = linalg.LocalReduction(q)
+    assert np.allclose(red.S, qp.K.toarray()[np.ix_(red.I, red.I)])
+    x = sla.spsolve(qp.K.tocsc(), qp.F)
+    assert np.abs(red.full(np.linalg.solve(red.S, red.g)) - x).max() <= 1e-10 * np.abs(x).max()
