@@ -16,13 +16,23 @@ Linear algebra: on the defect unknowns I (:class:`dualfem.linalg.LocalReduction`
 ``1/2 xI'S xI - g'xI + rho/2 sum_j w_j ((-BI xI)_j^+)^2``; its generalized Hessian on the
 active set A = {j : (BI xI)_j < 0} is ``S + rho BI_A' W_A BI_A``, applied through the Woodbury
 identity with one Cholesky factorization of S (made in setup) and the m x m Delassus matrix
-``D = BI S^-1 BI'``: the Newton system costs one |A| x |A| solve of ``D_AA + (rho W_A)^-1``,
-which stays well conditioned as rho grows (no 1/rho cancellation in the large matrix).
+``D = BI S^-1 BI'``: the Newton system costs one |A| x |A| solve of ``D_AA + (rho W_A)^-1``.
+Line search: exact, on the convex piecewise-quadratic restriction t -> P_rho(x + t d) (walk the
+breakpoints where a node enters or leaves contact); Armijo backtracking, the textbook choice,
+stalled with steps of 1e-12 when a node sat at the kink gap = 0 (f2, N = 128, delta = 1e-9) and
+is only a fallback. Stop: when the Newton decrement -grad'd <= 1e-20 x'Sx (about 1e-10 relative
+in the energy norm), when the step is at rounding level, or when a full step keeps the active
+set (exact on a quadratic piece). At large rho the gradient itself stalls far above rounding in
+the stiff directions, so it is not the stopping test (``newton_tol`` is only a shortcut).
+After each Newton solve the minimiser on the final active set is recomputed stably,
+``(D_AA + (rho W_A)^-1) mu_A = -b0_A`` then ``xI = S^-1 (g + BI_A' mu_A)``, so the penalty
+force and the penetration ``mu_A / (rho w_A)`` are not differences of rounded displacements.
 
 Continuation: rho_0 = ``rho0_factor`` * median(diag K on I) / median(w) -- the penalty
-stiffness rho w of one node equal to the elastic stiffness of its unknowns, i.e. of order E/h,
-taken from the QP itself (so it works for any QP and any units). rho is multiplied by
-``rho_growth`` (warm-started Newton each time) until the relative penetration is at most
+stiffness rho w of one node equal to the stiffness of its unknowns, taken from the QP itself
+(so it works for any QP and any units): of order E/h at large delta; at small delta the
+interface term w/delta dominates diag K and rho_0 grows like 1/delta with it. rho is multiplied
+by ``rho_growth`` (warm-started Newton each time) until the relative penetration is at most
 ``penetration_tol`` or rho reaches ``rho_max_factor`` * rho_0; in the latter case the status is
 ``INACCURATE`` (the penetration is then reported, never hidden).
 """
