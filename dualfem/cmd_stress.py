@@ -76,7 +76,7 @@ def cmd_stress(args) -> int:
             "base": stress.BASE, "time_limit": tasks[0].time_limit if tasks else None,
             "command": "dualfem " + " ".join(sys.argv[1:]) if sys.argv and "dualfem" in sys.argv[0] else None,
             "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            "environment": stress.environment()}
+            "environment": stress.environment(), "git_commit": _git_head()}
     tty = sys.stderr.isatty()
     t0 = time.monotonic()
 
@@ -106,3 +106,15 @@ def cmd_stress(args) -> int:
 
 def _coords(c: dict) -> str:
     return " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in c.items())
+
+
+def _git_head() -> str | None:
+    """The commit of the working tree the grid ran on (None outside a git checkout)."""
+    import subprocess
+
+    try:
+        p = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=10,
+                           cwd=Path(__file__).resolve().parent.parent)
+        return p.stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        return None

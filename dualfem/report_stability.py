@@ -282,7 +282,8 @@ def render(meta: dict, recs: list[dict], md_path: Path) -> str:
           f"({'QUICK grid' if meta.get('quick') else 'full grid'}"
           f"{'' if meta.get('complete', True) else ', INCOMPLETE: not every run finished'}; "
           f"started {meta.get('started', '?')}, finished {meta.get('finished', '?')}; "
-          f"{len(recs)} runs). Do not edit by hand: rerun the two commands.", ""]
+          f"{len(recs)} runs; code at commit {meta.get('git_commit') or '?'}). Do not edit by hand: rerun "
+          "`dualfem stress` and `dualfem report stability benchmarks/results/stress`.", ""]
     env = meta.get("environment", {})
     if env:
         L += [f"Machine: {env.get('cpus')} CPUs, Python {env.get('python')}, "

@@ -534,6 +534,9 @@ def run_grid(tasks: list[Task], out: Path, *, jobs: int = 1, resume: bool = Fals
         prev = results.get(t.after)
         if prev is None:
             return "wait"
+        if prev["outcome"] == "skipped" and not prev.get("skip_budget"):
+            return (f"not attempted: the solver skipped N={prev['scene']['N']} itself "
+                    f"({(prev.get('message') or '')[:100]})")
         if prev["outcome"] == "crashed" or "out of memory" in (prev.get("message") or ""):
             return f"not attempted: N={prev['scene']['N']} already crashed or ran out of memory"
         if prev["outcome"] == "timeout" or prev.get("skip_budget"):
