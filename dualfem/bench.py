@@ -926,10 +926,11 @@ class ResultStore:
         self.refs_dir.mkdir(parents=True, exist_ok=True)
         # temporary files of writes interrupted by a kill (atomic_write names them ".NAME.*"):
         # the result they were meant to become is absent, so the run is simply redone
-        for d in (self.out, self.rows_dir, self.refs_dir):
-            for p in d.glob(".*"):
-                if p.is_file():
-                    p.unlink()
+        stale = [p for d in (self.rows_dir, self.refs_dir) for p in d.glob(".*")]
+        stale += [p for n in ("results.csv", "sweep.json", "spec.toml") for p in self.out.glob(f".{n}.*")]
+        for p in stale:
+            if p.is_file():
+                p.unlink()
         self.rows: dict[str, dict] = {}
         for p in sorted(self.rows_dir.glob("[!.]*.json")):
             try:
