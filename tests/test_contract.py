@@ -43,12 +43,7 @@ _REF: dict = {}
 
 #: Known contract violations of plugins owned elsewhere, as strict xfails: the test still runs and
 #: turns red (XPASS strict) as soon as the plugin is fixed, so this list cannot go stale silently.
-KNOWN_VIOLATIONS = {
-    ("clarabel", "f2", 1e-9): "Clarabel (interior point) stops with x off by ~5e-6 in the energy norm at "
-                              "delta=1e-9 (duality-gap stop at near-degenerate open nodes), above its "
-                              "declared tolerance 1e-6; tighter tol_* settings end AlmostSolved. Needs an "
-                              "active-set polish in solvers/clarabel_.py or tolerance 1e-5 (issue 4 report).",
-}
+KNOWN_VIOLATIONS: dict[tuple[str, str, float], str] = {}
 
 
 def qp_for(load: str, delta: float):
