@@ -132,3 +132,25 @@ def test_cli_solver_params(capsys):
     assert rc == 0
     pen = next(r for r in data["runs"] if r["solver"] == "penalty")
     assert pen["params"]["rho_growth"] == 10.0
+
+
+class _Clone(Solver):
+    """Returns exactly pdas's answer (same linear algebra): no independent confirmation."""
+
+    name = "test_clone"
+    description = "test double"
+    tolerance = 1e-9
+
+    def solve(self):
+        ref = registry.get_solver("pdas")()
+        ref.setup(self.qp)
+        s = ref.solve()
+        return Solution(solver=self.name, status=Status.SOLVED, x=s.x.copy(), multipliers=s.multipliers.copy())
+
+
+def test_identical_answer_is_not_a_cross_check(qp, monkeypatch):
+    monkeypatch.setitem(registry._SOLVERS, "test_clone", _Clone)
+    res = compare_solvers(qp, ["test_clone", "pdas", "clarabel"])
+    ref = res["reference"]
+    assert {ref["solver"], *ref["cross_check"]["identical_to_reference"]} == {"pdas", "test_clone"}
+    assert ref["cross_check"]["solver"] == "clarabel" and ref["cross_check"]["agrees"]
