@@ -94,8 +94,11 @@ def test_run_grid_end_to_end_and_report(tmp_path):
 
 
 def test_harness_kills_a_run_past_its_hard_limit(tmp_path, monkeypatch):
+    # a slow run: the paper's Uzawa with r = 1 at delta = 1e-3 needs ~20000 outer iterations
     monkeypatch.setattr(stress, "hard_limit", lambda task: 0.0)
-    recs = stress.run_grid(_tasks()[:1], tmp_path / "r", jobs=1)
+    slow = Task(id="slow", axis="r", coords={"delta": 1e-3, "r": 1.0}, scene={**stress.BASE, "N": 16, "delta": 1e-3},
+                solver="uzawa", params={"r": 1.0}, ref={"mode": "solve"}, time_limit=600.0)
+    recs = stress.run_grid([slow], tmp_path / "r", jobs=1)
     assert recs[0]["outcome"] == "timeout" and "killed" in recs[0]["message"]
 
 
