@@ -95,9 +95,9 @@ OWN = [n for n in EXACT if not REG[n].requires]
 
 #: known failures at the time of writing (measured by `dualfem stress`, reports/stability.md); the
 #: test still runs and reports XPASS once fixed
-KNOWN = {"uzawa": "uzawa's defaults (r = 1e7 stress/length, tol_outer = 1e-5 in stress units) are absolute "
-                  "numbers: in Pa/m it stops at max_outer (an honest failure); the uzawa author is making "
-                  "them relative to the problem's scale"}
+KNOWN = {"uzawa": "uzawa is the paper's setting on purpose: r = 1e7 (stress/length) and tol_outer = 1e-5 (stress "
+                  "units) are absolute numbers, so in Pa/m it stops at max_outer (an honest failure, checked "
+                  "by the no-silent-wrong test); uzawa_auto, which chooses r from the QP, must and does agree"}
 
 
 @pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(reason=KNOWN[n], strict=False))
