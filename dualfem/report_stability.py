@@ -233,7 +233,9 @@ def _findings(recs) -> list[str]:
                    "delta = 1e-12 the interface term dominates K and the scaled stationarity residual stays small "
                    "while the contact forces are wrong.")
     # the interface-dominated regime: delta <= 1e-6 (interface stiffness >> elastic stiffness)
-    rr = [r for r in recs if r["axis"] == "r" and r["outcome"] == "correct" and r.get("iters")
+    # runs that ended by meeting their own outer test (solved, or inaccurate after a rate check)
+    rr = [r for r in recs if r["axis"] == "r" and r.get("status") in ("solved", "inaccurate")
+          and (r.get("iters") or 0) > 1
           and r["coords"]["r"] * r["coords"]["delta"] <= 1.0 and r["coords"]["delta"] <= 1e-6
           and (r.get("params_used") or {}).get("r_rule", "fixed") == "fixed"]
     if len(rr) >= 3:
@@ -241,8 +243,8 @@ def _findings(recs) -> list[str]:
         y = np.log10([r["iters"] for r in rr])
         if np.ptp(x) > 0:
             slope = float(np.polyfit(x, y, 1)[0])
-            out.append(f"- **Uzawa at small delta**: for delta <= 1e-6 and r x delta <= 1 the outer iterations of "
-                       f"the correct runs behave like (r delta)^({slope:.2f}) (least-squares fit over {len(rr)} runs, "
+            out.append(f"- **Uzawa at small delta**: for delta <= 1e-6 and r x delta <= 1 the outer iterations "
+                       f"needed to meet the outer test behave like (r delta)^({slope:.2f}) (least-squares fit over {len(rr)} runs, "
                        f"{', '.join(f'{_fmt(a)}: {int(b)}' for a, b in sorted((r['coords']['r'] * r['coords']['delta'], r['iters']) for r in rr))}): the slowest dual "
                        "mode has a compliance ~ delta (the 1/delta interface term), so it contracts by about "
                        "1 / (1 + r delta) per outer iteration. The paper's r = 1e7 gives r delta = 1e-2 at delta = "
@@ -260,7 +262,7 @@ def _findings(recs) -> list[str]:
                    "instead (x = s D y with s = max|D F|, P = D K D, q = -D F / s): in the side test "
                    "`python benchmarks/stress_scaling_check.py` (N = 16) both backends then solve every load "
                    "scale 1e-6..1e6 and every unit system to a relative error <= 1e-10.")
-    nu_fail = [r for r in recs if r["axis"] == "nu" and r["outcome"] not in ("correct", "skipped")]
+    nu_fail = [r for r in recs if r["axis"] == "nu" and r["outcome"] not in ("correct", "skipped", "unverified")]
     if nu_fail:
         out.append(f"- **Near-incompressible** (nu -> 0.5): {len(nu_fail)} runs not correct ("
                    + ", ".join(sorted({f"{r['solver']} at nu = {_fmt(r['coords']['nu'])}" for r in nu_fail}))
