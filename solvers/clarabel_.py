@@ -96,12 +96,15 @@ class ClarabelSolver(Solver):
 
 
 def _polish(qp, x, z):
-    """Exact KKT solve on Clarabel's contact set; kept only if its KKT error is smaller."""
+    """Active-set polish (:func:`dualfem.polish.active_set_polish`); kept only if it is consistent
+    and lowers the evaluator's KKT error."""
     from dualfem import evaluator
+    from dualfem.polish import active_set_polish
 
-    xs, zs = evaluator.active_set_solution(qp, evaluator.contact_set(qp, x))
     before = evaluator.kkt_error(evaluator.residuals(qp, x, z))
-    after = evaluator.kkt_error(evaluator.residuals(qp, xs, zs))
-    if after < before:
-        return xs, zs, {"polished": True, "kkt_before_polish": before}
+    out = active_set_polish(qp, x, z)
+    if out is not None:
+        xs, zs = out[0], out[1]
+        if evaluator.kkt_error(evaluator.residuals(qp, xs, zs)) < before:
+            return xs, zs, {"polished": True, "kkt_before_polish": before}
     return x, z, {"polished": False, "kkt_before_polish": before}
