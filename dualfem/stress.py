@@ -386,6 +386,14 @@ def _rss_gb() -> float:
         return 0.0
 
 
+def _proc_rss_gb(pid: int | None) -> float:
+    try:
+        with open(f"/proc/{pid}/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e9
+    except (OSError, ValueError, IndexError, TypeError):
+        return 0.0
+
+
 def mem_available_gb() -> float:
     """MemAvailable of the machine in GB (Linux /proc/meminfo; inf elsewhere)."""
     try:
@@ -548,7 +556,8 @@ def run_grid(tasks: list[Task], out: Path, *, jobs: int = 1, resume: bool = Fals
         if prev["outcome"] == "timeout" or prev.get("skip_budget"):
             return f"not attempted: N={prev['scene']['N']} already exceeded the time or memory budget"
         mem = (prev.get("peak_rss_gb") or 0.0) * MEM_GROWTH
-        avail = mem_available_gb()
+        # memory our own idle workers hold (cached QPs and factorizations) is ours to reuse
+        avail = mem_available_gb() + sum(_proc_rss_gb(w.proc.pid) for w in workers if w.task is None)
         if mem > 0.8 * avail:
             return (f"not attempted: predicted peak memory {mem:.1f} GB (x{MEM_GROWTH:g} per doubling of N from "
                     f"{prev['peak_rss_gb']:.1f} GB at N={prev['scene']['N']}) exceeds 80% of the {avail:.1f} GB "
