@@ -408,7 +408,7 @@ def _discussion(res: dict) -> str:
     fitted = {dl: v[1] for dl, v in summary.items() if v[1] is not None}
     facts = []
     if fitted:
-        facts.append("energy-norm order (fitted) " + ", ".join(f"{p:.2f} at delta = {dl}" for dl, p in fitted.items()))
+        facts.append("Energy-norm order (fitted): " + ", ".join(f"{p:.2f} at delta = {dl}" for dl, p in fitted.items()))
         if min(fitted.values()) >= 0.45:
             facts.append("every one at least the h^(1/2) of Theorem 1")
         else:
