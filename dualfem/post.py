@@ -55,11 +55,19 @@ def material(qp, E: float | None = None, nu: float | None = None, plane: str | N
 
 
 def nodal_displacement(qp, x: np.ndarray) -> np.ndarray:
-    """Displacement of every mesh node, shape (nnodes, 2); clamped components are 0."""
-    nd = np.asarray(_maps(qp)["node_dofs"])
+    """Displacement of every mesh node, shape (nnodes, 2); clamped components are 0.
+
+    A QP whose unknowns are shifted (``maps["x_shift"]``: the displacement is ``x + x_shift``,
+    e.g. the Signorini problem) is shifted back here.
+    """
+    maps = _maps(qp)
+    nd = np.asarray(maps["node_dofs"])
     x = np.asarray(x, dtype=float)
     if x.shape != (qp.n,):
         raise InputError(f"x must have length {qp.n}, got shape {x.shape}")
+    shift = maps.get("x_shift")
+    if shift is not None:
+        x = x + np.asarray(shift, dtype=float)
     u = np.zeros(nd.shape[::-1])
     mask = nd >= 0
     u.T[mask] = x[nd[mask]]
@@ -68,11 +76,13 @@ def nodal_displacement(qp, x: np.ndarray) -> np.ndarray:
 
 def free_vector(qp, u: np.ndarray) -> np.ndarray:
     """Inverse of :func:`nodal_displacement`: the vector x of free unknowns from nodal values."""
-    nd = np.asarray(_maps(qp)["node_dofs"])
+    maps = _maps(qp)
+    nd = np.asarray(maps["node_dofs"])
     x = np.zeros(qp.n)
     mask = nd >= 0
     x[nd[mask]] = np.asarray(u).T[mask]
-    return x
+    shift = maps.get("x_shift")
+    return x if shift is None else x - np.asarray(shift, dtype=float)
 
 
 def shape_gradients(nodes: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -179,3 +179,27 @@ def test_transfer_errors_decrease():
     assert errs[1]["L2"] < 0.6 * errs[0]["L2"]
     same = errors(fine, sf.x, fine, sf.x)
     assert same["energy_norm"] < 1e-12 and same["L2"] < 1e-12
+
+
+def test_nodal_displacement_applies_x_shift():
+    from dualfem.post import nodal_displacement
+    from dualfem.scene import load_scene
+
+    problem = load_scene("signorini", {})
+    qp = problem.build()
+    x = np.zeros(qp.n)
+    u = nodal_displacement(qp, x)
+    nd = np.asarray(qp.maps["node_dofs"])
+    shift = np.asarray(qp.maps["x_shift"])
+    assert np.abs(shift).max() > 0
+    mask = nd >= 0
+    assert np.allclose(u.T[mask], shift[nd[mask]])
+
+
+def test_free_vector_inverts_nodal_displacement_with_shift():
+    from dualfem.post import free_vector, nodal_displacement
+    from dualfem.scene import load_scene
+
+    qp = load_scene("signorini", {}).build()
+    x = np.random.default_rng(0).normal(size=qp.n)
+    assert np.allclose(free_vector(qp, nodal_displacement(qp, x)), x)

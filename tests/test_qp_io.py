@@ -33,3 +33,17 @@ def test_validation_messages():
            B=sp.csr_matrix((1, 3))).check()
     with pytest.raises(InputError, match="\\.npz or \\.mat"):
         QP(K=K, F=np.zeros(3), B=sp.csr_matrix((1, 3))).save("qp.txt")
+
+
+def test_atomic_write_gives_usual_permissions(tmp_path):
+    import os
+    import stat
+
+    from dualfem.io import atomic_write_text
+
+    umask = os.umask(0o022)
+    try:
+        p = atomic_write_text(tmp_path / "r.md", "x")
+    finally:
+        os.umask(umask)
+    assert stat.S_IMODE(p.stat().st_mode) == 0o644
