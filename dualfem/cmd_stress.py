@@ -77,6 +77,8 @@ def cmd_stress(args) -> int:
             "command": "dualfem " + " ".join(sys.argv[1:]) if sys.argv and "dualfem" in sys.argv[0] else None,
             "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
             "environment": stress.environment(), "git_commit": _git_head()}
+    if args.resume:
+        meta = _merge_meta(out / "meta.json", meta)
     tty = sys.stderr.isatty()
     t0 = time.monotonic()
 
@@ -95,9 +97,11 @@ def cmd_stress(args) -> int:
         print(file=sys.stderr)
     from collections import Counter
 
-    c = Counter(r["outcome"] for r in recs)
+    every = stress.load_results(out)[1]  # every record, also of earlier (resumed) runs
+    c = Counter(r["outcome"] for r in every)
     stress._write_meta(out, {**meta, "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-                             "complete": len(recs) == len(tasks), "n_tasks": len(tasks),
+                             "complete": len(recs) == len(tasks) and meta.get("complete_before", True),
+                             "n_tasks": len(tasks), "n_records": len(every),
                              "outcomes": dict(c)})
     print("outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(c.items())), file=sys.stderr)
     print(f"results in {out}/runs.jsonl; report: dualfem report stability {out}", file=sys.stderr)
@@ -118,3 +122,24 @@ def _git_head() -> str | None:
         return p.stdout.strip() or None
     except (OSError, subprocess.SubprocessError):
         return None
+
+
+def _merge_meta(path: Path, new: dict) -> dict:
+    """Meta of a resumed run: the first run's description, widened by this run, with a resume log."""
+    import json
+
+    try:
+        prev = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return new
+    out = dict(prev)
+    out["solvers"] = list(dict.fromkeys(list(prev.get("solvers", [])) + list(new["solvers"])))
+    out["axes"] = list(dict.fromkeys(list(prev.get("axes", [])) + list(new["axes"])))
+    for k in ("tolerances", "exact", "third_party", "missing"):
+        out[k] = {**prev.get(k, {}), **new.get(k, {})}
+    out["complete_before"] = bool(prev.get("complete", True))
+    out["resumed"] = list(prev.get("resumed", [])) + [
+        {k: new.get(k) for k in ("started", "command", "git_commit", "solvers", "axes")}]
+    out.pop("finished", None)
+    out.pop("outcomes", None)
+    return out

@@ -284,7 +284,11 @@ def render(meta: dict, recs: list[dict], md_path: Path) -> str:
           f"({'QUICK grid' if meta.get('quick') else 'full grid'}"
           f"{'' if meta.get('complete', True) else ', INCOMPLETE: not every run finished'}; "
           f"started {meta.get('started', '?')}, finished {meta.get('finished', '?')}; "
-          f"{len(recs)} runs; code at commit {meta.get('git_commit') or '?'}). Do not edit by hand: rerun "
+          f"{len(recs)} runs; code at commit {meta.get('git_commit') or '?'}"
+          + "".join(f"; resumed {r.get('started')} at commit {r.get('git_commit')} for "
+                    f"{', '.join(r.get('solvers') or [])} on axis {', '.join(r.get('axes') or [])}"
+                    for r in meta.get("resumed", []))
+          + "). Do not edit by hand: rerun "
           "`dualfem stress` and `dualfem report stability benchmarks/results/stress`.", ""]
     env = meta.get("environment", {})
     if env:
@@ -308,7 +312,7 @@ def render(meta: dict, recs: list[dict], md_path: Path) -> str:
           f"- **silent wrong answer** (`WRONG`): status solved, KKT residuals <= {safety:g} t, error > {safety:g} t;",
           "- **unverified** (`?`): no trusted reference, or the difference is within the reference's own accuracy "
           f"({safety:g} x the reference solver's declared tolerance);",
-          "- **skipped** (`-`): the solver does not apply, or the previous N already exceeded the time limit.", "",
+          "- **skipped** (`-`): the solver does not apply, or the previous N already exceeded the time or memory budget.", "",
           "Declared tolerances: " + ", ".join(f"`{k}` {v:g}" for k, v in sorted(meta.get("tolerances", {}).items()))
           + ". Solvers wrapping a third-party library (non-empty `requires`): "
           + ", ".join(f"`{k}`" for k, v in sorted(meta.get("third_party", {}).items()) if v) + ".", "",
@@ -413,8 +417,12 @@ def render(meta: dict, recs: list[dict], md_path: Path) -> str:
             ["P1 elements lock as nu -> 0.5 (lambda / mu = 2 nu / (1 - 2 nu) = 5000 at nu = 0.4999): the "
              "discrete problem stays well posed but K's conditioning grows with lambda / mu.", ""])
     section("N", solver_row, lambda r: r["coords"]["N"], "solver", "N", "N",
-            [f"Large N only for the solvers that fit the time limit: a solver is not attempted at 2N when its "
-             f"time at N times the growth factor exceeds the limit (reason in the table).", ""])
+            ["Large N only for the solvers that fit the budgets: a solver is not attempted at 2N when its "
+             "time at N x 6 exceeds the per-run time limit, or its peak memory at N x 4.5 exceeds 80% of the "
+             "memory available at that moment (a shared machine), or it skipped N itself; the reason is in "
+             "each skipped run's record. An error of exactly 0 (blank in the error map) means a bit-for-bit copy "
+             "of the reference (e.g. a backend polished by the same active-set code), not an independent check.",
+             ""])
     return "\n".join(L) + "\n"
 
 

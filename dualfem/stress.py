@@ -504,14 +504,14 @@ def run_grid(tasks: list[Task], out: Path, *, jobs: int = 1, resume: bool = Fals
                 r = json.loads(line)
             except json.JSONDecodeError:
                 continue  # a line cut by a kill: rerun that task
-            if not r.get("skip_budget"):  # scheduling decisions are re-made on every run
-                kept[r["id"]] = r
+            kept[r["id"]] = r
         # keep every complete record of axes/solvers not in this run; drop cut lines, and records
         # this run's axes and solvers would cover but its grid no longer holds (stale)
         ids_now = {t.id for t in tasks}
         axes_now, solvers_now = {t.axis for t in tasks}, {t.solver for t in tasks}
         kept = {k: r for k, r in kept.items()
-                if k in ids_now or r.get("axis") not in axes_now or r.get("solver") not in solvers_now}
+                if (k in ids_now and not r.get("skip_budget"))  # scheduling decisions are re-made
+                or (k not in ids_now and (r.get("axis") not in axes_now or r.get("solver") not in solvers_now))}
         _atomic_lines(runs_path, list(kept.values()))
     elif runs_path.exists():
         runs_path.unlink()
