@@ -30,7 +30,7 @@ class Problem:
         merged = dict(self.defaults)
         for k, v in params.items():
             d = self.defaults[k]
-            merged[k] = _coerce(k, v, d, self.name) if isinstance(d, (int, float)) else v
+            merged[k] = _coerce(k, v, d, self.name, owner="problem") if isinstance(d, (int, float)) else v
         self.params: dict[str, Any] = merged
         self.validate()
 

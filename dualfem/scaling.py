@@ -1,12 +1,14 @@
 """Normalise a QP once at the boundary, for the third-party backends.
 
-With ``x = D y`` (D = diag(K)^(-1/2)), objective multiplied by c = 1 / max|D F| and constraint
-rows scaled by R (unit infinity norm of R B D), the scaled QP
+With ``x = c D y`` (D = diag(K)^(-1/2), c = max|D F|) and constraint rows scaled by R (unit
+infinity norm of R B D), the scaled QP (objective divided by c^2)
 
-    min 1/2 y' (c D K D) y - (c D F)' y   s.t.  (R B D) y >= 0
+    min 1/2 y' (D K D) y - (D F / c)' y   s.t.  (R B D) y >= 0
 
-has a unit diagonal, a unit load and unit constraint rows, whatever the units or delta. Its
-multiplier nu maps back to ours by ``mu = R nu / c`` (from ``c D (K x - F) = D B' R nu``).
+has a unit diagonal, a unit load and unit constraint rows, whatever the units, the load
+magnitude or delta. Its multiplier nu maps back to ours by ``mu = c R nu`` (from
+``D (K x - F) / c = D B' R nu``). (Scaling the objective instead of the unknowns made the
+Hessian grow like 1 / load, and OSQP/Clarabel failed at load scales 1e-6 and 1e6.)
 """
 from __future__ import annotations
 
@@ -31,7 +33,7 @@ class ScaledQP:
 
     def unscale(self, y: np.ndarray, nu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(x, mu) in the units of the original QP."""
-        return self.d * y, self.r * nu / self.c
+        return self.c * self.d * y, self.c * self.r * nu
 
 
 def scale(qp: QP, enable: bool = True) -> ScaledQP:
@@ -42,12 +44,12 @@ def scale(qp: QP, enable: bool = True) -> ScaledQP:
     d = 1.0 / np.sqrt(qp.K.diagonal())
     Dm = sp.diags(d)
     qd = d * qp.F
-    c = 1.0 / max(np.abs(qd).max(initial=0.0), 1e-300)
-    if not np.isfinite(c) or np.abs(qd).max(initial=0.0) == 0.0:
+    c = float(np.abs(qd).max(initial=0.0))
+    if not np.isfinite(c) or c == 0.0:
         c = 1.0
     A = (qp.B @ Dm).tocsr()
     rn = np.abs(A).max(axis=1).toarray().ravel()
     r = 1.0 / np.where(rn > 0, rn, 1.0)
     A = (sp.diags(r) @ A).tocsr()
-    P = (c * (Dm @ qp.K @ Dm)).tocsc()
-    return ScaledQP(P, -c * qd, A, d, r, c)
+    P = (Dm @ qp.K @ Dm).tocsc()
+    return ScaledQP(P, -qd / c, A, d, r, c)

@@ -84,9 +84,10 @@ class Solver:
         raise NotImplementedError
 
 
-def _coerce(key: str, value: Any, default: Any, solver: str) -> Any:
+def _coerce(key: str, value: Any, default: Any, solver: str, owner: str = "solver") -> Any:
     """Convert a (possibly string, from --set) value to the type of its default."""
-    where = f"parameter {key!r} of solver {solver!r}"
+    where = (f"parameter {key!r} of solver {solver!r}" if owner == "solver"
+             else f"scene parameter {key!r} of problem {solver!r}")
     if isinstance(default, bool):
         if isinstance(value, str):
             if value.lower() in ("1", "true", "yes", "on"):

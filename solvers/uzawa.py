@@ -34,10 +34,12 @@ Choices where the paper is silent or misprinted (documented here once):
 * The first Newton iterate is the unconstrained minimizer K^-1 F (the paper does not say; it
   apparently starts from 0, which costs one extra Newton step: its m = 2 for f3). Every later
   inner loop is warm-started from the previous outer iterate.
-* Honest stop: the paper's outer test bounds only the last change of l. With an observed linear
-  rate rho (last few ratios of changes) the remaining error of l is about change * rho / (1 - rho);
-  when that exceeds ``error_factor * tol_outer`` the status is ``inaccurate`` (with the rate in the
-  message) instead of ``solved``. The iterates and the counts k, m are not affected.
+* Honest stop: the paper's outer test bounds only the last change of l. Two estimates of the
+  remaining error of l: change * rho / (1 - rho) with the observed linear rate rho, and the
+  proximal-point bound change / (r mu_min) (mu_min = smallest dual compliance, see below), which
+  also holds after one outer iteration. When the larger exceeds ``error_factor * tol_outer`` the
+  status is ``inaccurate`` (with both numbers in the message) instead of ``solved``. The iterates
+  and the counts k, m are not affected.
 * Shortcut (``shortcut=True``, with l^0 = 0): if the unconstrained minimizer has no negative
   jump, it already is the answer of the first Uzawa iteration and l^1 = 0; we return it with
   k = 1, m = 1 (one solve).
@@ -226,9 +228,21 @@ class Uzawa(Solver):
         space = _ReducedSpace if self.params["linalg"] == "reduced" else _FullSpace
         self.space = space(qp, self.params["inner_norm"])
         self.r = float(self.params["r"])
+        self._mu = None
         if self.params["r_rule"] == "auto" and qp.m:
-            mu = np.linalg.eigvals(self.space.dual_compliance(qp.weights)).real
-            self.r = float(self.params["r_factor"] / max(mu.min(), 1e-300))
+            self.r = float(self.params["r_factor"] / self._mu_min())
+
+    def _mu_min(self) -> float:
+        """Smallest eigenvalue of the dual compliance G W (computed once, when first needed)."""
+        if self._mu is None:
+            if self.qp.m == 0:
+                self._mu = np.inf
+            else:
+                GW = self.space.dual_compliance(self.qp.weights)
+                w = np.sqrt(self.qp.weights)
+                sym = (GW / self.qp.weights[None, :]) * w[:, None] * w[None, :]   # W^1/2 G W^1/2
+                self._mu = float(max(np.linalg.eigvalsh(0.5 * (sym + sym.T)).min(), 1e-300))
+        return self._mu
 
     def solve(self) -> Solution:
         p, qp, sp_ = self.params, self.qp, self.space
@@ -272,12 +286,17 @@ class Uzawa(Solver):
                 if not inner_ok:
                     return result(Status.INACCURATE, f"outer test met but last inner loop failed: {msg}")
                 rho = _contraction(history)
-                est = change * rho / (1.0 - rho) if rho < 1 else np.inf
+                est_rate = change * rho / (1.0 - rho) if rho < 1 else np.inf
+                # proximal-point bound: the dual is mu_min-strongly concave and its gradient at
+                # l^{k+1} is (l^{k+1} - l^k) / r, so |l^{k+1} - l*| <~ change / (r mu_min). It also
+                # covers a stop after one or two outer iterations, where no rate can be observed.
+                est = max(est_rate, change / (r * self._mu_min()))
                 history[-1]["dual_error_estimate"] = est
                 if est > p["error_factor"] * tol:
                     return result(Status.INACCURATE,
-                                  f"outer test met, but the dual iteration contracts slowly (rate {rho:.4f}): "
-                                  f"estimated multiplier error {est:.2g} > {p['error_factor']:g} x tol_outer; "
+                                  f"outer test met, but the estimated multiplier error {est:.2g} > "
+                                  f"{p['error_factor']:g} x tol_outer (observed rate {rho:.4f}, r x min dual "
+                                  f"compliance = {r * self._mu_min():.2g}, which should be >> 1); "
                                   f"use r_rule='auto' (solver uzawa_auto) or a smaller tol_outer")
                 return result(Status.SOLVED)
             if change < best:

@@ -92,3 +92,18 @@ def test_missing_dependency_is_one_line_exit_2(monkeypatch, capsys):
     assert main(["solve", "f2", "--set", "N=8", "--solver", "osqp"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "osqp_not_installed_here" in err[0] and "pip install" in err[0]
+
+
+@pytest.mark.parametrize("solver", ["osqp", "clarabel"])
+@pytest.mark.parametrize("load_scale", [1e-6, 1e6])
+def test_backends_invariant_to_load_magnitude(scene, solver, load_scale):
+    """The scaling normalises the unknowns, so the load magnitude cannot hurt the backends."""
+    from dualfem.scene import load_scene
+
+    _, qp = scene("f2", 16, 1e-5)
+    base = run(solver, qp)
+    qps = load_scene("f2", {"N": 16, "delta": 1e-5, "load_scale": load_scale}).build()
+    sol = run(solver, qps)
+    assert sol.ok
+    d = evaluator.compare(qps, sol.x, sol.multipliers, load_scale * base.x, load_scale * base.multipliers)
+    assert d["x_energy"] < 1e-8 and d["contact_mismatch"] == 0

@@ -93,15 +93,14 @@ def test_no_silent_wrong_answer_in_either_unit_system(name, system):
 OWN = [n for n in EXACT if not REG[n].requires]
 
 
-#: known failures at the time of writing (measured by `dualfem stress`, reports/stability.md); the
-#: test still runs and reports XPASS once fixed
-KNOWN = {"uzawa": "uzawa is the paper's setting on purpose: r = 1e7 (stress/length) and tol_outer = 1e-5 (stress "
-                  "units) are absolute numbers, so in Pa/m it stops at max_outer (an honest failure, checked "
-                  "by the no-silent-wrong test); uzawa_auto, which chooses r from the QP, must and does agree"}
+#: solvers whose parameters are absolute numbers BY DESIGN, so they are not unit-free: `uzawa` is
+#: the paper's setting (r = 1e7 stress/length, tol_outer = 1e-5 stress units); in Pa/m it stops at
+#: max_outer. That must be an honest failure, which test_no_silent_wrong_answer_in_either_unit_system
+#: and test_paper_uzawa_fails_honestly_in_other_units check; uzawa_auto is its unit-free variant.
+ABSOLUTE_PARAMETERS = {"uzawa"}
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(reason=KNOWN[n], strict=False))
-                                  if n in KNOWN else n for n in sorted(set(OWN) | {REF_NAME})])
+@pytest.mark.parametrize("name", sorted((set(OWN) | {REF_NAME}) - ABSOLUTE_PARAMETERS))
 def test_displacements_agree_after_unit_conversion(name):
     """Our own solvers and the reference: solved in both systems, and the same displacements."""
     bound = SAFETY * REG[name].tolerance
@@ -109,6 +108,13 @@ def test_displacements_agree_after_unit_conversion(name):
         sol, err = _converted_error(name, system)
         assert sol.status == Status.SOLVED, f"{name} in {system}: {sol.status} {sol.message}"
         assert err <= bound, f"{name} in {system}: error {err:.2e} after unit conversion > {bound:.0e}"
+
+
+@pytest.mark.parametrize("name", sorted(ABSOLUTE_PARAMETERS & set(EXACT)))
+def test_paper_uzawa_fails_honestly_in_other_units(name):
+    """The paper's absolute r and tolerance in Pa/m: not 'solved', and it says why."""
+    sol, err = _converted_error(name, "Pa/m")
+    assert sol.status != Status.SOLVED and sol.message
 
 
 @pytest.mark.parametrize("name", [n for n in ("clarabel", "osqp") if n in EXACT])
