@@ -138,8 +138,8 @@ def render(res: dict, auto: dict, Ns, planes, command: str, elapsed: float) -> s
               f"| uzawa_auto | " + " | ".join(_cell(auto[d]) for d in DELTAS) + " |", "",
               "* **Moderate delta: the counts depend on unstated choices.** The outer count is governed by "
               f"r mu there too, and mu scales with the mesh size (the nodal weights h): across our settings "
-              f"the same cell's k varies by up to a factor {spread_N:.1f} with N (k grows as the mesh is refined, "
-              f"towards the paper's counts), while plane strain versus plane stress changes k by at most "
+              f"the same cell's k varies by up to a factor {spread_N:.1f} with N (k grows as the mesh is refined; "
+              f"the closest N is named above), while plane strain versus plane stress changes k by at most "
               f"{spread_plane} iteration(s). Further unstated "
               "choices that shift k and m: the quadrature weight of a defect node (the paper prints h, which "
               "on its mesh may be the hypotenuse, sqrt(2) times the node spacing we use), the norm of the "
