@@ -939,6 +939,7 @@ class ResultStore:
             except (OSError, ValueError, KeyError):
                 continue     # a foreign or unreadable file: the run is redone
         self._last_csv = 0.0
+        self.keep: Callable[[dict], bool] | None = None
 
     def done(self, run_id: str) -> bool:
         r = self.rows.get(run_id)
@@ -952,8 +953,12 @@ class ResultStore:
             self.write_csv()
 
     def write_csv(self) -> Path:
+        """results.csv of the rows of the current spec (rows of runs no longer in it stay in rows/)."""
         self._last_csv = time.monotonic()
-        return write_csv(self.out / "results.csv", list(self.rows.values()))
+        rows = list(self.rows.values())
+        if self.keep is not None:
+            rows = [r for r in rows if self.keep(r)]
+        return write_csv(self.out / "results.csv", rows)
 
     # ------------------------------------------------------------- references
     def ref_path(self, scene_key: str) -> Path:
@@ -1060,6 +1065,12 @@ def run_sweep(spec: Spec | str | Path, out: str | Path, *, jobs: int = 1, dask: 
     atomic_write_text(store.out / "spec.toml", spec.text or json.dumps(_canon(spec.__dict__)))
     meta = {"spec": spec.path, "name": spec.name, "command": command, "jobs": jobs, "dask": dask,
             "started_utc": _utc(), "machine": machine_info()}
+    try:   # a resumed sweep keeps the list of every invocation that wrote into this directory
+        prev = json.loads((store.out / "sweep.json").read_text(encoding="utf-8"))
+        meta["invocations"] = list(prev.get("invocations", []))
+    except (OSError, ValueError):
+        meta["invocations"] = []
+    meta["invocations"].append({"command": command, "started_utc": meta["started_utc"]})
     atomic_write_text(store.out / "sweep.json", json.dumps(meta, indent=1, sort_keys=True))
     stream = stream or sys.stderr
 
@@ -1071,6 +1082,11 @@ def run_sweep(spec: Spec | str | Path, out: str | Path, *, jobs: int = 1, dask: 
     scenes = expand_scenes(spec)
     tasks = expand_tasks(spec, scenes)
     pending = [t for t in tasks if not is_done(t["run_id"])]
+    run_ids = {t["run_id"] for t in tasks}
+    floor_ids = {t["run_id"] for t in floor_tasks(spec, scenes)}
+    scene_keys = {sc.key for sc in scenes}
+    store.keep = lambda r: (r.get("run_id") in run_ids or r.get("run_id") in floor_ids
+                            or (r.get("kind") == "reference" and r.get("scene_key") in scene_keys))
     statuses: dict[str, int] = {}
     ran = aux = n_refs = 0
 

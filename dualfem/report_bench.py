@@ -314,6 +314,11 @@ def build_report(results: str | Path, md: str | Path, figdir: str | Path, *, our
         L.append(f"The results were produced by `{meta['command']}` (spec `{meta.get('spec')}`, "
                  f"jobs {meta.get('jobs')}, dask {meta.get('dask') or 'no'}; started {meta.get('started_utc')}, "
                  f"finished {meta.get('finished_utc', 'not finished')}).")
+    inv = meta.get("invocations") or []
+    if len(inv) > 1:
+        L.append(f"This results directory was written by {len(inv)} invocations (a resumed or extended sweep; "
+                 "results.csv keeps the rows of the current spec only): "
+                 + "; ".join(f"`{i['command']}` at {i['started_utc']}" for i in inv) + ".")
     L.append("")
     # -------------------------------------------------------------- machine
     L += ["## Machine and versions", ""]
@@ -369,6 +374,21 @@ def build_report(results: str | Path, md: str | Path, figdir: str | Path, *, our
     if ok_refs:
         ks = [_f(r.get("kkt_error")) for r in ok_refs]
         L.append(f"KKT error of the references: max {_fmt(max(ks), '.1e')}, median {_fmt(sorted(ks)[len(ks) // 2], '.1e')}.")
+    cached = []
+    if (res_dir / "refs").is_dir():
+        import numpy as np
+
+        for f in sorted((res_dir / "refs").glob("[!.]*.npz")):
+            try:
+                with np.load(f, allow_pickle=False) as d:
+                    cached.append((str(d["solver"]), float(d["kkt"])))
+            except (OSError, ValueError, KeyError):
+                continue
+    if cached:
+        ks = sorted(k for _, k in cached)
+        L.append(f"Reference cache of this results directory: {len(cached)} certified references "
+                 f"({', '.join(sorted({s for s, _ in cached}))}), evaluator KKT error max {ks[-1]:.1e}, "
+                 f"median {ks[len(ks) // 2]:.1e}.")
     for r in bad_refs:
         L.append(f"- NO certified reference for {r['label']}: {r.get('message')}")
     L.append("")
@@ -454,7 +474,7 @@ def run(argv: list[str]) -> int:
     p.add_argument("results", metavar="RESULTS", help="results.csv (or the sweep's output directory)")
     p.add_argument("--md", default="reports/benchmark.md", help="markdown output (default reports/benchmark.md)")
     p.add_argument("--figdir", default="reports/bench", help="figure directory (default reports/bench)")
-    p.add_argument("--ours", default="uzawa,pdas", help="comma-separated solvers checked against the targets")
+    p.add_argument("--ours", default="uzawa,uzawa_auto,pdas", help="comma-separated solvers checked against the targets")
     p.add_argument("--shift", type=float, default=10.0, help="shift of the geometric mean in seconds (10)")
     p.add_argument("--error", type=float, default=1e-8, help="equal-error level of the targets (1e-8)")
     try:
