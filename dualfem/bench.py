@@ -646,13 +646,15 @@ def _execute_floor(task: dict, qp, row: dict, tick) -> dict:
         return lu.solve
 
     methods = [("floor_splu", splu)]
+    missing_cholmod = ""
     if task.get("cholmod"):
         try:
             from sksparse.cholmod import cholesky  # type: ignore
 
             methods.append(("floor_cholmod", lambda: cholesky(K)))
         except ImportError:
-            pass
+            missing_cholmod = ("CHOLMOD floor not measured: scikit-sparse is not installed "
+                               "(apt-get install libsuitesparse-dev; pip install 'dualfem[cholmod]')")
     out = dict(row)
     results = {}
     for name, factor in methods:
@@ -680,7 +682,8 @@ def _execute_floor(task: dict, qp, row: dict, tick) -> dict:
     out.update(solver=best, variant=best, status="solved" if res < 1e-6 else "inaccurate",
                setup_s=_median(fac), solve_s=_median(sol_t), total_s=_median(tot), repeats_done=len(tot),
                setup_s_all=json.dumps(fac), solve_s_all=json.dumps(sol_t),
-               message=f"factorization + one solve of the unconstrained K; {others}")
+               message=f"factorization + one solve of the unconstrained K; {others}"
+                       + (f"; {missing_cholmod}" if missing_cholmod else ""))
     return out
 
 
