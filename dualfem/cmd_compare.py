@@ -9,10 +9,8 @@ one JSON object on stdout; one progress line per finished solver goes to stderr.
 """
 from __future__ import annotations
 
-import contextlib
-import os
-import sys
 
+from .quiet import c_stdout_to_stderr
 from .cli import add_scene_args, command, dumps, scene_from_args
 from .errors import InputError
 
@@ -42,25 +40,6 @@ def parse_solver_params(items: list[str], names: list[str]) -> dict[str, dict[st
     return out
 
 
-@contextlib.contextmanager
-def _stdout_to_stderr():
-    """Redirect file descriptor 1 to 2 (C libraries print there); no-op without descriptors."""
-    try:
-        fd, err = sys.stdout.fileno(), sys.stderr.fileno()
-    except (AttributeError, OSError, ValueError):
-        yield
-        return
-    sys.stdout.flush()
-    saved = os.dup(fd)
-    try:
-        os.dup2(err, fd)
-        yield
-    finally:
-        sys.stdout.flush()
-        os.dup2(saved, fd)
-        os.close(saved)
-
-
 @command("compare", "run several solvers on one scene and cross-check them against a certified reference")(_cfg)
 def cmd_compare(args) -> int:
     from .compare import compare_solvers, default_solvers, stderr_progress, table
@@ -78,7 +57,7 @@ def cmd_compare(args) -> int:
         names = default_solvers()
     params = parse_solver_params(args.param, names)
     problem = scene_from_args(args)
-    with _stdout_to_stderr():
+    with c_stdout_to_stderr():
         qp = problem.build()
         result = compare_solvers(qp, names, params, progress=stderr_progress())
     if args.json:

@@ -332,3 +332,15 @@ class LocalReduction:
     def norm2(self, xI: np.ndarray) -> float:
         """x'Kx of the full vector determined by xI (without forming it)."""
         return float(xI @ (self.S @ xI) - 2.0 * self.c0)
+
+
+#: dense Schur complement onto more local unknowns than this is refused (memory ~ 8 n^2 bytes)
+MAX_LOCAL = 12000
+
+
+def too_many_local(qp: QP, limit: int = MAX_LOCAL) -> str | None:
+    """Skip reason for solvers that form the dense reduced matrix, or None if it fits."""
+    nI = int(np.asarray(qp.local_dofs).size)
+    if nI > limit:
+        return f"{nI} local unknowns: the dense reduced matrix would exceed {limit}^2"
+    return None

@@ -28,13 +28,12 @@ the backend's own tolerance, which the evaluator shows).
 from __future__ import annotations
 
 import contextlib
-import os
-import sys
 import warnings
 
 import numpy as np
 
 from dualfem.errors import InputError
+from dualfem.quiet import c_stdout_to_stderr
 from dualfem.registry import register_solver
 from dualfem.scaling import scale
 from dualfem.solution import Solution, Status
@@ -72,32 +71,6 @@ def _iter_options(backend: str, max_iter: int) -> dict:
     if backend == "SCS":
         return {"max_iters": max_iter}
     return {}
-
-
-@contextlib.contextmanager
-def _stdout_to_stderr(enable: bool = True):
-    """Send C-level writes to stdout (backends print, e.g. OSQP's polish note) to stderr.
-
-    Keeps ``--json`` output on stdout clean; a no-op when stdout has no file descriptor.
-    """
-    if not enable:
-        yield
-        return
-    try:
-        fd = sys.stdout.fileno()
-        err = sys.stderr.fileno()
-    except (AttributeError, OSError, ValueError):
-        yield
-        return
-    sys.stdout.flush()
-    saved = os.dup(fd)
-    try:
-        os.dup2(err, fd)
-        yield
-    finally:
-        sys.stdout.flush()
-        os.dup2(saved, fd)
-        os.close(saved)
 
 
 @register_solver
@@ -154,7 +127,7 @@ class CvxpySolver(Solver):
         backend = self.params["solver"]
         opts = {**_eps_options(backend, self.params["eps"]), **_iter_options(backend, self.params["max_iter"])}
         try:
-            with warnings.catch_warnings(), _stdout_to_stderr(not self.params["verbose"]):
+            with warnings.catch_warnings(), (contextlib.nullcontext() if self.params["verbose"] else c_stdout_to_stderr()):
                 # cvxpy warns "Solution may be inaccurate": the status says it already
                 warnings.simplefilter("ignore", UserWarning)
                 self._prob.solve(solver=backend, verbose=bool(self.params["verbose"]), **opts)

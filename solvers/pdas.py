@@ -42,8 +42,7 @@ from dualfem.registry import register_solver
 from dualfem.solution import Solution, Status
 from dualfem.solver import Solver, positive
 
-#: dense Schur complement onto more local unknowns than this is refused (memory ~ 8 n^2 bytes)
-MAX_LOCAL = 12000
+from dualfem.linalg import MAX_LOCAL, too_many_local  # noqa: E402  (shared with penalty, uzawa)
 
 
 def reduced_dual(red):
@@ -95,10 +94,7 @@ class PDASSolver(Solver):
         return {"tol": min(float(tol) * 1e-3, cls.defaults["tol"])}
 
     def skip(self, qp) -> str | None:
-        nI = int(np.asarray(qp.local_dofs).size)
-        if nI > MAX_LOCAL:
-            return f"{nI} local unknowns: the dense reduced matrix would exceed {MAX_LOCAL}^2"
-        return None
+        return too_many_local(qp, MAX_LOCAL)
 
     def setup(self, qp) -> None:
         from dualfem.linalg import LocalReduction

@@ -87,10 +87,9 @@ class PenaltySolver(Solver):
         return {"penetration_tol": float(tol) * 1e-2}
 
     def skip(self, qp) -> str | None:
-        nI = int(np.asarray(qp.local_dofs).size)
-        if nI > MAX_LOCAL:
-            return f"{nI} local unknowns: the dense reduced matrix would exceed {MAX_LOCAL}^2"
-        return None
+        from dualfem.linalg import too_many_local
+
+        return too_many_local(qp, MAX_LOCAL)
 
     def setup(self, qp) -> None:
         from dualfem.linalg import LocalReduction

@@ -223,6 +223,13 @@ class Uzawa(Solver):
     def tolerance_params(cls, tol: float) -> dict:
         return {"tol_outer": tol * 10.0, "tol_inner": tol * 1e-2}
 
+    def skip(self, qp) -> str | None:
+        if self.params["linalg"] == "reduced":
+            from dualfem.linalg import too_many_local
+
+            return too_many_local(qp)
+        return None
+
     def setup(self, qp) -> None:
         self.qp = qp
         space = _ReducedSpace if self.params["linalg"] == "reduced" else _FullSpace
