@@ -137,18 +137,7 @@ def _plots(runs, floors, figdir: Path) -> tuple[list[str], list[str]]:
                 ax.set_xlabel("time (setup + solve) [s]")
                 ax.grid(True, which="major", alpha=0.3)
             axes[0][0].set_ylabel("relative energy-norm error of x")
-            h, lab = axes[0][0].get_legend_handles_labels()
-            for ax in axes[0][1:]:
-                for hh, ll in zip(*ax.get_legend_handles_labels()):
-                    if ll not in lab:
-                        h.append(hh)
-                        lab.append(ll)
-            fig.legend(h, lab, loc="upper center", ncol=min(len(lab), 8), fontsize=8, bbox_to_anchor=(0.5, 1.08))
-            fig.tight_layout()
-            name = f"wp_{load}_N{int(N)}.png"
-            fig.savefig(figdir / name, dpi=90, bbox_inches="tight")
-            plt.close(fig)
-            wp_files.append(name)
+            wp_files.append(_save_with_legend(fig, axes[0], figdir, f"wp_{load}_N{int(N)}.png"))
     # ---------------- scaling: one figure per scene, one panel per delta
     for load in loads:
         sel = [r for r in has if r["scene"] == load]
@@ -180,18 +169,7 @@ def _plots(runs, floors, figdir: Path) -> tuple[list[str], list[str]]:
             ax.set_xlabel("unknowns")
             ax.grid(True, which="major", alpha=0.3)
         axes[0][0].set_ylabel("time (setup + solve) [s], tightest solved tier")
-        h, lab = [], []
-        for ax in axes[0]:
-            for hh, ll in zip(*ax.get_legend_handles_labels()):
-                if ll not in lab:
-                    h.append(hh)
-                    lab.append(ll)
-        fig.legend(h, lab, loc="upper center", ncol=min(len(lab), 8), fontsize=8, bbox_to_anchor=(0.5, 1.08))
-        fig.tight_layout()
-        name = f"scaling_{load}.png"
-        fig.savefig(figdir / name, dpi=90, bbox_inches="tight")
-        plt.close(fig)
-        sc_files.append(name)
+        sc_files.append(_save_with_legend(fig, axes[0], figdir, f"scaling_{load}.png"))
     return wp_files, sc_files
 
 
@@ -490,3 +468,20 @@ def run(argv: list[str]) -> int:
                       err_target=a.error, command=cmd)
     print(f"wrote {md} and figures in {a.figdir}", file=sys.stderr)
     return 0
+
+
+def _save_with_legend(fig, axes, figdir, name: str) -> str:
+    """One legend for all panels (labels de-duplicated), saved as figdir/name; returns name."""
+    import matplotlib.pyplot as plt
+
+    h, lab = [], []
+    for ax in axes:
+        for hh, ll in zip(*ax.get_legend_handles_labels()):
+            if ll not in lab:
+                h.append(hh)
+                lab.append(ll)
+    fig.legend(h, lab, loc="upper center", ncol=min(len(lab), 8), fontsize=8, bbox_to_anchor=(0.5, 1.08))
+    fig.tight_layout()
+    fig.savefig(figdir / name, dpi=90, bbox_inches="tight")
+    plt.close(fig)
+    return name

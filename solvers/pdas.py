@@ -45,6 +45,21 @@ from dualfem.solver import Solver, positive
 from dualfem.linalg import MAX_LOCAL, too_many_local  # noqa: E402  (shared with penalty, uzawa)
 
 
+class ReducedDualSolver(Solver):
+    """Base of solvers working on the reduced dual (pdas, penalty): skip QPs whose dense
+    reduced matrix would not fit; setup builds the LocalReduction and the LCP data (D, b0)."""
+
+    def skip(self, qp) -> str | None:
+        return too_many_local(qp, MAX_LOCAL)
+
+    def setup(self, qp) -> None:
+        from dualfem.linalg import LocalReduction
+
+        self.qp = qp
+        self.red = LocalReduction(qp)
+        self.cho, self.D, self.b0 = reduced_dual(self.red)
+
+
 def reduced_dual(red):
     """Cholesky of S and the LCP data (D, b0) of a :class:`~dualfem.linalg.LocalReduction`."""
     cho = sla.cho_factor(red.S, lower=True, check_finite=True)
@@ -56,7 +71,7 @@ def reduced_dual(red):
 
 
 @register_solver
-class PDASSolver(Solver):
+class PDASSolver(ReducedDualSolver):
     """Semismooth Newton (primal-dual active set) on the reduced dual LCP, globalised."""
 
     name = "pdas"
@@ -92,16 +107,6 @@ class PDASSolver(Solver):
         # Newton converges quadratically to the exact Newton point: the stopping test only
         # needs to be below the requested accuracy; keep it at least as strict as the default.
         return {"tol": min(float(tol) * 1e-3, cls.defaults["tol"])}
-
-    def skip(self, qp) -> str | None:
-        return too_many_local(qp, MAX_LOCAL)
-
-    def setup(self, qp) -> None:
-        from dualfem.linalg import LocalReduction
-
-        self.qp = qp
-        self.red = LocalReduction(qp)
-        self.cho, self.D, self.b0 = reduced_dual(self.red)
 
     def _projected_newton_step(self, mu, gap, c):
         """One step of Bertsekas' projected Newton method on q(mu) = 1/2 mu'D mu + b0'mu, mu >= 0.

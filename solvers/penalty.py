@@ -43,13 +43,13 @@ import scipy.linalg as sla
 
 from dualfem.registry import register_solver
 from dualfem.solution import Solution, Status
-from dualfem.solver import Solver, positive
+from dualfem.solver import positive
 
-from .pdas import MAX_LOCAL, reduced_dual
+from .pdas import ReducedDualSolver
 
 
 @register_solver
-class PenaltySolver(Solver):
+class PenaltySolver(ReducedDualSolver):
     """Quadratic penalty of the non-penetration constraint with rho-continuation."""
 
     name = "penalty"
@@ -86,17 +86,8 @@ class PenaltySolver(Solver):
         # the x error follows the relative penetration; ask for 100x less penetration than tol
         return {"penetration_tol": float(tol) * 1e-2}
 
-    def skip(self, qp) -> str | None:
-        from dualfem.linalg import too_many_local
-
-        return too_many_local(qp, MAX_LOCAL)
-
     def setup(self, qp) -> None:
-        from dualfem.linalg import LocalReduction
-
-        self.qp = qp
-        self.red = LocalReduction(qp)
-        self.cho, self.D, self.b0 = reduced_dual(self.red)
+        super().setup(qp)
         kd = qp.K.diagonal()[self.red.I]
         self.rho0 = self.params["rho0_factor"] * float(np.median(kd)) / float(np.median(qp.weights))
 
