@@ -32,3 +32,9 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
         with open(tmp, "w", encoding="utf-8") as fh:
             fh.write(text)
     return atomic_write(path, write)
+
+
+def atomic_savefig(fig, path: str | Path, **savefig_kwargs) -> Path:
+    """Save a matplotlib figure atomically (PNG unless ``format`` is given)."""
+    savefig_kwargs.setdefault("format", "png")
+    return atomic_write(path, lambda tmp: fig.savefig(tmp, **savefig_kwargs))

@@ -482,6 +482,8 @@ def _save_with_legend(fig, axes, figdir, name: str) -> str:
                 lab.append(ll)
     fig.legend(h, lab, loc="upper center", ncol=min(len(lab), 8), fontsize=8, bbox_to_anchor=(0.5, 1.08))
     fig.tight_layout()
-    fig.savefig(figdir / name, dpi=90, bbox_inches="tight")
+    from .io import atomic_savefig
+
+    atomic_savefig(fig, figdir / name, dpi=90, bbox_inches="tight")
     plt.close(fig)
     return name

@@ -196,7 +196,7 @@ def plot(res: dict, outdir: Path) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io import atomic_write
+    from .io import atomic_savefig
 
     names = []
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
@@ -218,7 +218,7 @@ def plot(res: dict, outdir: Path) -> list[str]:
         ax.legend(fontsize=8)
     fig.suptitle(f"{res['scene']}: error against the N = {res['ref_N']} reference", fontsize=11)
     fig.tight_layout()
-    atomic_write(outdir / "convergence_errors.png", lambda t: fig.savefig(t, dpi=100, format="png"))
+    atomic_savefig(fig, outdir / "convergence_errors.png", dpi=100)
     plt.close(fig)
     names.append("convergence_errors.png")
 
@@ -245,7 +245,7 @@ def plot(res: dict, outdir: Path) -> list[str]:
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()
-    atomic_write(outdir / "convergence_quantities.png", lambda t: fig.savefig(t, dpi=100, format="png"))
+    atomic_savefig(fig, outdir / "convergence_quantities.png", dpi=100)
     plt.close(fig)
     names.append("convergence_quantities.png")
     return names

@@ -36,9 +36,9 @@ KEY_LABEL = {
 
 
 def _save(fig, path: Path, dpi: int) -> str:
-    from .io import atomic_write
+    from .io import atomic_savefig
 
-    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))
+    atomic_savefig(fig, path, dpi=dpi)
     import matplotlib.pyplot as plt
 
     plt.close(fig)

@@ -11,7 +11,6 @@ import math
 import platform
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -134,8 +133,8 @@ def render(res: dict, auto: dict, Ns, planes, command: str, elapsed: float) -> s
               "* **Remedy that keeps the method:** `uzawa_auto` takes r = 100 / mu_min from the QP itself "
               "(scale-invariant, ~1e11 at delta = 1e-9). Its counts on f2, N=" + str(Nr) + f" {pr}:", "",
               "| solver | " + " | ".join(f"d={_fmt_d(d)}" for d in DELTAS) + " |", "|---|" + "---|" * len(DELTAS),
-              f"| uzawa (r = 1e7) | " + " | ".join(_cell(res[(Nr, pr, 'f2', d, 2.0)]) for d in DELTAS) + " |",
-              f"| uzawa_auto | " + " | ".join(_cell(auto[d]) for d in DELTAS) + " |", "",
+              "| uzawa (r = 1e7) | " + " | ".join(_cell(res[(Nr, pr, 'f2', d, 2.0)]) for d in DELTAS) + " |",
+              "| uzawa_auto | " + " | ".join(_cell(auto[d]) for d in DELTAS) + " |", "",
               "* **Moderate delta: the counts depend on unstated choices.** The outer count is governed by "
               f"r mu there too, and mu scales with the mesh size (the nodal weights h): across our settings "
               f"the same cell's k varies by up to a factor {spread_N:.1f} with N (k grows as the mesh is refined; "

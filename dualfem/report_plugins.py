@@ -47,7 +47,7 @@ def generate(out: Path, N: int = 32, dpi: int = 110, sizes=(16, 32, 64, 128)) ->
     import matplotlib.pyplot as plt
 
     from . import evaluator
-    from .io import atomic_write
+    from .io import atomic_savefig
     from .registry import solvers
     from .runner import run
     from .scene import load_scene
@@ -149,7 +149,7 @@ def generate(out: Path, N: int = 32, dpi: int = 110, sizes=(16, 32, 64, 128)) ->
     figdir = out / "figures"
     figdir.mkdir(parents=True, exist_ok=True)
     path = figdir / "plugins_signorini.png"
-    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))
+    atomic_savefig(fig, path, dpi=dpi)
     plt.close(fig)
     md += [f"![Signorini contact](figures/{path.name})\n",
            "Left: the body on the obstacle (`dualfem solve signorini`). Right: contact pressure along the bottom for "

@@ -8,8 +8,6 @@ Figures go to ``reports/stability/`` next to the Markdown file; every file is wr
 from __future__ import annotations
 
 import argparse
-import io
-import json
 import math
 from collections import Counter, defaultdict
 from pathlib import Path
@@ -101,15 +99,10 @@ def _heatmaps(recs, rowf, colf, title, rowlabel, collabel, path: Path, keep_col_
             fig.colorbar(im, ax=ax, shrink=0.8)
     axs[0].set_ylabel(rowlabel, fontsize=8)
     fig.suptitle(title, fontsize=10)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    from .io import atomic_write
+    from .io import atomic_savefig
 
-    def write(tmp):
-        with open(tmp, "wb") as fh:
-            fh.write(buf.getvalue())
-    atomic_write(path, write)
+    atomic_savefig(fig, path, dpi=110)
+    plt.close(fig)
     return path
 
 
@@ -203,15 +196,10 @@ def _scatter_r_delta(recs, solver: str, path: Path) -> None:
     ax.set_title(f"{solver}: outer iterations against r x delta (all r, all delta)", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    from .io import atomic_write
+    from .io import atomic_savefig
 
-    def write(tmp):
-        with open(tmp, "wb") as fh:
-            fh.write(buf.getvalue())
-    atomic_write(path, write)
+    atomic_savefig(fig, path, dpi=110)
+    plt.close(fig)
 
 
 def _findings(recs) -> list[str]:
@@ -363,7 +351,6 @@ def render(meta: dict, recs: list[dict], md_path: Path) -> str:
         return r["solver"] + ("" if not p else " " + ",".join(f"{k}={_fmt(v)}" for k, v in p.items()))
 
     L += ["## The grid", ""]
-    base = meta.get("base", {})
     L += [f"Base scene: the paper's f2 (E = 69000, nu = 0.3, plane strain, delta = 1e-5) at N = "
           f"{16 if meta.get('quick') else 32}; each axis varies one thing. Per-run solver time limit "
           f"{meta.get('time_limit')} s.", ""]
