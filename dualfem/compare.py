@@ -38,6 +38,7 @@ import numpy as np
 from . import evaluator
 from .certify import certified_error, solver_for
 from .qp import QP
+from .runner import jsonable_params
 from .registry import get_solver, solvers as registered
 from .solution import Solution, Status
 
@@ -49,10 +50,6 @@ RUN_FIELDS = ("solver", "status", "verdict", "exact", "tolerance", "iterations",
 def default_solvers() -> list[str]:
     """Every registered solver, in name order (missing dependencies show up as ``skipped``)."""
     return sorted(registered())
-
-
-def _jsonable(d: dict) -> dict:
-    return {k: (v if isinstance(v, (int, float, str, bool, type(None))) else str(v)) for k, v in d.items()}
 
 
 def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, dict] | None = None,
@@ -90,7 +87,7 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
             "certificate": None,
             "n_contact": int(evaluator.contact_set(qp, sol.x).sum()) if finite else None,
             "message": sol.message,
-            "params": _jsonable(sol.params),
+            "params": jsonable_params(sol.params),
             "diff": None,
             "verdict": None,
         }
@@ -105,7 +102,7 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     ref_name, others = _choose_reference(runs)
     cross = None
     out: dict[str, Any] = {"problem": qp.name, "ndof": qp.n, "n_defect_nodes": qp.m,
-                           "params": _jsonable(qp.params), "reference": None, "runs": runs}
+                           "params": jsonable_params(qp.params), "reference": None, "runs": runs}
     if ref_name is not None:
         ref = sols[ref_name]
         rrec = next(r for r in runs if r["solver"] == ref_name)

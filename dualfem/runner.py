@@ -74,7 +74,7 @@ def summary(qp: QP, sol: Solution) -> dict:
         "n_defect_nodes": qp.m,
         "iterations": sol.iterations,
         "time_s": sol.time_s,
-        "params": _jsonable(sol.params),
+        "params": jsonable_params(sol.params),
     }
     if sol.x is not None and sol.residuals is not None and sol.residuals["finite"]:
         jump = qp.B @ sol.x
@@ -91,5 +91,6 @@ def summary(qp: QP, sol: Solution) -> dict:
     return out
 
 
-def _jsonable(d: dict) -> dict:
+def jsonable_params(d: dict) -> dict:
+    """Parameters as JSON-safe scalars (anything else as its string)."""
     return {k: (v if isinstance(v, (int, float, str, bool, type(None))) else str(v)) for k, v in d.items()}
