@@ -25,6 +25,9 @@ A sweep is described by a TOML spec (see ``benchmarks/default.toml``)::
     grid = {scaling = [0, 10]}
     max = {N = 256}        # only scenes with N <= 256 (min = {...} likewise): the others are not
                            # runs of this solver in the sweep (no row)
+    time_limit = 900.0     # this block's own time limit (default: the spec's), e.g. to let a slow
+                           # third-party solver show how far it gets on a big scene
+    repeats = 1            # this block's own timed repeats (default: the scene block's)
     optional = false       # true: a solver that is not registered is skipped, not an error
 
 Every run is one tidy row (:data:`COLUMNS`), written as ``rows/<run_id>.json`` (atomically: a
@@ -83,7 +86,8 @@ COLUMNS = [
 SPEC_KEYS = {"name", "description", "repeats", "warmup", "time_limit", "guard_factor", "guard_slack",
              "build_limit", "cold_setup", "tiers", "reference", "floor", "scenes", "solvers"}
 SCENE_KEYS_RESERVED = {"scene", "repeats", "warmup"}
-SOLVER_KEYS = {"name", "tiers", "params", "grid", "max", "min", "optional", "label"}
+SOLVER_KEYS = {"name", "tiers", "params", "grid", "max", "min", "optional", "label", "time_limit",
+               "repeats"}
 REFERENCE_KEYS = {"solvers", "tol", "certify", "time_limit", "params"}
 FLOOR_KEYS = {"enabled", "ignore", "repeats", "cholmod", "warmup"}
 
@@ -255,9 +259,12 @@ def parse_spec(data: dict, path: str = "<spec>", text: str = "") -> Spec:
         if name in reg:  # unknown solver parameters are input errors, found before any run
             for combo in _grid(grid):
                 reg[name](**{**params, **combo})
+        tl = (_num(f"time_limit of solver {name!r}", blk["time_limit"]) if "time_limit" in blk else None)
+        reps = (_num(f"repeats of solver {name!r}", blk["repeats"], lo=1, integer=True, allow_zero=True)
+                if "repeats" in blk else None)
         s.solvers.append({"name": name, "tiers": tiers_, "params": params, "grid": grid,
                           "max": blk.get("max", {}), "min": blk.get("min", {}), "optional": optional,
-                          "label": blk.get("label")})
+                          "label": blk.get("label"), "time_limit": tl, "repeats": reps})
     return s
 
 
@@ -337,6 +344,8 @@ def expand_tasks(spec: Spec, scenes: list[SceneSpec] | None = None) -> list[dict
         for blk in spec.solvers:
             name = blk["name"]
             cls = reg.get(name)
+            time_limit = spec.time_limit if blk.get("time_limit") is None else blk["time_limit"]
+            hard_limit = time_limit * spec.guard_factor + spec.guard_slack
             for combo in _grid(blk["grid"]):
                 variant = blk["label"] or name
                 if combo:
@@ -351,16 +360,17 @@ def expand_tasks(spec: Spec, scenes: list[SceneSpec] | None = None) -> list[dict
                 for tier, tp in tier_params.items():
                     params = {k: v for k, v in {**tp, **base}.items() if k != "_tol"}
                     if cls is not None and "time_limit" in cls.defaults and "time_limit" not in base:
-                        params["time_limit"] = float(spec.time_limit)
+                        params["time_limit"] = float(time_limit)
                     tol = spec.tiers.get(tier, float("nan"))
+                    repeats = sc.repeats if blk.get("repeats") is None else blk["repeats"]
                     ident = {"scene": sc.key, "solver": name, "params": params, "tier": tier, "tol": tol,
-                             "repeats": sc.repeats, "warmup": sc.warmup, "cold": spec.cold_setup,
-                             "time_limit": spec.time_limit}
+                             "repeats": repeats, "warmup": sc.warmup, "cold": spec.cold_setup,
+                             "time_limit": time_limit}
                     task = {"kind": "run", "run_id": _hash(ident), "spec": spec.name, "scene": sc.scene,
                             "scene_params": sc.params, "scene_key": sc.key, "label": sc.label,
                             "solver": name, "variant": variant, "params": params, "tier": tier, "tol": tol,
-                            "repeats": sc.repeats, "warmup": sc.warmup, "cold_setup": spec.cold_setup,
-                            "time_limit": spec.time_limit, "hard_limit": spec.hard_limit,
+                            "repeats": repeats, "warmup": sc.warmup, "cold_setup": spec.cold_setup,
+                            "time_limit": time_limit, "hard_limit": hard_limit,
                             "build_limit": spec.build_limit}
                     if not _in_range(sc, blk):
                         continue     # excluded by the spec's min/max: not a run of this sweep
@@ -710,6 +720,11 @@ def _recv_blocking(fh) -> Any:
 
 def _child_main() -> None:  # pragma: no cover - runs in the child process
     """Serve tasks on stdin/stdout; solver output written to fd 1 goes to stderr instead."""
+    try:  # a run that exhausts the machine's memory: the kernel should kill this worker, not the sweep
+        with open("/proc/self/oom_score_adj", "w") as fh:
+            fh.write("1000")
+    except OSError:
+        pass
     out_fd = os.dup(1)
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, 1)      # C libraries print to fd 1 (e.g. OSQP's polishing notes): drop it
@@ -813,7 +828,8 @@ class GuardedWorker:
         except (EOFError, BrokenPipeError, OSError):
             code = self.proc.poll() if self.proc else None
             self._kill()
-            return _error_row(task, f"worker process died in phase '{phase}' (exit code {code})"), None
+            why = " (killed: out of memory?)" if code == -9 else ""
+            return _error_row(task, f"worker process died in phase '{phase}' (exit code {code}{why})"), None
 
 
 _LOCAL = threading.local()

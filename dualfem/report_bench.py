@@ -1,6 +1,9 @@
 """``dualfem report bench RESULTS``: reports/benchmark.md and PNG figures from a sweep's results.
 
-RESULTS is a ``results.csv`` written by ``dualfem bench`` (or its directory). Definitions used
+RESULTS is a ``results.csv`` written by ``dualfem bench`` (or its directory); several RESULTS
+are merged into one report, a later one replacing the rows of an earlier one that measure the same
+thing (a run: scene, solver variant and tier; a floor: its group of scenes; a reference: its
+scene), e.g. a quick parallel sweep followed by a serial sweep of the large sizes. Definitions used
 in the report (also printed in it):
 
 * time of a run = setup + solve (median over the timed repeats; the factorization cache of
@@ -174,8 +177,12 @@ def _plots(runs, floors, figdir: Path) -> tuple[list[str], list[str]]:
 
 
 def targets(runs, floors, ours: list[str], err_target: float, floor_target: float, speed_target: float,
-            top: int = 2) -> list[str]:
-    """Markdown lines checking the performance targets at the largest N of the sweep."""
+            top: int = 2, tag_sources: bool = False) -> list[str]:
+    """Markdown lines checking the performance targets at the largest N of the sweep
+    (``tag_sources``: mark each time with the [number] of the results it comes from)."""
+    def tag(r: dict) -> str:
+        return f" [{r['_source'] + 1}]" if tag_sources and r.get("_source") is not None else ""
+
     lines = []
     floor_t = {_f(f.get("scene_N")): f for f in floors if f["status"] in ("solved", "inaccurate")}
     Ns = sorted({_f(r.get("scene_N")) for r in runs if r["status"] != "skipped"
@@ -225,7 +232,7 @@ def targets(runs, floors, ours: list[str], err_target: float, floor_target: floa
                 cb = min(comp_ok, key=lambda r: _f(r["total_s"]))
                 ct = _f(cb["total_s"])
                 sp = ct / t
-                cmp_txt = f"{ct:.3g} ({cb['variant']}, tier {cb['tier']})"
+                cmp_txt = f"{ct:.3g} ({cb['variant']}, tier {cb['tier']}){tag(cb)}"
                 sp_txt = f"{sp:.1f}" + (" ok" if sp >= speed_target else " MISSED")
                 if sp < speed_target:
                     misses.append(f"{s} at {sc[0]} N={sc[1]:g} delta={sc[2]:g}: {sp:.1f} x faster than "
@@ -243,7 +250,7 @@ def targets(runs, floors, ours: list[str], err_target: float, floor_target: floa
             else:
                 cmp_txt, sp_txt = "not run at this size (spec limit or skipped)", "n/a"
             lines.append(f"| {sc[0]} | {sc[1]:g} | {sc[2]:g} | {s} | {t:.3g} ({_fmt(best.get('setup_s'))} + "
-                         f"{_fmt(best.get('solve_s'))}) | {_fmt(flt)} | {_fmt(ratio, '.2f')}{fmark} | {cmp_txt} | {sp_txt} |")
+                         f"{_fmt(best.get('solve_s'))}){tag(best)} | {_fmt(flt)}{tag(fl) if fl else ''} | {_fmt(ratio, '.2f')}{fmark} | {cmp_txt} | {sp_txt} |")
     lines.append("")
     if misses:
         lines.append(f"**Targets missed ({len(misses)}):**")
@@ -254,28 +261,57 @@ def targets(runs, floors, ours: list[str], err_target: float, floor_target: floa
     return lines
 
 
-def build_report(results: str | Path, md: str | Path, figdir: str | Path, *, ours: list[str],
-                 shift: float = 10.0, err_target: float = 1e-8, floor_target: float = 1.5,
-                 speed_target: float = 10.0, command: str = "") -> Path:
-    """Write the markdown report and its figures; returns the markdown path."""
+def _slot(r: dict) -> tuple:
+    """What a row measures: rows of two sweeps with the same slot measure the same thing."""
+    if r["kind"] == "run":
+        return ("run", str(r.get("scene_key")), r["variant"], r["tier"])
+    if r["kind"] == "floor":
+        return ("floor", str(r.get("label")), _f(r.get("n_unknowns")))
+    return (str(r["kind"]), str(r.get("scene_key")))
+
+
+def load_sources(results: list[str | Path]) -> tuple[list[dict], list[dict]]:
+    """Rows of several results (later ones replace earlier rows of the same slot) and one
+    source record per results (path, directory, sweep.json, rows kept)."""
     from .bench import read_results
+
+    merged: dict[tuple, dict] = {}
+    sources = []
+    for i, item in enumerate(results):
+        rows = read_results(item)
+        if not rows:
+            raise InputError(f"results file {str(item)!r} has no rows")
+        res_path = Path(item)
+        res_dir = res_path if res_path.is_dir() else res_path.parent
+        meta = {}
+        if (res_dir / "sweep.json").is_file():
+            try:
+                meta = json.loads((res_dir / "sweep.json").read_text(encoding="utf-8"))
+            except ValueError:
+                meta = {}
+        for r in rows:
+            r["tier"] = str(r.get("tier")) if r.get("tier") is not None else ""
+            r["variant"] = str(r.get("variant") or r.get("solver"))
+            r["solver"] = str(r.get("solver"))
+            r["_source"] = i
+            merged[_slot(r)] = r
+        sources.append({"results": str(item), "dir": res_dir, "meta": meta, "n_rows": len(rows)})
+    rows = list(merged.values())
+    for i, src in enumerate(sources):
+        src["kept"] = sum(r["_source"] == i for r in rows)
+    return rows, sources
+
+
+def build_report(results: str | Path | list[str | Path], md: str | Path, figdir: str | Path, *,
+                 ours: list[str], shift: float = 10.0, err_target: float = 1e-8, floor_target: float = 1.5,
+                 speed_target: float = 10.0, command: str = "") -> Path:
+    """Write the markdown report and its figures from one or several results; returns the markdown path."""
     from .io import atomic_write_text
 
-    rows = read_results(results)
-    if not rows:
-        raise InputError(f"results file {str(results)!r} has no rows")
-    res_path = Path(results)
-    res_dir = res_path if res_path.is_dir() else res_path.parent
-    meta = {}
-    if (res_dir / "sweep.json").is_file():
-        try:
-            meta = json.loads((res_dir / "sweep.json").read_text(encoding="utf-8"))
-        except ValueError:
-            meta = {}
-    for r in rows:
-        r["tier"] = str(r.get("tier")) if r.get("tier") is not None else ""
-        r["variant"] = str(r.get("variant") or r.get("solver"))
-        r["solver"] = str(r.get("solver"))
+    results = [results] if isinstance(results, (str, Path)) else list(results)
+    if not results:
+        raise InputError("give at least one RESULTS (a results.csv or a sweep's output directory)")
+    rows, sources = load_sources(results)
     runs = [r for r in rows if r["kind"] == "run"]
     refs = [r for r in rows if r["kind"] == "reference"]
     floors = [r for r in rows if r["kind"] == "floor"]
@@ -287,16 +323,32 @@ def build_report(results: str | Path, md: str | Path, figdir: str | Path, *, our
         figrel = figdir.resolve()
 
     L = ["# Benchmark: run time against error", ""]
-    L.append(f"Generated by `{command or 'dualfem report bench ' + str(results)}` from `{results}`.")
-    if meta.get("command"):
-        L.append(f"The results were produced by `{meta['command']}` (spec `{meta.get('spec')}`, "
-                 f"jobs {meta.get('jobs')}, dask {meta.get('dask') or 'no'}; started {meta.get('started_utc')}, "
-                 f"finished {meta.get('finished_utc', 'not finished')}).")
-    inv = meta.get("invocations") or []
-    if len(inv) > 1:
-        L.append(f"This results directory was written by {len(inv)} invocations (a resumed or extended sweep; "
-                 "results.csv keeps the rows of the current spec only): "
-                 + "; ".join(f"`{i['command']}` at {i['started_utc']}" for i in inv) + ".")
+    names = " ".join(str(x) for x in results)
+    L.append(f"Generated by `{command or 'dualfem report bench ' + names}` from "
+             + ", ".join(f"`{x}`" for x in results) + ".")
+    if len(sources) > 1:
+        L.append(f"The rows of {len(sources)} sweeps are merged: where two sweeps measured the same thing "
+                 "(a run: scene, solver variant and tier; a floor; a reference), the later one on the command "
+                 "line replaces the earlier one.")
+    L.append("")
+    for i, src in enumerate(sources):
+        meta = src["meta"]
+        tag = f"[{i + 1}] " if len(sources) > 1 else ""
+        sizes = sorted({_f(r.get("scene_N")) for r in rows if r["_source"] == i and r["kind"] == "run"
+                        and math.isfinite(_f(r.get("scene_N")))})
+        kept = (f" {src['kept']} of its {src['n_rows']} rows are in this report (N = "
+                f"{', '.join(f'{n:g}' for n in sizes)})." if len(sources) > 1 else "")
+        if meta.get("command"):
+            L.append(f"- {tag}`{src['results']}` was produced by `{meta['command']}` (spec `{meta.get('spec')}`, "
+                     f"jobs {meta.get('jobs')}, dask {meta.get('dask') or 'no'}; started {meta.get('started_utc')}, "
+                     f"finished {meta.get('finished_utc', 'not finished')}).{kept}")
+        else:
+            L.append(f"- {tag}`{src['results']}` (no sweep.json beside it).{kept}")
+        inv = meta.get("invocations") or []
+        if len(inv) > 1:
+            L.append(f"  This results directory was written by {len(inv)} invocations (a resumed or extended "
+                     "sweep; results.csv keeps the rows of the current spec only): "
+                     + "; ".join(f"`{x['command']}` at {x['started_utc']}" for x in inv) + ".")
     L.append("")
     # -------------------------------------------------------------- machine
     L += ["## Machine and versions", ""]
@@ -352,19 +404,22 @@ def build_report(results: str | Path, md: str | Path, figdir: str | Path, *, our
     if ok_refs:
         ks = [_f(r.get("kkt_error")) for r in ok_refs]
         L.append(f"KKT error of the references: max {_fmt(max(ks), '.1e')}, median {_fmt(sorted(ks)[len(ks) // 2], '.1e')}.")
-    cached = []
-    if (res_dir / "refs").is_dir():
-        import numpy as np
+    cached = {}
+    for src in sources:
+        if (src["dir"] / "refs").is_dir():
+            import numpy as np
 
-        for f in sorted((res_dir / "refs").glob("[!.]*.npz")):
-            try:
-                with np.load(f, allow_pickle=False) as d:
-                    cached.append((str(d["solver"]), float(d["kkt"])))
-            except (OSError, ValueError, KeyError):
-                continue
+            for f in sorted((src["dir"] / "refs").glob("[!.]*.npz")):
+                try:
+                    with np.load(f, allow_pickle=False) as d:
+                        cached[f.name] = (str(d["solver"]), float(d["kkt"]))
+                except (OSError, ValueError, KeyError):
+                    continue
+    cached = list(cached.values())
     if cached:
         ks = sorted(k for _, k in cached)
-        L.append(f"Reference cache of this results directory: {len(cached)} certified references "
+        L.append(f"Reference cache of {'these results directories' if len(sources) > 1 else 'this results directory'}: "
+                 f"{len(cached)} certified references "
                  f"({', '.join(sorted({s for s, _ in cached}))}), evaluator KKT error max {ks[-1]:.1e}, "
                  f"median {ks[len(ks) // 2]:.1e}.")
     for r in bad_refs:
@@ -388,7 +443,7 @@ def build_report(results: str | Path, md: str | Path, figdir: str | Path, *, our
         L.append("")
     # -------------------------------------------------------------- targets
     L += ["## Performance targets", ""]
-    L += targets(runs, floors, ours, err_target, floor_target, speed_target)
+    L += targets(runs, floors, ours, err_target, floor_target, speed_target, tag_sources=len(sources) > 1)
     L.append("")
     # -------------------------------------------------------------- figures
     L += ["## Work-precision", "",
@@ -449,7 +504,9 @@ def run(argv: list[str]) -> int:
 
     p = argparse.ArgumentParser(prog="dualfem report bench",
                                 description="reports/benchmark.md + PNGs from a dualfem bench results.csv")
-    p.add_argument("results", metavar="RESULTS", help="results.csv (or the sweep's output directory)")
+    p.add_argument("results", metavar="RESULTS", nargs="+",
+                   help="results.csv or a sweep's output directory; several are merged, a later one replacing "
+                        "the rows of an earlier one that measure the same thing")
     p.add_argument("--md", default="reports/benchmark.md", help="markdown output (default reports/benchmark.md)")
     p.add_argument("--figdir", default="reports/bench", help="figure directory (default reports/bench)")
     p.add_argument("--ours", default="uzawa,uzawa_auto,pdas", help="comma-separated solvers checked against the targets")

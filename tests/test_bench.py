@@ -370,7 +370,7 @@ def test_progress_plain_lines_and_bar():
 
 def test_shipped_specs_are_valid():
     root = Path(__file__).resolve().parent.parent / "benchmarks"
-    for name in ("default.toml", "small.toml"):
+    for name in ("default.toml", "small.toml", "target.toml"):
         spec = bench.load_spec(root / name)
         tasks = bench.expand_tasks(spec)
         assert tasks and len({t["run_id"] for t in tasks}) == len(tasks)
@@ -379,3 +379,42 @@ def test_shipped_specs_are_valid():
     assert {s.scene for s in scenes} == {"f1", "f2", "f3"}
     assert {1e-1, 1e-3, 1e-5, 1e-7, 1e-9} <= {s.params.get("delta") for s in scenes}
     assert max(s.params.get("N", 0) for s in scenes) >= 512
+
+
+def test_solver_block_time_limit_and_repeats(tmp_path):
+    text = SMALL.replace('name = "clarabel"\ntiers = ["high"]',
+                         'name = "clarabel"\ntiers = ["high"]\ntime_limit = 7.5\nrepeats = 1')
+    spec = bench.load_spec(write(tmp_path, text))
+    tasks = bench.expand_tasks(spec)
+    clar = [t for t in tasks if t["solver"] == "clarabel"]
+    osqp = [t for t in tasks if t["solver"] == "osqp"]
+    assert all(t["time_limit"] == 7.5 and t["params"]["time_limit"] == 7.5 and t["repeats"] == 1 for t in clar)
+    assert all(t["repeats"] == 2 for t in tasks if t["solver"] != "clarabel")
+    assert all(t["hard_limit"] == 7.5 * spec.guard_factor + spec.guard_slack for t in clar)
+    assert all(t["time_limit"] == 60.0 and t["hard_limit"] == spec.hard_limit for t in osqp)
+    # a block without its own limit keeps the run ids it had before the option existed
+    plain = {t["run_id"] for t in bench.expand_tasks(bench.load_spec(write(tmp_path, SMALL, "s0.toml")))}
+    assert {t["run_id"] for t in osqp} <= plain and not {t["run_id"] for t in clar} & plain
+    with pytest.raises(InputError, match="time_limit of solver 'clarabel'"):
+        bench.load_spec(write(tmp_path, text.replace("time_limit = 7.5", "time_limit = 0"), "bad.toml"))
+    with pytest.raises(InputError, match="repeats of solver 'clarabel'"):
+        bench.load_spec(write(tmp_path, text.replace("repeats = 1", "repeats = 1.5"), "bad2.toml"))
+
+
+def test_report_merges_sweeps_later_wins(small_sweep, tmp_path):
+    from dualfem.report_bench import build_report, load_sources
+
+    _, out, _ = small_sweep
+    rows = bench.read_results(out / "results.csv")
+    redo = next(r for r in rows if r["kind"] == "run" and r["solver"] == "osqp" and r["status"] == "solved")
+    second = tmp_path / "second"
+    second.mkdir()
+    bench.write_csv(second / "results.csv", [{**redo, "status": "error", "message": "redone by a later sweep"}])
+    merged, sources = load_sources([out, second])
+    assert len(merged) == len(rows) and [s["kept"] for s in sources] == [len(rows) - 1, 1]
+    again = [r for r in merged if r["run_id"] == redo["run_id"]]
+    assert len(again) == 1 and again[0]["status"] == "error" and again[0]["_source"] == 1
+    assert len(load_sources([second, out])[0]) == len(rows)    # order matters: the earlier one is replaced
+    assert next(r for r in load_sources([second, out])[0] if r["run_id"] == redo["run_id"])["status"] == "solved"
+    text = build_report([out, second], tmp_path / "b.md", tmp_path / "f", ours=["osqp"]).read_text()
+    assert "[1]" in text and "[2]" in text and "merged" in text and "redone by a later sweep" in text
