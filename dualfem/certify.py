@@ -25,7 +25,7 @@ order. :func:`certified_error` returns both and their minimum.
 0: the tiny infeasibility of an exact-to-rounding x is not counted, and is reported separately
 by the evaluator's ``primal`` residual). Unlike the KKT residuals it is a bound on the error in x
 itself, so it certifies a reference solution. ``r'K^-1 r`` uses the cached factorization of
-K_fixed through :func:`k_solve`.
+K_fixed through :meth:`dualfem.linalg.LocalReduction.k_solve`.
 """
 from __future__ import annotations
 
@@ -35,21 +35,23 @@ import scipy.linalg as sla
 from .qp import QP
 
 
-def k_solve(red, r: np.ndarray) -> np.ndarray:
-    """K^-1 r for the QP of a :class:`dualfem.linalg.LocalReduction` (two cached solves).
+def refinement_step(qp: QP, ksolve, D: np.ndarray, x: np.ndarray, mu: np.ndarray,
+                    A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One exact Newton step (dx, dmu) of the equality-constrained KKT system on the set A:
 
-    With K = K_fixed + K_param (K_param on I x I): u = K_fixed^-1 r, the local part solves
-    ``S x_I = S_fixed u_I``, and x = K_fixed^-1 (r + e) with e_I = S_fixed x_I - S_fixed u_I.
+        K dx - B_A' dmu_A = -(K x - F - B' mu),     B_A dx = -B_A x,     dmu = 0 off A,
+
+    with ``ksolve(r) = K^-1 r`` and the Delassus matrix ``D = B K^-1 B'`` (its A x A block is
+    used). Used to refine a solution on its active set (pdas, the active-set polish) and to
+    measure the distance of (x, mu) to the exact solution for A (:func:`active_set_error`).
+    Raises ``numpy.linalg.LinAlgError`` if D_AA is not positive definite.
     """
-    ff = red.factor
-    u = ff.solve(r)
-    gI = ff.S_fixed @ u[red.I]
-    if not hasattr(red, "_S_cho"):
-        red._S_cho = sla.cho_factor(red.S, lower=True)
-    xI = sla.cho_solve(red._S_cho, gI)
-    e = np.zeros_like(r)
-    e[red.I] = ff.S_fixed @ xI - gI
-    return ff.solve(r + e)
+    dx = ksolve(qp.F + qp.B.T @ mu - qp.K @ x)
+    dmu = np.zeros_like(mu, dtype=float)
+    if A.any():
+        dmu[A] = sla.solve(D[np.ix_(A, A)], -(qp.B[A] @ (x + dx)), assume_a="pos")
+        dx = dx + ksolve(qp.B.T @ dmu)
+    return dx, dmu
 
 
 class _SparseK:
@@ -80,14 +82,12 @@ class KSolver:
         self._D = None
 
     def __call__(self, r: np.ndarray) -> np.ndarray:
-        return k_solve(self.red, r) if self.red is not None else self._lu.solve(r)
+        return self.red.k_solve(r) if self.red is not None else self._lu.solve(r)
 
     def delassus(self) -> np.ndarray | None:
         if self._D is None:
             if self.red is not None:
-                if not hasattr(self.red, "_S_cho"):
-                    self.red._S_cho = sla.cho_factor(self.red.S, lower=True)
-                D = self.red.BI @ sla.cho_solve(self.red._S_cho, self.red.BI.T)
+                D = self.red.dual()[0]
             elif self.qp.m <= 2000:
                 Bd = self.qp.B.toarray()
                 D = Bd @ np.column_stack([self._lu.solve(b) for b in Bd]) if self.qp.m else np.zeros((0, 0))
@@ -140,16 +140,10 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     D = ksolve.delassus() if A.any() else np.zeros((0, 0))
     if D is None:
         return float("nan")
-    r = qp.K @ x - qp.F - qp.B.T @ mu
-    dx = ksolve(-r)
-    dmu = np.zeros_like(mu)
-    if A.any():
-        BA = qp.B[A]
-        try:
-            dmu[A] = sla.solve(D[np.ix_(A, A)], -(BA @ (x + dx)), assume_a="pos")
-        except (np.linalg.LinAlgError, ValueError):
-            return float("nan")
-        dx = dx + ksolve(qp.B.T @ dmu)
+    try:
+        dx, dmu = refinement_step(qp, ksolve, D, x, mu, A)
+    except (np.linalg.LinAlgError, ValueError):
+        return float("nan")
     gap1 = qp.B @ (x + dx)
     mu1 = mu + dmu
     step_mu = np.abs(dmu).max(initial=0.0)

@@ -101,6 +101,10 @@ def active_set_solution(qp: QP, active: np.ndarray) -> tuple[np.ndarray, np.ndar
     Returns (x, mu) with mu = 0 off A. If A is the true contact set, this is the exact QP
     solution (check with :func:`certify`): a way to certify a reference without trusting
     any iterative solver.
+
+    Deliberately independent of the solvers' linear algebra: one sparse LU of the full KKT
+    matrix, no :class:`dualfem.linalg.LocalReduction` (which uzawa, pdas, penalty, the active-set
+    polish and :mod:`dualfem.certify` share), so a fault in that shared path cannot certify itself.
     """
     import scipy.sparse as sp
     import scipy.sparse.linalg as sla

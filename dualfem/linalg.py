@@ -15,7 +15,8 @@ directly, ``S_fixed = L_II U_II`` (no extra solves). It is cached by a hash of `
 I, so every delta, load case and solver that shares the mesh reuses it.
 
 :class:`LocalReduction` is what solvers use: ``S``, ``g``, ``B_I`` (dense), ``full(x_I)`` to
-recover all of x with one more solve, and ``c0`` (energy constant).
+recover all of x with one more solve, ``c0`` (energy constant), ``k_solve`` (K^-1 r for the whole
+K) and ``dual()`` (the Delassus matrix D = B K^-1 B' and the gaps b0 at zero contact force).
 """
 from __future__ import annotations
 
@@ -318,6 +319,8 @@ class LocalReduction:
         self.g = ff.S_fixed @ self.u_fixed[I]
         self.c0 = float(-0.5 * qp.F @ self.u_fixed + 0.5 * self.g @ self.u_fixed[I])
         self.time_s = {"factor": t1 - t0, "reduce": time.perf_counter() - t1}
+        self._S_cho = None
+        self._dual = None
 
     def full(self, xI: np.ndarray) -> np.ndarray:
         """All unknowns x from the local ones (one solve with the cached factor)."""
@@ -332,6 +335,42 @@ class LocalReduction:
     def norm2(self, xI: np.ndarray) -> float:
         """x'Kx of the full vector determined by xI (without forming it)."""
         return float(xI @ (self.S @ xI) - 2.0 * self.c0)
+
+    @property
+    def S_cho(self):
+        """Dense Cholesky factor of S (computed once; ``scipy.linalg.cho_solve`` format)."""
+        if self._S_cho is None:
+            import scipy.linalg as dla
+
+            self._S_cho = dla.cho_factor(self.S, lower=True, check_finite=True)
+        return self._S_cho
+
+    def dual(self) -> tuple[np.ndarray, np.ndarray]:
+        """(D, b0) of the reduced dual LCP, computed once: the Delassus matrix D = B K^-1 B'
+        (dense m x m, symmetric positive definite) and b0 = B K^-1 F, the gaps B x at mu = 0.
+        The gaps at contact forces mu are ``D mu + b0``."""
+        if self._dual is None:
+            import scipy.linalg as dla
+
+            D = self.BI @ dla.cho_solve(self.S_cho, self.BI.T)
+            self._dual = (0.5 * (D + D.T), self.BI @ dla.cho_solve(self.S_cho, self.g))
+        return self._dual
+
+    def k_solve(self, r: np.ndarray) -> np.ndarray:
+        """K^-1 r for the whole K (two solves with the cached factor of K_fixed).
+
+        With K = K_fixed + K_param (K_param on I x I): u = K_fixed^-1 r, the local part solves
+        ``S x_I = S_fixed u_I``, and x = K_fixed^-1 (r + e) with e_I = S_fixed x_I - S_fixed u_I.
+        """
+        import scipy.linalg as dla
+
+        ff = self.factor
+        u = ff.solve(r)
+        gI = ff.S_fixed @ u[self.I]
+        xI = dla.cho_solve(self.S_cho, gI)
+        e = np.zeros_like(r)
+        e[self.I] = ff.S_fixed @ xI - gI
+        return ff.solve(r + e)
 
 
 #: dense Schur complement onto more local unknowns than this is refused (memory ~ 8 n^2 bytes)

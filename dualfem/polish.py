@@ -21,18 +21,13 @@ from .qp import QP
 
 def active_set_polish(qp: QP, x: np.ndarray, mu: np.ndarray, red=None):
     """(x, mu, info) polished on the guessed active set, or None if the guess is inconsistent."""
-    from .certify import k_solve
+    from .certify import refinement_step
     from .linalg import LocalReduction
 
     if x is None or mu is None or not (np.all(np.isfinite(x)) and np.all(np.isfinite(mu))):
         return None
     red = red or LocalReduction(qp)
-    if not hasattr(red, "_S_cho"):
-        red._S_cho = sla.cho_factor(red.S, lower=True)
-    cho = red._S_cho
-    D = red.BI @ sla.cho_solve(cho, red.BI.T)
-    D = 0.5 * (D + D.T)
-    b0 = red.BI @ sla.cho_solve(cho, red.g)
+    D, b0 = red.dual()
     m = qp.m
     c = 1.0 / np.diag(D).mean() if m else 1.0
     A = (np.asarray(mu) - c * (qp.B @ x)) > 0
@@ -46,13 +41,12 @@ def active_set_polish(qp: QP, x: np.ndarray, mu: np.ndarray, red=None):
     scale_gap = max(np.abs(b0).max(initial=0.0), 1e-300)
     if np.any(mu1[A] < 0) or np.any(gap[~A] < -1e-12 * scale_gap):
         return None
-    x1 = red.full(sla.cho_solve(cho, red.g + red.BI.T @ mu1))
+    x1 = red.full(sla.cho_solve(red.S_cho, red.g + red.BI.T @ mu1))
     # one step of iterative refinement on A with full-space residuals
-    dx = k_solve(red, qp.F + qp.B.T @ mu1 - qp.K @ x1)
-    dmu = np.zeros(m)
-    if A.any():
-        dmu[A] = sla.solve(D[np.ix_(A, A)], -(qp.B[A] @ (x1 + dx)), assume_a="pos")
-        dx = dx + k_solve(red, qp.B.T @ dmu)
+    try:
+        dx, dmu = refinement_step(qp, red.k_solve, D, x1, mu1, A)
+    except (np.linalg.LinAlgError, ValueError):
+        dx, dmu = np.zeros_like(x1), np.zeros_like(mu1)
     if np.all(mu1[A] + dmu[A] >= 0):
         x1, mu1 = x1 + dx, mu1 + dmu
     nrm = float(np.sqrt(max(x1 @ (qp.K @ x1), 1e-300)))

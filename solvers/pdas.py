@@ -57,17 +57,8 @@ class ReducedDualSolver(Solver):
 
         self.qp = qp
         self.red = LocalReduction(qp)
-        self.cho, self.D, self.b0 = reduced_dual(self.red)
-
-
-def reduced_dual(red):
-    """Cholesky of S and the LCP data (D, b0) of a :class:`~dualfem.linalg.LocalReduction`."""
-    cho = sla.cho_factor(red.S, lower=True, check_finite=True)
-    SiBt = sla.cho_solve(cho, red.BI.T)
-    D = red.BI @ SiBt
-    D = 0.5 * (D + D.T)
-    b0 = red.BI @ sla.cho_solve(cho, red.g)
-    return cho, D, b0
+        self.cho = self.red.S_cho
+        self.D, self.b0 = self.red.dual()
 
 
 @register_solver
@@ -146,7 +137,7 @@ class PDASSolver(ReducedDualSolver):
         the residual. Skipped when the relative residual is already <= 1e-13. Returns
         (x, mu, steps kept).
         """
-        from dualfem.certify import k_solve
+        from dualfem.certify import refinement_step
 
         qp, red = self.qp, self.red
         A = mu > 0
@@ -161,11 +152,7 @@ class PDASSolver(ReducedDualSolver):
         if r0 <= 1e-13 * fs:     # already at the rounding floor: skip the (4 solves) refinement
             return x, mu, 0
         for _ in range(steps):
-            dx = k_solve(red, qp.F + qp.B.T @ mu - qp.K @ x)
-            dmu = np.zeros_like(mu)
-            if A.any():
-                dmu[A] = sla.solve(self.D[np.ix_(A, A)], -(qp.B[A] @ (x + dx)), assume_a="pos")
-                dx = dx + k_solve(red, qp.B.T @ dmu)
+            dx, dmu = refinement_step(qp, red.k_solve, self.D, x, mu, A)
             x1, mu1 = x + dx, mu + dmu
             r1 = resid(x1, mu1)
             if not (r1 < r0) or np.any(mu1[A] < 0):

@@ -25,6 +25,16 @@ def test_reduction_is_exact(scene, name, delta):
     assert np.abs(red.full(xI) - x).max() <= 1e-10 * np.abs(x).max()
     assert red.energy(xI) == pytest.approx(qp.energy(x), rel=1e-10)
     assert red.norm2(xI) == pytest.approx(x @ (qp.K @ x), rel=1e-10)
+    # K^-1 r for any r, and the reduced dual data D = B K^-1 B', b0 = B K^-1 F
+    r = np.random.default_rng(0).standard_normal(qp.n)
+    y = sla.spsolve(qp.K.tocsc(), r)
+    assert np.abs(red.k_solve(r) - y).max() <= 1e-10 * np.abs(y).max()
+    Bd = qp.B.toarray()
+    D_ref = Bd @ np.linalg.solve(K, Bd.T)
+    D, b0 = red.dual()
+    assert np.abs(D - D_ref).max() <= 1e-9 * np.abs(D_ref).max() and np.array_equal(D, D.T)
+    assert np.abs(b0 - qp.B @ x).max() <= 1e-10 * np.abs(x).max()
+    assert red.dual()[0] is D                                   # computed once
 
 
 def test_factorization_shared_across_delta_and_load(scene):
