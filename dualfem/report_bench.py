@@ -92,7 +92,7 @@ def _plots(runs, floors, figdir: Path) -> tuple[list[str], list[str]]:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.ticker import NullFormatter
+    from matplotlib.ticker import FormatStrFormatter, NullFormatter
 
     figdir.mkdir(parents=True, exist_ok=True)
     variants = sorted({r["variant"] for r in runs})
@@ -135,7 +135,11 @@ def _plots(runs, floors, figdir: Path) -> tuple[list[str], list[str]]:
                     ax.axvline(floor_t[N][1], color="k", ls="--", lw=0.8, label="floor")
                 ax.set_xscale("log")
                 ax.set_yscale("log")
-                ax.xaxis.set_minor_formatter(NullFormatter())
+                lo, hi = ax.get_xlim()
+                if hi < 10 * lo:     # within one decade: no major tick, so label the minor ones
+                    ax.xaxis.set_minor_formatter(FormatStrFormatter("%g"))
+                else:
+                    ax.xaxis.set_minor_formatter(NullFormatter())
                 ax.set_title(f"{load} N={N:g} delta={d:g}", fontsize=9)
                 ax.set_xlabel("time (setup + solve) [s]")
                 ax.grid(True, which="major", alpha=0.3)
