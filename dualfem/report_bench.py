@@ -254,7 +254,7 @@ def targets(runs, floors, ours: list[str], err_target: float, floor_target: floa
                 sp_txt = f"{sp:.1f}" + (" ok" if sp >= speed_target else " MISSED")
                 if sp < speed_target:
                     misses.append(f"{s} at {sc[0]} N={sc[1]:g} delta={sc[2]:g}: {sp:.1f} x faster than "
-                                  f"{cb['variant']} ({speed_target / sp:.1f} x short of the target)")
+                                  f"{cb['variant']} (target {speed_target:g} x: {100 * (1 - sp / speed_target):.0f} % short)")
             elif comp:
                 slowest = max((_f(r.get("total_s")) for r in comp if math.isfinite(_f(r.get("total_s")))),
                               default=float("nan"))
