@@ -120,8 +120,12 @@ class Spec:
 
     @property
     def hard_limit(self) -> float:
-        """Wall-clock budget of one run before its process is killed."""
-        return self.time_limit * self.guard_factor + self.guard_slack
+        """Wall-clock budget of one run with the spec's time limit before its process is killed."""
+        return self.guard(self.time_limit)
+
+    def guard(self, time_limit: float) -> float:
+        """Wall-clock budget of a phase whose own time limit is ``time_limit`` (seconds)."""
+        return time_limit * self.guard_factor + self.guard_slack
 
 
 def _num(where: str, v: Any, *, lo: float = 0.0, integer: bool = False, allow_zero: bool = False) -> float:
@@ -345,7 +349,8 @@ def expand_tasks(spec: Spec, scenes: list[SceneSpec] | None = None) -> list[dict
             name = blk["name"]
             cls = reg.get(name)
             time_limit = spec.time_limit if blk.get("time_limit") is None else blk["time_limit"]
-            hard_limit = time_limit * spec.guard_factor + spec.guard_slack
+            hard_limit = spec.guard(time_limit)
+            repeats = sc.repeats if blk.get("repeats") is None else blk["repeats"]
             for combo in _grid(blk["grid"]):
                 variant = blk["label"] or name
                 if combo:
@@ -362,7 +367,6 @@ def expand_tasks(spec: Spec, scenes: list[SceneSpec] | None = None) -> list[dict
                     if cls is not None and "time_limit" in cls.defaults and "time_limit" not in base:
                         params["time_limit"] = float(time_limit)
                     tol = spec.tiers.get(tier, float("nan"))
-                    repeats = sc.repeats if blk.get("repeats") is None else blk["repeats"]
                     ident = {"scene": sc.key, "solver": name, "params": params, "tier": tier, "tol": tol,
                              "repeats": repeats, "warmup": sc.warmup, "cold": spec.cold_setup,
                              "time_limit": time_limit}
@@ -402,8 +406,7 @@ def reference_task(spec: Spec, sc: SceneSpec) -> dict:
     ident = {"ref": sc.key, "reference": spec.reference}
     return {"kind": "reference", "run_id": "ref-" + _hash(ident), "spec": spec.name, "scene": sc.scene,
             "scene_params": sc.params, "scene_key": sc.key, "label": sc.label,
-            "reference": spec.reference, "hard_limit": spec.reference["time_limit"] * spec.guard_factor
-            + spec.guard_slack, "build_limit": spec.build_limit, "repeats": 0, "warmup": False}
+            "reference": spec.reference, "hard_limit": spec.guard(spec.reference["time_limit"]), "build_limit": spec.build_limit, "repeats": 0, "warmup": False}
 
 
 def floor_tasks(spec: Spec, scenes: list[SceneSpec]) -> list[dict]:
@@ -720,11 +723,9 @@ def _recv_blocking(fh) -> Any:
 
 def _child_main() -> None:  # pragma: no cover - runs in the child process
     """Serve tasks on stdin/stdout; solver output written to fd 1 goes to stderr instead."""
-    try:  # a run that exhausts the machine's memory: the kernel should kill this worker, not the sweep
-        with open("/proc/self/oom_score_adj", "w") as fh:
-            fh.write("1000")
-    except OSError:
-        pass
+    from .worker import volunteer_for_oom_killer
+
+    volunteer_for_oom_killer()
     out_fd = os.dup(1)
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, 1)      # C libraries print to fd 1 (e.g. OSQP's polishing notes): drop it

@@ -87,13 +87,13 @@ class KSolver:
     def delassus(self) -> np.ndarray | None:
         if self._D is None:
             if self.red is not None:
-                D = self.red.dual()[0]
+                self._D = self.red.dual()[0]          # symmetric already
             elif self.qp.m <= 2000:
                 Bd = self.qp.B.toarray()
                 D = Bd @ np.column_stack([self._lu.solve(b) for b in Bd]) if self.qp.m else np.zeros((0, 0))
+                self._D = 0.5 * (D + D.T)
             else:
                 return None
-            self._D = 0.5 * (D + D.T)
         return self._D
 
 

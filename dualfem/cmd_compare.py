@@ -9,10 +9,9 @@ one JSON object on stdout; one progress line per finished solver goes to stderr.
 """
 from __future__ import annotations
 
-
-from .quiet import c_stdout_to_stderr
 from .cli import add_scene_args, command, dumps, scene_from_args
 from .errors import InputError
+from .quiet import c_stdout_to_stderr
 
 
 def _cfg(p):

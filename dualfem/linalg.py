@@ -26,6 +26,7 @@ from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.linalg as dla
 import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 import scipy.sparse.linalg as sla
@@ -340,8 +341,6 @@ class LocalReduction:
     def S_cho(self):
         """Dense Cholesky factor of S (computed once; ``scipy.linalg.cho_solve`` format)."""
         if self._S_cho is None:
-            import scipy.linalg as dla
-
             self._S_cho = dla.cho_factor(self.S, lower=True, check_finite=True)
         return self._S_cho
 
@@ -350,8 +349,6 @@ class LocalReduction:
         (dense m x m, symmetric positive definite) and b0 = B K^-1 F, the gaps B x at mu = 0.
         The gaps at contact forces mu are ``D mu + b0``."""
         if self._dual is None:
-            import scipy.linalg as dla
-
             D = self.BI @ dla.cho_solve(self.S_cho, self.BI.T)
             self._dual = (0.5 * (D + D.T), self.BI @ dla.cho_solve(self.S_cho, self.g))
         return self._dual
@@ -362,8 +359,6 @@ class LocalReduction:
         With K = K_fixed + K_param (K_param on I x I): u = K_fixed^-1 r, the local part solves
         ``S x_I = S_fixed u_I``, and x = K_fixed^-1 (r + e) with e_I = S_fixed x_I - S_fixed u_I.
         """
-        import scipy.linalg as dla
-
         ff = self.factor
         u = ff.solve(r)
         gI = ff.S_fixed @ u[self.I]

@@ -63,7 +63,7 @@ def generate(out: Path, N: int = 32, dpi: int = 110, sizes=(16, 32, 64, 128)) ->
     qp = prob.build()
     p = prob.params
     ref = run(ref_name, qp)
-    md += [f"## Signorini contact: every solver\n",
+    md += ["## Signorini contact: every solver\n",
            f"`problems/signorini.py`: elastic rectangle {p['width']:g} x {p['height']:g} (E = {p['E']:g}, nu = "
            f"{p['nu']:g}, plane {p['plane']}), N = {N} ({qp.n} unknowns, {qp.m} bottom nodes), pressed by a flat "
            f"frictionless punch (indentation {p['indent']:g}) onto a rigid obstacle with initial gap "

@@ -54,7 +54,7 @@ import platform
 import sys
 import time
 from collections import OrderedDict
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from multiprocessing.connection import wait
 from pathlib import Path
 from typing import Any
@@ -414,11 +414,9 @@ def _worker_main(conn) -> None:  # pragma: no cover - runs in a child process
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     parent = os.getppid()
     peak = [0.0]
-    try:  # on a shared machine, if memory runs out the kernel should kill this worker first
-        with open("/proc/self/oom_score_adj", "w") as fh:
-            fh.write("1000")
-    except OSError:
-        pass
+    from .worker import volunteer_for_oom_killer
+
+    volunteer_for_oom_killer()
 
     def watch() -> None:  # sample memory; exit if the parent died (never leave orphans)
         while True:
