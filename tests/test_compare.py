@@ -19,20 +19,26 @@ def qp():
     return load_scene("f2", {"N": 16, "delta": 1e-5}).build()
 
 
-class _WrongSolver(Solver):
-    """Returns a slightly wrong answer and claims success (a silent wrong answer)."""
+class _FromPdas(Solver):
+    """Test double: pdas's answer with x multiplied by ``x_factor``, claiming success."""
 
-    name = "test_wrong"
     description = "test double"
-    tolerance = 1e-6
+    x_factor = 1.0
 
     def solve(self):
-        from dualfem.linalg import LocalReduction  # noqa: F401  (nothing to set up)
-
         ref = registry.get_solver("pdas")()
         ref.setup(self.qp)
         s = ref.solve()
-        return Solution(solver=self.name, status=Status.SOLVED, x=s.x * (1 + 1e-3), multipliers=s.multipliers)
+        return Solution(solver=self.name, status=Status.SOLVED, x=s.x * self.x_factor,
+                        multipliers=s.multipliers.copy())
+
+
+class _WrongSolver(_FromPdas):
+    """Returns a slightly wrong answer and claims success (a silent wrong answer)."""
+
+    name = "test_wrong"
+    tolerance = 1e-6
+    x_factor = 1 + 1e-3
 
 
 class _HonestFailure(Solver):
@@ -134,18 +140,11 @@ def test_cli_solver_params(capsys):
     assert pen["params"]["rho_growth"] == 10.0
 
 
-class _Clone(Solver):
+class _Clone(_FromPdas):
     """Returns exactly pdas's answer (same linear algebra): no independent confirmation."""
 
     name = "test_clone"
-    description = "test double"
     tolerance = 1e-9
-
-    def solve(self):
-        ref = registry.get_solver("pdas")()
-        ref.setup(self.qp)
-        s = ref.solve()
-        return Solution(solver=self.name, status=Status.SOLVED, x=s.x.copy(), multipliers=s.multipliers.copy())
 
 
 def test_identical_answer_is_not_a_cross_check(qp, monkeypatch):
