@@ -22,9 +22,9 @@ def main(argv=None) -> int:
     ap.add_argument("--scenes", default="f1,f2,f3")
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    from dualfem import evaluator
-    from dualfem.runner import run
-    from dualfem.scene import load_scene
+    from dualfem.core import evaluator
+    from dualfem.core.runner import run
+    from dualfem.core.scene import load_scene
 
     recs = []
     print(f"{'scene':5s} {'N':>4s} {'delta':>7s} {'status':8s} {'newton':>6s} {'active':>6s} {'kkt':>8s} "

@@ -19,10 +19,10 @@ import scipy.sparse as sp
 import dualfem.scaling as S
 import solvers.clarabel_ as C
 import solvers.osqp_ as O
-from dualfem import evaluator
-from dualfem.runner import run
-from dualfem.scene import load_scene
-from dualfem.stress import BASE, LOAD_SCALES, UNITS, scene_in_units
+from dualfem.core import evaluator
+from dualfem.core.runner import run
+from dualfem.core.scene import load_scene
+from dualfem.experiments.stress import BASE, LOAD_SCALES, UNITS, scene_in_units
 
 
 def variable_scaling(qp, enable=True):

@@ -5,9 +5,9 @@ The public API: :class:`~dualfem.qp.QP`, :class:`~dualfem.solution.Solution`,
 :func:`~dualfem.scene.load_scene`, and the plugin bases :class:`~dualfem.solver.Solver` and
 :class:`~dualfem.problem.Problem`.
 """
-from .errors import InputError, MissingDependency
-from .qp import QP
-from .solution import Solution, Status
+from dualfem.core.errors import InputError, MissingDependency
+from dualfem.core.qp import QP
+from dualfem.core.solution import Solution, Status
 
 __version__ = "0.1.0"
 

@@ -41,10 +41,10 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-from dualfem.errors import InputError, check_positive
-from dualfem.problem import Problem
-from dualfem.qp import QP
-from dualfem.registry import register_problem
+from dualfem.core.errors import InputError, check_positive
+from dualfem.core.problem import Problem
+from dualfem.core.qp import QP
+from dualfem.core.registry import register_problem
 
 STORAGE = ("full", "upper", "lower")
 

@@ -12,7 +12,7 @@ from typing import Callable
 
 import numpy as np
 
-from dualfem.errors import InputError
+from dualfem.core.errors import InputError
 
 Traction = Callable[[np.ndarray, np.ndarray], "np.ndarray | tuple[np.ndarray, np.ndarray]"]
 

@@ -44,13 +44,13 @@ import ast
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.errors import InputError, check_int, check_open_interval, check_positive
-from dualfem.problem import Problem
-from dualfem.qp import QP
-from dualfem.registry import register_problem
+from dualfem.core.elasticity import PLANES, lame
+from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
+from dualfem.core.problem import Problem
+from dualfem.core.qp import QP
+from dualfem.core.registry import register_problem
 
 from .loads import _ALLOWED
-from .thin_defect import PLANES, lame
 
 
 def gap_function(expr: str):

@@ -23,24 +23,13 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.errors import InputError, check_int, check_open_interval, check_positive
-from dualfem.problem import Problem
-from dualfem.qp import QP
-from dualfem.registry import register_problem
+from dualfem.core.elasticity import PLANES, lame
+from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
+from dualfem.core.problem import Problem
+from dualfem.core.qp import QP
+from dualfem.core.registry import register_problem
 
 from .loads import resolve_load
-
-PLANES = ("strain", "stress")
-
-
-def lame(E: float, nu: float, plane: str) -> tuple[float, float]:
-    """Lame parameters (lambda, mu) of the 2D model; plane stress uses lambda* = 2 lambda mu / (lambda + 2 mu)."""
-    lam = E * nu / ((1 + nu) * (1 - 2 * nu))
-    mu = E / (2 * (1 + nu))
-    if plane == "stress":
-        lam = 2 * lam * mu / (lam + 2 * mu)
-    return lam, mu
-
 
 def _parse_defect(value) -> np.ndarray:
     if isinstance(value, str):

@@ -17,10 +17,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.registry import register_solver
-from dualfem.scaling import scale
-from dualfem.solution import Solution, Status
-from dualfem.solver import Solver, positive
+from dualfem.core.registry import register_solver
+from dualfem.numerics.scaling import scale
+from dualfem.core.solution import Solution, Status
+from dualfem.core.solver import Solver, positive
 
 _STATUS = {
     "Solved": Status.SOLVED,
@@ -98,8 +98,8 @@ class ClarabelSolver(Solver):
 def _polish(qp, x, z):
     """Active-set polish (:func:`dualfem.polish.active_set_polish`); kept only if it is consistent
     and lowers the evaluator's KKT error."""
-    from dualfem import evaluator
-    from dualfem.polish import active_set_polish
+    from dualfem.core import evaluator
+    from dualfem.numerics.polish import active_set_polish
 
     before = evaluator.kkt_error(evaluator.residuals(qp, x, z))
     out = active_set_polish(qp, x, z)

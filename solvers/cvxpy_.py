@@ -32,12 +32,12 @@ import warnings
 
 import numpy as np
 
-from dualfem.errors import InputError
-from dualfem.quiet import c_stdout_to_stderr
-from dualfem.registry import register_solver
-from dualfem.scaling import scale
-from dualfem.solution import Solution, Status
-from dualfem.solver import Solver, positive
+from dualfem.core.errors import InputError
+from dualfem.core.quiet import c_stdout_to_stderr
+from dualfem.core.registry import register_solver
+from dualfem.numerics.scaling import scale
+from dualfem.core.solution import Solution, Status
+from dualfem.core.solver import Solver, positive
 
 #: accuracy promised per backend at default settings (relative energy-norm error of x)
 BACKEND_TOLERANCE = {"CLARABEL": 1e-5, "ECOS": 1e-5, "MOSEK": 1e-5, "GUROBI": 1e-5,
@@ -147,7 +147,7 @@ class CvxpySolver(Solver):
         x, mu = self._scaled.unscale(np.asarray(yv, float).ravel(), np.asarray(nu, float).ravel())
         msg = f"cvxpy/{backend}: {text}"
         if self.params["polish"] and status in (Status.SOLVED, Status.INACCURATE):
-            from dualfem.polish import active_set_polish
+            from dualfem.numerics.polish import active_set_polish
 
             try:
                 pol = active_set_polish(self.qp, x, mu)

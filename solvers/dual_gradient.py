@@ -33,10 +33,10 @@ import time
 import numpy as np
 import scipy.sparse.linalg as sla
 
-from dualfem.errors import InputError
-from dualfem.registry import register_solver
-from dualfem.solution import Solution, Status
-from dualfem.solver import Solver, positive
+from dualfem.core.errors import InputError
+from dualfem.core.registry import register_solver
+from dualfem.core.solution import Solution, Status
+from dualfem.core.solver import Solver, positive
 
 
 @register_solver

@@ -11,11 +11,11 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.quiet import c_stdout_to_stderr
-from dualfem.registry import register_solver
-from dualfem.scaling import scale
-from dualfem.solution import Solution, Status
-from dualfem.solver import Solver, positive
+from dualfem.core.quiet import c_stdout_to_stderr
+from dualfem.core.registry import register_solver
+from dualfem.numerics.scaling import scale
+from dualfem.core.solution import Solution, Status
+from dualfem.core.solver import Solver, positive
 
 _STATUS = {
     "solved": Status.SOLVED,

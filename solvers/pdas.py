@@ -37,12 +37,12 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
-from dualfem.errors import InputError
-from dualfem.registry import register_solver
-from dualfem.solution import Solution, Status
-from dualfem.solver import Solver, positive
+from dualfem.core.errors import InputError
+from dualfem.core.registry import register_solver
+from dualfem.core.solution import Solution, Status
+from dualfem.core.solver import Solver, positive
 
-from dualfem.linalg import MAX_LOCAL, too_many_local  # noqa: E402  (shared with penalty, uzawa)
+from dualfem.numerics.linalg import MAX_LOCAL, too_many_local  # noqa: E402  (shared with penalty, uzawa)
 
 
 class ReducedDualSolver(Solver):
@@ -53,7 +53,7 @@ class ReducedDualSolver(Solver):
         return too_many_local(qp, MAX_LOCAL)
 
     def setup(self, qp) -> None:
-        from dualfem.linalg import LocalReduction
+        from dualfem.numerics.linalg import LocalReduction
 
         self.qp = qp
         self.red = LocalReduction(qp)
@@ -137,7 +137,7 @@ class PDASSolver(ReducedDualSolver):
         the residual. Skipped when the relative residual is already <= 1e-13. Returns
         (x, mu, steps kept).
         """
-        from dualfem.certify import refinement_step
+        from dualfem.core.certify import refinement_step
 
         qp, red = self.qp, self.red
         A = mu > 0

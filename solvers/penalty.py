@@ -41,9 +41,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
-from dualfem.registry import register_solver
-from dualfem.solution import Solution, Status
-from dualfem.solver import positive
+from dualfem.core.registry import register_solver
+from dualfem.core.solution import Solution, Status
+from dualfem.core.solver import positive
 
 from .pdas import ReducedDualSolver
 
@@ -72,7 +72,7 @@ class PenaltySolver(ReducedDualSolver):
     def validate(self) -> None:
         positive(self, "penetration_tol", "rho0_factor", "rho_growth", "rho_max_factor",
                  "newton_tol", "max_newton", "sigma", "max_backtracks")
-        from dualfem.errors import InputError
+        from dualfem.core.errors import InputError
 
         if self.params["rho_growth"] <= 1:
             raise InputError(f"parameter 'rho_growth' of solver 'penalty' must be > 1, "

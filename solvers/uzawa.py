@@ -69,10 +69,10 @@ import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-from dualfem.errors import InputError
-from dualfem.registry import register_solver
-from dualfem.solution import Solution, Status
-from dualfem.solver import Solver, positive
+from dualfem.core.errors import InputError
+from dualfem.core.registry import register_solver
+from dualfem.core.solution import Solution, Status
+from dualfem.core.solver import Solver, positive
 
 
 def _contraction(history: list[dict], last: int = 5) -> float:
@@ -87,7 +87,7 @@ class _ReducedSpace:
     """Dense linear algebra on the local unknowns I (exact reduction)."""
 
     def __init__(self, qp, norm: str):
-        from dualfem.linalg import LocalReduction
+        from dualfem.numerics.linalg import LocalReduction
 
         if norm != "energy":
             raise InputError("parameter 'inner_norm' of solver 'uzawa' must be 'energy' with "
@@ -225,7 +225,7 @@ class Uzawa(Solver):
 
     def skip(self, qp) -> str | None:
         if self.params["linalg"] == "reduced":
-            from dualfem.linalg import too_many_local
+            from dualfem.numerics.linalg import too_many_local
 
             return too_many_local(qp)
         return None

@@ -5,7 +5,7 @@ import functools
 
 import pytest
 
-from dualfem.scene import load_scene
+from dualfem.core.scene import load_scene
 
 
 @functools.lru_cache(maxsize=None)

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from dualfem import evaluator
-from dualfem.runner import run
+from dualfem.core import evaluator
+from dualfem.core.runner import run
 
 
 @pytest.mark.parametrize("name", ["f1", "f2", "f3"])
@@ -62,8 +62,8 @@ def test_unscaled_option_still_maps_signs(scene, solver):
 
 
 def test_solver_parameter_errors():
-    from dualfem.errors import InputError
-    from dualfem.runner import make_solver
+    from dualfem.core.errors import InputError
+    from dualfem.core.runner import make_solver
 
     with pytest.raises(InputError, match="unknown parameter 'eps'"):
         make_solver("osqp", {"eps": 1})
@@ -85,8 +85,8 @@ def test_clarabel_polish_removes_its_small_delta_error(scene):
 
 
 def test_missing_dependency_is_one_line_exit_2(monkeypatch, capsys):
-    from dualfem.cli import main
-    from dualfem.registry import get_solver
+    from dualfem.cli.main import main
+    from dualfem.core.registry import get_solver
 
     monkeypatch.setattr(get_solver("osqp"), "requires", ("osqp_not_installed_here",))
     assert main(["solve", "f2", "--set", "N=8", "--solver", "osqp"]) == 2
@@ -98,7 +98,7 @@ def test_missing_dependency_is_one_line_exit_2(monkeypatch, capsys):
 @pytest.mark.parametrize("load_scale", [1e-6, 1e6])
 def test_backends_invariant_to_load_magnitude(scene, solver, load_scale):
     """The scaling normalises the unknowns, so the load magnitude cannot hurt the backends."""
-    from dualfem.scene import load_scene
+    from dualfem.core.scene import load_scene
 
     _, qp = scene("f2", 16, 1e-5)
     base = run(solver, qp)

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dualfem.cli import main
-from dualfem.registry import solvers
+from dualfem.cli.main import main
+from dualfem.core.registry import solvers
 
 SMALL = ["--set", "N=8"]
 
@@ -108,8 +108,8 @@ def test_scene_and_cli_inputs(case, capsys):
 
 
 def test_python_load_function_that_breaks():
-    from dualfem.errors import InputError
-    from dualfem.scene import load_scene
+    from dualfem.core.errors import InputError
+    from dualfem.core.scene import load_scene
 
     def bad(x, y):
         raise ZeroDivisionError("boom")
@@ -278,8 +278,8 @@ def test_corrupt_and_missing_qp_files(tmp_path, capsys):
 # ---------------------------------------------------------- missing optional dependency
 @pytest.fixture
 def fake_missing_solver():
-    from dualfem import registry
-    from dualfem.solver import Solver
+    from dualfem.core import registry
+    from dualfem.core.solver import Solver
 
     registry.solvers()
 
@@ -302,8 +302,8 @@ def test_missing_dependency_one_stderr_line(fake_missing_solver, extra, capsys):
 
 
 def test_missing_dependency_in_the_grid_is_a_skip_with_the_reason(fake_missing_solver):
-    from dualfem.runner import run
-    from dualfem.scene import load_scene
+    from dualfem.core.runner import run
+    from dualfem.core.scene import load_scene
 
     sol = run(fake_missing_solver, load_scene("f2", {"N": 8}).build())
     assert str(sol.status) == "skipped" and "pip install 'dualfem[fake]'" in sol.message

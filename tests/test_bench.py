@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from dualfem import bench
-from dualfem.errors import InputError
+from dualfem.experiments import bench
+from dualfem.core.errors import InputError
 
 SMALL = """
 name = "t"
@@ -77,7 +77,7 @@ def test_bad_scene_parameter_is_input_error(tmp_path):
 
 
 def test_cli_bad_spec_exit_2(tmp_path, capsys):
-    from dualfem.cli import main
+    from dualfem.cli.main import main
 
     rc = main(["bench", str(write(tmp_path, SMALL.replace('name = "osqp"', 'name = "osqq"'))),
                "--out", str(tmp_path / "o")])
@@ -154,7 +154,7 @@ def test_rerun_recomputes_nothing(small_sweep):
 
 
 def test_report(small_sweep, tmp_path):
-    from dualfem.report_bench import build_report
+    from dualfem.reports.bench import build_report
 
     _, out, _ = small_sweep
     md = build_report(out / "results.csv", tmp_path / "benchmark.md", tmp_path / "bench", ours=["osqp"])
@@ -168,7 +168,7 @@ def test_report(small_sweep, tmp_path):
 
 
 def test_report_cli(small_sweep, tmp_path):
-    from dualfem.cli import main
+    from dualfem.cli.main import main
 
     _, out, _ = small_sweep
     assert main(["report", "bench", "--", str(out), "--md", str(tmp_path / "b.md"),
@@ -178,7 +178,7 @@ def test_report_cli(small_sweep, tmp_path):
 
 
 def test_tier_statistics_by_hand():
-    from dualfem.report_bench import tier_table
+    from dualfem.reports.bench import tier_table
 
     def row(var, scene, status, kkt, t):
         return {"variant": var, "scene_key": scene, "tier": "x", "status": status, "kkt_error": kkt,
@@ -402,7 +402,7 @@ def test_solver_block_time_limit_and_repeats(tmp_path):
 
 
 def test_report_merges_sweeps_later_wins(small_sweep, tmp_path):
-    from dualfem.report_bench import build_report, load_sources
+    from dualfem.reports.bench import build_report, load_sources
 
     _, out, _ = small_sweep
     rows = bench.read_results(out / "results.csv")
@@ -421,7 +421,7 @@ def test_report_merges_sweeps_later_wins(small_sweep, tmp_path):
 
 
 def test_targets_table_by_hand():
-    from dualfem.report_bench import targets
+    from dualfem.reports.bench import targets
 
     def run(solver, status, t, err, delta=1e-9):
         return {"kind": "run", "scene": "f2", "scene_N": 1024, "scene_delta": delta, "solver": solver,

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from dualfem.cli import main
+from dualfem.cli.main import main
 
 FIELDS = {"solver", "status", "ndof", "n_defect_nodes", "energy", "max_jump", "n_contact", "iterations",
           "time_s", "residuals"}
@@ -35,7 +35,7 @@ def test_toml_scene_and_export(tmp_path, capsys):
     scene.write_text('scene = "f2"\nN = 8\ndelta = 1e-3\nplane = "stress"\n')
     out = tmp_path / "q.npz"
     assert main(["export", str(scene), "-o", str(out)]) == 0
-    from dualfem.qp import QP
+    from dualfem.core.qp import QP
 
     qp = QP.load(out)
     assert qp.m == 3 and qp.params["plane"] == "stress"

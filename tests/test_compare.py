@@ -6,12 +6,12 @@ import json
 import numpy as np
 import pytest
 
-from dualfem import registry
-from dualfem.cli import main
-from dualfem.compare import RUN_FIELDS, compare_solvers
-from dualfem.scene import load_scene
-from dualfem.solution import Solution, Status
-from dualfem.solver import Solver
+from dualfem.core import registry
+from dualfem.cli.main import main
+from dualfem.experiments.compare import RUN_FIELDS, compare_solvers
+from dualfem.core.scene import load_scene
+from dualfem.core.solution import Solution, Status
+from dualfem.core.solver import Solver
 
 
 @pytest.fixture(scope="module")

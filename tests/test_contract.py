@@ -25,13 +25,13 @@ import pytest
 
 from _lcp import enumerate_lcp
 
-from dualfem import evaluator
-from dualfem.certify import certified_error
-from dualfem.errors import InputError
-from dualfem.registry import solvers
-from dualfem.runner import run
-from dualfem.scene import load_scene
-from dualfem.solution import Solution, Status
+from dualfem.core import evaluator
+from dualfem.core.certify import certified_error
+from dualfem.core.errors import InputError
+from dualfem.core.registry import solvers
+from dualfem.core.runner import run
+from dualfem.core.scene import load_scene
+from dualfem.core.solution import Solution, Status
 
 N = 16
 LOADS = ("f1", "f2", "f3")

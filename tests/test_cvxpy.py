@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 from _lcp import enumerate_lcp
 
-from dualfem import evaluator
-from dualfem.errors import InputError
-from dualfem.registry import get_solver
-from dualfem.runner import make_solver, run
-from dualfem.scene import load_scene
-from dualfem.solution import Status
+from dualfem.core import evaluator
+from dualfem.core.errors import InputError
+from dualfem.core.registry import get_solver
+from dualfem.core.runner import make_solver, run
+from dualfem.core.scene import load_scene
+from dualfem.core.solution import Status
 
 cp = pytest.importorskip("cvxpy")
 
@@ -92,7 +92,7 @@ def test_backend_output_does_not_reach_stdout(f2, capfd):
 
 def test_polish_refuses_an_inconsistent_guess():
     """f3 (faces open): guessing every node in contact gives negative forces -> no polish."""
-    from dualfem.polish import active_set_polish
+    from dualfem.numerics.polish import active_set_polish
 
     qp = load_scene("f3", {"N": 16, "delta": 1e-1}).build()
     x_open, mu_open, _ = enumerate_lcp(qp.K, qp.F, qp.B)

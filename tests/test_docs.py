@@ -32,7 +32,7 @@ from pathlib import Path
 
 import pytest
 
-from dualfem import registry
+from dualfem.core import registry
 
 REPO = Path(__file__).resolve().parents[1]
 GUIDE = REPO / "docs" / "plugins.md"
@@ -68,7 +68,7 @@ def available(cmd: str) -> str | None:
     """None if the command can run in this checkout, else why not."""
     argv = shlex.split(cmd)
     if argv[0] == "dualfem" and len(argv) > 1 and argv[1] in OPTIONAL_COMMANDS:
-        from dualfem.cli import _COMMANDS, _import_commands
+        from dualfem.cli.main import _COMMANDS, _import_commands
 
         _import_commands()
         if argv[1] not in _COMMANDS:

@@ -1,12 +1,12 @@
 """The template solver solvers/dual_gradient.py: right answers, honest failure statuses."""
 import pytest
 
-from dualfem import evaluator
-from dualfem.errors import InputError
-from dualfem.registry import solvers
-from dualfem.runner import run
-from dualfem.scene import load_scene
-from dualfem.solution import Status
+from dualfem.core import evaluator
+from dualfem.core.errors import InputError
+from dualfem.core.registry import solvers
+from dualfem.core.runner import run
+from dualfem.core.scene import load_scene
+from dualfem.core.solution import Status
 
 
 def reference_name():

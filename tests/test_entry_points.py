@@ -92,9 +92,9 @@ def test_third_party_answers_are_right(plugin_env):
     """In-process: the same entry points, loaded by a fresh registry, give correct answers."""
     code = r"""
 import numpy as np
-from dualfem import evaluator
-from dualfem.runner import run
-from dualfem.scene import load_scene
+from dualfem.core import evaluator
+from dualfem.core.runner import run
+from dualfem.core.scene import load_scene
 qp = load_scene("string", {"N": 64, "q": 1.0, "tension": 1.0, "lift": 0.05}).build()
 s = run("example_nnls", qp)
 ref = run("clarabel", qp)

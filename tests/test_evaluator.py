@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dualfem import evaluator
-from dualfem.runner import run
+from dualfem.core import evaluator
+from dualfem.core.runner import run
 
 
 @pytest.fixture
@@ -71,7 +71,7 @@ def test_compare(solved):
 def test_residuals_are_scale_free(solved):
     """Same answer in other units (forces x 1e6, lengths x 1e-3) -> same residuals."""
     qp, sol = solved
-    from dualfem.qp import QP
+    from dualfem.core.qp import QP
 
     a, b = 1e6, 1e-3  # force and length scale factors: K ~ force/length
     qp2 = QP(K=qp.K * (a / b), F=qp.F * a, B=qp.B, weights=qp.weights * b)

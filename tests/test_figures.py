@@ -13,13 +13,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from dualfem import figures as F  # noqa: E402
-from dualfem.errors import InputError  # noqa: E402
-from dualfem.post import Post  # noqa: E402
-from dualfem.registry import solvers  # noqa: E402
-from dualfem.runner import run  # noqa: E402
-from dualfem.scene import load_scene  # noqa: E402
-from dualfem.solution import Solution, Status  # noqa: E402
+from dualfem.post import figures as F  # noqa: E402
+from dualfem.core.errors import InputError  # noqa: E402
+from dualfem.post.fields import Post  # noqa: E402
+from dualfem.core.registry import solvers  # noqa: E402
+from dualfem.core.runner import run  # noqa: E402
+from dualfem.core.scene import load_scene  # noqa: E402
+from dualfem.core.solution import Solution, Status  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -114,7 +114,7 @@ def test_plot_history_fake_solution():
 
 @pytest.mark.skipif("uzawa" not in solvers(), reason="the uzawa solver is not registered")
 def test_report_figures_small(tmp_path):
-    from dualfem.report_figures import generate
+    from dualfem.reports.figures import generate
 
     text = generate(tmp_path, N=8, sweep=(1e-1, 1e-5), dpi=40, history_solvers=["pdas"] if "pdas" in solvers() else [],
                     progress=lambda m: None)
@@ -126,7 +126,7 @@ def test_report_figures_small(tmp_path):
 
 
 def test_report_convergence_small(tmp_path):
-    from dualfem.report_convergence import run as report
+    from dualfem.reports.convergence import run as report
 
     assert report(["--deltas", "0.1", "--N", "8,16", "--ref-N", "32", "--out", str(tmp_path)]) == 0
     res = json.loads((tmp_path / "convergence.json").read_text())

@@ -6,14 +6,14 @@ import pytest
 import scipy.io
 import scipy.sparse as sp
 
-from dualfem import evaluator
-from dualfem.cli import main
-from dualfem.errors import InputError
-from dualfem.registry import solvers
-from dualfem.runner import run
-from dualfem.scene import load_scene
-from dualfem.solution import Status
-from problems.generic_qp import original_objective, original_x
+from dualfem.core import evaluator
+from dualfem.cli.main import main
+from dualfem.core.errors import InputError
+from dualfem.core.registry import solvers
+from dualfem.core.runner import run
+from dualfem.core.scene import load_scene
+from dualfem.core.solution import Status
+from dualfem.problems.generic_qp import original_objective, original_x
 
 
 def random_qp(n=25, m=8, seed=0):
@@ -215,7 +215,7 @@ def test_missing_and_corrupt_files(tmp_path):
     v73.write_bytes(hdr.ljust(116, b" ") + b"\x00" * 8 + b"\x00\x02" + b"IM" + b"\x00" * 384)
     with pytest.raises(InputError, match="-v7"):
         load_scene(str(v73)).build()
-    from dualfem.registry import get_problem
+    from dualfem.core.registry import get_problem
 
     with pytest.raises(InputError, match="path"):
         get_problem("qp_file")()

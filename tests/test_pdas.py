@@ -6,12 +6,12 @@ import pytest
 import scipy.sparse as sp
 from _lcp import enumerate_lcp
 
-from dualfem import evaluator
-from dualfem.errors import InputError
-from dualfem.qp import QP
-from dualfem.runner import make_solver, run
-from dualfem.scene import load_scene
-from dualfem.solution import Status
+from dualfem.core import evaluator
+from dualfem.core.errors import InputError
+from dualfem.core.qp import QP
+from dualfem.core.runner import make_solver, run
+from dualfem.core.scene import load_scene
+from dualfem.core.solution import Status
 
 # A 3-constraint QP (K = D^-1, B = I, so D is the Delassus matrix) on which plain PDAS cycles
 # from the cold start: found by a random search over SPD matrices (not an M-matrix).
@@ -93,7 +93,7 @@ def test_bad_parameters(bad):
 
 
 def test_tolerance_params():
-    from dualfem.registry import get_solver
+    from dualfem.core.registry import get_solver
 
     cls = get_solver("pdas")
     assert cls.tolerance_params(1e-6)["tol"] <= cls.defaults["tol"]

@@ -5,13 +5,13 @@ import numpy as np
 import pytest
 from _lcp import enumerate_lcp
 
-from dualfem import evaluator
-from dualfem.errors import InputError
-from dualfem.qp import QP
-from dualfem.registry import get_solver
-from dualfem.runner import make_solver, run
-from dualfem.scene import load_scene
-from dualfem.solution import Status
+from dualfem.core import evaluator
+from dualfem.core.errors import InputError
+from dualfem.core.qp import QP
+from dualfem.core.registry import get_solver
+from dualfem.core.runner import make_solver, run
+from dualfem.core.scene import load_scene
+from dualfem.core.solution import Status
 
 
 @pytest.fixture(scope="module")

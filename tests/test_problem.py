@@ -6,10 +6,10 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-from dualfem import evaluator
-from dualfem.errors import InputError
-from dualfem.scene import load_scene
-from problems.thin_defect import lame
+from dualfem.core import evaluator
+from dualfem.core.errors import InputError
+from dualfem.core.scene import load_scene
+from dualfem.problems.thin_defect import lame
 
 
 @pytest.mark.parametrize("plane", ["strain", "stress"])
@@ -115,7 +115,7 @@ def test_diagonal_defect_normal_not_x2():
 
 @pytest.mark.parametrize("solver", ["clarabel"])
 def test_f3_opens_and_f1_closes(solver):
-    from dualfem.runner import run
+    from dualfem.core.runner import run
 
     qp3 = load_scene("f3", {"N": 16, "delta": 0.1}).build()
     s3 = run(solver, qp3)
@@ -141,7 +141,7 @@ def test_load_cases_resultant():
 
 
 def test_plane_stress_softer_than_plane_strain():
-    from dualfem.runner import run
+    from dualfem.core.runner import run
 
     e = {}
     for plane in ("strain", "stress"):

@@ -18,12 +18,12 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from dualfem import evaluator
-from dualfem.registry import solvers
-from dualfem.runner import run
-from dualfem.scene import load_scene
-from dualfem.solution import Status
-from dualfem.stress import SAFETY, reference_solvers
+from dualfem.core import evaluator
+from dualfem.core.registry import solvers
+from dualfem.core.runner import run
+from dualfem.core.scene import load_scene
+from dualfem.core.solution import Status
+from dualfem.experiments.stress import SAFETY, reference_solvers
 
 REG = solvers()
 EXACT = sorted(n for n, c in REG.items() if c.exact and c.missing() is None)

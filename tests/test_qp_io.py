@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from dualfem.errors import InputError
-from dualfem.qp import QP
+from dualfem.core.errors import InputError
+from dualfem.core.qp import QP
 
 
 @pytest.mark.parametrize("ext", [".npz", ".mat"])
@@ -39,7 +39,7 @@ def test_atomic_write_gives_usual_permissions(tmp_path):
     import os
     import stat
 
-    from dualfem.io import atomic_write_text
+    from dualfem.core.io import atomic_write_text
 
     umask = os.umask(0o022)
     try:

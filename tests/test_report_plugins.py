@@ -3,9 +3,9 @@ from pathlib import Path
 
 import pytest
 
-from dualfem.cli import main
-from dualfem.errors import InputError
-from dualfem.report_plugins import run as report
+from dualfem.cli.main import main
+from dualfem.core.errors import InputError
+from dualfem.reports.plugins import run as report
 
 
 def test_report_plugins_small(tmp_path):

@@ -18,12 +18,12 @@ import functools
 import numpy as np
 import pytest
 
-from dualfem import evaluator
-from dualfem.registry import solvers
-from dualfem.runner import run
-from dualfem.scene import load_scene
-from dualfem.solution import Status
-from dualfem.stress import SAFETY, UNITS, reference_solvers, scene_in_units
+from dualfem.core import evaluator
+from dualfem.core.registry import solvers
+from dualfem.core.runner import run
+from dualfem.core.scene import load_scene
+from dualfem.core.solution import Status
+from dualfem.experiments.stress import SAFETY, UNITS, reference_solvers, scene_in_units
 
 REG = solvers()
 EXACT = sorted(n for n, c in REG.items() if c.exact and c.missing() is None)

@@ -3,12 +3,12 @@ the physics is checkable: exact uniform pressure on a flat foundation, global eq
 import numpy as np
 import pytest
 
-from dualfem import evaluator
-from dualfem.errors import InputError
-from dualfem.registry import solvers
-from dualfem.runner import run
-from dualfem.scene import load_scene
-from dualfem.solution import Status
+from dualfem.core import evaluator
+from dualfem.core.errors import InputError
+from dualfem.core.registry import solvers
+from dualfem.core.runner import run
+from dualfem.core.scene import load_scene
+from dualfem.core.solution import Status
 
 
 def exact_solvers():
@@ -117,7 +117,7 @@ def test_bad_input(key, value, needle):
 
 
 def test_cli_solve_signorini(capsys):
-    from dualfem.cli import main
+    from dualfem.cli.main import main
 
     rc = main(["solve", "signorini", "--set", "N=8", "--solver", "dual_gradient", "--json"])
     assert rc == 0

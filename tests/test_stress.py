@@ -6,9 +6,9 @@ import json
 import numpy as np
 import pytest
 
-from dualfem import stress
-from dualfem.cli import main
-from dualfem.stress import Task, classify
+from dualfem.experiments import stress
+from dualfem.cli.main import main
+from dualfem.experiments.stress import Task, classify
 
 
 @pytest.mark.parametrize("status,err,kkt,tol,expected", [

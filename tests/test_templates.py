@@ -11,8 +11,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dualfem import evaluator, registry
-from dualfem.runner import run
+from dualfem.core import evaluator
+
+from dualfem.core import registry
+from dualfem.core.runner import run
 
 REPO = Path(__file__).resolve().parents[1]
 TEMPLATES = REPO / "docs" / "templates"
@@ -37,15 +39,22 @@ def templates():
 
 
 def test_in_tree_copy_is_all_it_takes(tmp_path):
-    """A checkout whose solvers/ and problems/ hold the copied templates (first on the path)."""
+    """A template dropped into the solvers/ and problems/ folders is all it takes.
+
+    The folders are the packages dualfem.solvers / dualfem.problems; the copies go to a scratch
+    folder appended to those packages' paths (the repository's own folders stay untouched)."""
     for pkg in ("solvers", "problems"):
-        shutil.copytree(REPO / pkg, tmp_path / pkg, ignore=shutil.ignore_patterns("__pycache__"))
+        (tmp_path / pkg).mkdir()
     shutil.copy(TEMPLATES / "solver_template.py", tmp_path / "solvers" / "my_pg.py")
     shutil.copy(TEMPLATES / "problem_template.py", tmp_path / "problems" / "membrane.py")
-    env = dict(os.environ, PYTHONPATH=str(tmp_path), MPLBACKEND="Agg")
+    boot = ("import sys, dualfem.solvers, dualfem.problems; "
+            f"dualfem.solvers.__path__.append({str(tmp_path / 'solvers')!r}); "
+            f"dualfem.problems.__path__.append({str(tmp_path / 'problems')!r}); "
+            "from dualfem.cli import main; sys.exit(main(sys.argv[1:]))")
+    env = dict(os.environ, MPLBACKEND="Agg")
 
     def dualfem(*args):
-        r = subprocess.run([sys.executable, "-m", "dualfem", *args], env=env, capture_output=True, text=True,
+        r = subprocess.run([sys.executable, "-c", boot, *args], env=env, capture_output=True, text=True,
                            timeout=600, cwd=tmp_path)
         assert r.returncode == 0, (args, r.stdout, r.stderr)
         return r.stdout
@@ -58,6 +67,24 @@ def test_in_tree_copy_is_all_it_takes(tmp_path):
                  ["f2", "--set", "N=8", "--solver", "my_pg"]):
         rec = json.loads(dualfem("solve", *args, "--json"))
         assert rec["status"] == "solved" and max(rec["residuals"].values()) < 1e-8, rec
+
+
+def test_folders_named_solvers_and_problems_do_not_shadow_the_builtins(tmp_path):
+    """A research project's own solvers/ and problems/ packages in the working directory (first on
+    sys.path) must not hide dualfem's built-in plugins."""
+    for pkg in ("solvers", "problems"):
+        (tmp_path / pkg).mkdir()
+        (tmp_path / pkg / "__init__.py").write_text("MINE = True\n")
+        (tmp_path / pkg / "mine.py").write_text("raise RuntimeError('dualfem imported my module')\n")
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONPATH=str(tmp_path))
+    r = subprocess.run([sys.executable, "-m", "dualfem", "list", "--json"], env=env, capture_output=True,
+                       text=True, timeout=300, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    listing = json.loads(r.stdout)
+    from dualfem.core.registry import problems, solvers
+
+    assert set(solvers()) <= set(listing["solvers"]) and {"uzawa", "pdas", "osqp"} <= set(listing["solvers"])
+    assert set(problems()) <= set(listing["problems"]) and "thin_defect" in listing["problems"]
 
 
 def test_membrane_touches_the_floor_only_above_the_threshold(templates):
@@ -88,8 +115,8 @@ def test_membrane_point_symmetry(templates):
 
 @pytest.mark.parametrize("scene", ["f2", "signorini"])
 def test_solver_template_agrees_and_fails_honestly(templates, scene):
-    from dualfem.scene import load_scene
-    from dualfem.solution import Status
+    from dualfem.core.scene import load_scene
+    from dualfem.core.solution import Status
 
     qp = load_scene(scene, {"N": 8}).build()
     ref = run("pdas" if "pdas" in registry.solvers() else "clarabel", qp)

@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dualfem import evaluator
-from dualfem.errors import InputError
-from dualfem.runner import make_solver, run
+from dualfem.core import evaluator
+from dualfem.core.errors import InputError
+from dualfem.core.runner import make_solver, run
 
 
 @pytest.fixture(scope="module")
@@ -147,7 +147,7 @@ def test_euclidean_inner_norm_on_full_path(scene):
 
 def test_auto_r_is_scale_invariant_and_delta_aware(scene):
     """r_rule='auto': r ~ 100/delta at small delta, and the same r*compliance in other units."""
-    from dualfem.scene import load_scene
+    from dualfem.core.scene import load_scene
 
     r = {}
     for d in (1e-5, 1e-9):

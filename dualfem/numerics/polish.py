@@ -16,13 +16,13 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
-from .qp import QP
+from dualfem.core.qp import QP
 
 
 def active_set_polish(qp: QP, x: np.ndarray, mu: np.ndarray, red=None):
     """(x, mu, info) polished on the guessed active set, or None if the guess is inconsistent."""
-    from .certify import refinement_step
-    from .linalg import LocalReduction
+    from dualfem.core.certify import refinement_step
+    from dualfem.numerics.linalg import LocalReduction
 
     if x is None or mu is None or not (np.all(np.isfinite(x)) and np.all(np.isfinite(mu))):
         return None

@@ -23,8 +23,8 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
-from .cmd_report import register_report
-from .errors import InputError
+from dualfem.cli.report import register_report
+from dualfem.core.errors import InputError
 
 COMPETITORS = ("clarabel", "osqp")
 
@@ -291,7 +291,7 @@ def _slot(r: dict) -> tuple:
 def load_sources(results: list[str | Path]) -> tuple[list[dict], list[dict]]:
     """Rows of several results (later ones replace earlier rows of the same slot) and one
     source record per results (path, directory, sweep.json, rows kept)."""
-    from .bench import read_results
+    from dualfem.experiments.bench import read_results
 
     merged: dict[tuple, dict] = {}
     sources = []
@@ -324,7 +324,7 @@ def build_report(results: str | Path | list[str | Path], md: str | Path, figdir:
                  ours: list[str], shift: float = 10.0, err_target: float = 1e-8, floor_target: float = 1.5,
                  speed_target: float = 10.0, command: str = "") -> Path:
     """Write the markdown report and its figures from one or several results; returns the markdown path."""
-    from .io import atomic_write_text
+    from dualfem.core.io import atomic_write_text
 
     results = [results] if isinstance(results, (str, Path)) else list(results)
     if not results:
@@ -561,7 +561,7 @@ def _save_with_legend(fig, axes, figdir, name: str) -> str:
                 lab.append(ll)
     fig.legend(h, lab, loc="upper center", ncol=min(len(lab), 8), fontsize=8, bbox_to_anchor=(0.5, 1.08))
     fig.tight_layout()
-    from .io import atomic_savefig
+    from dualfem.core.io import atomic_savefig
 
     atomic_savefig(fig, figdir / name, dpi=90, bbox_inches="tight")
     plt.close(fig)

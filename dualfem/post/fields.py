@@ -14,7 +14,7 @@ Conventions:
   engineering shear ``gamma12 = 2 eps12`` is *not* used: ``eps12`` is the tensor component).
 * Stress in the units of ``E`` (MPa for the paper's scenes). Plane strain: ``sigma33 =
   lambda (eps11 + eps22)``; plane stress: ``sigma33 = 0`` and ``lambda`` is replaced by
-  ``lambda* = 2 lambda mu / (lambda + 2 mu)`` (see :func:`problems.thin_defect.lame`). The von
+  ``lambda* = 2 lambda mu / (lambda + 2 mu)`` (see :func:`dualfem.core.elasticity.lame`). The von
   Mises stress always uses all three normal components.
 * Along the defect the coordinate ``s`` runs from the first tip (s = 0) to the second; the
   tips are single (not doubled) nodes, so the jump is zero there. ``jump_normal = [u.nu] =
@@ -28,7 +28,8 @@ from functools import cached_property
 
 import numpy as np
 
-from .errors import InputError
+from dualfem.core.elasticity import lame
+from dualfem.core.errors import InputError
 
 _REQUIRED_MAPS = ("nodes", "triangles", "node_dofs")
 
@@ -112,8 +113,6 @@ def strains(qp, x: np.ndarray) -> np.ndarray:
 def stresses(qp, x: np.ndarray, E: float | None = None, nu: float | None = None,
              plane: str | None = None) -> dict[str, np.ndarray]:
     """Stress per triangle: ``s11, s22, s12, s33`` and ``von_mises`` (units of E)."""
-    from problems.thin_defect import lame
-
     E, nu, plane = material(qp, E, nu, plane)
     lam, mu = lame(E, nu, plane)
     eps = strains(qp, x)

@@ -68,8 +68,8 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from .errors import InputError
-from .io import atomic_write, atomic_write_text
+from dualfem.core.errors import InputError
+from dualfem.core.io import atomic_write, atomic_write_text
 
 #: column order of results.csv (rows may carry more keys; they are appended in sorted order)
 COLUMNS = [
@@ -174,7 +174,7 @@ def load_spec(path: str | Path) -> Spec:
 
 def parse_spec(data: dict, path: str = "<spec>", text: str = "") -> Spec:
     """Validate a spec given as a dict (the parsed TOML)."""
-    from .registry import solvers as registered
+    from dualfem.core.registry import solvers as registered
 
     _table("the spec", data, SPEC_KEYS)
     s = Spec(name=str(data.get("name", Path(path).stem)), path=path, text=text)
@@ -321,7 +321,7 @@ class SceneSpec:
 
 def expand_scenes(spec: Spec) -> list[SceneSpec]:
     """Every scene of the spec's grids (validated by constructing the problem)."""
-    from .scene import load_scene
+    from dualfem.core.scene import load_scene
 
     out: dict[str, SceneSpec] = {}
     for blk in spec.scenes:
@@ -339,7 +339,7 @@ def expand_scenes(spec: Spec) -> list[SceneSpec]:
 
 def expand_tasks(spec: Spec, scenes: list[SceneSpec] | None = None) -> list[dict]:
     """Run tasks (one per scene x solver variant x tier), plus skipped rows with their reason."""
-    from .registry import solvers as registered
+    from dualfem.core.registry import solvers as registered
 
     scenes = expand_scenes(spec) if scenes is None else scenes
     reg = registered()
@@ -464,7 +464,7 @@ def machine_info() -> dict:
             pass
     git = ""
     try:
-        here = Path(__file__).resolve().parent.parent
+        here = Path(__file__).resolve().parents[2]
         if (here / ".git").exists():
             git = subprocess.run(["git", "-C", str(here), "rev-parse", "--short", "HEAD"], capture_output=True,
                                  text=True, timeout=5).stdout.strip()
@@ -505,7 +505,7 @@ def _median(v: list[float]) -> float:
 
 
 def _residual_cols(res: dict | None, tol: float | None) -> dict:
-    from .evaluator import kkt_error
+    from dualfem.core.evaluator import kkt_error
 
     if not res:
         return {"kkt_error": None, "within_tol": False}
@@ -530,7 +530,7 @@ def execute(task: dict, tick: Callable[[str, float], None] = lambda phase, budge
     row["loadavg"] = _loadavg()       # 1-minute load average when the task started (a busy machine)
     if task.get("skip"):
         return skipped_row(task), None
-    from .scene import load_scene
+    from dualfem.core.scene import load_scene
 
     tick("build", task["build_limit"])
     t0 = time.perf_counter()
@@ -546,9 +546,9 @@ def execute(task: dict, tick: Callable[[str, float], None] = lambda phase, budge
 
 def _timed_runs(task: dict, qp, name: str, params: dict, tick, warmup: bool, repeats: int):
     """Warm-up (untimed) then ``repeats`` timed runs; returns (last solution, setup list, solve list, note)."""
-    from . import linalg
-    from .runner import run
-    from .solution import Status
+    from dualfem.numerics import linalg
+    from dualfem.core.runner import run
+    from dualfem.core.solution import Status
 
     setups, solves, statuses = [], [], []
     sol = None
@@ -577,8 +577,8 @@ def _timed_runs(task: dict, qp, name: str, params: dict, tick, warmup: bool, rep
 
 
 def _execute_run(task: dict, qp, row: dict, tick) -> dict:
-    from . import evaluator
-    from .solution import Status
+    from dualfem.core import evaluator
+    from dualfem.core.solution import Status
 
     ref = task.get("ref")
     sol, setups, solves, done, note = _timed_runs(task, qp, task["solver"], task["params"], tick,
@@ -611,8 +611,8 @@ def _execute_run(task: dict, qp, row: dict, tick) -> dict:
 
 
 def _execute_reference(task: dict, qp, row: dict, tick) -> tuple[dict, Any]:
-    from .evaluator import kkt_error
-    from .registry import solvers as registered
+    from dualfem.core.evaluator import kkt_error
+    from dualfem.core.registry import solvers as registered
 
     spec = task["reference"]
     reg = registered()
@@ -723,7 +723,7 @@ def _recv_blocking(fh) -> Any:
 
 def _child_main() -> None:  # pragma: no cover - runs in the child process
     """Serve tasks on stdin/stdout; solver output written to fd 1 goes to stderr instead."""
-    from .worker import volunteer_for_oom_killer
+    from dualfem.experiments.worker import volunteer_for_oom_killer
 
     volunteer_for_oom_killer()
     out_fd = os.dup(1)
@@ -745,7 +745,7 @@ def _child_main() -> None:  # pragma: no cover - runs in the child process
         if task.get("kind") != "reference":
             # references of one mesh share the K_fixed factorization (they are not timed results);
             # after anything else, free the memory of cached factorizations
-            from . import linalg
+            from dualfem.numerics import linalg
             linalg.clear_cache()
 
 
@@ -769,7 +769,7 @@ class GuardedWorker:
     def _start(self) -> None:
         env = dict(os.environ)
         env.setdefault("MPLBACKEND", "Agg")
-        self.proc = subprocess.Popen([sys.executable, "-m", "dualfem.bench", "--child"], stdin=subprocess.PIPE,
+        self.proc = subprocess.Popen([sys.executable, "-m", "dualfem.experiments.bench", "--child"], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, env=env, bufsize=0)
         self.buf = b""
 
@@ -865,7 +865,7 @@ def _execute_all(tasks: list[dict], jobs: int, dask: str | None) -> Iterable[tup
         try:
             from distributed import Client, as_completed
         except ImportError:
-            from .errors import MissingDependency
+            from dualfem.core.errors import MissingDependency
             raise MissingDependency("--dask needs dask.distributed: pip install 'dualfem[parallel]'") from None
         try:
             client = Client(dask, timeout="20s")
@@ -885,7 +885,7 @@ def _execute_all(tasks: list[dict], jobs: int, dask: str | None) -> Iterable[tup
         try:
             from joblib import Parallel, delayed
         except ImportError:
-            from .errors import MissingDependency
+            from dualfem.core.errors import MissingDependency
             raise MissingDependency("--jobs needs joblib: pip install 'dualfem[parallel]'") from None
         par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
         yield from par(delayed(run_guarded)(t) for t in tasks)
@@ -1160,5 +1160,5 @@ if __name__ == "__main__":  # pragma: no cover
     if sys.argv[1:] == ["--child"]:
         _child_main()
     else:
-        print("usage: python -m dualfem.bench --child (internal); use 'dualfem bench SPEC.toml'", file=sys.stderr)
+        print("usage: python -m dualfem.experiments.bench --child (internal); use 'dualfem bench SPEC.toml'", file=sys.stderr)
         sys.exit(2)

@@ -31,7 +31,7 @@ import scipy.sparse as sp
 import scipy.sparse.csgraph as csgraph
 import scipy.sparse.linalg as sla
 
-from .qp import QP
+from dualfem.core.qp import QP
 
 #: unknowns per leaf of the nested dissection
 _LEAF = 64

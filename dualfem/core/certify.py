@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
-from .qp import QP
+from dualfem.core.qp import QP
 
 
 def refinement_step(qp: QP, ksolve, D: np.ndarray, x: np.ndarray, mu: np.ndarray,
@@ -74,7 +74,7 @@ class KSolver:
         self.qp = qp
         self.red = None
         try:
-            from .linalg import LocalReduction
+            from dualfem.numerics.linalg import LocalReduction
 
             self.red = LocalReduction(qp)
         except Exception:  # noqa: BLE001 - any structure problem: plain sparse LU

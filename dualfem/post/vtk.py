@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError, MissingDependency
-from .io import atomic_write
-from .post import Post
+from dualfem.core.errors import InputError, MissingDependency
+from dualfem.core.io import atomic_write
+from dualfem.post.fields import Post
 
 SUFFIXES = {"vtu": (".vtu",), "xdmf": (".xdmf", ".xmf")}
 

@@ -5,9 +5,9 @@ maps and the material) and a :class:`~dualfem.solution.Solution`, on a matplotli
 (a new figure when ``ax`` is None), and returns the ``Axes``; the same calls work in a
 notebook::
 
-    from dualfem.scene import load_scene
-    from dualfem.runner import run
-    from dualfem import figures
+    from dualfem.core.scene import load_scene
+    from dualfem.core.runner import run
+    from dualfem.post import figures
     qp = load_scene("f2", {"N": 64, "delta": 1e-1}).build()
     sol = run(figures.pick_solver(), qp)
     figures.plot_deformed(qp, sol, scale=300)
@@ -20,8 +20,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from .errors import InputError
-from .post import Post
+from dualfem.core.errors import InputError
+from dualfem.post.fields import Post
 
 #: solvers tried in this order by :func:`pick_solver` (fast and exact first)
 PREFERRED = ("pdas", "uzawa", "clarabel")
@@ -30,7 +30,7 @@ PREFERRED = ("pdas", "uzawa", "clarabel")
 def pick_solver(name: str | None = None, *, exact: bool = True, order: Sequence[str] = PREFERRED) -> str:
     """Name of the solver to use: ``name`` if given (checked), else the first registered and
     installed solver of ``order`` (with ``exact`` True, only solvers declaring ``exact``)."""
-    from .registry import get_solver, solvers
+    from dualfem.core.registry import get_solver, solvers
 
     if name is not None:
         cls = get_solver(name)

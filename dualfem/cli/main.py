@@ -10,7 +10,7 @@ import json
 import sys
 from typing import Any, Callable
 
-from .errors import InputError, MissingDependency
+from dualfem.core.errors import InputError, MissingDependency
 
 DEFAULT_SOLVER = "uzawa"
 _COMMANDS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {}
@@ -42,7 +42,7 @@ def add_param_args(p: argparse.ArgumentParser) -> None:
 
 def scene_from_args(args: argparse.Namespace):
     """Problem instance from SCENE + --set."""
-    from .scene import load_scene, parse_set
+    from dualfem.core.scene import load_scene, parse_set
 
     return load_scene(args.scene, parse_set(args.set))
 
@@ -79,8 +79,8 @@ def _cfg_list(p):
 
 @command("list", "list problems, scenes and solvers (and whether each is installed)")(_cfg_list)
 def cmd_list(args) -> int:
-    from .registry import entry_point_errors, problems, solvers
-    from .scene import presets
+    from dualfem.core.registry import entry_point_errors, problems, solvers
+    from dualfem.core.scene import presets
 
     sol = {n: {"installed": c.missing() is None, "missing": c.missing(), "description": c.description,
                "exact": c.exact, "parameters": c.defaults} for n, c in sorted(solvers().items())}
@@ -136,16 +136,16 @@ def _cfg_solve(p):
 
 @command("solve", "solve one scene with one solver")(_cfg_solve)
 def cmd_solve(args) -> int:
-    from .runner import make_solver, run, summary
-    from .scene import parse_set
-    from .solution import Status
+    from dualfem.core.runner import make_solver, run, summary
+    from dualfem.core.scene import parse_set
+    from dualfem.core.solution import Status
 
     solver = make_solver(args.solver, parse_set(args.param))  # validate before the (slow) assembly
     missing = solver.missing()
     if missing:
         raise MissingDependency(missing)
     if args.vtk or args.xdmf:
-        from .vtk import check_path
+        from dualfem.post.vtk import check_path
 
         for path, kind in ((args.vtk, "vtu"), (args.xdmf, "xdmf")):
             if path:
@@ -158,7 +158,7 @@ def cmd_solve(args) -> int:
     if post:
         post(problem, qp, sol, rec)
     if args.vtk or args.xdmf:
-        from .vtk import write_outputs
+        from dualfem.post.vtk import write_outputs
 
         if sol.x is None:
             print(f"dualfem solve: no solution ({sol.status}): --vtk/--xdmf not written", file=sys.stderr)
@@ -198,15 +198,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _import_commands() -> None:
-    """Import every ``dualfem/cmd_*.py`` module: each registers sub-commands with :func:`command`."""
+    """Import every module of ``dualfem/cli/``: each registers sub-commands with :func:`command`."""
     import importlib
     import pkgutil
 
-    import dualfem
+    import dualfem.cli
 
-    for info in pkgutil.iter_modules(dualfem.__path__):
-        if info.name.startswith("cmd_"):
-            importlib.import_module(f"dualfem.{info.name}")
+    for info in pkgutil.iter_modules(dualfem.cli.__path__):
+        if info.name != "main":
+            importlib.import_module(f"dualfem.cli.{info.name}")
 
 
 def main(argv: list[str] | None = None) -> int:

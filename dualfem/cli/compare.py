@@ -9,9 +9,9 @@ one JSON object on stdout; one progress line per finished solver goes to stderr.
 """
 from __future__ import annotations
 
-from .cli import add_scene_args, command, dumps, scene_from_args
-from .errors import InputError
-from .quiet import c_stdout_to_stderr
+from dualfem.cli.main import add_scene_args, command, dumps, scene_from_args
+from dualfem.core.errors import InputError
+from dualfem.core.quiet import c_stdout_to_stderr
 
 
 def _cfg(p):
@@ -41,8 +41,8 @@ def parse_solver_params(items: list[str], names: list[str]) -> dict[str, dict[st
 
 @command("compare", "run several solvers on one scene and cross-check them against a certified reference")(_cfg)
 def cmd_compare(args) -> int:
-    from .compare import compare_solvers, default_solvers, stderr_progress, table
-    from .registry import get_solver
+    from dualfem.experiments.compare import compare_solvers, default_solvers, stderr_progress, table
+    from dualfem.core.registry import get_solver
 
     if args.solvers is not None:
         names = [s.strip() for s in args.solvers.split(",") if s.strip()]

@@ -122,9 +122,9 @@ def scene_in_units(base: dict, stress: float, length: float) -> dict:
     E and tractions are stresses (x ``stress``); width, height and the defect are lengths
     (x ``length``); delta is a length per stress (the interface pressure is [u]/delta).
     """
-    from problems.thin_defect import ThinDefect
+    from dualfem.core.registry import get_problem
 
-    d = {**ThinDefect.defaults, **base}
+    d = {**get_problem("thin_defect").defaults, **base}
     out = dict(base)
     out["E"] = float(d["E"]) * stress
     out["width"] = float(d["width"]) * length
@@ -138,7 +138,7 @@ def scene_in_units(base: dict, stress: float, length: float) -> dict:
 def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = AXES,
                time_limit: float | None = None, max_n: int | None = None) -> list[Task]:
     """All tasks of the stress grid for ``solver_names`` (see the module docstring)."""
-    from .registry import solvers
+    from dualfem.core.registry import solvers
 
     reg = solvers()
     tl = float(time_limit if time_limit is not None else (20.0 if quick else 120.0))
@@ -196,7 +196,7 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = 
 # ------------------------------------------------------------------------ references
 def reference_solvers() -> list[tuple[str, dict]]:
     """(name, params) of the reference solvers available, preferred first."""
-    from .registry import solvers
+    from dualfem.core.registry import solvers
 
     reg = solvers()
     out = []
@@ -218,14 +218,14 @@ class _Cache:
         self.size = size
 
     def qp(self, scene: dict):
-        from .scene import load_scene
+        from dualfem.core.scene import load_scene
 
         k = json.dumps(scene, sort_keys=True, default=str)
         if k not in self.qps and int(scene.get("N", 32)) >= LARGE_N:
             # a large scene: free every cached QP, reference and factorization first
             import gc
 
-            from .linalg import clear_cache
+            from dualfem.numerics.linalg import clear_cache
 
             self.qps.clear()
             self.refs.clear()
@@ -243,9 +243,9 @@ class _Cache:
 
     def ref(self, scene: dict, which: int):
         """Reference number ``which`` (0 = preferred, 1 = second) of ``scene``, or a reason."""
-        from . import evaluator
-        from .runner import run
-        from .solution import Status
+        from dualfem.core import evaluator
+        from dualfem.core.runner import run
+        from dualfem.core.solution import Status
 
         refs = reference_solvers()
         if which >= len(refs):
@@ -261,7 +261,7 @@ class _Cache:
             if sol.status not in (Status.SOLVED, Status.INACCURATE) or not (kkt <= REF_KKT):
                 val = (None, f"reference {name} not trusted: status {sol.status}, KKT {kkt:.1e}")
             else:
-                from .registry import get_solver
+                from dualfem.core.registry import get_solver
 
                 val = ({"name": name, "x": sol.x, "mu": sol.multipliers, "kkt": kkt, "time_s": dt,
                         "tolerance": get_solver(name).tolerance}, None)
@@ -319,9 +319,9 @@ def classify(status: str, err: float | None, kkt: float | None, tol: float) -> s
 
 def execute(task: Task, cache: _Cache) -> dict:
     """Run one task in this process; return its JSON record (no arrays)."""
-    from . import evaluator
-    from .registry import get_solver
-    from .runner import run
+    from dualfem.core import evaluator
+    from dualfem.core.registry import get_solver
+    from dualfem.core.runner import run
 
     cls = get_solver(task.solver)
     params = dict(task.params)
@@ -414,7 +414,7 @@ def _worker_main(conn) -> None:  # pragma: no cover - runs in a child process
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     parent = os.getppid()
     peak = [0.0]
-    from .worker import volunteer_for_oom_killer
+    from dualfem.experiments.worker import volunteer_for_oom_killer
 
     volunteer_for_oom_killer()
 
@@ -658,13 +658,13 @@ def _clean(o):
 
 
 def _atomic_lines(path: Path, recs: list[dict]) -> None:
-    from .io import atomic_write_text
+    from dualfem.core.io import atomic_write_text
 
     atomic_write_text(path, "".join(json.dumps(_clean(r)) + "\n" for r in recs))
 
 
 def _write_meta(out: Path, meta: dict) -> None:
-    from .io import atomic_write_text
+    from dualfem.core.io import atomic_write_text
 
     atomic_write_text(out / "meta.json", json.dumps(_clean(meta), indent=1) + "\n")
 
@@ -685,7 +685,7 @@ def environment() -> dict:
 
 def load_results(path: str | Path) -> tuple[dict, list[dict]]:
     """(meta, records) from a results directory (or its ``runs.jsonl``); InputError if unusable."""
-    from .errors import InputError
+    from dualfem.core.errors import InputError
 
     p = Path(path)
     if p.is_dir():

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .cmd_report import register_report
-from .errors import check_int
+from dualfem.cli.report import register_report
+from dualfem.core.errors import check_int
 
 
 def _progress(msg: str) -> None:
@@ -35,7 +35,7 @@ def _reference(names) -> str:
 
 
 def _kkt(sol) -> float:
-    from .evaluator import kkt_error
+    from dualfem.core.evaluator import kkt_error
 
     return kkt_error(sol.residuals) if sol.residuals else float("nan")
 
@@ -46,12 +46,12 @@ def generate(out: Path, N: int = 32, dpi: int = 110, sizes=(16, 32, 64, 128)) ->
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from . import evaluator
-    from .io import atomic_savefig
-    from .registry import solvers
-    from .runner import run
-    from .scene import load_scene
-    from .solution import Status
+    from dualfem.core import evaluator
+    from dualfem.core.io import atomic_savefig
+    from dualfem.core.registry import solvers
+    from dualfem.core.runner import run
+    from dualfem.core.scene import load_scene
+    from dualfem.core.solution import Status
 
     avail = {n: c for n, c in sorted(solvers().items()) if c.missing() is None}
     ref_name = _reference(avail)
@@ -189,7 +189,7 @@ def run(argv: list[str]) -> int:
                     help="mesh sizes of the dual_gradient cost table (scene f2; default 16,32,64,128)")
     ap.add_argument("--out", default="reports", help="output directory (default reports/)")
     args = ap.parse_args(argv)
-    from .errors import InputError
+    from dualfem.core.errors import InputError
 
     try:
         sizes = [int(v) for v in args.sizes.split(",") if v.strip()]
@@ -204,7 +204,7 @@ def run(argv: list[str]) -> int:
     out = Path(args.out)
     t0 = time.perf_counter()
     text = generate(out, N=N, dpi=dpi, sizes=sizes)
-    from .io import atomic_write_text
+    from dualfem.core.io import atomic_write_text
 
     atomic_write_text(out / "plugins.md", text + f"\n_Wall time {time.perf_counter() - t0:.0f} s._\n")
     _progress(f"wrote {out / 'plugins.md'}")

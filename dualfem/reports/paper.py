@@ -14,8 +14,8 @@ import time
 
 import numpy as np
 
-from .cmd_report import register_report
-from .io import atomic_write_text
+from dualfem.cli.report import register_report
+from dualfem.core.io import atomic_write_text
 
 # The paper's tables (Zhiltsov & Maksimova 2023, section 5): (k_MU, m_MN)
 PAPER_T1 = {("f1", 1e-7): (18, 24), ("f1", 1e-5): (22, 33), ("f1", 1e-1): (23, 28),
@@ -33,8 +33,8 @@ def _fmt_d(d: float) -> str:
 
 def run_all(Ns, planes, solver: str = "uzawa", progress=None) -> dict:
     """k, m, status for every (N, plane, table cell)."""
-    from .runner import run
-    from .scene import load_scene
+    from dualfem.core.runner import run
+    from dualfem.core.scene import load_scene
 
     cells = [("T1", load, d, 2.0) for load in ("f1", "f2", "f3") for d in T1_DELTAS]
     cells += [("T2", "f2", d, 2.0) for d in DELTAS] + [("T3", "f2", d, 1.1) for d in DELTAS]
@@ -181,8 +181,8 @@ def report_paper(argv: list[str]) -> int:
     res = run_all(Ns, planes, progress=progress)
     dist = sorted(((_distance(res, N, p), N, p) for N in Ns for p in planes))
     _, Nr, pr = dist[0]
-    from .runner import run
-    from .scene import load_scene
+    from dualfem.core.runner import run
+    from dualfem.core.scene import load_scene
 
     auto = {}
     for d in DELTAS:

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .cmd_report import register_report
-from .errors import InputError
+from dualfem.cli.report import register_report
+from dualfem.core.errors import InputError
 
 #: deltas of the jump / pressure / history figures (the paper's range)
 SWEEP = (1e-1, 1e-3, 1e-5, 1e-7, 1e-9)
@@ -36,7 +36,7 @@ KEY_LABEL = {
 
 
 def _save(fig, path: Path, dpi: int) -> str:
-    from .io import atomic_savefig
+    from dualfem.core.io import atomic_savefig
 
     atomic_savefig(fig, path, dpi=dpi)
     import matplotlib.pyplot as plt
@@ -47,7 +47,7 @@ def _save(fig, path: Path, dpi: int) -> str:
 
 def history_key(sol) -> str | None:
     """The first key of :data:`HISTORY_KEYS` present in ``sol.history``."""
-    from .figures import history_series
+    from dualfem.post.figures import history_series
 
     for key in HISTORY_KEYS:
         if history_series(sol, key) is not None:
@@ -59,9 +59,9 @@ def solvers_with_history(exclude=(), probe_N: int = 8) -> list[str]:
     """Registered, installed solvers that record a per-iteration history (a key of
     :data:`HISTORY_KEYS`), found by one solve of a tiny f2 scene (N = ``probe_N``): libraries
     without a history are not run at full size just to find that out."""
-    from .registry import solvers
-    from .runner import run
-    from .scene import load_scene
+    from dualfem.core.registry import solvers
+    from dualfem.core.runner import run
+    from dualfem.core.scene import load_scene
 
     qp = load_scene("f2", {"N": probe_N, "delta": 1e-5}).build()
     out = []
@@ -83,7 +83,7 @@ class _Cases:
         self._sol: dict = {}
 
     def qp(self, scene: str, delta: float):
-        from .scene import load_scene
+        from dualfem.core.scene import load_scene
 
         key = (scene, delta)
         if key not in self._qp:
@@ -91,7 +91,7 @@ class _Cases:
         return self._qp[key]
 
     def solve(self, solver: str, scene: str, delta: float, params: dict | None = None):
-        from .runner import run
+        from dualfem.core.runner import run
 
         key = (solver, scene, delta)
         if key not in self._sol:
@@ -111,10 +111,10 @@ def generate(outdir: Path, N: int = 64, solver: str | None = None, scale: float 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from . import evaluator
-    from . import figures as F
-    from .post import Post
-    from .registry import solvers
+    from dualfem.core import evaluator
+    from dualfem.post import figures as F
+    from dualfem.post.fields import Post
+    from dualfem.core.registry import solvers
 
     exact = F.pick_solver(solver, exact=True)
     figdir = outdir / "figures"
@@ -311,7 +311,7 @@ def run(argv: list[str]) -> int:
     if argv[:1] == ["--"]:  # 'dualfem report KIND -- --opt ...' with older dispatchers
         argv = argv[1:]
     args = ap.parse_args(argv)
-    from .errors import check_int, check_positive
+    from dualfem.core.errors import check_int, check_positive
 
     N = check_int("--N", args.N, 4, 1024)
     if N % 4:
@@ -321,7 +321,7 @@ def run(argv: list[str]) -> int:
     out = Path(args.out)
     hist = None
     if args.history_solvers is not None:
-        from .registry import get_solver
+        from dualfem.core.registry import get_solver
 
         hist = [h.strip() for h in args.history_solvers.split(",") if h.strip()]
         for h in hist:
@@ -329,7 +329,7 @@ def run(argv: list[str]) -> int:
     t0 = time.perf_counter()
     text = generate(out, N=N, solver=args.solver, scale=scale, dpi=dpi, history_solvers=hist,
                     progress=lambda m: print(m, file=sys.stderr, flush=True))
-    from .io import atomic_write_text
+    from dualfem.core.io import atomic_write_text
 
     atomic_write_text(out / "figures.md", text + f"\n_Wall time {time.perf_counter() - t0:.0f} s._\n")
     print(f"wrote {out / 'figures.md'}", file=sys.stderr)

@@ -5,8 +5,8 @@ import shlex
 import sys
 from pathlib import Path
 
-from .cli import command
-from .errors import InputError
+from dualfem.cli.main import command
+from dualfem.core.errors import InputError
 
 
 def _cfg(p):
@@ -25,7 +25,7 @@ def _cfg(p):
 
 @command("bench", "run (or resume) a benchmark sweep: every solver, error against time")(_cfg)
 def cmd_bench(args) -> int:
-    from .bench import load_spec, run_sweep
+    from dualfem.experiments.bench import load_spec, run_sweep
 
     if args.jobs < 1:
         raise InputError(f"--jobs must be an integer >= 1, got {args.jobs}")

@@ -1,6 +1,6 @@
 """``dualfem report KIND [ARGS...]``: regenerate a report in reports/.
 
-Report kinds are registered by modules ``dualfem/report_*.py`` with :func:`register_report`;
+Report kinds are registered by the modules of ``dualfem/reports/`` with :func:`register_report`;
 each kind is a function ``run(argv: list[str]) -> int`` with its own argparse.
 """
 from __future__ import annotations
@@ -10,8 +10,8 @@ import importlib
 import pkgutil
 from typing import Callable
 
-from .cli import command
-from .errors import InputError
+from dualfem.cli.main import command
+from dualfem.core.errors import InputError
 
 _REPORTS: dict[str, tuple[str, Callable[[list[str]], int]]] = {}
 
@@ -25,12 +25,12 @@ def register_report(kind: str, help: str):
 
 
 def reports() -> dict[str, tuple[str, Callable[[list[str]], int]]]:
-    """All report kinds (imports every ``dualfem/report_*.py``)."""
-    import dualfem
+    """All report kinds (imports every module of ``dualfem/reports/``)."""
+    import dualfem.reports
 
-    for info in pkgutil.iter_modules(dualfem.__path__):
-        if info.name.startswith("report_"):
-            importlib.import_module(f"dualfem.{info.name}")
+    for info in pkgutil.iter_modules(dualfem.reports.__path__):
+        if not info.name.startswith("_"):
+            importlib.import_module(f"dualfem.reports.{info.name}")
     return dict(_REPORTS)
 
 

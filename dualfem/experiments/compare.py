@@ -35,12 +35,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from . import evaluator
-from .certify import certified_error, solver_for
-from .qp import QP
-from .runner import jsonable_params
-from .registry import get_solver, solvers as registered
-from .solution import Solution, Status
+from dualfem.core import evaluator
+from dualfem.core.certify import certified_error, solver_for
+from dualfem.core.qp import QP
+from dualfem.core.runner import jsonable_params
+from dualfem.core.registry import get_solver, solvers as registered
+from dualfem.core.solution import Solution, Status
 
 #: fields of each run record (stable JSON interface of ``dualfem compare --json``)
 RUN_FIELDS = ("solver", "status", "verdict", "exact", "tolerance", "iterations", "energy", "time_s",
@@ -59,7 +59,7 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     ``params`` maps a solver name to its parameters. ``progress`` receives one line per finished
     solver.
     """
-    from .runner import make_solver, run
+    from dualfem.core.runner import make_solver, run
 
     names = list(names) if names is not None else default_solvers()
     params = params or {}

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .qp import QP
+from dualfem.core.qp import QP
 
 
 @dataclass

@@ -6,8 +6,8 @@ import sys
 import time
 from pathlib import Path
 
-from .cli import command
-from .errors import InputError
+from dualfem.cli.main import command
+from dualfem.core.errors import InputError
 
 
 def _cfg(p):
@@ -31,9 +31,9 @@ def _cfg(p):
 
 @command("stress", "run the numerical-stability grid (delta, r, units, load, nu, N) over every solver")(_cfg)
 def cmd_stress(args) -> int:
-    from . import stress
-    from .errors import check_int, check_positive
-    from .registry import solvers
+    from dualfem.experiments import stress
+    from dualfem.core.errors import check_int, check_positive
+    from dualfem.core.registry import solvers
 
     reg = solvers()
     if args.solvers:

@@ -12,8 +12,8 @@ import math
 from collections import Counter, defaultdict
 from pathlib import Path
 
-from .cmd_report import register_report
-from .errors import InputError
+from dualfem.cli.report import register_report
+from dualfem.core.errors import InputError
 
 COLORS = {"correct": "#2e9d4f", "failed": "#f0a030", "flagged": "#f5d040", "timeout": "#c77c2a",
           "crashed": "#8c4a1a", "silent_wrong": "#d62728", "unverified": "#9ecae1", "skipped": "#d9d9d9"}
@@ -99,7 +99,7 @@ def _heatmaps(recs, rowf, colf, title, rowlabel, collabel, path: Path, keep_col_
             fig.colorbar(im, ax=ax, shrink=0.8)
     axs[0].set_ylabel(rowlabel, fontsize=8)
     fig.suptitle(title, fontsize=10)
-    from .io import atomic_savefig
+    from dualfem.core.io import atomic_savefig
 
     atomic_savefig(fig, path, dpi=110)
     plt.close(fig)
@@ -196,7 +196,7 @@ def _scatter_r_delta(recs, solver: str, path: Path) -> None:
     ax.set_title(f"{solver}: outer iterations against r x delta (all r, all delta)", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
-    from .io import atomic_savefig
+    from dualfem.core.io import atomic_savefig
 
     atomic_savefig(fig, path, dpi=110)
     plt.close(fig)
@@ -415,8 +415,8 @@ def render(meta: dict, recs: list[dict], md_path: Path) -> str:
 
 @register_report("stability", "numerical-stability grid: colour maps and silent wrong answers (from dualfem stress)")
 def run(argv: list[str]) -> int:
-    from .io import atomic_write_text
-    from .stress import load_results
+    from dualfem.core.io import atomic_write_text
+    from dualfem.experiments.stress import load_results
 
     ap = argparse.ArgumentParser(prog="dualfem report stability",
                                  description="write reports/stability.md from a dualfem stress results directory")

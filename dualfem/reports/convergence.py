@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .cmd_report import register_report
-from .errors import InputError
+from dualfem.cli.report import register_report
+from dualfem.core.errors import InputError
 
 DEFAULT_DELTAS = (1e-1, 1e-5, 1e-9)
 DEFAULT_NS = (16, 32, 64, 128, 256, 512)
@@ -53,8 +53,8 @@ def _ints(text: str, name: str) -> list[int]:
 
 def level_quantities(qp, sol) -> dict:
     """Energy, contact-zone length, total contact force and contact nodes of one solution."""
-    from . import evaluator
-    from .post import contact_length, defect_fields
+    from dualfem.core import evaluator
+    from dualfem.post.fields import contact_length, defect_fields
 
     d = defect_fields(qp, sol.x)
     tol = evaluator.CONTACT_RTOL * max(np.abs(sol.x).max(initial=0.0), evaluator.TINY)
@@ -69,7 +69,7 @@ def level_quantities(qp, sol) -> dict:
 
 def errors(qp_f, x_f: np.ndarray, qp_c, x_c: np.ndarray) -> dict:
     """Relative energy-norm, full-K-norm and L2 errors of a coarse solution against the fine one."""
-    from .post import mass_norm2, prolongate
+    from dualfem.post.fields import mass_norm2, prolongate
 
     e = x_f - prolongate(qp_c, x_c, qp_f)
     Kel = qp_f.K_fixed
@@ -122,9 +122,9 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = "f2", progress=print) -> 
     reference solve, so the peak is one fine QP plus one fine factorization (a reference at
     N = 1024 holding three of them was killed for lack of memory on a 24 GB machine).
     """
-    from .linalg import clear_cache
-    from .runner import run
-    from .scene import load_scene
+    from dualfem.numerics.linalg import clear_cache
+    from dualfem.core.runner import run
+    from dualfem.core.scene import load_scene
 
     res = {"scene": scene, "solver": solver, "ref_N": ref_N, "Ns": list(Ns), "deltas": {},
            "params": {k: v for k, v in load_scene(scene, {"N": min(Ns)}).build().params.items()
@@ -196,7 +196,7 @@ def plot(res: dict, outdir: Path) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io import atomic_savefig
+    from dualfem.core.io import atomic_savefig
 
     names = []
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
@@ -478,8 +478,8 @@ def run(argv: list[str]) -> int:
         argv = argv[1:]
     args = ap.parse_args(argv)
     supplements = [_read_json(f) for f in args.supplement]
-    from .cli import dumps
-    from .io import atomic_write_text
+    from dualfem.cli.main import dumps
+    from dualfem.core.io import atomic_write_text
 
     out = Path(args.out)
     if args.from_json:
@@ -490,7 +490,7 @@ def run(argv: list[str]) -> int:
         atomic_write_text(out / "convergence.md", markdown(res, pngs, res.get("command", "dualfem report convergence")))
         print(f"wrote {out / 'convergence.md'} from {args.from_json}", file=sys.stderr)
         return 0
-    from .figures import pick_solver
+    from dualfem.post.figures import pick_solver
 
     deltas = _floats(args.deltas, "--deltas")
     Ns = sorted(_ints(args.Ns, "--N"))

@@ -1,0 +1,1 @@
+"""The core: QP, Solution/Status, Solver and Problem bases, registry, evaluator, certificate, runner."""

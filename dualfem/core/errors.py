@@ -1,0 +1,54 @@
+"""User-facing errors.
+
+Every problem with the *input* (a scene parameter, a solver option, a file) raises
+:class:`InputError`. Its message names the parameter and the allowed range; the CLI prints it as
+one line on stderr and exits with status 2, never with a traceback.
+"""
+from __future__ import annotations
+
+import math
+
+
+class InputError(ValueError):
+    """Bad input: the message names the parameter and what is allowed."""
+
+
+class MissingDependency(ImportError):
+    """An optional dependency is missing; the message says what to install."""
+
+
+def check_positive(name: str, value, *, allow_zero: bool = False) -> float:
+    """Return ``value`` as float if it is finite and > 0 (>= 0 with ``allow_zero``)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        rng = ">= 0" if allow_zero else "> 0"
+        raise InputError(f"{name} must be a finite number {rng}, got {value!r}")
+    return v
+
+
+def check_int(name: str, value, lo: int, hi: int | None = None) -> int:
+    """Return ``value`` as int if it is an integer in [lo, hi]."""
+    if isinstance(value, bool):
+        raise InputError(f"{name} must be an integer >= {lo}, got {value!r}")
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be an integer >= {lo}, got {value!r}") from None
+    if not math.isfinite(f) or f != int(f) or f < lo or (hi is not None and f > hi):
+        rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise InputError(f"{name} must be an integer {rng}, got {value!r}")
+    return int(f)
+
+
+def check_open_interval(name: str, value, lo: float, hi: float) -> float:
+    """Return ``value`` as float if it lies in the open interval (lo, hi)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a number in ({lo}, {hi}), got {value!r}") from None
+    if not math.isfinite(v) or not (lo < v < hi):
+        raise InputError(f"{name} must be in the open interval ({lo}, {hi}), got {value!r}")
+    return v

@@ -1,0 +1,194 @@
+"""The QP that every solver receives.
+
+    minimize    1/2 x' K x - F' x
+    subject to  B x >= 0                      (one row per constrained defect node)
+
+Conventions (stated once, used everywhere):
+
+* ``x``: displacements of the free degrees of freedom (length units of the scene).
+* ``B``: row j is the normal jump ``[u_nu]_j = nu . (u_j^+ - u_j^-)`` at defect node j; it is
+  purely geometric (entries are components of the unit normal), so ``B x`` is a length.
+  ``B x >= 0`` means no interpenetration.
+* ``weights``: trapezoid weight w_j of defect node j (a length): ``integral over gamma0 of
+  phi ~ sum_j w_j phi_j``.
+* **Multipliers** ``mu`` (``Solution.multipliers``): nodal contact forces, ``mu >= 0`` in
+  compression, with ``K x - F = B' mu`` at the solution. Units: force per unit thickness
+  (stress x length, e.g. MPa.mm). The paper's pressure ``l(x) = -sigma_nu + [u_nu]/delta``
+  (units of stress) is ``pressure = mu / weights`` (:meth:`QP.pressure`).
+
+Optional structure lets fast solvers reuse work: ``K = K_fixed + K_param`` where ``K_param``
+(the 1/delta interface term) touches only ``local_dofs``, and ``B`` touches only ``local_dofs``
+too. ``K_fixed`` does not depend on delta, r or the load, so a factorization of it is reused
+across all of them.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from dualfem.core.errors import InputError
+
+
+@dataclass
+class QP:
+    """A convex QP ``min 1/2 x'Kx - F'x  s.t.  Bx >= 0`` in plain scipy.sparse / numpy data."""
+
+    K: sp.csc_matrix
+    F: np.ndarray
+    B: sp.csr_matrix
+    weights: np.ndarray | None = None
+    K_fixed: sp.csc_matrix | None = None
+    local_dofs: np.ndarray | None = None
+    name: str = "qp"
+    params: dict = field(default_factory=dict)
+    maps: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.K = sp.csc_matrix(self.K, dtype=float)
+        self.F = np.asarray(self.F, dtype=float).ravel()
+        self.B = sp.csr_matrix(self.B, dtype=float)
+        n = self.K.shape[0]
+        if self.K.shape != (n, n):
+            raise InputError(f"K must be square, got shape {self.K.shape}")
+        if self.F.shape != (n,):
+            raise InputError(f"F must have length {n} (the size of K), got {self.F.shape[0]}")
+        if self.B.shape[1] != n:
+            raise InputError(f"B must have {n} columns (the size of K), got {self.B.shape[1]}")
+        m = self.B.shape[0]
+        if self.weights is None:
+            self.weights = np.ones(m)
+        self.weights = np.asarray(self.weights, dtype=float).ravel()
+        if self.weights.shape != (m,):
+            raise InputError(f"weights must have length {m} (rows of B), got {self.weights.shape[0]}")
+        for nm, arr in (("K", self.K.data), ("F", self.F), ("B", self.B.data), ("weights", self.weights)):
+            if not np.all(np.isfinite(arr)):
+                raise InputError(f"{nm} contains NaN or infinite entries")
+        if np.any(self.weights <= 0):
+            raise InputError("weights must be > 0")
+        if self.K_fixed is None:
+            self.K_fixed = self.K
+        else:
+            self.K_fixed = sp.csc_matrix(self.K_fixed, dtype=float)
+        if self.local_dofs is None:
+            self.local_dofs = np.unique(self.B.indices)
+        self.local_dofs = np.asarray(self.local_dofs, dtype=np.int64)
+
+    # ---------------------------------------------------------------- sizes
+    @property
+    def n(self) -> int:
+        """Number of unknowns."""
+        return self.K.shape[0]
+
+    @property
+    def m(self) -> int:
+        """Number of constraints (defect nodes)."""
+        return self.B.shape[0]
+
+    # -------------------------------------------------------------- helpers
+    def energy(self, x: np.ndarray) -> float:
+        """Discrete potential energy Pi(x) = 1/2 x'Kx - F'x."""
+        return float(0.5 * x @ (self.K @ x) - self.F @ x)
+
+    def pressure(self, multipliers: np.ndarray) -> np.ndarray:
+        """Contact pressure l_j = mu_j / w_j (units of stress) from nodal multipliers."""
+        return np.asarray(multipliers) / self.weights
+
+    def key(self) -> str:
+        """A hash of (K, F, B): equal keys mean the same QP."""
+        h = hashlib.sha1()
+        for a in (self.K.indptr, self.K.indices, self.K.data, self.F, self.B.indptr, self.B.indices, self.B.data):
+            h.update(np.ascontiguousarray(a).tobytes())
+        return h.hexdigest()[:16]
+
+    def check(self, *, symmetric_tol: float = 1e-10) -> None:
+        """Check symmetry of K and positive diagonal (cheap checks); raise InputError."""
+        d = abs(self.K - self.K.T)
+        scale = max(abs(self.K).max(), 1e-300)
+        if d.nnz and d.max() > symmetric_tol * scale:
+            raise InputError(f"K must be symmetric; max |K - K'| / max|K| = {d.max() / scale:.2e}")
+        if np.any(self.K.diagonal() <= 0):
+            raise InputError("K must be positive definite; it has a non-positive diagonal entry")
+
+    # ---------------------------------------------------------------- export
+    def to_dict(self) -> dict:
+        """Plain arrays (for .npz/.mat); sparse matrices as CSC/CSR triplet arrays."""
+        K = self.K.tocoo()
+        B = self.B.tocoo()
+        out = {
+            "K_row": K.row, "K_col": K.col, "K_data": K.data, "K_shape": np.array(K.shape),
+            "B_row": B.row, "B_col": B.col, "B_data": B.data, "B_shape": np.array(B.shape),
+            "F": self.F, "weights": self.weights, "local_dofs": self.local_dofs,
+            "name": np.array(self.name),
+        }
+        for k, v in self.params.items():
+            if isinstance(v, (int, float, str)):
+                out[f"param_{k}"] = np.array(v)
+        for k, v in self.maps.items():
+            out[f"map_{k}"] = np.asarray(v)
+        return out
+
+    def save(self, path: str | Path) -> Path:
+        """Write the QP to ``.npz`` or ``.mat`` atomically (write to a temp file, then rename)."""
+        from dualfem.core.io import atomic_write
+
+        path = Path(path)
+        data = self.to_dict()
+        if path.suffix == ".npz":
+            def write(tmp):
+                with open(tmp, "wb") as fh:
+                    np.savez_compressed(fh, **data)
+        elif path.suffix == ".mat":
+            import scipy.io
+
+            data = {k: v for k, v in data.items() if v.dtype.kind != "U"}
+            mat = {**data, "K": self.K, "B": self.B.tocsc(), "name": self.name}
+
+            def write(tmp):
+                scipy.io.savemat(tmp, mat, do_compression=True)
+        else:
+            raise InputError(f"output file must end in .npz or .mat, got {path.name!r}")
+        atomic_write(path, write)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "QP":
+        """Read a QP written by :meth:`save` (``.npz`` or ``.mat``) and validate it."""
+        path = Path(path)
+        if not path.exists():
+            raise InputError(f"QP file {str(path)!r} does not exist")
+        try:
+            if path.suffix == ".npz":
+                d = dict(np.load(path, allow_pickle=False))
+            elif path.suffix == ".mat":
+                import scipy.io
+
+                d = scipy.io.loadmat(path)
+            else:
+                raise InputError(f"QP file must end in .npz or .mat, got {path.name!r}")
+        except InputError:
+            raise
+        except Exception as exc:  # corrupt file
+            raise InputError(f"cannot read QP file {str(path)!r}: {exc}") from None
+        try:
+            if "K" in d and sp.issparse(d["K"]):
+                K, B = d["K"], d["B"]
+            else:
+                K = sp.coo_matrix((d["K_data"].ravel(), (d["K_row"].ravel(), d["K_col"].ravel())),
+                                  shape=tuple(int(s) for s in d["K_shape"].ravel()))
+                B = sp.coo_matrix((d["B_data"].ravel(), (d["B_row"].ravel(), d["B_col"].ravel())),
+                                  shape=tuple(int(s) for s in d["B_shape"].ravel()))
+            F = d["F"].ravel()
+            w = d["weights"].ravel() if "weights" in d else None
+        except KeyError as exc:
+            raise InputError(f"QP file {str(path)!r} lacks the array {exc.args[0]!r}") from None
+        except ValueError as exc:
+            raise InputError(f"QP file {str(path)!r} has inconsistent arrays: {exc}") from None
+        maps = {k[4:]: v for k, v in d.items() if k.startswith("map_")}
+        params = {k[6:]: v.item() if np.ndim(v) == 0 else v for k, v in d.items() if k.startswith("param_")}
+        qp = cls(K=K, F=F, B=B, weights=w, name=path.stem, maps=maps, params=params)
+        qp.check()
+        return qp

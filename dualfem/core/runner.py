@@ -1,0 +1,96 @@
+"""Run a solver on a QP: time setup and solve separately, attach independent residuals.
+
+``run`` never lets a solver fail silently: a missing dependency or a skip reason becomes
+``Status.SKIPPED`` with the reason, an exception inside the solver becomes ``Status.ERROR`` with
+its message, and the residuals always come from :mod:`dualfem.evaluator`.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from dualfem.core import evaluator
+from dualfem.core.errors import InputError
+from dualfem.core.qp import QP
+from dualfem.core.registry import get_solver
+from dualfem.core.solution import Solution, Status
+from dualfem.core.solver import Solver
+
+
+def make_solver(name: str, params: dict[str, Any] | None = None) -> Solver:
+    """Instantiate the registered solver ``name`` with ``params`` (validated)."""
+    return get_solver(name)(**(params or {}))
+
+
+def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None) -> Solution:
+    """Solve ``qp`` with ``solver`` (an instance, or a registry name plus ``params``)."""
+    if isinstance(solver, str):
+        solver = make_solver(solver, params)
+    reason = solver.missing() or solver.skip(qp)
+    if reason:
+        return Solution(solver=solver.name, status=Status.SKIPPED, message=reason, params=dict(solver.params))
+    t0 = time.perf_counter()
+    try:
+        solver.setup(qp)
+        t1 = time.perf_counter()
+        sol = solver.solve()
+        t2 = time.perf_counter()
+    except InputError:
+        raise
+    except Exception as exc:  # the solver broke: say so, never hide it
+        return Solution(solver=solver.name, status=Status.ERROR, params=dict(solver.params),
+                        message=f"{type(exc).__name__}: {exc}",
+                        time_s={"setup": 0.0, "solve": time.perf_counter() - t0})
+    sol.time_s = {"setup": t1 - t0, "solve": t2 - t1, **{k: v for k, v in sol.time_s.items()
+                                                         if k not in ("setup", "solve")}}
+    sol.params = dict(solver.params)
+    attach_residuals(qp, sol)
+    return sol
+
+
+def attach_residuals(qp: QP, sol: Solution) -> Solution:
+    """Fill ``sol.residuals`` from the evaluator; a non-finite answer cannot stay 'solved'."""
+    if sol.x is None:
+        return sol
+    if sol.multipliers is None:
+        sol.multipliers = np.zeros(qp.m)
+    sol.residuals = evaluator.residuals(qp, sol.x, sol.multipliers)
+    if not sol.residuals["finite"] and sol.status == Status.SOLVED:
+        sol.status = Status.NUMERICAL_ERROR
+        sol.message = (sol.message + "; " if sol.message else "") + "solution contains NaN/inf"
+    return sol
+
+
+def summary(qp: QP, sol: Solution) -> dict:
+    """The JSON record of one solve (field names are a stable interface)."""
+    out: dict[str, Any] = {
+        "solver": sol.solver,
+        "status": str(sol.status),
+        "message": sol.message,
+        "problem": qp.name,
+        "ndof": qp.n,
+        "n_defect_nodes": qp.m,
+        "iterations": sol.iterations,
+        "time_s": sol.time_s,
+        "params": jsonable_params(sol.params),
+    }
+    if sol.x is not None and sol.residuals is not None and sol.residuals["finite"]:
+        jump = qp.B @ sol.x
+        out.update({
+            "energy": sol.residuals["energy"],
+            "max_jump": float(jump.max(initial=0.0)),
+            "n_contact": int(evaluator.contact_set(qp, sol.x).sum()),
+            "contact_rtol": evaluator.CONTACT_RTOL,
+            "total_contact_force": float(sol.multipliers.sum()),
+            "residuals": {k: sol.residuals[k] for k in ("stationarity", "primal", "dual", "complementarity")},
+        })
+    else:
+        out.update({"energy": None, "max_jump": None, "n_contact": None, "residuals": None})
+    return out
+
+
+def jsonable_params(d: dict) -> dict:
+    """Parameters as JSON-safe scalars (anything else as its string)."""
+    return {k: (v if isinstance(v, (int, float, str, bool, type(None))) else str(v)) for k, v in d.items()}

@@ -1,0 +1,70 @@
+"""Resolve a SCENE argument (built-in preset name or TOML file) plus ``--set`` overrides."""
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from dualfem.core.errors import InputError
+from dualfem.core.problem import Problem
+from dualfem.core.registry import get_problem, problems
+
+
+def presets() -> dict[str, tuple[str, dict[str, Any]]]:
+    """Built-in scene names -> (problem name, parameters)."""
+    out: dict[str, tuple[str, dict[str, Any]]] = {}
+    for pname, cls in problems().items():
+        for sname, params in cls.presets.items():
+            out[sname] = (pname, dict(params))
+    return out
+
+
+def parse_set(items: list[str] | None) -> dict[str, str]:
+    """Parse ``KEY=VALUE`` strings (from ``--set``) into a dict; InputError if malformed."""
+    out: dict[str, str] = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise InputError(f"--set expects KEY=VALUE, got {item!r}")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
+    """Return the problem instance for a preset name, a ``.toml`` scene file or a ``.npz``/``.mat`` QP file.
+
+    A TOML scene file holds scene keys at top level; ``problem = "NAME"`` picks the problem
+    plugin (default ``thin_defect``) and ``scene = "f2"`` starts from a built-in preset.
+    """
+    overrides = dict(overrides or {})
+    pre = presets()
+    if spec in pre:
+        pname, params = pre[spec]
+    elif Path(spec).suffix in (".npz", ".mat"):
+        # a QP file (generic ``min 1/2 x'Px + q'x s.t. Gx >= h`` or a ``dualfem export``): problems/generic_qp.py
+        pname, params = "qp_file", {"path": spec}
+    elif spec.endswith(".toml") or Path(spec).is_file():
+        path = Path(spec)
+        if not path.is_file():
+            raise InputError(f"scene file {spec!r} does not exist")
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except tomllib.TOMLDecodeError as exc:
+            raise InputError(f"malformed TOML in scene file {spec!r}: {exc}") from None
+        except UnicodeDecodeError:
+            raise InputError(f"scene file {spec!r} is not UTF-8 text") from None
+        base = data.pop("scene", None)
+        if base is not None:
+            if base not in pre:
+                raise InputError(f"unknown base scene {base!r} in {spec!r}; "
+                                 f"built-in scenes: {', '.join(sorted(pre))}")
+            pname, params = pre[base]
+        else:
+            pname, params = "thin_defect", {}
+        pname = data.pop("problem", pname)
+        params.update(data)
+    else:
+        raise InputError(f"unknown scene {spec!r}; use a built-in scene "
+                         f"({', '.join(sorted(pre))}) or a path to a .toml scene file or a .npz/.mat QP file")
+    params.update(overrides)
+    return get_problem(pname)(**params)

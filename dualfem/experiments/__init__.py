@@ -1,0 +1,1 @@
+"""Experiments: compare, bench and stress sweeps, and the harness they share."""

@@ -1,0 +1,1 @@
+"""Numerical kernels: orderings, factorizations, the exact reduction onto the defect unknowns, scaling."""

@@ -1,0 +1,1 @@
+"""Post-processing of a solution: fields, stresses, VTK/XDMF output, figures."""
