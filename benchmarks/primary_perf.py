@@ -29,11 +29,10 @@ import numpy as np
 import scipy.sparse.linalg as sla
 
 from dualfem.core import evaluator
-
-from dualfem.numerics import linalg
 from dualfem.core.io import atomic_write, atomic_write_text
 from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
+from dualfem.numerics import linalg
 
 DELTAS = [1e-1, 1e-3, 1e-5, 1e-7, 1e-9]
 

@@ -8,7 +8,7 @@ scene file or with ``--set``, ``load`` is ``"f1"``, ``"f2"``, ``"f3"`` or an exp
 from __future__ import annotations
 
 import ast
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

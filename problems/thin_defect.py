@@ -31,6 +31,7 @@ from dualfem.core.registry import register_problem
 
 from .loads import resolve_load
 
+
 def _parse_defect(value) -> np.ndarray:
     if isinstance(value, str):
         try:

@@ -18,9 +18,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from dualfem.core.registry import register_solver
-from dualfem.numerics.scaling import scale
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver, positive
+from dualfem.numerics.scaling import scale
 
 _STATUS = {
     "Solved": Status.SOLVED,

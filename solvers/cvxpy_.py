@@ -35,9 +35,9 @@ import numpy as np
 from dualfem.core.errors import InputError
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.core.registry import register_solver
-from dualfem.numerics.scaling import scale
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver, positive
+from dualfem.numerics.scaling import scale
 
 #: accuracy promised per backend at default settings (relative energy-norm error of x)
 BACKEND_TOLERANCE = {"CLARABEL": 1e-5, "ECOS": 1e-5, "MOSEK": 1e-5, "GUROBI": 1e-5,

@@ -13,9 +13,9 @@ import scipy.sparse as sp
 
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.core.registry import register_solver
-from dualfem.numerics.scaling import scale
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver, positive
+from dualfem.numerics.scaling import scale
 
 _STATUS = {
     "solved": Status.SOLVED,

@@ -41,7 +41,6 @@ from dualfem.core.errors import InputError
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver, positive
-
 from dualfem.numerics.linalg import MAX_LOCAL, too_many_local  # noqa: E402  (shared with penalty, uzawa)
 
 

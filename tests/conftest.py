@@ -8,7 +8,7 @@ import pytest
 from dualfem.core.scene import load_scene
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _scene(name: str, N: int, delta: float, plane: str = "strain"):
     problem = load_scene(name, {"N": N, "delta": delta, "plane": plane})
     return problem, problem.build()

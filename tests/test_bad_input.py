@@ -6,8 +6,6 @@ subprocess, which also catches stray warnings and tracebacks printed outside Pyt
 """
 from __future__ import annotations
 
-import json
-import math
 import os
 import re
 import subprocess

@@ -14,8 +14,11 @@ from pathlib import Path
 
 import pytest
 
-from dualfem.experiments import bench
 from dualfem.core.errors import InputError
+from dualfem.experiments import bench, harness, store
+from dualfem.experiments.progress import Progress
+from dualfem.experiments.spec import load_spec
+from dualfem.experiments.tasks import expand_scenes, expand_tasks
 
 SMALL = """
 name = "t"
@@ -65,15 +68,15 @@ def run_rows(out: Path) -> dict[str, dict]:
 ])
 def test_bad_spec_is_input_error(tmp_path, text, words):
     with pytest.raises(InputError) as exc:
-        bench.load_spec(write(tmp_path, text))
+        load_spec(write(tmp_path, text))
     for w in words:
         assert w in str(exc.value)
 
 
 def test_bad_scene_parameter_is_input_error(tmp_path):
-    spec = bench.load_spec(write(tmp_path, SMALL.replace("N = [8, 16]", "N = [8, 1]")))
+    spec = load_spec(write(tmp_path, SMALL.replace("N = [8, 16]", "N = [8, 1]")))
     with pytest.raises(InputError, match="N"):
-        bench.expand_tasks(spec)
+        expand_tasks(spec)
 
 
 def test_cli_bad_spec_exit_2(tmp_path, capsys):
@@ -87,8 +90,8 @@ def test_cli_bad_spec_exit_2(tmp_path, capsys):
 
 
 def test_task_expansion(tmp_path):
-    spec = bench.load_spec(write(tmp_path, SMALL))
-    tasks = bench.expand_tasks(spec)
+    spec = load_spec(write(tmp_path, SMALL))
+    tasks = expand_tasks(spec)
     # 8 scenes x (osqp: 2 tiers, missing solver: 2 tiers) + clarabel (1 tier) on the 4 scenes with N <= 8
     assert len(tasks) == 8 * 4 + 4
     assert len({t["run_id"] for t in tasks}) == len(tasks)
@@ -100,23 +103,23 @@ def test_task_expansion(tmp_path):
     missing = [t for t in tasks if t["solver"] == "no_such_solver_xyz"]
     assert all("not registered" in t["skip"] for t in missing)
     # the run id is a function of the run's definition: same spec -> same ids, other repeats -> other ids
-    assert [t["run_id"] for t in bench.expand_tasks(spec)] == [t["run_id"] for t in tasks]
-    spec3 = bench.load_spec(write(tmp_path, SMALL.replace("repeats = 2", "repeats = 3"), "s3.toml"))
-    assert not {t["run_id"] for t in bench.expand_tasks(spec3)} & {t["run_id"] for t in tasks}
+    assert [t["run_id"] for t in expand_tasks(spec)] == [t["run_id"] for t in tasks]
+    spec3 = load_spec(write(tmp_path, SMALL.replace("repeats = 2", "repeats = 3"), "s3.toml"))
+    assert not {t["run_id"] for t in expand_tasks(spec3)} & {t["run_id"] for t in tasks}
 
 
 # ------------------------------------------------------------------ a whole small sweep
 @pytest.fixture(scope="module")
 def small_sweep(tmp_path_factory):
     d = tmp_path_factory.mktemp("sweep")
-    spec = bench.load_spec(write(d, SMALL))
+    spec = load_spec(write(d, SMALL))
     summary = bench.run_sweep(spec, d / "out", progress=False, stream=open(os.devnull, "w"))
     return spec, d / "out", summary
 
 
 def test_sweep_rows_and_statuses(small_sweep):
     spec, out, summary = small_sweep
-    rows = bench.read_results(out / "results.csv")
+    rows = store.read_results(out / "results.csv")
     runs = [r for r in rows if r["kind"] == "run"]
     assert len(runs) == summary.total == 36
     assert {r["status"] for r in runs} <= RUN_STATUSES
@@ -206,11 +209,11 @@ def test_failed_reference_is_never_cached(tmp_path):
         '\n[reference]\nsolvers = ["clarabel"]\nparams = {clarabel = {max_iter = 1}}\n'
     out = tmp_path / "out"
     for attempt, reps in enumerate((2, 1)):    # the 2nd sweep has new runs on the same scene
-        spec = bench.load_spec(write(tmp_path, text.replace("repeats = 2", f"repeats = {reps}")))
+        spec = load_spec(write(tmp_path, text.replace("repeats = 2", f"repeats = {reps}")))
         s = bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
         assert s.refs == 1                                  # the failed reference is tried again every time
         assert not list((out / "refs").glob("*.npz"))
-        rows = bench.read_results(out)
+        rows = store.read_results(out)
         ref = [r for r in rows if r["kind"] == "reference"]
         assert len(ref) == 1 and ref[0]["status"] == "error" and "no certified reference" in ref[0]["message"]
         assert "max_iter" in ref[0]["message"]
@@ -221,10 +224,10 @@ def test_failed_reference_is_never_cached(tmp_path):
 
 # ------------------------------------------------------------------ wall-clock guard
 def test_guard_kills_a_run_over_its_budget(tmp_path):
-    spec = bench.load_spec(write(tmp_path, SMALL))
-    task = next(t for t in bench.expand_tasks(spec) if t["solver"] == "clarabel" and not t["skip"])
+    spec = load_spec(write(tmp_path, SMALL))
+    task = next(t for t in expand_tasks(spec) if t["solver"] == "clarabel" and not t["skip"])
     task = {**task, "scene_params": {"N": 32, "delta": 1e-9}, "hard_limit": 1e-4, "ref": None}
-    w = bench.GuardedWorker()
+    w = harness.GuardedWorker()
     try:
         row, payload = w.run(task)
         assert row["status"] == "time_limit" and "wall-clock guard" in row["message"] and payload is None
@@ -236,17 +239,17 @@ def test_guard_kills_a_run_over_its_budget(tmp_path):
 
 
 def test_worker_exception_becomes_error_row(tmp_path):
-    spec = bench.load_spec(write(tmp_path, SMALL))
-    task = next(t for t in bench.expand_tasks(spec) if t["solver"] == "osqp")
-    row, _ = bench.run_guarded({**task, "scene": "no_such_scene", "ref": None})
+    spec = load_spec(write(tmp_path, SMALL))
+    task = next(t for t in expand_tasks(spec) if t["solver"] == "osqp")
+    row, _ = harness.run_guarded({**task, "scene": "no_such_scene", "ref": None})
     assert row["status"] == "error" and "no_such_scene" in row["message"]
-    bench._close_local_worker()
+    harness._close_local_worker()
 
 
 # ------------------------------------------------------------------ kill and resume
 RESUME = """
 name = "resume"
-repeats = 3
+repeats = 2
 time_limit = 60
 [tiers]
 low = 1e-3
@@ -255,7 +258,7 @@ high = 1e-8
 enabled = false
 [[scenes]]
 scene = ["f1", "f2", "f3"]
-N = [16, 32]
+N = [8, 16]
 delta = [1e-3, 1e-9]
 [[solvers]]
 name = "osqp"
@@ -265,12 +268,26 @@ tiers = ["high"]
 """
 
 
+def _session_pids(sid: int) -> list[int]:
+    """Live processes of a session (Linux /proc)."""
+    pids = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
+            except (OSError, IndexError):
+                continue
+            if int(fields[3]) == sid and fields[0] != "Z":
+                pids.append(int(d.name))
+    return pids
+
+
 def test_resume_after_killing_a_sweep(tmp_path):
     spec_path = write(tmp_path, RESUME)
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "dualfem", "bench", str(spec_path), "--out", str(out)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    total = len(bench.expand_tasks(bench.load_spec(spec_path)))
+    total = len(expand_tasks(load_spec(spec_path)))
     try:
         deadline = time.monotonic() + 300
         while time.monotonic() < deadline:
@@ -280,8 +297,12 @@ def test_resume_after_killing_a_sweep(tmp_path):
                 break
             time.sleep(0.005)
         assert proc.poll() is None, "the sweep finished before it could be killed"
-        os.killpg(proc.pid, signal.SIGKILL)                 # the sweep and its worker child
+        os.kill(proc.pid, signal.SIGKILL)                   # kill -9 of the sweep alone
         proc.wait()
+        deadline = time.monotonic() + 15                    # its worker dies with it: no orphans
+        while _session_pids(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not _session_pids(proc.pid), "a worker process outlived the killed sweep"
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -295,17 +316,17 @@ def test_resume_after_killing_a_sweep(tmp_path):
         with open(out / "results.csv", newline="") as fh:
             list(csv.DictReader(fh))
     finished_runs = [k for k, v in kept.items() if not k.startswith(("ref-", "floor-"))
-                     and json.loads(v)["status"] in bench.FINAL_STATUSES]
+                     and json.loads(v)["status"] in store.FINAL_STATUSES]
     assert 3 <= len(finished_runs) < total
     (out / ".gitignore").write_text("rows/\n")              # a user's file in the results directory
     # run again: completes the sweep, recomputes nothing finished
-    s = bench.run_sweep(bench.load_spec(spec_path), out, progress=False, stream=open(os.devnull, "w"))
+    s = bench.run_sweep(load_spec(spec_path), out, progress=False, stream=open(os.devnull, "w"))
     assert s.total == total and s.skipped_done == len(finished_runs) and s.ran == total - len(finished_runs)
     for rid in finished_runs:
         assert (out / "rows" / f"{rid}.json").read_bytes() == kept[rid]
-    rows = bench.read_results(out)
+    rows = store.read_results(out)
     assert {r["run_id"] for r in rows if r["kind"] == "run"} == {t["run_id"] for t in
-                                                                 bench.expand_tasks(bench.load_spec(spec_path))}
+                                                                 expand_tasks(load_spec(spec_path))}
     assert [p.name for p in out.rglob(".*") if p.is_file()] == [".gitignore"]   # no temporary file left
 
 
@@ -314,13 +335,13 @@ PAR = SMALL.replace('N = [8, 16]', 'N = [8]').replace("repeats = 2", "repeats = 
 
 
 def _statuses(out: Path) -> dict[str, str]:
-    return {r["run_id"]: r["status"] for r in bench.read_results(out)}
+    return {r["run_id"]: r["status"] for r in store.read_results(out)}
 
 
 @pytest.fixture(scope="module")
 def serial_par(tmp_path_factory):
     d = tmp_path_factory.mktemp("par")
-    spec = bench.load_spec(write(d, PAR))
+    spec = load_spec(write(d, PAR))
     bench.run_sweep(spec, d / "serial", progress=False, stream=open(os.devnull, "w"))
     return spec, _statuses(d / "serial")
 
@@ -339,7 +360,7 @@ def test_dask_executor_on_local_cluster(serial_par, tmp_path):
                                   protocol="tcp", dashboard_address=None) as cluster:      # loopback TCP
         s = bench.run_sweep(spec, tmp_path / "out", dask=cluster.scheduler_address, progress=False,
                             stream=open(os.devnull, "w"))
-    bench._close_local_worker()
+    harness._close_local_worker()
     assert s.skipped_done == 0 and s.ran == 12 and _statuses(tmp_path / "out") == expected
 
 
@@ -356,12 +377,12 @@ def test_progress_plain_lines_and_bar():
     import io
 
     s = io.StringIO()
-    p = bench.Progress(2, "x", s, tty=False)
+    p = Progress(2, "x", s, tty=False)
     p.update("one")
     p.update("two")
     assert s.getvalue().count("\n") == 2 and "[1/2] one" in s.getvalue() and "[2/2] two" in s.getvalue()
     s = io.StringIO()
-    p = bench.Progress(2, "x", s, tty=True)
+    p = Progress(2, "x", s, tty=True)
     p.update("one")
     assert "\r" in s.getvalue() and "\n" not in s.getvalue()
     p.update("two")
@@ -371,11 +392,11 @@ def test_progress_plain_lines_and_bar():
 def test_shipped_specs_are_valid():
     root = Path(__file__).resolve().parent.parent / "benchmarks"
     for name in ("default.toml", "small.toml", "target.toml"):
-        spec = bench.load_spec(root / name)
-        tasks = bench.expand_tasks(spec)
+        spec = load_spec(root / name)
+        tasks = expand_tasks(spec)
         assert tasks and len({t["run_id"] for t in tasks}) == len(tasks)
-    spec = bench.load_spec(root / "default.toml")
-    scenes = bench.expand_scenes(spec)
+    spec = load_spec(root / "default.toml")
+    scenes = expand_scenes(spec)
     assert {s.scene for s in scenes} == {"f1", "f2", "f3"}
     assert {1e-1, 1e-3, 1e-5, 1e-7, 1e-9} <= {s.params.get("delta") for s in scenes}
     assert max(s.params.get("N", 0) for s in scenes) >= 512
@@ -384,8 +405,8 @@ def test_shipped_specs_are_valid():
 def test_solver_block_time_limit_and_repeats(tmp_path):
     text = SMALL.replace('name = "clarabel"\ntiers = ["high"]',
                          'name = "clarabel"\ntiers = ["high"]\ntime_limit = 7.5\nrepeats = 1')
-    spec = bench.load_spec(write(tmp_path, text))
-    tasks = bench.expand_tasks(spec)
+    spec = load_spec(write(tmp_path, text))
+    tasks = expand_tasks(spec)
     clar = [t for t in tasks if t["solver"] == "clarabel"]
     osqp = [t for t in tasks if t["solver"] == "osqp"]
     assert all(t["time_limit"] == 7.5 and t["params"]["time_limit"] == 7.5 and t["repeats"] == 1 for t in clar)
@@ -393,23 +414,23 @@ def test_solver_block_time_limit_and_repeats(tmp_path):
     assert all(t["hard_limit"] == 7.5 * spec.guard_factor + spec.guard_slack for t in clar)
     assert all(t["time_limit"] == 60.0 and t["hard_limit"] == spec.hard_limit for t in osqp)
     # a block without its own limit keeps the run ids it had before the option existed
-    plain = {t["run_id"] for t in bench.expand_tasks(bench.load_spec(write(tmp_path, SMALL, "s0.toml")))}
+    plain = {t["run_id"] for t in expand_tasks(load_spec(write(tmp_path, SMALL, "s0.toml")))}
     assert {t["run_id"] for t in osqp} <= plain and not {t["run_id"] for t in clar} & plain
     with pytest.raises(InputError, match="time_limit of solver 'clarabel'"):
-        bench.load_spec(write(tmp_path, text.replace("time_limit = 7.5", "time_limit = 0"), "bad.toml"))
+        load_spec(write(tmp_path, text.replace("time_limit = 7.5", "time_limit = 0"), "bad.toml"))
     with pytest.raises(InputError, match="repeats of solver 'clarabel'"):
-        bench.load_spec(write(tmp_path, text.replace("repeats = 1", "repeats = 1.5"), "bad2.toml"))
+        load_spec(write(tmp_path, text.replace("repeats = 1", "repeats = 1.5"), "bad2.toml"))
 
 
 def test_report_merges_sweeps_later_wins(small_sweep, tmp_path):
     from dualfem.reports.bench import build_report, load_sources
 
     _, out, _ = small_sweep
-    rows = bench.read_results(out / "results.csv")
+    rows = store.read_results(out / "results.csv")
     redo = next(r for r in rows if r["kind"] == "run" and r["solver"] == "osqp" and r["status"] == "solved")
     second = tmp_path / "second"
     second.mkdir()
-    bench.write_csv(second / "results.csv", [{**redo, "status": "error", "message": "redone by a later sweep"}])
+    store.write_csv(second / "results.csv", [{**redo, "status": "error", "message": "redone by a later sweep"}])
     merged, sources = load_sources([out, second])
     assert len(merged) == len(rows) and [s["kept"] for s in sources] == [len(rows) - 1, 1]
     again = [r for r in merged if r["run_id"] == redo["run_id"]]

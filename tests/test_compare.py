@@ -6,12 +6,12 @@ import json
 import numpy as np
 import pytest
 
-from dualfem.core import registry
 from dualfem.cli.main import main
-from dualfem.experiments.compare import RUN_FIELDS, compare_solvers
+from dualfem.core import registry
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
+from dualfem.experiments.compare import RUN_FIELDS, compare_solvers
 
 
 @pytest.fixture(scope="module")

@@ -22,7 +22,6 @@ import math
 
 import numpy as np
 import pytest
-
 from _lcp import enumerate_lcp
 
 from dualfem.core import evaluator

@@ -6,8 +6,8 @@ import pytest
 import scipy.io
 import scipy.sparse as sp
 
-from dualfem.core import evaluator
 from dualfem.cli.main import main
+from dualfem.core import evaluator
 from dualfem.core.errors import InputError
 from dualfem.core.registry import solvers
 from dualfem.core.runner import run

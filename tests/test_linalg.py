@@ -6,8 +6,8 @@ import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-from dualfem.numerics import linalg
 from dualfem.core.qp import QP
+from dualfem.numerics import linalg
 
 
 @pytest.mark.parametrize("name, delta", [("f2", 1e-5), ("f1", 1e-9), ("f3", 1e-1)])

@@ -5,9 +5,19 @@ import numpy as np
 import pytest
 
 from dualfem.core.errors import InputError
-from dualfem.post.fields import (Post, contact_length, defect_fields, free_vector, mass_norm2, nodal_displacement,
-                          prolongate, strains, stresses, von_mises)
 from dualfem.core.scene import load_scene
+from dualfem.post.fields import (
+    Post,
+    contact_length,
+    defect_fields,
+    free_vector,
+    mass_norm2,
+    nodal_displacement,
+    prolongate,
+    strains,
+    stresses,
+    von_mises,
+)
 from dualfem.problems.thin_defect import lame
 
 
@@ -163,9 +173,9 @@ def test_mass_norm_matches_skfem(qp8):
 
 def test_transfer_errors_decrease():
     """Coarse exact solutions approach a finer one (energy-norm and L2 errors shrink with h)."""
+    from dualfem.core.runner import run
     from dualfem.post.figures import pick_solver
     from dualfem.reports.convergence import errors
-    from dualfem.core.runner import run
 
     solver = pick_solver()
     fine = load_scene("f2", {"N": 32, "delta": 1e-1}).build()
@@ -182,8 +192,8 @@ def test_transfer_errors_decrease():
 
 
 def test_nodal_displacement_applies_x_shift():
-    from dualfem.post.fields import nodal_displacement
     from dualfem.core.scene import load_scene
+    from dualfem.post.fields import nodal_displacement
 
     problem = load_scene("signorini", {})
     qp = problem.build()
@@ -197,8 +207,8 @@ def test_nodal_displacement_applies_x_shift():
 
 
 def test_free_vector_inverts_nodal_displacement_with_shift():
-    from dualfem.post.fields import free_vector, nodal_displacement
     from dualfem.core.scene import load_scene
+    from dualfem.post.fields import free_vector, nodal_displacement
 
     qp = load_scene("signorini", {}).build()
     x = np.random.default_rng(0).normal(size=qp.n)

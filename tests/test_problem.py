@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
 from dualfem.core import evaluator
@@ -55,7 +54,7 @@ def test_patch_uniaxial_stress_reproduced_exactly(plane):
     u[basis.nodal_dofs[1]] = e22 * y - 0.2
     bnd = np.unique(basis.nodal_dofs[:, mesh.boundary_nodes()].ravel())
     # the defect faces are (internal) boundary facets of the doubled mesh: keep them free
-    outer = np.flatnonzero((np.isclose(x, 0) | np.isclose(x, 1) | np.isclose(y, 0) | np.isclose(y, 1)))
+    outer = np.flatnonzero(np.isclose(x, 0) | np.isclose(x, 1) | np.isclose(y, 0) | np.isclose(y, 1))
     D = np.unique(basis.nodal_dofs[:, outer].ravel())
     assert D.size < bnd.size  # the defect faces really are boundary here
     I = np.setdiff1d(np.arange(basis.N), D)

@@ -1,5 +1,4 @@
 """``dualfem report plugins`` (small sizes): the report and its figure are written."""
-from pathlib import Path
 
 import pytest
 

@@ -11,9 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dualfem.core import evaluator
-
-from dualfem.core import registry
+from dualfem.core import evaluator, registry
 from dualfem.core.runner import run
 
 REPO = Path(__file__).resolve().parents[1]

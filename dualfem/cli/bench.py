@@ -25,7 +25,8 @@ def _cfg(p):
 
 @command("bench", "run (or resume) a benchmark sweep: every solver, error against time")(_cfg)
 def cmd_bench(args) -> int:
-    from dualfem.experiments.bench import load_spec, run_sweep
+    from dualfem.experiments.bench import run_sweep
+    from dualfem.experiments.spec import load_spec
 
     if args.jobs < 1:
         raise InputError(f"--jobs must be an integer >= 1, got {args.jobs}")

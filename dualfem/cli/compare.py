@@ -41,8 +41,8 @@ def parse_solver_params(items: list[str], names: list[str]) -> dict[str, dict[st
 
 @command("compare", "run several solvers on one scene and cross-check them against a certified reference")(_cfg)
 def cmd_compare(args) -> int:
-    from dualfem.experiments.compare import compare_solvers, default_solvers, stderr_progress, table
     from dualfem.core.registry import get_solver
+    from dualfem.experiments.compare import compare_solvers, default_solvers, stderr_progress, table
 
     if args.solvers is not None:
         names = [s.strip() for s in args.solvers.split(",") if s.strip()]

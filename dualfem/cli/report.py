@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
-from typing import Callable
+from collections.abc import Callable
 
 from dualfem.cli.main import command
 from dualfem.core.errors import InputError

@@ -31,9 +31,10 @@ def _cfg(p):
 
 @command("stress", "run the numerical-stability grid (delta, r, units, load, nu, N) over every solver")(_cfg)
 def cmd_stress(args) -> int:
-    from dualfem.experiments import stress
     from dualfem.core.errors import check_int, check_positive
     from dualfem.core.registry import solvers
+    from dualfem.experiments import reference, stress
+    from dualfem.experiments.machine import environment
 
     reg = solvers()
     if args.solvers:
@@ -66,27 +67,28 @@ def cmd_stress(args) -> int:
             print(f"{ax:6s} {n} runs")
         print(f"total  {len(tasks)} runs, solvers: {', '.join(names)}")
         return 0
-    refs = stress.reference_solvers()
-    meta = {"quick": bool(args.quick), "solvers": names, "axes": list(axes), "safety": stress.SAFETY,
+    refs = reference.candidates()
+    meta = {"quick": bool(args.quick), "solvers": names, "axes": list(axes),
+            "grading": "dualfem.core.grade: error <= declared tolerance + the reference's certified bound",
             "ref_kkt": stress.REF_KKT, "references": [r[0] for r in refs],
-            "tolerances": {n: reg[n].tolerance for n in names},
+            "tolerances": {n: reg[n]().tolerance for n in names if reg[n].missing() is None},
             "exact": {n: reg[n].exact for n in names},
             "third_party": {n: bool(reg[n].requires) for n in names},
             "missing": {n: reg[n].missing() for n in names if reg[n].missing()},
             "base": stress.BASE, "time_limit": tasks[0].time_limit if tasks else None,
             "command": "dualfem " + " ".join(sys.argv[1:]) if sys.argv and "dualfem" in sys.argv[0] else None,
             "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            "environment": stress.environment(), "git_commit": _git_head()}
+            "environment": environment(), "git_commit": _git_head()}
     if args.resume:
         meta = _merge_meta(out / "meta.json", meta)
     tty = sys.stderr.isatty()
     t0 = time.monotonic()
 
-    def progress(i, n, rec):
-        err = rec.get("err")
+    def progress(i, n, row):
+        err = row.err_x_energy
         e = f"err {err:.1e}" if isinstance(err, float) and math.isfinite(err) else ""
-        line = (f"[{i}/{n} {time.monotonic() - t0:6.0f}s] {rec['axis']:5s} {rec['solver']:9s} "
-                f"{_coords(rec['coords']):32s} {rec.get('status', ''):15s} {rec['outcome']:12s} {e}")
+        line = (f"[{i}/{n} {time.monotonic() - t0:6.0f}s] {row.axis:5s} {row.solver:9s} "
+                f"{_coords(row.coords):32s} {row.status or '':15s} {row.grade or '':12s} {e}")
         print(("\r" + line[:150]) if tty else line, file=sys.stderr, end="" if tty else "\n", flush=True)
 
     print(f"dualfem stress: {len(tasks)} runs ({', '.join(names)}), reference "
@@ -98,7 +100,7 @@ def cmd_stress(args) -> int:
     from collections import Counter
 
     every = stress.load_results(out)[1]  # every record, also of earlier (resumed) runs
-    c = Counter(r["outcome"] for r in every)
+    c = Counter(r.grade for r in every)
     stress._write_meta(out, {**meta, "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                              "complete": len(recs) == len(tasks) and meta.get("complete_before", True),
                              "n_tasks": len(tasks), "n_records": len(every),
@@ -118,7 +120,7 @@ def _git_head() -> str | None:
 
     try:
         p = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, timeout=10,
-                           cwd=Path(__file__).resolve().parent.parent)
+                           cwd=Path(__file__).resolve().parents[2])
         return p.stdout.strip() or None
     except (OSError, subprocess.SubprocessError):
         return None

@@ -21,6 +21,9 @@ from dualfem.core.qp import QP
 
 TINY = 1e-300
 
+#: the names of the four KKT residuals, in report order (defined here only)
+RESIDUALS = ("stationarity", "primal", "dual", "complementarity")
+
 #: A defect node is "in contact" when its normal jump is at most this fraction of |x|_inf.
 CONTACT_RTOL = 1e-6
 
@@ -57,8 +60,13 @@ def residuals(qp: QP, x: np.ndarray, multipliers: np.ndarray) -> dict:
 
 def kkt_error(res: dict) -> float:
     """The largest of the four KKT residuals (nan if any is nan)."""
-    vals = [res[k] for k in ("stationarity", "primal", "dual", "complementarity")]
+    vals = [res[k] for k in RESIDUALS]
     return float("nan") if any(np.isnan(vals)) else float(max(vals))
+
+
+def kkt_residuals(res: dict) -> dict:
+    """The four KKT residuals of a :func:`residuals` record (without energy and flags)."""
+    return {k: res[k] for k in RESIDUALS}
 
 
 def contact_set(qp: QP, x: np.ndarray, rtol: float = CONTACT_RTOL) -> np.ndarray:

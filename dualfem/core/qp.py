@@ -155,7 +155,7 @@ class QP:
         return path
 
     @classmethod
-    def load(cls, path: str | Path) -> "QP":
+    def load(cls, path: str | Path) -> QP:
         """Read a QP written by :meth:`save` (``.npz`` or ``.mat``) and validate it."""
         path = Path(path)
         if not path.exists():

@@ -20,13 +20,13 @@ if TYPE_CHECKING:  # pragma: no cover
     from dualfem.core.problem import Problem
     from dualfem.core.solver import Solver
 
-_SOLVERS: dict[str, type["Solver"]] = {}
-_PROBLEMS: dict[str, type["Problem"]] = {}
+_SOLVERS: dict[str, type[Solver]] = {}
+_PROBLEMS: dict[str, type[Problem]] = {}
 _LOADED = False
 _ENTRY_POINT_ERRORS: list[str] = []
 
 
-def register_solver(cls: type["Solver"]) -> type["Solver"]:
+def register_solver(cls: type[Solver]) -> type[Solver]:
     """Class decorator: add a solver plugin to the registry under ``cls.name``."""
     if not cls.name:
         raise ValueError(f"solver class {cls.__name__} has no name")
@@ -34,7 +34,7 @@ def register_solver(cls: type["Solver"]) -> type["Solver"]:
     return cls
 
 
-def register_problem(cls: type["Problem"]) -> type["Problem"]:
+def register_problem(cls: type[Problem]) -> type[Problem]:
     """Class decorator: add a problem plugin to the registry under ``cls.name``."""
     if not cls.name:
         raise ValueError(f"problem class {cls.__name__} has no name")
@@ -62,13 +62,13 @@ def _load() -> None:
                 _ENTRY_POINT_ERRORS.append(f"{group}:{ep.name}: {exc}")
 
 
-def solvers() -> dict[str, type["Solver"]]:
+def solvers() -> dict[str, type[Solver]]:
     """All registered solver classes by name."""
     _load()
     return dict(_SOLVERS)
 
 
-def problems() -> dict[str, type["Problem"]]:
+def problems() -> dict[str, type[Problem]]:
     """All registered problem classes by name."""
     _load()
     return dict(_PROBLEMS)
@@ -80,7 +80,7 @@ def entry_point_errors() -> list[str]:
     return list(_ENTRY_POINT_ERRORS)
 
 
-def get_solver(name: str) -> type["Solver"]:
+def get_solver(name: str) -> type[Solver]:
     """The solver class registered as ``name``; InputError listing the known names otherwise."""
     reg = solvers()
     if name not in reg:
@@ -88,7 +88,7 @@ def get_solver(name: str) -> type["Solver"]:
     return reg[name]
 
 
-def get_problem(name: str) -> type["Problem"]:
+def get_problem(name: str) -> type[Problem]:
     """The problem class registered as ``name``; InputError listing the known names otherwise."""
     reg = problems()
     if name not in reg:

@@ -84,7 +84,7 @@ def summary(qp: QP, sol: Solution) -> dict:
             "n_contact": int(evaluator.contact_set(qp, sol.x).sum()),
             "contact_rtol": evaluator.CONTACT_RTOL,
             "total_contact_force": float(sol.multipliers.sum()),
-            "residuals": {k: sol.residuals[k] for k in ("stationarity", "primal", "dual", "complementarity")},
+            "residuals": evaluator.kkt_residuals(sol.residuals),
         })
     else:
         out.update({"energy": None, "max_jump": None, "n_contact": None, "residuals": None})

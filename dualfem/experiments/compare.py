@@ -4,17 +4,18 @@
 QP, through :func:`dualfem.runner.run` (so statuses, timings and the evaluator's independent
 residuals are the same as for ``dualfem solve``), picks the reference, and judges each run.
 
-Reference ("the certified most accurate solution"): among the runs of *exact* solvers
-(``Solver.exact``) that claim success with finite residuals, the one with the smallest
-a-posteriori energy-norm error certificate (:func:`dualfem.certify.certified_error`, computed
-from the QP alone, not from the solver's word: the smaller of the rigorous duality-gap bound on
-|x - x*|_K / |x|_K and, when the active set is verified with margins, the first-order size of an
-exact refinement step on it), ties broken by the evaluator's KKT error, then time. The record's
-``error_bound`` is that value, ``certificate`` holds both parts. It is cross-checked against the next best certified exact run: their
-difference must lie within the second one's declared tolerance plus both bounds. Runs whose x is
-bit-for-bit the reference's are listed (``identical_to_reference``) but skipped as cross-checks.
+Reference: chosen by the one reference policy (:mod:`dualfem.experiments.reference`): among the
+runs of *exact* solvers that claim success with an evaluator KKT error within their own declared
+tolerance, the one with the smallest a-posteriori energy-norm error certificate
+(:func:`dualfem.core.certify.certified_error`, computed from the QP alone: the smaller of the
+rigorous duality-gap bound on |x - x*|_K / |x|_K and, when the active set is verified with
+margins, the first-order size of an exact refinement step on it), ties broken by the KKT error,
+then time. The record's ``error_bound`` is that value, ``certificate`` holds both parts. It is
+cross-checked against the next best trusted run: their difference must lie within the second
+one's declared tolerance plus both bounds. Runs whose x is bit-for-bit the reference's are listed
+(``identical_to_reference``) but skipped as cross-checks.
 
-Verdict of each run (``verdict`` field):
+Verdict of each run (``verdict`` field), compare's word for :func:`dualfem.core.grade.grade`:
 
 * ``reference``: the reference itself;
 * ``ok``: claims success and is right: evaluator KKT error <= its declared ``tolerance`` and
@@ -31,16 +32,20 @@ from __future__ import annotations
 import math
 import sys
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
 from dualfem.core import evaluator
 from dualfem.core.certify import certified_error, solver_for
+from dualfem.core.grade import grade
 from dualfem.core.qp import QP
+from dualfem.core.registry import get_solver
+from dualfem.core.registry import solvers as registered
 from dualfem.core.runner import jsonable_params
-from dualfem.core.registry import get_solver, solvers as registered
 from dualfem.core.solution import Solution, Status
+from dualfem.experiments import reference
 
 #: fields of each run record (stable JSON interface of ``dualfem compare --json``)
 RUN_FIELDS = ("solver", "status", "verdict", "exact", "tolerance", "iterations", "energy", "time_s",
@@ -80,7 +85,7 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
             "iterations": sol.iterations,
             "energy": sol.residuals["energy"] if finite else None,
             "time_s": {**sol.time_s, "total": sum(v for k, v in sol.time_s.items() if k in ("setup", "solve"))},
-            "residuals": ({k: sol.residuals[k] for k in ("stationarity", "primal", "dual", "complementarity")}
+            "residuals": (evaluator.kkt_residuals(sol.residuals)
                           if finite else None),
             "kkt_error": evaluator.kkt_error(sol.residuals) if finite else None,
             "error_bound": None,
@@ -94,7 +99,8 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
         if finite:
             cert = certified_error(qp, sol.x, sol.multipliers, ksolve)
             rec["certificate"] = cert
-            rec["error_bound"] = cert["value"]
+            rec["error_bound"] = reference.certificate(qp, sol.x, sol.multipliers, ksolve) \
+                if not np.isfinite(cert["value"]) else cert["value"]
         runs.append(rec)
         if progress:
             progress(f"{nm}: {rec['status']} in {time.perf_counter() - t0:.2f} s")
@@ -138,31 +144,33 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     return out
 
 
-def _choose_reference(runs: list[dict]) -> tuple[str | None, list[str] | None]:
-    cands = [r for r in runs if r["exact"] and r["status"] == str(Status.SOLVED)
-             and r["error_bound"] is not None and math.isfinite(r["error_bound"])]
-    if not cands:
-        return None, None
-    cands.sort(key=lambda r: (r["error_bound"], r["kkt_error"], r["time_s"]["total"]))
-    return cands[0]["solver"], ([r["solver"] for r in cands[1:]] or None)
+def _choose_reference(runs: list[dict]) -> tuple[str | None, list[str]]:
+    """The one reference policy (:mod:`dualfem.experiments.reference`) applied to the runs made:
+    trusted runs (exact, solved, KKT error within the solver's own tolerance, finite certificate)
+    ranked by certificate, KKT error, time. Returns (reference, the other trusted runs in order)."""
+    ranked = []
+    for r in runs:
+        ok, _ = reference.trusted(r["status"], r["exact"], r["kkt_error"], r["error_bound"], kkt_max=r["tolerance"])
+        if ok:
+            ranked.append((reference.rank_key(r["error_bound"], r["kkt_error"], r["time_s"]["total"]), r["solver"]))
+    ranked.sort()
+    names = [n for _, n in ranked]
+    return (names[0] if names else None), names[1:]
+
+
+_VERDICT = {"correct": "ok", "flagged": "wrong", "silent_wrong": "wrong", "failed": "failed",
+            "unverified": "unchecked", "skipped": "skipped", "timeout": "failed", "crashed": "failed"}
 
 
 def _verdict(rec: dict, ref: dict | None) -> str:
-    if rec["status"] == str(Status.SKIPPED):
-        return "skipped"
+    """compare's word for :func:`dualfem.core.grade.grade` of a run (``reference`` for the reference)."""
     if ref is not None and rec["solver"] == ref["solver"]:
         return "reference"
-    if rec["status"] != str(Status.SOLVED):
-        return "failed"
-    if rec["energy"] is None:
+    if rec["status"] == str(Status.SOLVED) and rec["energy"] is None:
         return "wrong"            # claims success without a finite answer
-    if ref is None:
-        return "unchecked"
-    tol = rec["tolerance"]
-    slack = ref["error_bound"] or 0.0
-    if rec["kkt_error"] > tol or rec["diff"]["x_energy"] > tol + slack:
-        return "wrong"
-    return "ok"
+    err = (rec["diff"] or {}).get("x_energy") if ref is not None else None
+    g = grade(rec["status"], err, rec["kkt_error"], rec["tolerance"], ref["error_bound"] if ref else 0.0)
+    return _VERDICT[g]
 
 
 # ------------------------------------------------------------------------ printing

@@ -35,7 +35,7 @@ from dualfem.core.qp import QP
 
 #: unknowns per leaf of the nested dissection
 _LEAF = 64
-_CACHE: "OrderedDict[str, FixedFactor]" = OrderedDict()
+_CACHE: OrderedDict[str, FixedFactor] = OrderedDict()
 _CACHE_SIZE = 4
 
 

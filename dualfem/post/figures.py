@@ -16,7 +16,7 @@ matplotlib is imported lazily, so importing this module is cheap.
 """
 from __future__ import annotations
 
-from typing import Iterable, Sequence
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 
@@ -88,8 +88,8 @@ def plot_deformed(qp, sol, ax=None, *, scale: float = 300.0, title: str | None =
     if colorbar:
         ax.figure.colorbar(coll, ax=ax, label=f"von Mises stress [{_units(qp)}]")
     ax.set_aspect("equal")
-    ax.set_xlabel("x1 + {:g} u1".format(scale))
-    ax.set_ylabel("x2 + {:g} u2".format(scale))
+    ax.set_xlabel(f"x1 + {scale:g} u1")
+    ax.set_ylabel(f"x2 + {scale:g} u2")
     if title:
         ax.set_title(title, fontsize=10)
     return ax

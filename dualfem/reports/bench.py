@@ -291,7 +291,7 @@ def _slot(r: dict) -> tuple:
 def load_sources(results: list[str | Path]) -> tuple[list[dict], list[dict]]:
     """Rows of several results (later ones replace earlier rows of the same slot) and one
     source record per results (path, directory, sweep.json, rows kept)."""
-    from dualfem.experiments.bench import read_results
+    from dualfem.experiments.store import read_results
 
     merged: dict[tuple, dict] = {}
     sources = []

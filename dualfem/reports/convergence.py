@@ -122,9 +122,10 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = "f2", progress=print) -> 
     reference solve, so the peak is one fine QP plus one fine factorization (a reference at
     N = 1024 holding three of them was killed for lack of memory on a 24 GB machine).
     """
-    from dualfem.numerics.linalg import clear_cache
+    from dualfem.core.evaluator import kkt_residuals
     from dualfem.core.runner import run
     from dualfem.core.scene import load_scene
+    from dualfem.numerics.linalg import clear_cache
 
     res = {"scene": scene, "solver": solver, "ref_N": ref_N, "Ns": list(Ns), "deltas": {},
            "params": {k: v for k, v in load_scene(scene, {"N": min(Ns)}).build().params.items()
@@ -139,7 +140,7 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = "f2", progress=print) -> 
         if not sf.ok:
             raise RuntimeError(f"reference solve failed at N={ref_N}, delta={delta:g}: {sf.status} {sf.message}")
         ref = {"N": ref_N, "ndof": qpf.n, "time_build_s": tb, "time_s": sf.time_s, "iterations": sf.iterations,
-               "residuals": {k: sf.residuals[k] for k in ("stationarity", "primal", "dual", "complementarity")},
+               "residuals": kkt_residuals(sf.residuals),
                **level_quantities(qpf, sf)}
         progress(f"delta={delta:g} reference N={ref_N}: {qpf.n} unknowns, build {tb:.1f} s, "
                  f"setup {sf.time_s['setup']:.1f} s, solve {sf.time_s['solve']:.2f} s")

@@ -71,13 +71,13 @@ def _heatmaps(recs, rowf, colf, title, rowlabel, collabel, path: Path, keep_col_
             r = cell.get((rv, cv))
             if r is None:
                 continue
-            A[i, j] = outs.index(r["outcome"])
-            if r.get("err") is not None and r["err"] > 0:
-                E[i, j] = math.log10(max(r["err"], 1e-17))
-            if r.get("iters"):
-                IT[i, j] = math.log10(r["iters"])
-            t = (r.get("time_setup") or 0) + (r.get("time_solve") or 0)
-            if t > 0 and r["outcome"] not in ("skipped", "timeout", "crashed"):
+            A[i, j] = outs.index(r["grade"])
+            if r.get("err_x_energy") is not None and r["err_x_energy"] > 0:
+                E[i, j] = math.log10(max(r["err_x_energy"], 1e-17))
+            if r.get("main_iterations"):
+                IT[i, j] = math.log10(r["main_iterations"])
+            t = (r.get("setup_s") or 0) + (r.get("solve_s") or 0)
+            if t > 0 and r["grade"] not in ("skipped", "timeout", "crashed"):
                 TM[i, j] = math.log10(t)
     panels = [(A, "outcome", cmap, (-0.5, len(outs) - 0.5)), (np.clip(E, -14, 1), "log10 rel. energy-norm error (clipped to [-14, 1])", "viridis", (-14, 1)),
               (IT, "log10 iterations (main counter)", "magma_r", None), (TM, "log10 time setup+solve [s]", "cividis", None)]
@@ -118,11 +118,11 @@ def _table(recs, rowf, colf, keep_col_order=None) -> str:
             if r is None:
                 cells.append("")
                 continue
-            s = SYMBOL[r["outcome"]]
-            if r.get("err") is not None:
-                s += f" {r['err']:.0e}"
-            if r.get("iters"):
-                s += f" ({int(r['iters'])})"
+            s = SYMBOL[r["grade"]]
+            if r.get("err_x_energy") is not None:
+                s += f" {r['err_x_energy']:.0e}"
+            if r.get("main_iterations"):
+                s += f" ({int(r['main_iterations'])})"
             cells.append(s)
         out.append(f"| {_fmt(rv)} | " + " | ".join(cells) + " |")
     return "\n".join(out)
@@ -132,8 +132,8 @@ def _scene_str(r: dict) -> str:
     s = dict(r["scene"])
     keep = {k: v for k, v in s.items() if k in ("load", "N", "delta", "E", "nu", "plane", "load_scale", "width")}
     txt = ", ".join(f"{k}={_fmt(v)}" for k, v in keep.items())
-    if r.get("params"):
-        txt += "; " + ", ".join(f"{k}={_fmt(v)}" for k, v in r["params"].items())
+    if r.get("solver_params"):
+        txt += "; " + ", ".join(f"{k}={_fmt(v)}" for k, v in r["solver_params"].items())
     return txt
 
 
@@ -142,12 +142,12 @@ def _boundaries(recs, colf, colname) -> list[str]:
     lines = []
     by = defaultdict(list)
     for r in recs:
-        by[r["solver"] + (" " + ",".join(f"{k}={_fmt(v)}" for k, v in r["params"].items()) if r.get("params") else "")].append(r)
+        by[r["solver"] + (" " + ",".join(f"{k}={_fmt(v)}" for k, v in r["solver_params"].items()) if r.get("solver_params") else "")].append(r)
     for s, rs in sorted(by.items()):
         rs = sorted(rs, key=lambda r: _sortkey(colf(r)))
-        good = [colf(r) for r in rs if r["outcome"] == "correct"]
-        bad = [r for r in rs if r["outcome"] not in ("correct", "skipped")]
-        skipped = [r for r in rs if r["outcome"] == "skipped"]
+        good = [colf(r) for r in rs if r["grade"] == "correct"]
+        bad = [r for r in rs if r["grade"] not in ("correct", "skipped")]
+        skipped = [r for r in rs if r["grade"] == "skipped"]
         if not bad and not skipped:
             lines.append(f"- **{s}**: correct at every {colname} tried ({', '.join(_fmt(c) for c in good)}).")
             continue
@@ -156,9 +156,9 @@ def _boundaries(recs, colf, colname) -> list[str]:
             parts.append(f"correct at {colname} = {', '.join(_fmt(c) for c in good)}")
         for r in bad:
             why = (r.get("message") or "").strip() or (r.get("reason") or "")
-            e = f", error {r['err']:.1e}" if r.get("err") is not None else ""
-            k = f", KKT {r['kkt']:.1e}" if r.get("kkt") is not None else ""
-            parts.append(f"{colname} = {_fmt(colf(r))}: **{r['outcome']}** (status {r.get('status')}{e}{k}"
+            e = f", error {r['err_x_energy']:.1e}" if r.get("err_x_energy") is not None else ""
+            k = f", KKT {r['kkt_error']:.1e}" if r.get("kkt_error") is not None else ""
+            parts.append(f"{colname} = {_fmt(colf(r))}: **{r['grade']}** (status {r.get('status')}{e}{k}"
                          f"{'; ' + why[:160] if why else ''})")
         if skipped:
             parts.append(f"skipped at {colname} = {', '.join(_fmt(colf(r)) for r in skipped)} "
@@ -170,8 +170,8 @@ def _boundaries(recs, colf, colname) -> list[str]:
 def _by_product(recs) -> dict:
     out = defaultdict(list)
     for r in recs:
-        if r["outcome"] == "correct" and r.get("iters"):
-            out[float(f"{r['coords']['r'] * r['coords']['delta']:.3g}")].append(r["iters"])
+        if r["grade"] == "correct" and r.get("main_iterations"):
+            out[float(f"{r['coords']['r'] * r['coords']['delta']:.3g}")].append(r["main_iterations"])
     return out
 
 
@@ -184,8 +184,8 @@ def _scatter_r_delta(recs, solver: str, path: Path) -> None:
 
     fig, ax = plt.subplots(figsize=(6.4, 4.0), constrained_layout=True)
     for o in COLORS:
-        pts = [(r["coords"]["r"] * r["coords"]["delta"], r["iters"]) for r in recs
-               if r["outcome"] == o and r.get("iters")]
+        pts = [(r["coords"]["r"] * r["coords"]["delta"], r["main_iterations"]) for r in recs
+               if r["grade"] == o and r.get("main_iterations")]
         if pts:
             x, y = zip(*pts)
             ax.scatter(x, y, s=28, color=COLORS[o], edgecolor="k", linewidth=0.4, label=o)
@@ -207,7 +207,7 @@ def _findings(recs) -> list[str]:
     import numpy as np
 
     out = []
-    wrong1 = [r for r in recs if r["outcome"] == "silent_wrong" and r.get("iters") == 1]
+    wrong1 = [r for r in recs if r["grade"] == "silent_wrong" and r.get("main_iterations") == 1]
     if wrong1:
         prods = sorted({r["coords"]["r"] * r["coords"]["delta"] for r in wrong1 if "r" in r["coords"]
                         and isinstance(r["coords"]["r"], float)})
@@ -223,23 +223,23 @@ def _findings(recs) -> list[str]:
     # the interface-dominated regime: delta <= 1e-6 (interface stiffness >> elastic stiffness)
     # runs that ended by meeting their own outer test (solved, or inaccurate after a rate check)
     rr = [r for r in recs if r["axis"] == "r" and r.get("status") in ("solved", "inaccurate")
-          and (r.get("iters") or 0) > 1
+          and (r.get("main_iterations") or 0) > 1
           and r["coords"]["r"] * r["coords"]["delta"] <= 1.0 and r["coords"]["delta"] <= 1e-6
           and (r.get("params_used") or {}).get("r_rule", "fixed") == "fixed"]
     if len(rr) >= 3:
         x = np.log10([r["coords"]["r"] * r["coords"]["delta"] for r in rr])
-        y = np.log10([r["iters"] for r in rr])
+        y = np.log10([r["main_iterations"] for r in rr])
         if np.ptp(x) > 0:
             slope = float(np.polyfit(x, y, 1)[0])
             out.append(f"- **Uzawa at small delta**: for delta <= 1e-6 and r x delta <= 1 the outer iterations "
                        f"needed to meet the outer test behave like (r delta)^({slope:.2f}) (least-squares fit over {len(rr)} runs, "
-                       f"{', '.join(f'{_fmt(a)}: {int(b)}' for a, b in sorted((r['coords']['r'] * r['coords']['delta'], r['iters']) for r in rr))}): the slowest dual "
+                       f"{', '.join(f'{_fmt(a)}: {int(b)}' for a, b in sorted((r['coords']['r'] * r['coords']['delta'], r['main_iterations']) for r in rr))}): the slowest dual "
                        "mode has a compliance ~ delta (the 1/delta interface term), so it contracts by about "
                        "1 / (1 + r delta) per outer iteration. The paper's r = 1e7 gives r delta = 1e-2 at delta = "
                        "1e-9 (its ~900 iterations); choosing r from delta (or from the dual compliance, as "
                        "`uzawa_auto` does) keeps r delta, and the iteration count, constant.")
     scaled_fail = [r for r in recs if r["axis"] in ("load", "units") and r.get("third_party")
-                   and r["outcome"] in HONEST_OR_WRONG and (r.get("params_used") or {}).get("scale") is True]
+                   and r["grade"] in HONEST_OR_WRONG and (r.get("params_used") or {}).get("scale") is True]
     if scaled_fail:
         out.append(f"- **Scaled third-party backends on the load and units axes** ({len(scaled_fail)} runs: "
                    + ", ".join(sorted({f"{r['solver']} ({_fmt(list(r['coords'].values())[0])})" for r in scaled_fail}))
@@ -250,7 +250,7 @@ def _findings(recs) -> list[str]:
                    "instead (x = s D y with s = max|D F|, P = D K D, q = -D F / s): in the side test "
                    "`python benchmarks/stress_scaling_check.py` (N = 16) both backends then solve every load "
                    "scale 1e-6..1e6 and every unit system to a relative error <= 1e-10.")
-    nu_fail = [r for r in recs if r["axis"] == "nu" and r["outcome"] not in ("correct", "skipped", "unverified")]
+    nu_fail = [r for r in recs if r["axis"] == "nu" and r["grade"] not in ("correct", "skipped", "unverified")]
     if nu_fail:
         out.append(f"- **Near-incompressible** (nu -> 0.5): {len(nu_fail)} runs not correct ("
                    + ", ".join(sorted({f"{r['solver']} at nu = {_fmt(r['coords']['nu'])}" for r in nu_fail}))
@@ -261,12 +261,41 @@ def _findings(recs) -> list[str]:
 HONEST_OR_WRONG = ("failed", "flagged", "timeout", "crashed", "silent_wrong")
 
 
+def _classification(meta: dict) -> list[str]:
+    """How runs are graded: the one policy of :mod:`dualfem.core.grade`, in words."""
+    refs = meta.get("references") or []
+    return ["## How a run is graded", "",
+            "Every run is compared with a reference solution of the same QP, chosen by dualfem's one reference "
+            f"policy (`dualfem.experiments.reference`): the first trusted run of {', '.join(f'`{r}`' for r in refs) or '?'} "
+            "(a run of a reference solver is compared with the next one, never with itself). A reference is trusted "
+            f"only if it claims solved, its own independent KKT residual is below {meta.get('ref_kkt', 1e-7):g} and its "
+            "certified energy-norm error bound (from the QP alone) is finite. On the *units* and *load* axes the reference "
+            "is the base scene's reference mapped by exact physics (change of units; x(sF) = s x(F)), so no solver is "
+            "trusted on scaled data.", "",
+            "The error is the relative energy-norm error |x - x_ref|_K / |x_ref|_K. With t the tolerance the solver "
+            "instance declares and b the reference's certified error bound (`dualfem.core.grade.grade`, the same policy "
+            "as `dualfem compare` and `dualfem bench`):", "",
+            "- **correct** (`ok`): status solved, KKT residuals <= t and error <= t + b;",
+            "- **failed** (`F`, honest): the status says not solved (max_iter, stagnation, numerical_error, ...);",
+            "- **flagged** (`FL`, honest): status solved, but the evaluator's largest KKT residual is > t, so a user "
+            "checking residuals sees it;",
+            "- **timeout** (`T`) / **crashed** (`X`): the harness killed the run or the process died (honest: no answer);",
+            "- **silent wrong answer** (`WRONG`): status solved, KKT residuals <= t, error > t + b;",
+            "- **unverified** (`?`): no trusted reference;",
+            "- **skipped** (`-`): the solver does not apply, or the previous N already exceeded the time or memory budget.",
+            "",
+            "Declared tolerances: " + ", ".join(f"`{k}` {v:g}" for k, v in sorted(meta.get("tolerances", {}).items()))
+            + ". Solvers wrapping a third-party library (non-empty `requires`): "
+            + ", ".join(f"`{k}`" for k, v in sorted(meta.get("third_party", {}).items()) if v) + ".", "",
+            "Cells of the tables: grade symbol, error, (main iteration counter: `outer` for Uzawa, else the "
+            "solver's only counter).", ""]
+
+
 def render(meta: dict, recs: list[dict], md_path: Path) -> str:
     """Write the figures next to ``md_path`` and return the Markdown text."""
     fig_dir = md_path.parent / "stability"
     rel = fig_dir.name
     L: list[str] = []
-    safety = meta.get("safety", 10)
     L += ["# Numerical stability under stress", "",
           "Generated by `dualfem report stability RESULTS` from the runs of `dualfem stress` "
           f"({'QUICK grid' if meta.get('quick') else 'full grid'}"
@@ -282,39 +311,16 @@ def render(meta: dict, recs: list[dict], md_path: Path) -> str:
     if env:
         L += [f"Machine: {env.get('cpus')} CPUs, Python {env.get('python')}, "
               + ", ".join(f"{k} {v}" for k, v in env.get("versions", {}).items()) + ".", ""]
-    refs = meta.get("references") or []
-    L += ["## How a run is classified", "",
-          f"Every run is compared with a reference solution of the same QP: the registered "
-          f"`{refs[0] if refs else '?'}` solver"
-          + (f" (runs of `{refs[0]}` itself are compared with `{refs[1]}` at its default tolerances 1e-10)" if len(refs) > 1 else "")
-          + f". A reference is trusted only if its own independent KKT residual is below {meta.get('ref_kkt', 1e-7):g}. "
-          "On the *units* and *load* axes the reference is the base scene's reference mapped by exact physics "
-          "(change of units; x(sF) = s x(F)), so no solver is trusted on scaled data.", "",
-          f"The error is the relative energy-norm error |x - x_ref|_K / |x_ref|_K. With the solver's declared "
-          f"`tolerance` t (class attribute) and the safety factor {safety:g}:", "",
-          f"- **correct** (`ok`): status solved and error <= {safety:g} t;",
-          "- **failed** (`F`, honest): the status says not solved (max_iter, stagnation, numerical_error, ...);",
-          f"- **flagged** (`FL`, honest): status solved, error > {safety:g} t, but the evaluator's largest KKT residual "
-          f"is > {safety:g} t, so a user checking residuals sees it;",
-          "- **timeout** (`T`) / **crashed** (`X`): the harness killed the run or the process died (honest: no answer);",
-          f"- **silent wrong answer** (`WRONG`): status solved, KKT residuals <= {safety:g} t, error > {safety:g} t;",
-          "- **unverified** (`?`): no trusted reference, or the difference is within the reference's own accuracy "
-          f"({safety:g} x the reference solver's declared tolerance);",
-          "- **skipped** (`-`): the solver does not apply, or the previous N already exceeded the time or memory budget.", "",
-          "Declared tolerances: " + ", ".join(f"`{k}` {v:g}" for k, v in sorted(meta.get("tolerances", {}).items()))
-          + ". Solvers wrapping a third-party library (non-empty `requires`): "
-          + ", ".join(f"`{k}`" for k, v in sorted(meta.get("third_party", {}).items()) if v) + ".", "",
-          "Cells of the tables: outcome symbol, error, (main iteration counter: `outer` for Uzawa, else the "
-          "solver's only counter).", ""]
+    L += _classification(meta)
     # ---------------------------------------------------------------- summary
     solvers = sorted({r["solver"] for r in recs})
-    c = {s: Counter(r["outcome"] for r in recs if r["solver"] == s) for s in solvers}
+    c = {s: Counter(r["grade"] for r in recs if r["solver"] == s) for s in solvers}
     outs = [o for o in COLORS if any(c[s][o] for s in solvers)]
     L += ["## Summary", "", "| solver | " + " | ".join(outs) + " |", "|---" * (len(outs) + 1) + "|"]
     for s in solvers:
         L.append(f"| {s} | " + " | ".join(str(c[s][o]) for o in outs) + " |")
     L.append("")
-    wrong = [r for r in recs if r["outcome"] == "silent_wrong"]
+    wrong = [r for r in recs if r["grade"] == "silent_wrong"]
     ours = [r for r in wrong if not r.get("third_party")]
     theirs = [r for r in wrong if r.get("third_party")]
     L += ["## Silent wrong answers", "",
@@ -323,10 +329,10 @@ def render(meta: dict, recs: list[dict], md_path: Path) -> str:
         L += ["| solver | axis | scene; solver params | status | error | KKT | message |", "|---|---|---|---|---|---|---|"]
         for r in sorted(wrong, key=lambda r: (bool(r.get("third_party")), r["solver"], r["axis"])):
             L.append(f"| {r['solver']}{'' if r.get('third_party') else ' (ours)'} | {r['axis']} | {_scene_str(r)} | "
-                     f"{r.get('status')} | {r['err']:.1e} | {r['kkt']:.1e} | {(r.get('message') or '')[:80]} |")
+                     f"{r.get('status')} | {r['err_x_energy']:.1e} | {r['kkt_error']:.1e} | {(r.get('message') or '')[:80]} |")
         L.append("")
     L += _findings(recs)
-    unv = [r for r in recs if r["outcome"] == "unverified"]
+    unv = [r for r in recs if r["grade"] == "unverified"]
     if unv:
         L += [f"Unverified runs ({len(unv)}): " + "; ".join(
             f"{r['solver']} {r['axis']} {_scene_str(r)} ({(r.get('reason') or '')[:120]})" for r in unv[:20]), ""]
@@ -347,7 +353,7 @@ def render(meta: dict, recs: list[dict], md_path: Path) -> str:
         L.extend(["Boundaries:", ""] + _boundaries(rs, colf, colname) + [""])
 
     def solver_row(r):
-        p = r.get("params") or {}
+        p = r.get("solver_params") or {}
         return r["solver"] + ("" if not p else " " + ",".join(f"{k}={_fmt(v)}" for k, v in p.items()))
 
     L += ["## The grid", ""]

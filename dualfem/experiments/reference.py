@@ -1,0 +1,136 @@
+"""The one reference policy: which answer every other run of a scene is measured against.
+
+A run is a **trusted reference** when (:func:`trust`)
+
+1. its solver is exact (``Solver.exact``) and it claims ``solved``;
+2. the evaluator's largest KKT residual, recomputed from (x, mu) and the QP, is at most
+   ``kkt_max`` (never a run that fails its own residuals);
+3. its a-posteriori energy-norm error certificate (:func:`dualfem.core.certify.certified_error`,
+   computed from the QP alone) is finite and at most ``bound_max``. A zero solution of a zero
+   load is exact (certificate 0).
+
+Among trusted runs the one with the smallest certificate wins, ties broken by KKT error, then
+time (:func:`rank_key`). ``compare`` ranks the runs it has; ``bench`` and ``stress`` compute one
+with :func:`compute`, trying :func:`candidates` in order (pdas first: exact and fastest, then
+Clarabel) until one is trusted. A run of the reference solver itself is measured against the
+next candidate (:func:`candidates` with ``exclude``), never against itself.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+#: preferred reference solvers and their parameters (Clarabel at dualfem's default tolerances:
+#: asking it for 1e-12 made it stop 'inaccurate' at delta <= 1e-6 on the stress grid)
+PREFERRED: tuple[tuple[str, dict], ...] = (("pdas", {}), ("clarabel", {"max_iter": 500}))
+#: default bound on a reference's own evaluator KKT error
+KKT_MAX = 1e-8
+#: default bound on a reference's certified relative energy-norm error (a looser reference only widens the
+#: slack it grants: grades use tolerance + the reference's bound)
+BOUND_MAX = 1e-4
+
+
+@dataclass
+class Reference:
+    """A trusted reference solution of one QP."""
+
+    solver: str
+    x: np.ndarray
+    multipliers: np.ndarray
+    kkt: float
+    bound: float
+    time_s: float
+    tolerance: float
+    params: dict = field(default_factory=dict)
+
+
+def candidates(exclude: tuple[str, ...] = (), only: tuple[str, ...] | None = None) -> list[tuple[str, dict]]:
+    """(name, params) of the registered, installed exact reference solvers, preferred first.
+
+    ``only`` replaces the preferred list (e.g. a bench spec's ``reference.solvers``)."""
+    from dualfem.core.registry import solvers
+
+    reg = solvers()
+    preferred = dict(PREFERRED)
+    names = list(only) if only is not None else [n for n, _ in PREFERRED]
+    return [(n, dict(preferred.get(n, {}))) for n in names
+            if n not in exclude and n in reg and reg[n].missing() is None and reg[n].exact]
+
+
+def certificate(qp, x: np.ndarray | None, mu: np.ndarray | None, ksolve=None) -> float:
+    """Certified relative energy-norm error of (x, mu); 0 for the exact zero answer of a zero load."""
+    from dualfem.core.certify import certified_error
+
+    if x is None or mu is None:
+        return float("nan")
+    if not np.any(x) and not np.any(qp.F) and not np.any(mu):
+        return 0.0
+    return float(certified_error(qp, x, mu, ksolve)["value"])
+
+
+def trusted(status: str, exact: bool, kkt: float | None, bound: float | None, *, kkt_max: float = KKT_MAX,
+            bound_max: float = BOUND_MAX) -> tuple[bool, str]:
+    """The policy as a predicate on a run's facts: (trusted, reason)."""
+    if not exact:
+        return False, "not an exact solver"
+    if str(status) != "solved":
+        return False, f"status {status}"
+    if kkt is None or not kkt <= kkt_max:
+        return False, f"KKT error {kkt} > {kkt_max:g}"
+    if bound is None or not (math.isfinite(bound) and bound <= bound_max):
+        return False, f"certified error {bound} not <= {bound_max:g}"
+    return True, "trusted"
+
+
+def trust(qp, sol, *, exact: bool = True, kkt_max: float = KKT_MAX, bound_max: float = BOUND_MAX,
+          ksolve=None) -> tuple[bool, float, float, str]:
+    """(trusted, certificate, kkt, reason) of a solution ``sol`` (see the module docstring)."""
+    from dualfem.core.evaluator import kkt_error
+
+    finite = sol.residuals is not None and sol.residuals.get("finite", False)
+    kkt = kkt_error(sol.residuals) if finite else float("nan")
+    bound = certificate(qp, sol.x, sol.multipliers, ksolve) if finite and str(sol.status) == "solved" and exact \
+        else float("nan")
+    ok, why = trusted(str(sol.status), exact, kkt, bound, kkt_max=kkt_max, bound_max=bound_max)
+    return ok, bound, kkt, why
+
+
+def rank_key(bound: float, kkt: float, seconds: float) -> tuple[float, float, float]:
+    """Order of trusted references: smallest certificate, then KKT error, then time."""
+    return (bound, kkt, seconds)
+
+
+def compute(qp, *, exclude: tuple[str, ...] = (), kkt_max: float = KKT_MAX, bound_max: float = BOUND_MAX,
+            time_limit: float | None = None, tol: float | None = None,
+            params: dict[str, dict] | None = None, only: tuple[str, ...] | None = None) -> tuple[Reference | None, list[str]]:
+    """Run :func:`candidates` in order until one is trusted; returns (reference or None, what was tried).
+
+    ``tol`` asks each solver for that accuracy (``Solver.tolerance_params``), ``params`` adds
+    per-solver parameters, ``time_limit`` goes to solvers that take one.
+    """
+    from dualfem.core.registry import get_solver
+    from dualfem.core.runner import run
+
+    tried: list[str] = []
+    for name, base in candidates(exclude, only):
+        cls = get_solver(name)
+        p: dict[str, Any] = {**base, **(cls.tolerance_params(tol) if tol else {}), **(params or {}).get(name, {})}
+        if time_limit is not None and "time_limit" in cls.defaults:
+            p["time_limit"] = float(time_limit)
+        t0 = time.perf_counter()
+        sol = run(name, qp, p)
+        dt = time.perf_counter() - t0
+        ok, bound, kkt, why = trust(qp, sol, kkt_max=kkt_max, bound_max=bound_max)
+        tried.append(f"{name}: {sol.status}, KKT error {kkt:.2e}, certified error {bound:.1e}"
+                     + ("" if ok else f" ({why})"))
+        if ok:
+            return Reference(solver=name, x=sol.x, multipliers=sol.multipliers, kkt=kkt, bound=bound, time_s=dt,
+                             tolerance=float(getattr(sol, "tolerance", cls.tolerance)), params=p), tried
+    if not tried:
+        names = ", ".join(only if only is not None else [n for n, _ in PREFERRED])
+        tried.append(f"no exact reference solver ({names}) is registered and installed")
+    return None, tried

@@ -1,0 +1,175 @@
+"""One tidy row per run: the record that compare, bench and stress produce and every report reads.
+
+The field names are a stable interface (they are the columns of ``results.csv``). Fields that
+hold several values (``solver_params``, ``iterations``, ``coords``) are dicts in Python and JSON
+text in CSV. Anything else a producer wants to keep (``scene_*`` parameters, ``reason``, ...)
+goes to :attr:`Row.extra` and is written as its own column.
+
+Units: times in seconds (``*_s``), memory in MB (``peak_rss_mb``), errors relative (see
+:mod:`dualfem.core.grade` for the grading policy, :mod:`dualfem.core.evaluator` for residuals).
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from dualfem.core.evaluator import RESIDUALS
+from dualfem.core.grade import grade
+
+
+@dataclass
+class Row:
+    """One run (``kind``: run, reference, floor, stress, compare); see the module docstring."""
+
+    run_id: str = ""
+    kind: str = "run"
+    spec: str | None = None
+    scene: str | dict | None = None          # a scene name (bench) or its parameters (stress)
+    scene_key: str | None = None
+    label: str | None = None
+    n_unknowns: int | None = None
+    n_constraints: int | None = None
+    solver: str | None = None
+    variant: str | None = None
+    solver_params: dict = field(default_factory=dict)
+    tier: str | None = None
+    tol: float | None = None
+    status: str | None = None
+    claimed_status: str | None = None
+    grade: str | None = None
+    message: str = ""
+    iterations: dict = field(default_factory=dict)
+    main_iterations: float | None = None
+    repeats: int | None = None
+    repeats_done: int = 0
+    assembly_s: float | None = None
+    setup_s: float | None = None
+    solve_s: float | None = None
+    total_s: float | None = None
+    setup_s_all: str | None = None
+    solve_s_all: str | None = None
+    time_limit: float | None = None
+    cold_setup: bool | None = None
+    peak_rss_mb: float | None = None
+    kkt_error: float | None = None
+    stationarity: float | None = None
+    primal: float | None = None
+    dual: float | None = None
+    complementarity: float | None = None
+    within_tol: bool | None = None
+    err_x_energy: float | None = None
+    err_x_max: float | None = None
+    err_multipliers: float | None = None
+    err_energy: float | None = None
+    contact_mismatch: int | None = None
+    ref_solver: str | None = None
+    ref_kkt: float | None = None
+    ref_bound: float | None = None
+    axis: str | None = None
+    coords: dict = field(default_factory=dict)
+    exact: bool | None = None
+    third_party: bool | None = None
+    started_utc: str | None = None
+    loadavg: float | None = None
+    cpu: str | None = None
+    cores: int | None = None
+    affinity: int | None = None
+    threads: str | None = None
+    python: str | None = None
+    platform: str | None = None
+    versions: str | None = None
+    git: str | None = None
+    extra: dict = field(default_factory=dict)
+
+    # -------------------------------------------------------- dict-style access
+    def __getitem__(self, key: str) -> Any:
+        if key in _NAMES:
+            return getattr(self, key)
+        return self.extra[key]
+
+    def __setitem__(self, key: str, value: Any) -> None:
+        if key in _NAMES:
+            setattr(self, key, value)
+        else:
+            self.extra[key] = value
+
+    def get(self, key: str, default: Any = None) -> Any:
+        """Like ``dict.get`` over the fields and ``extra``."""
+        try:
+            v = self[key]
+        except KeyError:
+            return default
+        return default if v is None else v
+
+    def update(self, values: dict | None = None, **kw: Any) -> None:
+        """Set several fields (unknown names go to ``extra``)."""
+        for k, v in {**(values or {}), **kw}.items():
+            self[k] = v
+
+    # ----------------------------------------------------------------- grading
+    def set_residuals(self, res: dict | None, tol: float | None) -> None:
+        """Copy the evaluator's residuals; ``within_tol`` = KKT error <= ``tol``."""
+        if not res or not res.get("finite", True):
+            self.kkt_error, self.within_tol = None, False
+            return
+        for k in RESIDUALS:
+            self[k] = res[k]
+        self.kkt_error = max(res[k] for k in RESIDUALS)
+        self.within_tol = bool(tol is not None and math.isfinite(tol) and self.kkt_error <= tol)
+
+    def regrade(self) -> str:
+        """Set and return :attr:`grade` from the row's status, error, KKT error and tolerance."""
+        tol = self.tol if self.tol is not None and math.isfinite(self.tol) else float("nan")
+        self.grade = grade(self.status or "error", self.err_x_energy, self.kkt_error, tol, self.ref_bound)
+        return self.grade
+
+    # ----------------------------------------------------------- serialisation
+    def to_dict(self) -> dict:
+        """Flat JSON-safe dict (``extra`` merged in; non-finite floats as None)."""
+        out = {f: _plain(getattr(self, f)) for f in _NAMES}
+        out.update({k: _plain(v) for k, v in self.extra.items()})
+        return out
+
+    def csv_record(self) -> dict:
+        """Flat dict for CSV: dicts and lists as JSON text."""
+        return {k: (json.dumps(v, sort_keys=True) if isinstance(v, (dict, list)) else v)
+                for k, v in self.to_dict().items()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Row:
+        """A row from a dict (e.g. a CSV or JSON record); JSON text of dict fields is parsed."""
+        row = cls()
+        for k, v in d.items():
+            if k in _DICT_FIELDS and isinstance(v, str):
+                try:
+                    v = json.loads(v) if v else {}
+                except ValueError:
+                    v = {"text": v}
+            row[k] = v
+        return row
+
+
+_NAMES = tuple(f.name for f in fields(Row) if f.name != "extra")
+_DICT_FIELDS = {"solver_params", "iterations", "coords"}
+#: the columns of results.csv, in order (a row's ``extra`` keys follow, sorted)
+COLUMNS = list(_NAMES)
+
+
+def _plain(v: Any) -> Any:
+    if isinstance(v, (float, np.floating)):
+        return float(v) if math.isfinite(v) else None
+    if isinstance(v, np.integer):
+        return int(v)
+    if isinstance(v, np.bool_):
+        return bool(v)
+    if isinstance(v, np.ndarray):
+        return [_plain(x) for x in v.tolist()]
+    if isinstance(v, dict):
+        return {str(k): _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    return v

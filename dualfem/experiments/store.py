@@ -1,0 +1,139 @@
+"""The results folder of a sweep: one atomic JSON file per row, a merged ``results.csv``, references.
+
+``rows/<run_id>.json`` (a row file is complete or absent), ``results.csv`` (rewritten
+atomically), ``refs/<scene_key>.npz`` (certified reference solutions).
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dualfem.core.errors import InputError
+from dualfem.core.io import atomic_write, atomic_write_text
+from dualfem.experiments.row import COLUMNS, Row
+
+#: statuses of a run that are final (a resumed sweep does not redo them); ``skipped`` rows are
+#: cheap and redone, so that a solver registered later gets its runs.
+FINAL_STATUSES = {"solved", "inaccurate", "max_iter", "time_limit", "stagnation", "numerical_error",
+                  "infeasible", "error"}
+
+
+class ResultStore:
+    """``rows/<run_id>.json`` (one atomic file per row), ``results.csv`` (atomic merge), ``refs/``."""
+
+    def __init__(self, out: str | Path):
+        self.out = Path(out)
+        self.rows_dir = self.out / "rows"
+        self.refs_dir = self.out / "refs"
+        self.rows_dir.mkdir(parents=True, exist_ok=True)
+        self.refs_dir.mkdir(parents=True, exist_ok=True)
+        # temporary files of writes interrupted by a kill (atomic_write names them ".NAME.*"):
+        # the result they were meant to become is absent, so the run is simply redone
+        stale = [p for d in (self.rows_dir, self.refs_dir) for p in d.glob(".*")]
+        stale += [p for n in ("results.csv", "sweep.json", "spec.toml") for p in self.out.glob(f".{n}.*")]
+        for p in stale:
+            if p.is_file():
+                p.unlink()
+        self.rows: dict[str, dict] = {}
+        for p in sorted(self.rows_dir.glob("[!.]*.json")):
+            try:
+                r = json.loads(p.read_text(encoding="utf-8"))
+                self.rows[r["run_id"]] = r
+            except (OSError, ValueError, KeyError):
+                continue     # a foreign or unreadable file: the run is redone
+        self._last_csv = 0.0
+        self.keep: Callable[[dict], bool] | None = None
+
+    def done(self, run_id: str) -> bool:
+        r = self.rows.get(run_id)
+        return r is not None and r.get("status") in FINAL_STATUSES
+
+    def add(self, row: Row | dict) -> None:
+        """Write one row (its own atomic file) and, at most every 5 s, results.csv."""
+        clean = (row if isinstance(row, Row) else Row.from_dict(row)).to_dict()
+        atomic_write_text(self.rows_dir / f"{row['run_id']}.json", json.dumps(clean, sort_keys=True))
+        self.rows[row["run_id"]] = clean
+        if time.monotonic() - self._last_csv > 5.0:
+            self.write_csv()
+
+    def write_csv(self) -> Path:
+        """results.csv of the rows of the current spec (rows of runs no longer in it stay in rows/)."""
+        self._last_csv = time.monotonic()
+        rows = list(self.rows.values())
+        if self.keep is not None:
+            rows = [r for r in rows if self.keep(r)]
+        return write_csv(self.out / "results.csv", rows)
+
+    # ------------------------------------------------------------- references
+    def ref_path(self, scene_key: str) -> Path:
+        return self.refs_dir / f"{scene_key}.npz"
+
+    def load_ref(self, scene_key: str) -> dict | None:
+        p = self.ref_path(scene_key)
+        if not p.exists():
+            return None
+        try:
+            with np.load(p, allow_pickle=False) as d:
+                return {"x": d["x"], "multipliers": d["multipliers"], "qp_key": str(d["qp_key"]),
+                        "solver": str(d["solver"]), "kkt": float(d["kkt"]),
+                        "bound": float(d["bound"]) if "bound" in d else None}
+        except (OSError, ValueError, KeyError):
+            return None
+
+    def save_ref(self, scene_key: str, payload: dict) -> None:
+        def write(tmp):
+            with open(tmp, "wb") as fh:
+                np.savez(fh, x=payload["x"], multipliers=payload["multipliers"], qp_key=np.array(payload["qp_key"]),
+                         solver=np.array(payload["solver"]), kkt=np.array(payload["kkt"]),
+                         bound=np.array(payload.get("bound", np.nan)),
+                         params=np.array(payload["params"]))
+        atomic_write(self.ref_path(scene_key), write)
+
+
+def write_csv(path: str | Path, rows: list[dict]) -> Path:
+    """Write tidy rows to CSV atomically (the :class:`Row` columns first, then the rest sorted)."""
+    rows = [(r if isinstance(r, Row) else Row.from_dict(r)).csv_record() for r in rows]
+    extra = sorted({k for r in rows for k in r} - set(COLUMNS))
+    cols = COLUMNS + extra
+    rows = sorted(rows, key=lambda r: (str(r.get("kind")), str(r.get("label")), str(r.get("variant")),
+                                       str(r.get("tier")), str(r.get("run_id"))))
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=cols, extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r.get(k) is None else r.get(k)) for k in cols})
+    return atomic_write_text(path, buf.getvalue())
+
+
+def read_results(path: str | Path) -> list[dict]:
+    """Rows of a results.csv (or of the results.csv inside a directory), numbers parsed."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "results.csv"
+    if not path.is_file():
+        raise InputError(f"results file {str(path)!r} does not exist")
+    out = []
+    with open(path, newline="", encoding="utf-8") as fh:
+        for r in csv.DictReader(fh):
+            out.append({k: _parse(v) for k, v in r.items()})
+    return out
+
+
+def _parse(v: str) -> Any:
+    if v == "":
+        return None
+    if v in ("True", "False"):
+        return v == "True"
+    try:
+        f = float(v)
+    except ValueError:
+        return v
+    return int(f) if f.is_integer() and "." not in v and "e" not in v.lower() and "inf" not in v.lower() else f
+

@@ -1,0 +1,147 @@
+"""The stress grid: which runs ``dualfem stress`` makes (axes delta, r, units, load, nu, N).
+
+For the ``units`` and ``load`` axes the reference does not come from solving the scaled QP at
+all: it is the reference of the base scene mapped by the exact physics (a change of units maps
+x by the length factor and the nodal forces by stress x length; the QP is positively
+homogeneous in the load, so ``x(s F) = s x(F)``). This tests scale invariance without trusting
+any solver on the scaled data.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from collections import OrderedDict
+from dataclasses import dataclass
+
+DELTAS = [1e-12, 1e-9, 1e-6, 1e-3, 1.0, 1e3]
+
+
+RS = [1e0, 1e3, 1e5, 1e7, 1e9, 1e12]
+
+
+NUS = [0.0, 0.3, 0.45, 0.49, 0.4999]
+
+
+LOAD_SCALES = [1e-6, 1e-4, 1e-2, 1.0, 1e2, 1e4, 1e6]
+
+
+NS = [8, 16, 32, 64, 128, 256, 512, 1024]
+
+
+#: unit systems relative to the paper's (stress unit MPa, length unit taken as 1 m):
+#: name -> (number of new stress units per MPa, number of new length units per m)
+UNITS = OrderedDict([("MPa-m", (1.0, 1.0)), ("MPa-mm", (1.0, 1e3)), ("Pa-m", (1e6, 1.0)),
+                     ("Pa-mm", (1e6, 1e3)), ("GPa-km", (1e-3, 1e-3))])
+
+
+AXES = ("delta", "r", "units", "load", "nu", "N")
+
+
+#: the paper's scene (f2, delta = 1e-5, E = 69000 MPa, nu = 0.3, plane strain) at N = 32
+BASE = {"load": "f2", "N": 32, "delta": 1e-5, "E": 69000.0, "nu": 0.3, "plane": "strain"}
+
+
+#: the paper's fixed augmentation parameter r (MPa per unit length)
+PAPER_R = 1e7
+
+
+@dataclass
+class Task:
+    """One run: a scene, a solver with explicit parameters, and how to obtain its reference."""
+
+    id: str
+    axis: str
+    coords: dict
+    scene: dict
+    solver: str
+    params: dict
+    ref: dict
+    time_limit: float
+    after: str | None = None          # id of the task that must finish first (N axis)
+    ref_ok: bool = True                # False: do not compute a reference (beyond budget)
+
+    def key(self) -> str:
+        """Stable identity of the run (used to resume)."""
+        return self.id
+
+
+def _sid(d: dict) -> str:
+    return hashlib.sha1(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:10]
+
+
+def scene_in_units(base: dict, stress: float, length: float) -> dict:
+    """The same physics as ``base`` (paper units) in a unit system; see :data:`UNITS`.
+
+    E and tractions are stresses (x ``stress``); width, height and the defect are lengths
+    (x ``length``); delta is a length per stress (the interface pressure is [u]/delta).
+    """
+    from dualfem.core.registry import get_problem
+
+    d = {**get_problem("thin_defect").defaults, **base}
+    out = dict(base)
+    out["E"] = float(d["E"]) * stress
+    out["width"] = float(d["width"]) * length
+    out["height"] = float(d["height"]) * length
+    out["defect"] = [[float(c) * length for c in pt] for pt in d["defect"]]
+    out["load_scale"] = float(d["load_scale"]) * stress
+    out["delta"] = float(d["delta"]) * length / stress
+    return out
+
+
+def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = AXES,
+               time_limit: float | None = None, max_n: int | None = None) -> list[Task]:
+    """All tasks of the stress grid for ``solver_names`` (see the module docstring)."""
+    from dualfem.core.registry import solvers
+
+    reg = solvers()
+    tl = float(time_limit if time_limit is not None else (20.0 if quick else 120.0))
+    n_small = 16 if quick else 32
+    base = {**BASE, "N": n_small}
+    tasks: list[Task] = []
+
+    def add(axis, coords, scene, solver, params=None, ref=None, after=None):
+        params = params or {}
+        tid = f"{axis}:{solver}:{_sid({'s': scene, 'p': params, 'c': coords})}"
+        tasks.append(Task(id=tid, axis=axis, coords=coords, scene=scene, solver=solver, params=params,
+                          ref=ref or {"mode": "solve"}, time_limit=tl, after=after))
+        return tid
+
+    # the r axis: solvers with a parameter r that is used as given (not chosen by an r_rule)
+    r_solvers = [s for s in solver_names
+                 if "r" in reg[s].defaults and reg[s].defaults.get("r_rule", "fixed") == "fixed"]
+    if "delta" in axes:
+        for load in (["f2"] if quick else ["f1", "f2", "f3"]):
+            for d in DELTAS:
+                for s in solver_names:
+                    add("delta", {"load": load, "delta": d}, {**base, "load": load, "delta": d}, s)
+    if "r" in axes:
+        for s in r_solvers:
+            for d in DELTAS:
+                for r in RS:
+                    add("r", {"delta": d, "r": r}, {**base, "delta": d}, s, {"r": r})
+    if "units" in axes:
+        for uname, (fs, fl) in UNITS.items():
+            scene = scene_in_units(base, fs, fl)
+            ref = {"mode": "transform", "base": base, "x": fl, "mu": fs * fl}
+            for s in solver_names:
+                add("units", {"units": uname, "r": "default"}, scene, s, ref=ref)
+                if s in r_solvers:  # the paper's fixed number, not converted
+                    add("units", {"units": uname, "r": f"{PAPER_R:g} fixed"}, scene, s, {"r": PAPER_R}, ref=ref)
+    if "load" in axes:
+        for ls in LOAD_SCALES:
+            scene = {**base, "load_scale": ls}
+            ref = {"mode": "transform", "base": base, "x": ls, "mu": ls}
+            for s in solver_names:
+                add("load", {"load_scale": ls}, scene, s, ref=ref)
+    if "nu" in axes:
+        for nu in NUS:
+            for s in solver_names:
+                add("nu", {"nu": nu}, {**base, "nu": nu, "plane": "strain"}, s)
+    if "N" in axes:
+        top = max_n or (128 if quick else 1024)
+        prev: dict[str, str] = {}
+        for n in [n for n in NS if n <= top]:
+            for s in solver_names:
+                prev[s] = add("N", {"N": n}, {**BASE, "N": n}, s, after=prev.get(s))
+    return tasks
+
