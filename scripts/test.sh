@@ -1,12 +1,15 @@
 #!/usr/bin/env bash
-# Install dualfem with its test extras and run the test suite.
-# pytest's exit code 5 ("no tests collected") is turned into a failure: a suite that ran no test
-# must never pass by accident.
+# Install dualfem with its test extras (into the active virtual environment, else ./.venv), then
+# lint (ruff), type-check the core (mypy) and run the test suite. pytest's exit code 5 ("no tests
+# collected") is turned into a failure: a suite that ran no test must never pass by accident.
 set -uo pipefail
 cd "$(dirname "$0")/.."
-python -m pip install -q -e ".[test,parallel,xdmf]" || exit 1
-export MPLBACKEND=Agg
-python -m pytest -q "$@"
+. scripts/_env.sh
+"$PY" -m pip install -q --upgrade pip >/dev/null || exit 1
+"$PY" -m pip install -q -e ".[test,parallel,xdmf]" || exit 1
+"$PY" -m ruff check . || { echo "ruff found problems (see above)" >&2; exit 1; }
+"$PY" -m mypy || { echo "mypy found problems in dualfem/core (see above)" >&2; exit 1; }
+"$PY" -m pytest -q "$@"
 rc=$?
 if [ "$rc" -eq 5 ]; then
   echo "pytest collected no tests: failing on purpose" >&2

@@ -208,7 +208,7 @@ def test_failed_reference_is_never_cached(tmp_path):
         .replace('scene = ["f1", "f3"]', 'scene = "f1"') + \
         '\n[reference]\nsolvers = ["clarabel"]\nparams = {clarabel = {max_iter = 1}}\n'
     out = tmp_path / "out"
-    for attempt, reps in enumerate((2, 1)):    # the 2nd sweep has new runs on the same scene
+    for reps in (2, 1):    # the 2nd sweep has new runs on the same scene
         spec = load_spec(write(tmp_path, text.replace("repeats = 2", f"repeats = {reps}")))
         s = bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
         assert s.refs == 1                                  # the failed reference is tried again every time

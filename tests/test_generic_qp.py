@@ -165,16 +165,19 @@ def test_validation(tmp_path, case, needle):
     elif case == "h_len":
         a["h"] = h[:-1]
     elif case == "nan":
-        a["q"] = q.copy(); a["q"][3] = np.nan
+        a["q"] = q.copy()
+        a["q"][3] = np.nan
     elif case == "asym":
-        a["P"] = P.copy(); a["P"][0, 1] += 1.0
+        a["P"] = P.copy()
+        a["P"][0, 1] += 1.0
     elif case == "indefinite":
         w, V = np.linalg.eigh(P)
         w[0] = -1.0                      # one negative eigenvalue, diagonal still positive
         a["P"] = (V * w) @ V.T
         assert np.all(np.diag(a["P"]) > 0)
     elif case == "neg_diag":
-        a["P"] = P.copy(); a["P"][2, 2] = -1.0
+        a["P"] = P.copy()
+        a["P"][2, 2] = -1.0
     elif case == "singular":
         a["P"] = np.eye(25)
         a["P"][:2, :2] = 1.0             # exactly singular, positive diagonal

@@ -103,7 +103,7 @@ def test_post_is_lazy_and_needs_material(qp8):
     assert "stress" in p.__dict__ and "defect" not in p.__dict__
     bare = type(qp8)(K=qp8.K, F=qp8.F, B=qp8.B, weights=qp8.weights, maps=qp8.maps)
     with pytest.raises(InputError, match="E and nu"):
-        Post(bare, x=x).stress
+        _ = Post(bare, x=x).stress
     assert Post(bare, x=x, E=1.0, nu=0.25).von_mises.max() == 0.0
     nomaps = type(qp8)(K=qp8.K, F=qp8.F, B=qp8.B)
     with pytest.raises(InputError, match="mesh maps"):

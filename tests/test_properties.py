@@ -19,6 +19,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from dualfem.core import evaluator
+from dualfem.core.errors import InputError
 from dualfem.core.registry import solvers
 from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
@@ -119,5 +120,5 @@ def test_strategy_covers_exact_solvers():
     # the properties above are only meaningful with at least two exact solvers to compare
     assert len(EXACT) >= 2 and REF_NAME in REG
     assert all(REG[n].exact for n in EXACT)
-    with pytest.raises(Exception):
+    with pytest.raises(InputError):
         load_scene("f2", {"N": 8, "load": lambda x, y: np.full_like(x, np.nan)}).build()

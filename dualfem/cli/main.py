@@ -29,8 +29,8 @@ def command(name: str, help: str):
 
 def add_scene_args(p: argparse.ArgumentParser) -> None:
     """SCENE and ``--set KEY=VALUE`` (shared by every scene-taking command)."""
-    p.add_argument("scene", metavar="SCENE", help="built-in scene (f1, f2, f3, ...: see 'dualfem list'), a .toml scene file, "
-                        "or a .npz/.mat QP file")
+    p.add_argument("scene", metavar="SCENE", help="built-in scene (f1, f2, f3, ...: see 'dualfem list'), "
+                   "a .toml scene file, or a .npz/.mat QP file")
     p.add_argument("--set", dest="set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene parameter (N, delta, plane, E, nu, load, ...)")
 

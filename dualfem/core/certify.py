@@ -79,7 +79,7 @@ class KSolver:
             self.red = LocalReduction(qp)
         except Exception:  # noqa: BLE001 - any structure problem: plain sparse LU
             self._lu = _SparseK(qp)
-        self._D = None
+        self._D: np.ndarray | None = None
 
     def __call__(self, r: np.ndarray) -> np.ndarray:
         return self.red.k_solve(r) if self.red is not None else self._lu.solve(r)

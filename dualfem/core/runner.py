@@ -76,14 +76,14 @@ def summary(qp: QP, sol: Solution) -> dict:
         "time_s": sol.time_s,
         "params": jsonable_params(sol.params),
     }
-    if sol.x is not None and sol.residuals is not None and sol.residuals["finite"]:
+    if sol.x is not None and sol.multipliers is not None and sol.residuals is not None and sol.residuals["finite"]:
         jump = qp.B @ sol.x
         out.update({
             "energy": sol.residuals["energy"],
             "max_jump": float(jump.max(initial=0.0)),
             "n_contact": int(evaluator.contact_set(qp, sol.x).sum()),
             "contact_rtol": evaluator.CONTACT_RTOL,
-            "total_contact_force": float(sol.multipliers.sum()),
+            "total_contact_force": float(np.sum(sol.multipliers)),
             "residuals": evaluator.kkt_residuals(sol.residuals),
         })
     else:

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
-class Status(str, enum.Enum):
+class Status(enum.StrEnum):
     """Outcome of a solve. Only ``SOLVED`` means the solver claims an answer to its tolerance."""
 
     SOLVED = "solved"

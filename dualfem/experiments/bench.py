@@ -261,7 +261,8 @@ def _begin(spec: Spec, store: ResultStore, out: Path, jobs: int, dask: str | Non
     return meta
 
 
-def _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream, progress) -> tuple[dict, int, int]:
+def _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream,
+                           progress) -> tuple[dict, int, int]:
     """Phase 1: certified references (for scenes with pending runs) and floors; returns (refs, aux, n_refs)."""
     need = {t["scene_key"] for t in pending if not t["skip"]}
     refs: dict[str, dict | None] = {}

@@ -39,13 +39,13 @@ import numpy as np
 
 from dualfem.core import evaluator
 from dualfem.core.certify import certified_error, solver_for
-from dualfem.core.grade import grade
 from dualfem.core.qp import QP
 from dualfem.core.registry import get_solver
 from dualfem.core.registry import solvers as registered
 from dualfem.core.runner import jsonable_params
 from dualfem.core.solution import Solution, Status
 from dualfem.experiments import reference
+from dualfem.experiments.row import Row
 
 #: fields of each run record (stable JSON interface of ``dualfem compare --json``)
 RUN_FIELDS = ("solver", "status", "verdict", "exact", "tolerance", "iterations", "energy", "time_s",
@@ -64,7 +64,7 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     ``params`` maps a solver name to its parameters. ``progress`` receives one line per finished
     solver.
     """
-    from dualfem.core.runner import make_solver, run
+    from dualfem.core.runner import make_solver
 
     names = list(names) if names is not None else default_solvers()
     params = params or {}
@@ -74,73 +74,79 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     sols: dict[str, Solution] = {}
     for nm, inst in insts.items():
         t0 = time.perf_counter()
-        sol = run(inst, qp)
-        sols[nm] = sol
-        finite = sol.residuals is not None and sol.residuals.get("finite", False)
-        rec = {
-            "solver": nm,
-            "status": str(sol.status),
-            "exact": bool(getattr(inst, "exact", True)),
-            "tolerance": float(getattr(inst, "tolerance", get_solver(nm).tolerance)),
-            "iterations": sol.iterations,
-            "energy": sol.residuals["energy"] if finite else None,
-            "time_s": {**sol.time_s, "total": sum(v for k, v in sol.time_s.items() if k in ("setup", "solve"))},
-            "residuals": (evaluator.kkt_residuals(sol.residuals)
-                          if finite else None),
-            "kkt_error": evaluator.kkt_error(sol.residuals) if finite else None,
-            "error_bound": None,
-            "certificate": None,
-            "n_contact": int(evaluator.contact_set(qp, sol.x).sum()) if finite else None,
-            "message": sol.message,
-            "params": jsonable_params(sol.params),
-            "diff": None,
-            "verdict": None,
-        }
-        if finite:
-            cert = certified_error(qp, sol.x, sol.multipliers, ksolve)
-            rec["certificate"] = cert
-            rec["error_bound"] = reference.certificate(qp, sol.x, sol.multipliers, ksolve) \
-                if not np.isfinite(cert["value"]) else cert["value"]
+        rec, sols[nm] = _run_one(qp, nm, inst, ksolve)
         runs.append(rec)
         if progress:
             progress(f"{nm}: {rec['status']} in {time.perf_counter() - t0:.2f} s")
-
-    ref_name, others = _choose_reference(runs)
-    cross = None
     out: dict[str, Any] = {"problem": qp.name, "ndof": qp.n, "n_defect_nodes": qp.m,
                            "params": jsonable_params(qp.params), "reference": None, "runs": runs}
+    ref_name, others = _choose_reference(runs)
     if ref_name is not None:
-        ref = sols[ref_name]
-        rrec = next(r for r in runs if r["solver"] == ref_name)
-        for rec in runs:
-            s = sols[rec["solver"]]
-            if rec["energy"] is not None:
-                rec["diff"] = evaluator.compare(qp, s.x, s.multipliers, ref.x, ref.multipliers)
-        out["reference"] = {
-            "solver": ref_name,
-            "error_bound": rrec["error_bound"],
-            "kkt_error": rrec["kkt_error"],
-            "why": (f"exact solver with the smallest certified energy-norm error bound "
-                    f"({rrec['error_bound']:.1e}) among exact solvers claiming success"),
-            "cross_check": cross,
-        }
-        # the cross-check is the best certified other exact run whose x is not bit-for-bit the
-        # reference's (identical answers come from the same linear algebra, e.g. a backend
-        # polished on the same reduced system: they would confirm nothing)
-        identical = [nm for nm in others or [] if np.array_equal(sols[nm].x, ref.x)]
-        rest = [nm for nm in others or [] if nm not in identical]
-        if rest:
-            cross = {"solver": rest[0], "identical_to_reference": identical}
-            out["reference"]["cross_check"] = cross
-        if cross is not None:
-            c = next(r for r in runs if r["solver"] == cross["solver"])
-            d = c["diff"]["x_energy"]
-            allowed = c["tolerance"] + (rrec["error_bound"] or 0.0) + (c["error_bound"] or 0.0)
-            cross.update({"x_energy": d, "multipliers": c["diff"]["multipliers"],
-                          "allowed": allowed, "agrees": bool(d <= allowed)})
+        out["reference"] = _reference_record(qp, runs, sols, ref_name, others)
     for rec in runs:
         rec["verdict"] = _verdict(rec, out["reference"])
     out["silent_wrong"] = [r["solver"] for r in runs if r["verdict"] == "wrong"]
+    return out
+
+
+def _run_one(qp: QP, nm: str, inst, ksolve) -> tuple[dict[str, Any], Solution]:
+    """Solve with one solver; its record (without diff and verdict) and its solution."""
+    from dualfem.core.runner import run
+
+    sol = run(inst, qp)
+    finite = sol.residuals is not None and sol.residuals.get("finite", False)
+    rec = {
+        "solver": nm,
+        "status": str(sol.status),
+        "exact": bool(getattr(inst, "exact", True)),
+        "tolerance": float(getattr(inst, "tolerance", get_solver(nm).tolerance)),
+        "iterations": sol.iterations,
+        "energy": sol.residuals["energy"] if finite else None,
+        "time_s": {**sol.time_s, "total": sum(v for k, v in sol.time_s.items() if k in ("setup", "solve"))},
+        "residuals": evaluator.kkt_residuals(sol.residuals) if finite else None,
+        "kkt_error": evaluator.kkt_error(sol.residuals) if finite else None,
+        "error_bound": None,
+        "certificate": None,
+        "n_contact": int(evaluator.contact_set(qp, sol.x).sum()) if finite else None,
+        "message": sol.message,
+        "params": jsonable_params(sol.params),
+        "diff": None,
+        "verdict": None,
+    }
+    if finite:
+        cert = certified_error(qp, sol.x, sol.multipliers, ksolve)
+        rec["certificate"] = cert
+        rec["error_bound"] = cert["value"] if np.isfinite(cert["value"]) else \
+            reference.certificate(qp, sol.x, sol.multipliers, ksolve)
+    return rec, sol
+
+
+def _reference_record(qp: QP, runs: list[dict], sols: dict[str, Solution], ref_name: str,
+                      others: list[str]) -> dict[str, Any]:
+    """Differences of every run to the reference, and the cross-check of the reference."""
+    ref = sols[ref_name]
+    rrec = next(r for r in runs if r["solver"] == ref_name)
+    for rec in runs:
+        s = sols[rec["solver"]]
+        if rec["energy"] is not None:
+            rec["diff"] = evaluator.compare(qp, s.x, s.multipliers, ref.x, ref.multipliers)
+    out: dict[str, Any] = {
+        "solver": ref_name, "error_bound": rrec["error_bound"], "kkt_error": rrec["kkt_error"],
+        "why": (f"exact solver with the smallest certified energy-norm error bound "
+                f"({rrec['error_bound']:.1e}) among exact solvers claiming success"),
+        "cross_check": None,
+    }
+    # the cross-check is the best certified other exact run whose x is not bit-for-bit the
+    # reference's (identical answers come from the same linear algebra, e.g. a backend
+    # polished on the same reduced system: they would confirm nothing)
+    identical = [nm for nm in others if np.array_equal(sols[nm].x, ref.x)]
+    rest = [nm for nm in others if nm not in identical]
+    if rest:
+        c = next(r for r in runs if r["solver"] == rest[0])
+        d = c["diff"]["x_energy"]
+        allowed = c["tolerance"] + (rrec["error_bound"] or 0.0) + (c["error_bound"] or 0.0)
+        out["cross_check"] = {"solver": rest[0], "identical_to_reference": identical, "x_energy": d,
+                              "multipliers": c["diff"]["multipliers"], "allowed": allowed, "agrees": bool(d <= allowed)}
     return out
 
 
@@ -168,9 +174,10 @@ def _verdict(rec: dict, ref: dict | None) -> str:
         return "reference"
     if rec["status"] == str(Status.SOLVED) and rec["energy"] is None:
         return "wrong"            # claims success without a finite answer
-    err = (rec["diff"] or {}).get("x_energy") if ref is not None else None
-    g = grade(rec["status"], err, rec["kkt_error"], rec["tolerance"], ref["error_bound"] if ref else 0.0)
-    return _VERDICT[g]
+    row = Row(kind="compare", solver=rec["solver"], status=rec["status"], tol=rec["tolerance"],
+              kkt_error=rec["kkt_error"], err_x_energy=(rec["diff"] or {}).get("x_energy") if ref else None,
+              ref_bound=ref["error_bound"] if ref else None)
+    return _VERDICT[row.regrade()]
 
 
 # ------------------------------------------------------------------------ printing
@@ -198,13 +205,12 @@ def table(result: dict) -> str:
     for r in result["runs"]:
         it = ",".join(f"{k}={v}" for k, v in r["iterations"].items()) or "-"
         d = r["diff"] or {}
-        f = (lambda v: f"{v:8.1e}" if isinstance(v, (int, float)) and v is not None and math.isfinite(v) else f"{'-':>8s}")
         en = f"{r['energy']:17.10e}" if r["energy"] is not None else f"{'-':>17s}"
         cm = "-" if not d else ("same" if d["contact_mismatch"] == 0 else f"{d['contact_mismatch']} off")
         lines.append(f"{r['solver']:{w}s} {r['status']:15s} {r['verdict']:9s} {it[:22]:22s} "
                      f"{r['time_s'].get('setup', 0):8.3f} {r['time_s'].get('solve', 0):8.3f} {en} "
-                     f"{f(r['kkt_error'])} {f(r['error_bound'])} {r['tolerance']:7.0e} {f(d.get('x_energy'))} "
-                     f"{f(d.get('multipliers'))} {cm:>7s}")
+                     f"{_num8(r['kkt_error'])} {_num8(r['error_bound'])} {r['tolerance']:7.0e} "
+                     f"{_num8(d.get('x_energy'))} {_num8(d.get('multipliers'))} {cm:>7s}")
     for r in result["runs"]:
         if (r["status"] != "solved" or r["verdict"] == "wrong") and r["message"]:
             msg = r["message"]
@@ -216,6 +222,11 @@ def table(result: dict) -> str:
         lines.append("SILENT WRONG ANSWER: " + ", ".join(result["silent_wrong"]) +
                      " claim(s) success but are wrong beyond their declared tolerance")
     return "\n".join(lines)
+
+
+def _num8(v) -> str:
+    """A number in the table's 8-character scientific format, '-' when missing."""
+    return f"{v:8.1e}" if isinstance(v, (int, float)) and math.isfinite(v) else f"{'-':>8s}"
 
 
 def stderr_progress() -> Callable[[str], None]:

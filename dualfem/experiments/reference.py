@@ -106,7 +106,8 @@ def rank_key(bound: float, kkt: float, seconds: float) -> tuple[float, float, fl
 
 def compute(qp, *, exclude: tuple[str, ...] = (), kkt_max: float = KKT_MAX, bound_max: float = BOUND_MAX,
             time_limit: float | None = None, tol: float | None = None,
-            params: dict[str, dict] | None = None, only: tuple[str, ...] | None = None) -> tuple[Reference | None, list[str]]:
+            params: dict[str, dict] | None = None,
+            only: tuple[str, ...] | None = None) -> tuple[Reference | None, list[str]]:
     """Run :func:`candidates` in order until one is trusted; returns (reference or None, what was tried).
 
     ``tol`` asks each solver for that accuracy (``Solver.tolerance_params``), ``params`` adds

@@ -143,7 +143,8 @@ def reference_task(spec: Spec, sc: SceneSpec) -> dict:
     ident = {"ref": sc.key, "reference": spec.reference}
     return {"kind": "reference", "run_id": "ref-" + _hash(ident), "spec": spec.name, "scene": sc.scene,
             "scene_params": sc.params, "scene_key": sc.key, "label": sc.label,
-            "reference": spec.reference, "hard_limit": spec.guard(spec.reference["time_limit"]), "build_limit": spec.build_limit, "repeats": 0, "warmup": False}
+            "reference": spec.reference, "hard_limit": spec.guard(spec.reference["time_limit"]),
+            "build_limit": spec.build_limit, "repeats": 0, "warmup": False}
 
 
 def floor_tasks(spec: Spec, scenes: list[SceneSpec]) -> list[dict]:
