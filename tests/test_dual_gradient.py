@@ -72,6 +72,6 @@ def test_tolerance_params_tighten_the_stop():
     cls = solvers()["dual_gradient"]
     assert cls.tolerance_params(1e-6)["tol"] < 1e-6
     qp = load_scene("f2", {"N": 8}).build()
-    loose = run("dual_gradient", qp, cls.tolerance_params(1e-2))
-    tight = run("dual_gradient", qp, cls.tolerance_params(1e-8))
+    loose = run("dual_gradient", qp, cls.tolerance_params(1e-2), tol=1e-2)
+    tight = run("dual_gradient", qp, cls.tolerance_params(1e-8), tol=1e-8)
     assert loose.ok and tight.ok and loose.iterations["gradient"] < tight.iterations["gradient"]

@@ -1,8 +1,15 @@
-"""Run a solver on a QP: time setup and solve separately, attach independent residuals.
+"""Run a solver on a QP: time setup and solve separately, attach independent residuals, certify.
 
 ``run`` never lets a solver fail silently: a missing dependency or a skip reason becomes
 ``Status.SKIPPED`` with the reason, an exception inside the solver becomes ``Status.ERROR`` with
-its message, and the residuals always come from :mod:`dualfem.evaluator`.
+its message, and the residuals always come from :mod:`dualfem.core.evaluator`.
+
+**Certification** (:func:`certify_status`), for every plugin: a ``solved`` claim stands only if
+the evaluator's scale-free KKT residuals, recomputed from (x, mu) and the QP, are within the
+tolerance the solver instance declares, and, for exact solvers, the a-posteriori energy-norm
+error certificate (:func:`dualfem.core.certify.certified_error`) is too where it applies.
+Otherwise the status becomes ``inaccurate`` with a message naming the residual and by how much;
+the plugin's own claim stays in ``Solution.info["claimed_status"]``.
 """
 from __future__ import annotations
 
@@ -24,8 +31,13 @@ def make_solver(name: str, params: dict[str, Any] | None = None) -> Solver:
     return get_solver(name)(**(params or {}))
 
 
-def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None) -> Solution:
-    """Solve ``qp`` with ``solver`` (an instance, or a registry name plus ``params``)."""
+def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, tol: float | None = None) -> Solution:
+    """Solve ``qp`` with ``solver`` (an instance, or a registry name plus ``params``).
+
+    ``tol``: the relative accuracy asked for (e.g. a benchmark tier, with the parameters of
+    ``Solver.tolerance_params(tol)``); the answer is certified to ``max(tol, solver.tolerance)``.
+    Without it, to the tolerance the solver declares.
+    """
     if isinstance(solver, str):
         solver = make_solver(solver, params)
     reason = solver.missing() or solver.skip(qp)
@@ -47,6 +59,37 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None) -> S
                                                          if k not in ("setup", "solve")}}
     sol.params = dict(solver.params)
     attach_residuals(qp, sol)
+    t3 = time.perf_counter()
+    asked = None if tol is None or not np.isfinite(tol) else float(tol)
+    declared = float(solver.tolerance) if asked is None else max(float(solver.tolerance), asked)
+    certify_status(qp, sol, declared, bool(solver.exact))
+    sol.time_s["certify"] = time.perf_counter() - t3
+    return sol
+
+
+def certify_status(qp: QP, sol: Solution, tol: float, exact: bool) -> Solution:
+    """Demote an uncertified ``solved`` claim to ``inaccurate`` (see the module docstring)."""
+    sol.info.setdefault("claimed_status", str(sol.status))
+    sol.info["certified_tol"] = tol
+    res = sol.residuals
+    if sol.status != Status.SOLVED or res is None or not res.get("finite", False) or sol.x is None \
+            or sol.multipliers is None:
+        return sol
+    worst = max(evaluator.RESIDUALS, key=lambda k: res[k])
+    why = None
+    if res[worst] > tol:
+        why = f"evaluator residual {worst} = {res[worst]:.1e} exceeds the declared tolerance {tol:g}"
+    elif exact:
+        from dualfem.core.certify import certified_error
+
+        cert = certified_error(qp, sol.x, sol.multipliers)["value"]
+        sol.info["certificate"] = cert
+        if np.isfinite(cert) and cert > tol:
+            why = (f"certified energy-norm error bound {cert:.1e} exceeds the declared tolerance {tol:g} "
+                   f"(residuals are within it)")
+    if why:
+        sol.status = Status.INACCURATE
+        sol.message = f"{sol.message}; not certified: {why}" if sol.message else f"not certified: {why}"
     return sol
 
 
@@ -68,6 +111,7 @@ def summary(qp: QP, sol: Solution) -> dict:
     out: dict[str, Any] = {
         "solver": sol.solver,
         "status": str(sol.status),
+        "claimed_status": sol.info.get("claimed_status", str(sol.status)),
         "message": sol.message,
         "problem": qp.name,
         "ndof": qp.n,

@@ -98,6 +98,7 @@ def _run_one(qp: QP, nm: str, inst, ksolve) -> tuple[dict[str, Any], Solution]:
     rec = {
         "solver": nm,
         "status": str(sol.status),
+        "claimed_status": sol.info.get("claimed_status", str(sol.status)),
         "exact": bool(getattr(inst, "exact", True)),
         "tolerance": float(getattr(inst, "tolerance", get_solver(nm).tolerance)),
         "iterations": sol.iterations,
