@@ -345,7 +345,7 @@ def test_export_does_not_clobber_on_bad_input(tmp_path, capsys):
     (["--axes", "delta,temperature"], [r"--axes", r"'temperature'", r"delta, r, units"]),
     (["--time-limit", "0"], [r"--time-limit", r"> 0"]),
     (["--time-limit", "nan"], [r"--time-limit", r"finite"]),
-    (["--jobs", "0"], [r"--jobs", r"\[1, 64\]"]),
+    (["--jobs", "0"], [r"--jobs", r"\[1, \d+\]"]),
     (["--max-n", "5"], [r"--max-n", r"\[8, 4096\]"]),
 ])
 def test_stress_rejects_bad_flags_before_writing(flags, needles, tmp_path, capsys):

@@ -327,7 +327,8 @@ def test_resume_after_killing_a_sweep(tmp_path):
     rows = store.read_results(out)
     assert {r["run_id"] for r in rows if r["kind"] == "run"} == {t["run_id"] for t in
                                                                  expand_tasks(load_spec(spec_path))}
-    assert [p.name for p in out.rglob(".*") if p.is_file()] == [".gitignore"]   # no temporary file left
+    # no temporary file left (.lock is the folder's lock file, released, not a result)
+    assert sorted(p.name for p in out.rglob(".*") if p.is_file()) == [".gitignore", ".lock"]
 
 
 # ------------------------------------------------------------------ executors
@@ -458,3 +459,41 @@ def test_targets_table_by_hand():
     assert "uzawa | status inaccurate: error 2.5e-10 in 96 s (1.20 x the floor), not claimed" in text
     assert "uzawa_auto at f2 N=1024 delta=1e-09: 1.62 x the floor" in text       # over 1.5: missed, with why
     assert "6.9 x faster than osqp (target 10 x: 31 % short)" in text and "Targets missed (3)" in text
+
+
+# ------------------------------------------------------------------ nothing lost
+def test_rows_kept_only_in_results_csv_survive_a_new_sweep(small_sweep, tmp_path):
+    """rows/ is not committed: a sweep on a fresh clone must keep the committed results.csv rows."""
+    import shutil
+
+    spec, out, _ = small_sweep
+    clone = tmp_path / "clone"
+    clone.mkdir()
+    shutil.copy(out / "results.csv", clone / "results.csv")
+    shutil.copy(out / "spec.toml", clone / "spec.toml")
+    before = {r["run_id"]: r["status"] for r in store.read_results(clone)}
+    s = bench.run_sweep(spec, clone, progress=False, stream=open(os.devnull, "w"))
+    after = {r["run_id"]: r["status"] for r in store.read_results(clone)}
+    assert s.ran == 0 and before == after             # nothing recomputed, nothing dropped
+
+
+def test_results_folder_belongs_to_one_spec_and_is_locked(small_sweep, tmp_path):
+    spec, out, _ = small_sweep
+    other = load_spec(write(tmp_path, SMALL.replace('name = "t"', 'name = "other"'), "other.toml"))
+    before = (out / "results.csv").read_bytes()
+    with pytest.raises(InputError, match="another spec"):
+        bench.run_sweep(other, out, progress=False, stream=open(os.devnull, "w"))
+    assert (out / "results.csv").read_bytes() == before
+    from dualfem.experiments.store import lock_folder
+
+    with lock_folder(out), pytest.raises(InputError, match="in use by another running sweep"):
+        bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+    assert (out / "results.csv").read_bytes() == before
+
+
+@pytest.mark.parametrize("name", ["../escape", "/abs", "a/b", ".hidden", ""])
+def test_unsafe_spec_names_are_refused(name):
+    from dualfem.experiments.store import default_out
+
+    with pytest.raises(InputError, match="results folder"):
+        default_out("bench", name)

@@ -1,6 +1,7 @@
 """``dualfem bench SPEC.toml [--jobs N] [--dask ADDRESS] [--out DIR]``: run or resume a sweep."""
 from __future__ import annotations
 
+import os
 import shlex
 import sys
 from pathlib import Path
@@ -16,7 +17,9 @@ def _cfg(p):
     p.add_argument("--dask", metavar="ADDRESS", default=None,
                    help="send the tasks to this dask.distributed scheduler (e.g. tcp://10.0.0.1:8786)")
     p.add_argument("--out", metavar="DIR", default=None,
-                   help="results directory (default benchmarks/results/<spec name>); rerun to resume")
+                   help="results directory (default dualfem-results/bench/<spec name>); rerun to resume")
+    p.add_argument("--force", action="store_true",
+                   help="write into an --out that holds the results of another spec")
     p.add_argument("--retry-failed", action="store_true",
                    help="also redo finished runs whose status is not solved/inaccurate")
     p.add_argument("--no-progress-bar", action="store_true",
@@ -27,20 +30,22 @@ def _cfg(p):
 def cmd_bench(args) -> int:
     from dualfem.experiments.bench import run_sweep
     from dualfem.experiments.spec import load_spec
+    from dualfem.experiments.store import default_out
 
-    if args.jobs < 1:
-        raise InputError(f"--jobs must be an integer >= 1, got {args.jobs}")
+    max_jobs = 4 * (os.cpu_count() or 1)
+    if not 1 <= args.jobs <= max_jobs:
+        raise InputError(f"--jobs must be an integer in 1..{max_jobs} (4 x the {os.cpu_count()} cores), got {args.jobs}")
     if args.dask is not None and args.jobs != 1:
         raise InputError("--jobs and --dask exclude each other: the dask scheduler decides the parallelism")
     spec = load_spec(args.spec)
-    out = Path(args.out) if args.out else Path("benchmarks") / "results" / spec.name
+    out = Path(args.out) if args.out else default_out("bench", spec.name)
     if sys.argv[1:2] == ["bench"]:
         command = "dualfem bench " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     else:   # called through main(argv) from Python: rebuild it from the parsed arguments
         command = f"dualfem bench {shlex.quote(args.spec)} --jobs {args.jobs}" + \
             (f" --dask {shlex.quote(args.dask)}" if args.dask else "") + (f" --out {shlex.quote(str(out))}")
     summary = run_sweep(spec, out, jobs=args.jobs, dask=args.dask, command=command,
-                        progress=not args.no_progress_bar, retry_failed=args.retry_failed)
+                        progress=not args.no_progress_bar, retry_failed=args.retry_failed, force=args.force)
     st = ", ".join(f"{k} {v}" for k, v in sorted(summary.statuses.items())) or "nothing to do"
     print(f"{summary.out}/results.csv: {summary.total} runs in the spec, {summary.skipped_done} already done, "
           f"{summary.ran} executed now ({st}); {summary.aux} reference/floor tasks", file=sys.stderr)

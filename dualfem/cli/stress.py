@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -14,8 +15,9 @@ def _cfg(p):
     p.add_argument("--quick", action="store_true",
                    help="small version: N=16 base scene, load f2 only on the delta axis, N up to 128, "
                         "20 s per-run time limit (default: N=32, loads f1/f2/f3, N up to 1024, 120 s)")
-    p.add_argument("--out", default="benchmarks/results/stress", metavar="DIR",
-                   help="results directory (runs.jsonl, meta.json); default benchmarks/results/stress")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="results directory (runs.jsonl, meta.json); default dualfem-results/stress/quick or .../full "
+                        "(the committed grid is regenerated only with an explicit --out benchmarks/results/stress)")
     p.add_argument("--solvers", default=None, metavar="A,B",
                    help="comma-separated solver names (default: every registered, installed solver)")
     p.add_argument("--axes", default=None, metavar="A,B",
@@ -26,6 +28,8 @@ def _cfg(p):
     p.add_argument("--max-n", type=str, default=None, metavar="N", help="largest N on the N axis")
     p.add_argument("-j", "--jobs", type=str, default="1", metavar="J", help="worker processes (default 1)")
     p.add_argument("--resume", action="store_true", help="keep finished runs in DIR/runs.jsonl, run the rest")
+    p.add_argument("--force", action="store_true",
+                   help="start a new grid in a DIR that holds one (its runs.jsonl is kept as runs.<time>.jsonl.old)")
     p.add_argument("--dry-run", action="store_true", help="print the number of runs per axis and exit")
 
 
@@ -35,6 +39,7 @@ def cmd_stress(args) -> int:
     from dualfem.core.registry import solvers
     from dualfem.experiments import reference, stress
     from dualfem.experiments.machine import environment
+    from dualfem.experiments.store import default_out
 
     reg = solvers()
     if args.solvers:
@@ -54,10 +59,13 @@ def cmd_stress(args) -> int:
                              f"{', '.join(stress.AXES)}")
     tl = None if args.time_limit is None else check_positive("--time-limit", args.time_limit)
     max_n = None if args.max_n is None else check_int("--max-n", args.max_n, 8, 4096)
-    jobs = check_int("--jobs", args.jobs, 1, 64)
-    out = Path(args.out)
+    jobs = check_int("--jobs", args.jobs, 1, 4 * (os.cpu_count() or 1))
+    out = Path(args.out) if args.out else default_out("stress", "quick" if args.quick else "full")
     if out.exists() and not out.is_dir():
         raise InputError(f"--out must be a directory, {str(out)!r} is a file")
+    if (out / "runs.jsonl").exists() and not (args.resume or args.force or args.dry_run):
+        raise InputError(f"--out {str(out)!r} already holds a stress grid (runs.jsonl): pass --resume to continue it "
+                         f"or --force to start a new one beside it")
 
     tasks = stress.build_grid(names, quick=args.quick, axes=axes, time_limit=tl, max_n=max_n)
     if args.dry_run:

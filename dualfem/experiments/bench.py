@@ -315,17 +315,33 @@ def _runs(pending, refs, store, jobs, dask, stream, progress, title) -> tuple[di
 
 
 def run_sweep(spec: Spec | str | Path, out: str | Path, *, jobs: int = 1, dask: str | None = None,
-              command: str = "", progress: bool = True, stream=None,
-              retry_failed: bool = False) -> SweepSummary:
-    """Run (or resume) a sweep; returns a summary. Files: see :class:`ResultStore`."""
+              command: str = "", progress: bool = True, stream=None, retry_failed: bool = False,
+              force: bool = False) -> SweepSummary:
+    """Run (or resume) a sweep; returns a summary. Files: see :class:`ResultStore`.
+
+    Everything is validated before anything is written; the folder is locked for the run and must
+    belong to this spec (``force`` adds the rows of another spec to it).
+    """
     if not isinstance(spec, Spec):
         spec = load_spec(spec)
     if jobs < 1:
         raise InputError(f"--jobs must be an integer >= 1, got {jobs}")
     scenes = expand_scenes(spec)          # every scene validated before anything is written
     tasks = expand_tasks(spec, scenes)
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out must be a directory, {str(out)!r} is a file")
     store = ResultStore(out)
-    meta = _begin(spec, store, Path(out), jobs, dask, command)
+    store.claim(spec.name, spec.text, force)
+    store.open()
+    try:
+        return _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, stream, retry_failed)
+    finally:
+        store.close()
+
+
+def _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, stream, retry_failed) -> SweepSummary:
+    meta = _begin(spec, store, out, jobs, dask, command)
     stream = stream or sys.stderr
 
     def is_done(rid: str) -> bool:

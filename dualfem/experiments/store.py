@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -26,14 +27,26 @@ FINAL_STATUSES = {"solved", "inaccurate", "max_iter", "time_limit", "stagnation"
 
 
 class ResultStore:
-    """``rows/<run_id>.json`` (one atomic file per row), ``results.csv`` (atomic merge), ``refs/``."""
+    """``rows/<run_id>.json`` (one atomic file per row), ``results.csv`` (atomic merge), ``refs/``.
 
-    def __init__(self, out: str | Path):
+    Nothing is lost: rows that exist only in ``results.csv`` (``rows/`` is not committed) are
+    kept as finished rows; a corrupt row or reference file is moved aside (``*.corrupt``) with a
+    warning and its run redone; a lock file (``.lock``) refuses a second sweep on the same folder;
+    a folder belongs to one spec (:meth:`claim`).
+    """
+
+    def __init__(self, out: str | Path, warn: Callable[[str], None] | None = None):
         self.out = Path(out)
+        self.warn = warn or (lambda msg: print(f"dualfem bench: warning: {msg}", file=sys.stderr))
         self.rows_dir = self.out / "rows"
         self.refs_dir = self.out / "refs"
+        self._lock = None
+
+    def open(self) -> ResultStore:
+        """Create the folder, take its lock, clear interrupted temporary files, read every row."""
         self.rows_dir.mkdir(parents=True, exist_ok=True)
         self.refs_dir.mkdir(parents=True, exist_ok=True)
+        self._take_lock()
         # temporary files of writes interrupted by a kill (atomic_write names them ".NAME.*"):
         # the result they were meant to become is absent, so the run is simply redone
         stale = [p for d in (self.rows_dir, self.refs_dir) for p in d.glob(".*")]
@@ -42,14 +55,55 @@ class ResultStore:
             if p.is_file():
                 p.unlink()
         self.rows: dict[str, dict] = {}
+        if (self.out / "results.csv").is_file():
+            try:
+                for r in read_results(self.out / "results.csv"):
+                    rid = r.get("run_id")
+                    if rid and not (self.rows_dir / f"{rid}.json").exists():
+                        # a row kept only in the (committed) CSV: give it its own file again
+                        self.rows[rid] = Row.from_dict(r).to_dict()
+                        atomic_write_text(self.rows_dir / f"{rid}.json", json.dumps(self.rows[rid], sort_keys=True))
+            except (InputError, csv.Error, ValueError) as exc:
+                self._move_aside(self.out / "results.csv", f"unreadable results.csv ({exc})")
         for p in sorted(self.rows_dir.glob("[!.]*.json")):
             try:
                 r = json.loads(p.read_text(encoding="utf-8"))
                 self.rows[r["run_id"]] = r
-            except (OSError, ValueError, KeyError):
-                continue     # a foreign or unreadable file: the run is redone
+            except (OSError, ValueError, KeyError, TypeError):
+                self._move_aside(p, "unreadable row file; its run is redone")
         self._last_csv = 0.0
         self.keep: Callable[[dict], bool] | None = None
+        return self
+
+    def _take_lock(self) -> None:
+        self._lock = lock_folder(self.out)
+
+    def close(self) -> None:
+        """Release the folder's lock."""
+        if self._lock is not None:
+            self._lock.close()
+            self._lock = None
+
+    def _move_aside(self, p: Path, why: str) -> None:
+        dest = p.with_name(p.name + ".corrupt")
+        try:
+            p.replace(dest)
+            self.warn(f"{why}: moved {str(p)!r} to {str(dest)!r}")
+        except OSError:
+            self.warn(f"{why}: {str(p)!r} ignored")
+
+    def claim(self, name: str, text: str, force: bool = False) -> None:
+        """Refuse a folder that holds the results of a spec of another name (unless ``force``)."""
+        prev = self.out / "spec.toml"
+        if force or not prev.is_file():
+            return
+        old = prev.read_text(encoding="utf-8", errors="replace")
+        if old.strip() == text.strip() or _spec_name(old) == name:
+            return
+        raise InputError(f"--out {str(self.out)!r} holds the results of another spec "
+                         f"({_spec_name(old) or 'unnamed'!r}, not {name!r}); choose another --out, "
+                         f"or pass --force to add this spec's rows to it")
+
 
     def done(self, run_id: str) -> bool:
         r = self.rows.get(run_id)
@@ -84,7 +138,8 @@ class ResultStore:
                 return {"x": d["x"], "multipliers": d["multipliers"], "qp_key": str(d["qp_key"]),
                         "solver": str(d["solver"]), "kkt": float(d["kkt"]),
                         "bound": float(d["bound"]) if "bound" in d else None}
-        except (OSError, ValueError, KeyError):
+        except (OSError, ValueError, KeyError, EOFError):
+            self._move_aside(p, "unreadable reference file; the reference is recomputed")
             return None
 
     def save_ref(self, scene_key: str, payload: dict) -> None:
@@ -95,6 +150,51 @@ class ResultStore:
                          bound=np.array(payload.get("bound", np.nan)),
                          params=np.array(payload["params"]))
         atomic_write(self.ref_path(scene_key), write)
+
+
+
+
+def lock_folder(out: Path):
+    """Take the exclusive lock of a results folder (released when the returned file is closed)."""
+    import fcntl
+
+    fh = open(out / ".lock", "a+")
+    try:
+        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        fh.close()
+        raise InputError(f"--out {str(out)!r} is in use by another running sweep (lock file "
+                         f"{str(out / '.lock')!r}); wait for it or choose another --out") from None
+    return fh
+
+
+def safe_name(name: str, what: str = "spec name") -> str:
+    """``name`` if it is a safe folder name (letters, digits, ``._-``; no separators, no ``..``)."""
+    import re
+
+    if not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9._-]{0,63}", name or "") or ".." in name:
+        raise InputError(f"{what} {name!r} cannot name a results folder: use 1-64 letters, digits, '.', '_' or "
+                         f"'-' (no path separators, no '..', not starting with '.')")
+    return name
+
+
+#: where commands write when no --out is given: a user results folder, never the committed results
+USER_RESULTS = Path("dualfem-results")
+
+
+def default_out(kind: str, name: str) -> Path:
+    """``dualfem-results/<kind>/<name>`` in the working directory (name checked by :func:`safe_name`)."""
+    return USER_RESULTS / kind / safe_name(name)
+
+
+def _spec_name(text: str) -> str | None:
+    import tomllib
+
+    try:
+        v = tomllib.loads(text).get("name")
+    except (tomllib.TOMLDecodeError, AttributeError):
+        return None
+    return str(v) if v is not None else None
 
 
 def write_csv(path: str | Path, rows: list[dict]) -> Path:

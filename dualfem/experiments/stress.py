@@ -303,11 +303,18 @@ class _Scheduler:
 def run_grid(tasks: list[Task], out: Path, *, jobs: int = 1, resume: bool = False,
              progress=None, meta: dict | None = None) -> list[Row]:
     """Execute ``tasks``; append rows to ``out/runs.jsonl``; return the rows of ``tasks``."""
+    from dualfem.experiments.store import lock_folder
+
     out.mkdir(parents=True, exist_ok=True)
+    with lock_folder(out):
+        return _run_grid(tasks, out, jobs, resume, progress, meta)
+
+
+def _run_grid(tasks: list[Task], out: Path, jobs: int, resume: bool, progress, meta: dict | None) -> list[Row]:
     runs_path = out / "runs.jsonl"
     kept: dict[str, Row] = _kept_rows(runs_path, tasks) if resume else {}
-    if not resume and runs_path.exists():
-        runs_path.unlink()
+    if not resume and runs_path.exists():     # never deleted: kept beside the new grid
+        runs_path.replace(out / f"runs.{time.strftime('%Y%m%dT%H%M%S')}.jsonl.old")
     ids = {t.id for t in tasks}
     done = {k: v for k, v in kept.items() if k in ids}
     todo = [t for t in tasks if t.id not in done]
