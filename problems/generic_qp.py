@@ -43,7 +43,7 @@ import scipy.sparse.linalg as sla
 
 from dualfem.core.errors import InputError, check_positive
 from dualfem.core.problem import Problem
-from dualfem.core.qp import QP
+from dualfem.core.qp import QP, coo_from_arrays
 from dualfem.core.registry import register_problem
 
 STORAGE = ("full", "upper", "lower")
@@ -82,17 +82,7 @@ def _matrix(d: dict, name: str, where: str, required: bool = True):
         return sp.csc_matrix(a.astype(float))
     keys = [f"{name}_{s}" for s in ("data", "row", "col", "shape")]
     if all(k in d for k in keys):
-        data, row, col, shape = (np.asarray(d[k]).ravel() for k in keys)
-        if shape.size != 2:
-            raise InputError(f"array {name}_shape in {where} must hold 2 numbers, got {shape.tolist()}")
-        if not (data.size == row.size == col.size):
-            raise InputError(f"{name}_data, {name}_row, {name}_col in {where} must have equal lengths, "
-                             f"got {data.size}, {row.size}, {col.size}")
-        nr, nc = (int(s) for s in shape)
-        if row.size and (row.min() < 0 or row.max() >= nr or col.min() < 0 or col.max() >= nc):
-            raise InputError(f"{name}_row/{name}_col in {where} hold indices outside {name}_shape = ({nr}, {nc})")
-        return sp.csc_matrix(sp.coo_matrix((data.astype(float), (row.astype(np.int64), col.astype(np.int64))),
-                                           shape=(nr, nc)))
+        return sp.csc_matrix(coo_from_arrays(d, name, where))
     if required:
         raise InputError(f"{where} lacks the matrix {name!r} (a 2-D array {name!r} or the COO triplets "
                          f"{', '.join(keys)})")

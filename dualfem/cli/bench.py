@@ -34,7 +34,8 @@ def cmd_bench(args) -> int:
 
     max_jobs = 4 * (os.cpu_count() or 1)
     if not 1 <= args.jobs <= max_jobs:
-        raise InputError(f"--jobs must be an integer in 1..{max_jobs} (4 x the {os.cpu_count()} cores), got {args.jobs}")
+        raise InputError(f"--jobs must be an integer in 1..{max_jobs} (4 x the {os.cpu_count()} cores), "
+                         f"got {args.jobs}")
     if args.dask is not None and args.jobs != 1:
         raise InputError("--jobs and --dask exclude each other: the dask scheduler decides the parallelism")
     spec = load_spec(args.spec)

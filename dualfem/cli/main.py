@@ -116,8 +116,11 @@ def _cfg_export(p):
 def cmd_export(args) -> int:
     from pathlib import Path
 
+    from dualfem.core.io import check_output_path
+
     if Path(args.output).suffix not in (".npz", ".mat"):
         raise InputError(f"-o must name a .npz or .mat file, got {args.output!r}")
+    check_output_path(args.output, "-o")
     qp = scene_from_args(args).build()
     qp.save(args.output)
     print(f"wrote {args.output}: n={qp.n} unknowns, m={qp.m} constraints", file=sys.stderr)
@@ -141,7 +144,7 @@ def cmd_solve(args) -> int:
     from dualfem.core.scene import parse_set
     from dualfem.core.solution import Status
 
-    solver = make_solver(args.solver, parse_set(args.param))  # validate before the (slow) assembly
+    solver = make_solver(args.solver, parse_set(args.param, "-p"))  # validate before the (slow) assembly
     missing = solver.missing()
     if missing:
         raise MissingDependency(missing)
@@ -226,6 +229,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"dualfem {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:      # the reader of our output went away (e.g. `| head`): stop quietly
+        import os
+
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -52,7 +52,7 @@ def residuals(qp: QP, x: np.ndarray, multipliers: np.ndarray) -> dict:
         "stationarity": float(np.abs(r).max(initial=0.0) / fs),
         "primal": float(max(0.0, -gap.min(initial=0.0)) / ls),
         "dual": float(max(0.0, -mu.min(initial=0.0)) / fs),
-        "complementarity": float(np.abs(mu * gap).max(initial=0.0) / (fs * ls)),
+        "complementarity": float(np.abs((mu / fs) * (gap / ls)).max(initial=0.0)),
         "energy": qp.energy(x),
         "finite": True,
     }

@@ -6,6 +6,24 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
+from dualfem.core.errors import InputError
+
+
+def check_output_path(path: str | Path, flag: str) -> Path:
+    """Refuse, before any work, an output path that cannot be written: a directory, a path under a
+    regular file, a folder without write permission. Returns the path."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{flag} {str(path)!r} is a directory; give a file name")
+    parent = path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise InputError(f"{flag} {str(path)!r}: {str(parent)!r} is a file, not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(f"{flag} {str(path)!r}: no permission to write in {str(parent)!r}")
+    return path
+
 
 def atomic_write(path: str | Path, write: Callable[[str], None]) -> Path:
     """Call ``write(tmp_path)`` on a temporary file next to ``path``, then rename it into place."""

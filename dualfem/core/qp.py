@@ -33,6 +33,57 @@ import scipy.sparse as sp
 from dualfem.core.errors import InputError
 
 
+def coo_from_arrays(d: dict, name: str, where: str, rows: int | None = None,
+                    cols: int | None = None) -> sp.coo_matrix:
+    """A sparse matrix from the COO arrays ``name_data``, ``name_row``, ``name_col``, ``name_shape`` of a file.
+
+    Refused (InputError naming the array) before any allocation: non-integer indices or shape,
+    a shape that disagrees with ``rows``/``cols`` (the sizes implied by the other arrays),
+    arrays of unequal length, indices outside the shape, non-finite data.
+    """
+    data, row, col, shape = (np.asarray(d[f"{name}_{s}"]).ravel() for s in ("data", "row", "col", "shape"))
+    for s, a in (("row", row), ("col", col), ("shape", shape)):
+        if a.dtype.kind not in "iu":
+            raise InputError(f"array {name}_{s} in {where} must hold integers, got dtype {a.dtype}")
+    if data.dtype.kind not in "iuf":
+        raise InputError(f"array {name}_data in {where} must be numeric, got dtype {data.dtype}")
+    if shape.size != 2 or shape.min() < 0:
+        raise InputError(f"array {name}_shape in {where} must hold 2 sizes >= 0, got {shape.tolist()}")
+    nr, nc = int(shape[0]), int(shape[1])
+    for want, got, what in ((rows, nr, "rows"), (cols, nc, "columns")):
+        if want is not None and got != want:
+            raise InputError(f"array {name}_shape in {where} declares {got} {what}, but the other arrays imply {want}")
+    if not (data.size == row.size == col.size):
+        raise InputError(f"{name}_data, {name}_row, {name}_col in {where} must have equal lengths, "
+                         f"got {data.size}, {row.size}, {col.size}")
+    if row.size and (row.min() < 0 or row.max() >= nr or col.min() < 0 or col.max() >= nc):
+        raise InputError(f"{name}_row/{name}_col in {where} hold indices outside {name}_shape = ({nr}, {nc})")
+    return sp.coo_matrix((data.astype(float), (row.astype(np.int64), col.astype(np.int64))), shape=(nr, nc))
+
+
+def check_params(params: dict, where: str) -> None:
+    """Material and model parameters read from a file, validated like scene parameters."""
+    from dualfem.core.elasticity import PLANES
+
+    def number(k: str) -> float | None:
+        v = params.get(k)
+        if v is None:
+            return None
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v):
+            raise InputError(f"param_{k} in {where} must be a finite number, got {v!r}")
+        return float(v)
+
+    for k in ("E", "delta", "width", "height"):
+        v = number(k)
+        if v is not None and v <= 0:
+            raise InputError(f"param_{k} in {where} must be > 0, got {v!r}")
+    nu = number("nu")
+    if nu is not None and not -1.0 < nu < 0.5:
+        raise InputError(f"param_nu in {where} must lie in (-1, 0.5), got {nu!r}")
+    if "plane" in params and params["plane"] not in PLANES:
+        raise InputError(f"param_plane in {where} must be one of {', '.join(PLANES)}, got {params['plane']!r}")
+
+
 @dataclass
 class QP:
     """A convex QP ``min 1/2 x'Kx - F'x  s.t.  Bx >= 0`` in plain scipy.sparse / numpy data."""
@@ -173,22 +224,25 @@ class QP:
             raise
         except Exception as exc:  # corrupt file
             raise InputError(f"cannot read QP file {str(path)!r}: {exc}") from None
+        where = f"QP file {str(path)!r}"
         try:
+            F = np.asarray(d["F"]).ravel()
+            if F.dtype.kind not in "iuf":
+                raise InputError(f"array 'F' in {where} must be numeric, got dtype {F.dtype}")
+            n = F.size
             if "K" in d and sp.issparse(d["K"]):
                 K, B = d["K"], d["B"]
-            else:
-                K = sp.coo_matrix((d["K_data"].ravel(), (d["K_row"].ravel(), d["K_col"].ravel())),
-                                  shape=tuple(int(s) for s in d["K_shape"].ravel()))
-                B = sp.coo_matrix((d["B_data"].ravel(), (d["B_row"].ravel(), d["B_col"].ravel())),
-                                  shape=tuple(int(s) for s in d["B_shape"].ravel()))
-            F = d["F"].ravel()
+            else:          # shapes are checked against the arrays before anything is allocated
+                K = coo_from_arrays(d, "K", where, rows=n, cols=n)
+                B = coo_from_arrays(d, "B", where, cols=n)
             w = d["weights"].ravel() if "weights" in d else None
         except KeyError as exc:
-            raise InputError(f"QP file {str(path)!r} lacks the array {exc.args[0]!r}") from None
+            raise InputError(f"{where} lacks the array {exc.args[0]!r}") from None
         except ValueError as exc:
-            raise InputError(f"QP file {str(path)!r} has inconsistent arrays: {exc}") from None
+            raise InputError(f"{where} has inconsistent arrays: {exc}") from None
         maps = {k[4:]: v for k, v in d.items() if k.startswith("map_")}
         params = {k[6:]: v.item() if np.ndim(v) == 0 else v for k, v in d.items() if k.startswith("param_")}
+        check_params(params, where)
         qp = cls(K=K, F=F, B=B, weights=w, name=path.stem, maps=maps, params=params)
         qp.check()
         return qp

@@ -82,7 +82,11 @@ def certify_status(qp: QP, sol: Solution, tol: float, exact: bool) -> Solution:
     elif exact:
         from dualfem.core.certify import certified_error
 
-        cert = certified_error(qp, sol.x, sol.multipliers)["value"]
+        try:
+            cert = certified_error(qp, sol.x, sol.multipliers)["value"]
+        except (np.linalg.LinAlgError, ValueError, RuntimeError) as exc:
+            cert = float("nan")
+            sol.message = f"{sol.message}; certificate unavailable ({type(exc).__name__}: {exc})".lstrip("; ")
         sol.info["certificate"] = cert
         if np.isfinite(cert) and cert > tol:
             why = (f"certified energy-norm error bound {cert:.1e} exceeds the declared tolerance {tol:g} "
@@ -123,7 +127,7 @@ def summary(qp: QP, sol: Solution) -> dict:
     if sol.x is not None and sol.multipliers is not None and sol.residuals is not None and sol.residuals["finite"]:
         jump = qp.B @ sol.x
         out.update({
-            "energy": sol.residuals["energy"],
+            "energy": sol.residuals["energy"] + float(np.asarray(qp.maps.get("objective_offset", 0.0))),
             "max_jump": float(jump.max(initial=0.0)),
             "n_contact": int(evaluator.contact_set(qp, sol.x).sum()),
             "contact_rtol": evaluator.CONTACT_RTOL,

@@ -19,15 +19,24 @@ def presets() -> dict[str, tuple[str, dict[str, Any]]]:
     return out
 
 
-def parse_set(items: list[str] | None) -> dict[str, str]:
-    """Parse ``KEY=VALUE`` strings (from ``--set``) into a dict; InputError if malformed."""
+def parse_set(items: list[str] | None, flag: str = "--set") -> dict[str, str]:
+    """Parse ``KEY=VALUE`` strings (from ``--set`` or ``-p``) into a dict; InputError if malformed."""
     out: dict[str, str] = {}
     for item in items or []:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
-            raise InputError(f"--set expects KEY=VALUE, got {item!r}")
+            raise InputError(f"{flag} expects KEY=VALUE, got {item!r}")
         out[key.strip()] = value.strip()
     return out
+
+
+def _check_toml_types(spec: str, defaults: dict[str, Any], data: dict[str, Any]) -> None:
+    """Numbers in a scene file are TOML numbers: a boolean or a string for a numeric key is refused."""
+    for k, v in data.items():
+        d = defaults.get(k)
+        if isinstance(d, (int, float)) and not isinstance(d, bool) and \
+                (isinstance(v, bool) or not isinstance(v, (int, float))):
+            raise InputError(f"scene key {k!r} in {spec!r} must be a number, got {v!r} ({type(v).__name__})")
 
 
 def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
@@ -62,6 +71,7 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
         else:
             pname, params = "thin_defect", {}
         pname = data.pop("problem", pname)
+        _check_toml_types(spec, get_problem(pname).defaults, data)
         params.update(data)
     else:
         raise InputError(f"unknown scene {spec!r}; use a built-in scene "

@@ -96,6 +96,8 @@ def _coerce(key: str, value: Any, default: Any, solver: str, owner: str = "solve
                 return False
             raise InputError(f"{where} must be true or false, got {value!r}")
         return bool(value)
+    if isinstance(default, (int, float)) and not isinstance(default, bool) and isinstance(value, bool):
+        raise InputError(f"{where} must be a number, got {value!r}")
     if isinstance(default, int) and not isinstance(default, bool):
         try:
             f = float(value)

@@ -115,7 +115,11 @@ def _run_one(qp: QP, nm: str, inst, ksolve) -> tuple[dict[str, Any], Solution]:
         "verdict": None,
     }
     if finite:
-        cert = certified_error(qp, sol.x, sol.multipliers, ksolve)
+        try:
+            cert = certified_error(qp, sol.x, sol.multipliers, ksolve)
+        except (np.linalg.LinAlgError, ValueError, RuntimeError) as exc:
+            cert = {"bound": float("nan"), "active_set": float("nan"), "value": float("nan"),
+                    "error": f"{type(exc).__name__}: {exc}"}
         rec["certificate"] = cert
         rec["error_bound"] = cert["value"] if np.isfinite(cert["value"]) else \
             reference.certificate(qp, sol.x, sol.multipliers, ksolve)

@@ -220,9 +220,17 @@ def read_results(path: str | Path) -> list[dict]:
     if not path.is_file():
         raise InputError(f"results file {str(path)!r} does not exist")
     out = []
-    with open(path, newline="", encoding="utf-8") as fh:
-        for r in csv.DictReader(fh):
-            out.append({k: _parse(v) for k, v in r.items()})
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.DictReader(fh)
+            missing = {"run_id", "kind", "status"} - set(reader.fieldnames or [])
+            if missing:
+                raise InputError(f"{str(path)!r} is not a dualfem bench results.csv (no column "
+                                 f"{', '.join(sorted(missing))})")
+            for r in reader:
+                out.append({k: _parse(v) for k, v in r.items()})
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"{str(path)!r} is not a readable results.csv: {exc}") from None
     return out
 
 

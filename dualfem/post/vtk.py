@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from dualfem.core.errors import InputError, MissingDependency
-from dualfem.core.io import atomic_write
+from dualfem.core.io import atomic_write, check_output_path
 from dualfem.post.fields import Post
 
 SUFFIXES = {"vtu": (".vtu",), "xdmf": (".xdmf", ".xmf")}
@@ -40,8 +40,12 @@ def check_path(path: str | os.PathLike, kind: str) -> Path:
     if path.suffix.lower() not in SUFFIXES[kind]:
         opt = "--vtk" if kind == "vtu" else "--xdmf"
         raise InputError(f"{opt} must name a {' or '.join(SUFFIXES[kind])} file, got {str(path)!r}")
-    if path.parent != Path("") and path.parent.exists() and not path.parent.is_dir():
-        raise InputError(f"cannot write {str(path)!r}: {str(path.parent)!r} is not a directory")
+    opt = "--vtk" if kind == "vtu" else "--xdmf"
+    check_output_path(path, opt)
+    h5 = path.with_suffix(".h5")
+    if kind == "xdmf" and h5.exists() and not path.exists():
+        raise InputError(f"--xdmf {str(path)!r} would overwrite {str(h5)!r}, which is not the data file of an "
+                         f"earlier {path.name}: move it or choose another name")
     if importlib.util.find_spec("meshio") is None:
         raise MissingDependency("writing VTK/XDMF needs meshio: pip install meshio")
     if kind == "xdmf" and importlib.util.find_spec("h5py") is None:

@@ -1,0 +1,253 @@
+"""Run the bad-input corpus (``tests/bad_inputs``): every case refused cleanly or answered correctly.
+
+Each case runs ``dualfem`` (in this process through :func:`dualfem.cli.main`, or as a real
+subprocess) in a scratch folder and is classified (see tests/bad_inputs/README.md): ``refused``
+(exit 2, one ``dualfem CMD: error:`` line with the expected words, nothing written),
+``answered`` (exit 0/1, no traceback, the expected JSON), ``silent_wrong``, ``traceback``,
+``data_lost``, ``wrote_on_refusal``, ``hang`` or ``wrong_refusal``.
+"""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import tomllib
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+#: outcome classes, in report order; only the first two are acceptable
+OUTCOMES = ("refused", "answered", "silent_wrong", "traceback", "data_lost", "wrote_on_refusal", "hang",
+            "wrong_refusal")
+
+
+# ------------------------------------------------------------------------ crafted files
+def _export(d: Path, **extra) -> None:
+    from dualfem.core.scene import load_scene
+
+    qp = load_scene("f2", {"N": 8}).build()
+    data = {**qp.to_dict(), **extra}
+    np.savez(d / "qp.npz", **data)
+
+
+def _float_indices(d: Path) -> None:
+    from dualfem.core.scene import load_scene
+
+    data = load_scene("f2", {"N": 8}).build().to_dict()
+    data["K_row"] = data["K_row"].astype(float) + 0.5
+    np.savez(d / "qp.npz", **data)
+
+
+def _huge_shape(d: Path) -> None:
+    np.savez(d / "qp.npz", K_row=np.array([0]), K_col=np.array([0]), K_data=np.array([1.0]),
+             K_shape=np.array([10**9, 10**9]), B_row=np.array([0]), B_col=np.array([0]), B_data=np.array([1.0]),
+             B_shape=np.array([1, 10**9]), F=np.zeros(1))
+
+
+def _shifted_qp(d: Path) -> None:
+    # min 1/2 x^2  s.t.  x >= 1  (G x >= h with h = 1): solution x = 1, objective 0.5
+    np.savez(d / "qp.npz", P=np.array([[1.0]]), q=np.array([0.0]), G=np.array([[1.0]]), h=np.array([1.0]))
+
+
+def _bad_nu_export(d: Path) -> None:
+    _export(d, param_nu=np.array(0.7))
+
+
+def _foreign_results(d: Path) -> None:
+    res = d / "res"
+    res.mkdir()
+    (res / "spec.toml").write_text('name = "someone_else"\n')
+    (res / "results.csv").write_text("run_id,kind,status\nabc,run,solved\n")
+
+
+def _old_grid(d: Path) -> None:
+    (d / "grid").mkdir()
+    (d / "grid" / "runs.jsonl").write_text('{"axis": "nu", "outcome": "correct", "solver": "pdas"}\n')
+
+
+def _foreign_csv(d: Path) -> None:
+    (d / "foreign.csv").write_text("name,age\nada,36\n")
+
+
+def _a_directory(d: Path) -> None:
+    (d / "adir").mkdir()
+
+
+def _a_file(d: Path) -> None:
+    (d / "afile").write_text("not a folder\n")
+
+
+def _unrelated_h5(d: Path) -> None:
+    (d / "out.h5").write_bytes(b"someone's HDF5 data")
+
+
+
+
+MAKERS: dict[str, Callable[[Path], None]] = {
+    "float_indices": _float_indices, "huge_shape": _huge_shape, "shifted_qp": _shifted_qp,
+    "bad_nu_export": _bad_nu_export, "foreign_results": _foreign_results, "old_grid": _old_grid,
+    "foreign_csv": _foreign_csv, "a_directory": _a_directory, "a_file": _a_file, "unrelated_h5": _unrelated_h5,
+}
+
+
+# ------------------------------------------------------------------------ running a case
+def load_cases(corpus: Path) -> list[dict]:
+    """The cases of ``corpus/cases.toml``."""
+    return list(tomllib.loads((corpus / "cases.toml").read_text(encoding="utf-8"))["case"])
+
+
+def _snapshot(d: Path) -> dict[str, str]:
+    out = {}
+    for p in sorted(d.rglob("*")):
+        if p.is_file():
+            try:
+                out[str(p.relative_to(d))] = hashlib.sha1(p.read_bytes()).hexdigest()
+            except OSError:
+                out[str(p.relative_to(d))] = "unreadable"
+    return out
+
+
+class _Timeout(Exception):
+    pass
+
+
+def _in_process(argv: list[str], timeout: float) -> tuple[int | None, str, str, str]:
+    """(exit code, stdout, stderr, traceback text) of ``dualfem ARGV`` run in this process."""
+    from dualfem.cli.main import main
+
+    out, err = io.StringIO(), io.StringIO()
+
+    def alarm(*_):
+        raise _Timeout
+
+    old = signal.signal(signal.SIGALRM, alarm)
+    signal.setitimer(signal.ITIMER_REAL, timeout)
+    tb = ""
+    rc: int | None = None
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            rc = main(argv)
+    except _Timeout:
+        rc = None
+    except BaseException:  # noqa: BLE001 - an uncaught exception is exactly what we look for
+        tb = traceback.format_exc()
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+    return rc, out.getvalue(), err.getvalue(), tb
+
+
+def _as_subprocess(argv: list[str], timeout: float, close_early: bool) -> tuple[int | None, str, str, str]:
+    cmd = [sys.executable, "-m", "dualfem", *argv]
+    env = dict(os.environ, MPLBACKEND="Agg")
+    if close_early:       # like `dualfem ... | head -c 1`
+        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+        p.stdout.read(1)
+        p.stdout.close()
+        try:
+            _, err = p.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            return None, "", "", ""
+        e = err.decode(errors="replace")
+        return p.returncode, "", e, e if "Traceback" in e else ""
+    try:
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env)
+    except subprocess.TimeoutExpired:
+        return None, "", "", ""
+    return r.returncode, r.stdout, r.stderr, r.stderr if "Traceback" in r.stderr else ""
+
+
+def run_case(case: dict, corpus: Path) -> dict:
+    """Run one case in a fresh scratch folder; its record (``outcome`` one of :data:`OUTCOMES`)."""
+    with tempfile.TemporaryDirectory(prefix="dualfem-bad-") as tmp:
+        d = Path(tmp)
+        if case.get("make"):
+            MAKERS[case["make"]](d)
+        for f in case.get("files", []):
+            shutil.copy(corpus / f, d / Path(f).name)
+        before = _snapshot(d)
+        argv = [a.replace("{dir}", str(d)).replace("{corpus}", str(corpus)) for a in case["argv"]]
+        cwd = os.getcwd()
+        os.chdir(d)               # anything written without a path lands here and is seen
+        t0 = time.perf_counter()
+        try:
+            if case.get("subprocess"):
+                rc, out, err, tb = _as_subprocess(argv, case.get("timeout", 60), case.get("close_stdout_early", False))
+            else:
+                rc, out, err, tb = _in_process(argv, case.get("timeout", 60))
+        finally:
+            os.chdir(cwd)
+        after = _snapshot(d)
+        rec = {"class": case["class"], "name": case["name"], "argv": argv, "exit": rc, "seconds":
+               round(time.perf_counter() - t0, 2), "stderr": err.strip()[-400:], "open": case.get("open", "")}
+        rec["outcome"], rec["why"] = _classify(case, rc, out, err, tb, before, after)
+        return rec
+
+
+def _classify(case: dict, rc, out: str, err: str, tb: str, before: dict, after: dict) -> tuple[str, str]:
+    if rc is None and not tb:
+        return "hang", f"no answer within {case.get('timeout', 60)} s"
+    if tb or "Traceback" in err:
+        return "traceback", (tb or err).strip().splitlines()[-1][:200]
+    lost = [f for f in before if f not in after or before[f] != after[f]]
+    if lost:
+        return "data_lost", f"changed or removed: {', '.join(lost)}"
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    if case["expect"] == "refused":
+        if rc != 2:
+            return ("silent_wrong" if rc == 0 else "wrong_refusal"), f"exit {rc}, expected a refusal (exit 2)"
+        if set(after) - set(before):
+            return "wrote_on_refusal", f"wrote {', '.join(sorted(set(after) - set(before)))}"
+        if len(lines) != 1 or not re.match(r"dualfem \S+: error: ", lines[0]):
+            return "wrong_refusal", f"stderr is not one error line: {lines[:3]}"
+        missing = [n for n in case.get("needles", []) if not re.search(n, lines[0], flags=re.I)]
+        if missing:
+            return "wrong_refusal", f"the message lacks {missing}: {lines[0][:200]}"
+        return "refused", lines[0][:200]
+    if rc == 2:
+        return "wrong_refusal", f"refused a valid input: {lines[-1][:200] if lines else ''}"
+    if rc not in (0, 1) and not case.get("close_stdout_early"):
+        return "wrong_refusal", f"exit {rc}"
+    return _check_answer(case, out)
+
+
+def _check_answer(case: dict, out: str) -> tuple[str, str]:
+    if not any(k in case for k in ("json_status", "json_energy", "finite_residuals")):
+        return "answered", "no traceback, exit 0/1"
+    try:
+        rec = json.loads(out)
+    except ValueError:
+        return "silent_wrong", "stdout is not one JSON object"
+    if "json_status" in case and rec.get("status") not in case["json_status"]:
+        return "silent_wrong", f"status {rec.get('status')}, expected one of {case['json_status']}"
+    if "json_energy" in case and not (rec.get("energy") is not None
+                                       and abs(rec["energy"] - case["json_energy"]) <= 1e-8 * max(1, abs(case["json_energy"]))):
+        return "silent_wrong", f"energy {rec.get('energy')}, the file's objective is {case['json_energy']}"
+    if case.get("finite_residuals") and not (rec.get("residuals") and all(
+            v is not None and np.isfinite(v) for v in rec["residuals"].values())):
+        return "silent_wrong", f"residuals {rec.get('residuals')}"
+    return "answered", f"status {rec.get('status')}"
+
+
+def run_corpus(corpus: Path, progress: Callable[[str], None] | None = None) -> list[dict]:
+    """Run every case of the corpus; their records in file order."""
+    corpus = Path(corpus).resolve()
+    recs = []
+    for case in load_cases(corpus):
+        rec = run_case(case, corpus)
+        recs.append(rec)
+        if progress:
+            progress(f"{rec['class']:8s} {rec['outcome']:16s} {rec['name']}")
+    return recs
