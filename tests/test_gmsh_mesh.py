@@ -277,3 +277,27 @@ def test_symmetric_scene_is_symmetric():
     x = np.linspace(0, W, 101)
     assert np.allclose(g(x, np.ones_like(x)), g(W - x, np.ones_like(x)), atol=1e-12)
     assert np.ptp(g(x, np.ones_like(x))) > 0, "not a uniform load: the contact set is not trivially all or nothing"
+
+
+def _digest(m: DefectMesh) -> str:
+    import hashlib
+
+    h = hashlib.sha256(m.points.tobytes() + m.triangles.tobytes())
+    for a in [*m.defect_nodes, *m.boundary.values()]:
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def test_reproducible_across_processes():
+    import os
+    import subprocess
+
+    code = ("import hashlib, sys; from problems.gmsh_mesh import mesh_with_defects; "
+            f"m = mesh_with_defects(1.0, 1.0, {TWO!r}, 0.04, tip_size=0.01); "
+            "h = hashlib.sha256(m.points.tobytes() + m.triangles.tobytes()); "
+            "[h.update(a.tobytes()) for a in [*m.defect_nodes, *m.boundary.values()]]; "
+            "sys.stdout.write(h.hexdigest())")
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, check=True,
+                         env={**os.environ, "PYTHONPATH": str(root)})
+    assert out.stdout == _digest(mesh_with_defects(1.0, 1.0, TWO, 0.04, tip_size=0.01))
