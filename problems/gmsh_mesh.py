@@ -55,13 +55,16 @@ class DefectMesh:
     ``points`` (2, n) node coordinates; ``triangles`` (3, nt) node indices, counter-clockwise;
     ``defect_nodes[i]`` the nodes along defect i from its first given point to its last (tips
     and kinks included); ``boundary[side]`` for side in bottom, top, left, right: the nodes on
-    that side (corners included), bottom/top ordered by x, left/right by y.
+    that side (corners included), bottom/top ordered by x, left/right by y. ``mirror`` (only for
+    :func:`problems.gmsh_symmetric.mesh_symmetric`): node i's mirror image about x = width/2 is
+    node ``mirror[i]``.
     """
 
     points: np.ndarray
     triangles: np.ndarray
     defect_nodes: list[np.ndarray]
     boundary: dict[str, np.ndarray] = field(default_factory=dict)
+    mirror: np.ndarray | None = None
 
 
 # --------------------------------------------------------------------------- geometry helpers
@@ -272,24 +275,34 @@ def _session(gmsh) -> Iterator[None]:
                 gmsh.model.setCurrent(previous)
 
 
-def _build(gmsh, width: float, height: float,
-           parsed) -> tuple[dict[str, int], int, list[tuple[list[int], int]], list[int]]:
-    """Rectangle, defect curves embedded in it. Returns side curve tags, surface tag,
-    per defect (its curve tags in order, its start point tag), and the tip point tags."""
+_Built = tuple[dict[str, list[int]], int, list[tuple[list[int], int]], list[int]]
+
+
+def _build(gmsh, width: float, height: float, parsed, right_split: tuple[float, ...] = ()) -> _Built:
+    """Rectangle, defect curves embedded in it. Returns the side curve tags, the surface tag,
+    per defect (its curve tags in order, its start point tag), and the tip point tags.
+
+    ``right_split``: heights (strictly between 0 and height) of extra points on the right side
+    x = width; a defect point exactly there ends on the side (it is no tip) and shares the point."""
     geo = gmsh.model.geo
+    on_right = {float(y): geo.addPoint(width, float(y), 0.0) for y in sorted(right_split)}
     corners = [geo.addPoint(x, y, 0.0) for x, y in ((0, 0), (width, 0), (width, height), (0, height))]
-    lines = [geo.addLine(corners[k], corners[(k + 1) % 4]) for k in range(4)]
-    sides = dict(zip(("bottom", "right", "top", "left"), lines, strict=True))
-    surface = geo.addPlaneSurface([geo.addCurveLoop(lines)])
+    right_pts = [corners[1], *on_right.values(), corners[2]]
+    sides = {"bottom": [geo.addLine(corners[0], corners[1])],
+             "right": [geo.addLine(a, b) for a, b in zip(right_pts[:-1], right_pts[1:], strict=True)],
+             "top": [geo.addLine(corners[2], corners[3])],
+             "left": [geo.addLine(corners[3], corners[0])]}
+    surface = geo.addPlaneSurface([geo.addCurveLoop([t for side in sides.values() for t in side])])
     curves, tips = [], []
     for P, curve in parsed:
-        pts = [geo.addPoint(float(x), float(y), 0.0) for x, y in P]
+        pts = [on_right[float(y)] if x == width and float(y) in on_right else geo.addPoint(float(x), float(y), 0.0)
+               for x, y in P]
         if curve == "spline" and len(P) > 2:
             tags = [geo.addSpline(pts)]
         else:
             tags = [geo.addLine(a, b) for a, b in zip(pts[:-1], pts[1:], strict=True)]
         curves.append((tags, pts[0]))
-        tips += [pts[0], pts[-1]]
+        tips += [t for t in (pts[0], pts[-1]) if t not in on_right.values()]
     geo.synchronize()
     all_curves = [t for tags, _ in curves for t in tags]
     if all_curves:
@@ -354,8 +367,9 @@ def _extract(gmsh, sides, surface, curves) -> DefectMesh:
     tri[area2 < 0] = tri[area2 < 0][:, [0, 2, 1]]
     defect_nodes = [index[_chain(gmsh, ct, start)] for ct, start in curves]
     boundary = {}
-    for side, tag in sides.items():
-        b = index[np.asarray(gmsh.model.mesh.getNodes(1, tag, includeBoundary=True)[0], dtype=np.int64)]
+    for side, side_tags in sides.items():
+        b = np.unique(np.concatenate([gmsh.model.mesh.getNodes(1, t, includeBoundary=True)[0] for t in side_tags]))
+        b = index[b.astype(np.int64)]
         axis = 0 if side in ("bottom", "top") else 1
         boundary[side] = b[np.argsort(points[axis, b], kind="stable")]
     if any((d < 0).any() for d in defect_nodes) or any((b < 0).any() for b in boundary.values()):

@@ -301,3 +301,61 @@ def test_reproducible_across_processes():
     out = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, check=True,
                          env={**os.environ, "PYTHONPATH": str(root)})
     assert out.stdout == _digest(mesh_with_defects(1.0, 1.0, TWO, 0.04, tip_size=0.01))
+
+
+# ------------------------------------------------------------------- mirror-symmetric meshes
+SYM = [{"points": [[0.1, 0.3], [0.3, 0.35], [0.4, 0.3]], "curve": "spline"},
+       {"points": [[0.9, 0.3], [0.7, 0.35], [0.6, 0.3]], "curve": "spline"},       # mirror image of 0
+       {"points": [[0.2, 0.7], [0.4, 0.6], [0.6, 0.6], [0.8, 0.7]], "curve": "polyline"},   # crosses the axis
+       {"points": [[0.3, 0.85], [0.5, 0.8], [0.7, 0.85]], "curve": "polyline"}]    # kink on the axis
+
+
+def test_symmetric_mesh_is_a_mirror_image():
+    from problems.gmsh_symmetric import mesh_symmetric
+
+    m = mesh_symmetric(1.0, 1.0, SYM, 0.05, tip_size=0.0125)
+    _check_mesh(m, SYM)
+    mi = m.mirror
+    assert np.array_equal(mi[mi], np.arange(len(mi)))
+    assert np.abs(m.points[0, mi] - (1.0 - m.points[0])).max() < 1e-15
+    assert np.array_equal(m.points[1, mi], m.points[1])
+    tris = {tuple(sorted(t)) for t in m.triangles.T.tolist()}
+    assert tris == {tuple(sorted(t)) for t in mi[m.triangles].T.tolist()}
+    for k in (2, 3):     # self-symmetric defects: the node list reversed is its own mirror image
+        assert np.array_equal(mi[m.defect_nodes[k][::-1]], m.defect_nodes[k])
+    assert np.array_equal(mi[m.defect_nodes[0]], m.defect_nodes[1])    # both run from their outer tip
+    assert np.array_equal(mi[m.boundary["left"]], m.boundary["right"])
+    assert np.array_equal(mi[m.boundary["bottom"][::-1]], m.boundary["bottom"])
+    again = mesh_symmetric(1.0, 1.0, SYM, 0.05, tip_size=0.0125)
+    assert np.array_equal(again.points, m.points) and np.array_equal(again.triangles, m.triangles)
+
+
+def test_symmetric_mesh_pairs_in_any_order_and_direction():
+    from problems.gmsh_symmetric import mesh_symmetric
+
+    defects = [{"points": SYM[1]["points"][::-1], "curve": "spline"}, SYM[0]]   # right one first, reversed
+    m = mesh_symmetric(1.0, 1.0, defects, 0.05)
+    _check_mesh(m, defects)      # each node list runs from the defect's first point to its last
+    assert np.array_equal(m.mirror[m.defect_nodes[1][::-1]], m.defect_nodes[0])
+
+
+def test_symmetric_scene_meshes_symmetrically():
+    from problems.gmsh_symmetric import mesh_symmetric
+
+    sc = _scene(next(p for p in SCENES if p.stem == "symmetric"))
+    m = mesh_symmetric(1.0, 1.0, sc["defects"], sc["mesh_size"], sc.get("tip_size"))
+    _check_mesh(m, sc["defects"])
+    assert np.array_equal(m.mirror[m.defect_nodes[0][::-1]], m.defect_nodes[0])
+
+
+@pytest.mark.parametrize("defects, message", [
+    (_defs([[0.2, 0.5], [0.4, 0.5]]), r"defects\[0\] has no mirror image about x = 0.5"),
+    (_defs([[0.2, 0.5], [0.4, 0.5]], [[0.6, 0.5], [0.8, 0.55]]), r"defects\[0\] has no mirror image"),
+    (_defs([[0.3, 0.5], [0.5, 0.6], [0.7, 0.5]], curve="spline"), r"defects\[0\] is a spline crossing the symmetry"),
+    (_defs([[0.2, 0.2], [0.8, 0.8]], [[0.2, 0.8], [0.8, 0.2]]), r"defects\[0\] and defects\[1\] cross"),
+])
+def test_symmetric_mesh_refuses_asymmetric_defects(defects, message):
+    from problems.gmsh_symmetric import mesh_symmetric
+
+    with pytest.raises(InputError, match=message):
+        mesh_symmetric(1.0, 1.0, defects, 0.05)
