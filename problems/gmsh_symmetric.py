@@ -75,7 +75,9 @@ def mesh_symmetric(width: float, height: float, defects: list[dict], mesh_size: 
     parsed = validate(width, height, defects, mesh_size, tip_size)
     W, H = float(width), float(height)
     roles = _roles(parsed, W, _TOL_REL * max(W, H))
-    halves, where, split = [], {}, []        # the defects of the left half; heights where they meet the axis
+    halves: list[tuple[np.ndarray, str]] = []     # the defects of the left half
+    where: dict[int, int] = {}                    # defect index -> its index in halves
+    split: list[float] = []                       # heights where half-defects end on the axis
     for role, i in roles:
         if role in ("self", "left"):
             P, curve = parsed[i]
