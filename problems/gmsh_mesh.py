@@ -1,0 +1,398 @@
+"""Triangle meshes of a rectangle with thin defects embedded as internal edges (gmsh).
+
+Body: the rectangle (0, width) x (0, height). Each defect is a curve through ``k >= 2`` points:
+``"polyline"`` (straight segments; the points are kinks) or ``"spline"`` (gmsh's Catmull-Rom
+spline through the points: uniform parameter, end tangents from the reflected neighbour
+``2 P0 - P1``; :func:`sample_defect` evaluates the same curve in numpy). The curves are embedded
+in the 2D mesh (``gmsh.model.mesh.embed``), so the mesh conforms to them: consecutive defect
+nodes are joined by a triangle edge. All defect points of a polyline are mesh nodes; for a
+spline only its two ends are (the interior points are control points of the curve). Optional
+refinement toward the tips: element size ``tip_size`` within ``tip_size`` of a tip, growing
+linearly (slope ``_GRADE``) to ``mesh_size``.
+
+Before meshing the geometry is checked in numpy (splines on 64 samples per span): every
+defect strictly inside the body, no self-intersection, no two defects crossing or touching
+(distance > ``_TOL_REL * max(width, height)``), and the estimated triangle count below
+``MAX_TRIANGLES``. Problems raise :class:`dualfem.errors.InputError` naming the defects as
+``defects[i]`` (counted from 0, as in the ``[[defects]]`` list of a scene file).
+
+gmsh is optional (``pip install 'dualfem[gmsh]'``) and imported only when meshing. It runs
+single-threaded with fixed options and prints nothing, so the same input gives identical
+arrays.
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from dualfem.errors import InputError, MissingDependency, check_positive
+
+CURVES = ("polyline", "spline")
+SIDES = ("bottom", "top", "left", "right")
+MAX_TRIANGLES = 5_000_000
+SAMPLES_PER_SPAN = 64          # spline samples per span between two given points (validation only)
+_TOL_REL = 1e-9                # "touching" tolerance, relative to max(width, height)
+_GRADE = 0.3                   # growth of the element size per unit distance away from a tip
+_TRI_PER_AREA = 4 / math.sqrt(3)   # triangles per h^2 of area for equilateral triangles of side h
+_OPTIONS = {                   # fixed gmsh options (reproducible, silent, first order, one thread)
+    "General.Terminal": 0, "General.Verbosity": 0, "General.NumThreads": 1,
+    "Mesh.MaxNumThreads1D": 1, "Mesh.MaxNumThreads2D": 1, "Mesh.RandomSeed": 1,
+    "Mesh.Algorithm": 6, "Mesh.ElementOrder": 1, "Mesh.RecombineAll": 0, "Mesh.Smoothing": 1,
+    "Mesh.MinimumCurveNodes": 3, "Mesh.MeshSizeFromPoints": 0, "Mesh.MeshSizeFromCurvature": 0,
+    "Mesh.MeshSizeExtendFromBoundary": 0, "Mesh.MeshSizeMin": 0.0,
+}
+
+
+@dataclass
+class DefectMesh:
+    """A conforming triangle mesh of the body with its defects.
+
+    ``points`` (2, n) node coordinates; ``triangles`` (3, nt) node indices, counter-clockwise;
+    ``defect_nodes[i]`` the nodes along defect i from its first given point to its last (tips
+    and kinks included); ``boundary[side]`` for side in bottom, top, left, right: the nodes on
+    that side (corners included), bottom/top ordered by x, left/right by y. ``mirror`` (only for
+    :func:`problems.gmsh_symmetric.mesh_symmetric`): node i's mirror image about x = width/2 is
+    node ``mirror[i]``.
+    """
+
+    points: np.ndarray
+    triangles: np.ndarray
+    defect_nodes: list[np.ndarray]
+    boundary: dict[str, np.ndarray] = field(default_factory=dict)
+    mirror: np.ndarray | None = None
+
+
+# --------------------------------------------------------------------------- geometry helpers
+def rotate(points: np.ndarray, angle_deg: float, center) -> np.ndarray:
+    """Rotate coordinates ``points`` of shape (2, n) by ``angle_deg`` degrees (counter-clockwise
+    positive) about ``center`` = (cx, cy). Pass defect points of shape (k, 2) as ``pts.T``."""
+    p = np.asarray(points, dtype=float)
+    if p.ndim != 2 or p.shape[0] != 2:
+        raise InputError(f"rotate expects coordinates of shape (2, n), got shape {p.shape}")
+    a = math.radians(float(angle_deg))
+    R = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+    c = np.asarray(center, dtype=float).reshape(2, 1)
+    return R @ (p - c) + c
+
+
+def sample_defect(points: np.ndarray, curve: str, per_span: int = SAMPLES_PER_SPAN) -> np.ndarray:
+    """Points (m, 2) along a defect: the given points for a polyline; for a spline
+    ``per_span`` samples per span of gmsh's uniform Catmull-Rom curve (ends included)."""
+    P = np.asarray(points, dtype=float)
+    if curve == "polyline" or len(P) == 2:
+        return P.copy()
+    n = len(P) - 1
+    ext = np.vstack([2 * P[0] - P[1], P, 2 * P[-1] - P[-2]])
+    s = np.linspace(0.0, n, n * per_span + 1)
+    i = np.minimum(s.astype(int), n - 1)
+    t = (s - i)[:, None]
+    p0, p1, p2, p3 = ext[i], ext[i + 1], ext[i + 2], ext[i + 3]
+    return 0.5 * (2 * p1 + (p2 - p0) * t + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t ** 2
+                  + (3 * p1 - p0 - 3 * p2 + p3) * t ** 3)
+
+
+def _segment_distances(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distances (na, nb) between the segments of polylines A (na+1, 2) and B (nb+1, 2), and a
+    mask of the pairs that cross properly (each segment's ends strictly on both sides of the other)."""
+    a0, a1 = A[:-1, None, :], A[1:, None, :]
+    b0, b1 = B[None, :-1, :], B[None, 1:, :]
+
+    def cross(o, p, q):
+        return (p[..., 0] - o[..., 0]) * (q[..., 1] - o[..., 1]) - (p[..., 1] - o[..., 1]) * (q[..., 0] - o[..., 0])
+
+    def point_seg(p, s0, s1):
+        d = s1 - s0
+        t = np.clip(((p - s0) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-300), 0.0, 1.0)
+        return np.linalg.norm(p - (s0 + t[..., None] * d), axis=-1)
+
+    proper = ((np.sign(cross(a0, a1, b0)) * np.sign(cross(a0, a1, b1)) < 0)
+              & (np.sign(cross(b0, b1, a0)) * np.sign(cross(b0, b1, a1)) < 0))
+    d = np.minimum.reduce([point_seg(a0, b0, b1), point_seg(a1, b0, b1),
+                           point_seg(b0, a0, a1), point_seg(b1, a0, a1)])
+    return np.where(proper, 0.0, d), proper
+
+
+def _closest(A: np.ndarray, B: np.ndarray, mask=None) -> tuple[float, bool, np.ndarray]:
+    """Smallest segment distance between polylines A and B (pairs allowed by ``mask``), whether
+    that pair crosses properly, and a point near the closest approach."""
+    best, crossing, where = np.inf, False, A[0]
+    for r0 in range(0, len(A) - 1, 256):               # row blocks keep memory bounded
+        Ar = A[r0:r0 + 257]
+        d, proper = _segment_distances(Ar, B)
+        if mask is not None:
+            d = np.where(mask[r0:r0 + 256], d, np.inf)
+        k = np.unravel_index(np.argmin(d), d.shape)
+        if d[k] < best:
+            best, crossing = float(d[k]), bool(proper[k])
+            where = 0.25 * (Ar[k[0]] + Ar[k[0] + 1] + B[k[1]] + B[k[1] + 1])
+    return best, crossing, where
+
+
+def _fmt(p) -> str:
+    return f"({float(p[0]):.6g}, {float(p[1]):.6g})"
+
+
+# --------------------------------------------------------------------------- validation
+def _check_defect(i: int, d: Any) -> tuple[np.ndarray, str]:
+    """One defect's points (k, 2) and curve type; InputError naming ``defects[i]`` otherwise."""
+    if not isinstance(d, dict) or "points" not in d:
+        raise InputError(f"defects[{i}] must be a table with 'points' (k >= 2 points [x, y]) and "
+                         f"'curve' ({' or '.join(CURVES)}), got {d!r}")
+    curve = d.get("curve", "polyline")
+    if curve not in CURVES:
+        raise InputError(f"defects[{i}]: curve must be {' or '.join(repr(c) for c in CURVES)}, got {curve!r}")
+    try:
+        P = np.array(d["points"], dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"defects[{i}]: points must be a list of [x, y] numbers, got {d['points']!r}") from None
+    if P.ndim != 2 or P.shape[1] != 2 or P.shape[0] < 2:
+        raise InputError(f"defects[{i}]: points must be k >= 2 points [x, y], got shape {P.shape}")
+    if not np.all(np.isfinite(P)):
+        raise InputError(f"defects[{i}]: points must be finite numbers, got {d['points']!r}")
+    return P, curve
+
+
+def _check_one(i: int, P: np.ndarray, S: np.ndarray, width: float, height: float, tol: float) -> None:
+    """Distinct points, inside the body, no self-intersection (S: the sampled curve)."""
+    gaps = np.linalg.norm(P[:, None, :] - P[None, :, :], axis=-1)
+    np.fill_diagonal(gaps, np.inf)
+    if gaps.min() <= tol:
+        a, b = sorted(np.unravel_index(np.argmin(gaps), gaps.shape))
+        raise InputError(f"defects[{i}]: points {a} and {b} coincide at {_fmt(P[a])}; the points must be distinct")
+    margin = np.minimum.reduce([S[:, 0], width - S[:, 0], S[:, 1], height - S[:, 1]])
+    if margin.min() <= tol:
+        j = int(np.argmin(margin))
+        what = "point" if len(S) == len(P) else "curve point"
+        raise InputError(f"defects[{i}]: {what} {_fmt(S[j])} is not strictly inside the body "
+                         f"(0, {width:g}) x (0, {height:g})")
+    seg = np.diff(S, axis=0)
+    if len(seg) >= 2:       # adjacent segments folding back onto each other
+        c = seg[:-1, 0] * seg[1:, 1] - seg[:-1, 1] * seg[1:, 0]
+        dot = (seg[:-1] * seg[1:]).sum(-1)
+        norms = np.linalg.norm(seg[:-1], axis=1) * np.linalg.norm(seg[1:], axis=1)
+        fold = np.flatnonzero((np.abs(c) <= 1e-12 * norms) & (dot < 0))
+        if len(fold):
+            raise InputError(f"defects[{i}] intersects itself: it folds back on itself at {_fmt(S[fold[0] + 1])}")
+    if len(seg) >= 3:
+        idx = np.arange(len(seg))
+        mask = idx[None, :] >= idx[:, None] + 2          # non-adjacent pairs only
+        dist, _, where = _closest(S, S, mask)
+        if dist <= tol:
+            raise InputError(f"defects[{i}] intersects itself near {_fmt(where)}")
+
+
+def estimate_triangles(width: float, height: float, mesh_size: float, tip_size: float | None, n_tips: int) -> int:
+    """Rough triangle count: equilateral triangles of the local size, tips' discs added."""
+    count = _TRI_PER_AREA * width * height / mesh_size ** 2
+    if tip_size is not None and tip_size < mesh_size:
+        d_min, d_max = _tip_distances(mesh_size, tip_size)
+        r = np.linspace(d_min, d_max, 401)
+        size = tip_size + (mesh_size - tip_size) * (r - d_min) / (d_max - d_min)
+        f = 2 * np.pi * r * (1 / size ** 2 - 1 / mesh_size ** 2)
+        ring = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(r)))
+        disc = np.pi * d_min ** 2 * (1 / tip_size ** 2 - 1 / mesh_size ** 2)
+        count += n_tips * _TRI_PER_AREA * (ring + disc)
+    return int(math.ceil(count))
+
+
+def _tip_distances(mesh_size: float, tip_size: float) -> tuple[float, float]:
+    """Threshold distances: size tip_size up to DistMin, linear growth to mesh_size at DistMax."""
+    d_min = tip_size
+    return d_min, d_min + (mesh_size - tip_size) / _GRADE
+
+
+def validate(width: float, height: float, defects: list[dict], mesh_size: float,
+             tip_size: float | None = None) -> list[tuple[np.ndarray, str]]:
+    """Check all inputs of :func:`mesh_with_defects` (no gmsh needed); return [(points, curve)]."""
+    width, height = check_positive("width", width), check_positive("height", height)
+    mesh_size = check_positive("mesh_size", mesh_size)
+    if mesh_size > min(width, height):
+        raise InputError(f"mesh_size must be in (0, min(width, height)] = (0, {min(width, height):g}], "
+                         f"got {mesh_size:g}")
+    if tip_size is not None:
+        tip_size = check_positive("tip_size", tip_size)
+        if tip_size > mesh_size:
+            raise InputError(f"tip_size must be in (0, mesh_size] = (0, {mesh_size:g}], got {tip_size:g}")
+    if not isinstance(defects, (list, tuple)):
+        raise InputError(f"defects must be a list of tables {{points, curve}}, got {type(defects).__name__}")
+    est = estimate_triangles(width, height, mesh_size, tip_size, 2 * len(defects))
+    if est > MAX_TRIANGLES:
+        raise InputError(f"mesh_size={mesh_size:g}" + (f", tip_size={tip_size:g}" if tip_size else "")
+                         + f" gives about {est:,} triangles (limit {MAX_TRIANGLES:,}); use a larger size")
+    tol = _TOL_REL * max(width, height)
+    parsed = [_check_defect(i, d) for i, d in enumerate(defects)]
+    samples = [sample_defect(P, c) for P, c in parsed]
+    for i, (P, _) in enumerate(parsed):
+        _check_one(i, P, samples[i], width, height, tol)
+    for i in range(len(samples)):
+        for j in range(i + 1, len(samples)):
+            dist, crossing, where = _closest(samples[i], samples[j])
+            if crossing:
+                raise InputError(f"defects[{i}] and defects[{j}] cross near {_fmt(where)}")
+            if dist <= tol:
+                raise InputError(f"defects[{i}] and defects[{j}] touch near {_fmt(where)} "
+                                 f"(distance {dist:.3g}); defects must be disjoint")
+    return parsed
+
+
+# --------------------------------------------------------------------------- gmsh
+def _import_gmsh():
+    try:
+        import gmsh
+    except ImportError:
+        raise MissingDependency("meshing defects of any shape needs gmsh: pip install 'dualfem[gmsh]'") from None
+    return gmsh
+
+
+@contextmanager
+def _session(gmsh) -> Iterator[None]:
+    """A fresh gmsh model with the fixed options; gmsh is finalized (or, if the caller had it
+    initialized already, the model removed and the options restored) whatever happens."""
+    owner = not gmsh.isInitialized()
+    if owner:
+        gmsh.initialize(readConfigFiles=False, interruptible=False)
+    saved: dict[str, float] = {}
+    previous = None if owner else gmsh.model.getCurrent()
+    try:
+        for name, value in _OPTIONS.items():
+            saved[name] = gmsh.option.getNumber(name)
+            gmsh.option.setNumber(name, value)
+        gmsh.model.add("dualfem_defects")
+        yield
+    finally:
+        if owner:
+            gmsh.finalize()
+        else:
+            gmsh.model.remove()
+            for name, value in saved.items():
+                gmsh.option.setNumber(name, value)
+            if previous:
+                gmsh.model.setCurrent(previous)
+
+
+_Built = tuple[dict[str, list[int]], int, list[tuple[list[int], int]], list[int]]
+
+
+def _build(gmsh, width: float, height: float, parsed, right_split: tuple[float, ...] = ()) -> _Built:
+    """Rectangle, defect curves embedded in it. Returns the side curve tags, the surface tag,
+    per defect (its curve tags in order, its start point tag), and the tip point tags.
+
+    ``right_split``: heights (strictly between 0 and height) of extra points on the right side
+    x = width; a defect point exactly there ends on the side (it is no tip) and shares the point."""
+    geo = gmsh.model.geo
+    on_right = {float(y): geo.addPoint(width, float(y), 0.0) for y in sorted(right_split)}
+    corners = [geo.addPoint(x, y, 0.0) for x, y in ((0, 0), (width, 0), (width, height), (0, height))]
+    right_pts = [corners[1], *on_right.values(), corners[2]]
+    sides = {"bottom": [geo.addLine(corners[0], corners[1])],
+             "right": [geo.addLine(a, b) for a, b in zip(right_pts[:-1], right_pts[1:], strict=True)],
+             "top": [geo.addLine(corners[2], corners[3])],
+             "left": [geo.addLine(corners[3], corners[0])]}
+    surface = geo.addPlaneSurface([geo.addCurveLoop([t for side in sides.values() for t in side])])
+    curves, tips = [], []
+    for P, curve in parsed:
+        pts = [on_right[float(y)] if x == width and float(y) in on_right else geo.addPoint(float(x), float(y), 0.0)
+               for x, y in P]
+        if curve == "spline" and len(P) > 2:
+            tags = [geo.addSpline(pts)]
+        else:
+            tags = [geo.addLine(a, b) for a, b in zip(pts[:-1], pts[1:], strict=True)]
+        curves.append((tags, pts[0]))
+        tips += [t for t in (pts[0], pts[-1]) if t not in on_right.values()]
+    geo.synchronize()
+    all_curves = [t for tags, _ in curves for t in tags]
+    if all_curves:
+        gmsh.model.mesh.embed(1, all_curves, 2, surface)
+    return sides, surface, curves, tips
+
+
+def _size_fields(gmsh, mesh_size: float, tip_size: float | None, tips: list[int]) -> None:
+    gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
+    if tip_size is None or tip_size >= mesh_size or not tips:
+        return
+    d_min, d_max = _tip_distances(mesh_size, tip_size)
+    fld = gmsh.model.mesh.field
+    dist = fld.add("Distance")
+    fld.setNumbers(dist, "PointsList", tips)
+    thr = fld.add("Threshold")
+    fld.setNumber(thr, "InField", dist)
+    fld.setNumber(thr, "SizeMin", tip_size)
+    fld.setNumber(thr, "SizeMax", mesh_size)
+    fld.setNumber(thr, "DistMin", d_min)
+    fld.setNumber(thr, "DistMax", d_max)
+    fld.setAsBackgroundMesh(thr)
+
+
+def _chain(gmsh, curve_tags: list[int], start_point: int) -> np.ndarray:
+    """gmsh node tags along consecutive curves, walking their line elements from start_point."""
+    node = int(gmsh.model.mesh.getNodes(0, start_point)[0][0])
+    out = [node]
+    for tag in curve_tags:
+        _, conn = gmsh.model.mesh.getElementsByType(1, tag)
+        edges = np.asarray(conn, dtype=np.int64).reshape(-1, 2)
+        nbr: dict[int, list[int]] = {}
+        for a, b in edges.tolist():
+            nbr.setdefault(a, []).append(b)
+            nbr.setdefault(b, []).append(a)
+        prev = -1
+        for _ in range(len(edges)):
+            nxt = [v for v in nbr.get(node, []) if v != prev]
+            if len(nxt) != 1:
+                raise RuntimeError(f"gmsh mesh of curve {tag} is not a simple chain at node {node}")
+            prev, node = node, nxt[0]
+            out.append(node)
+    return np.asarray(out, dtype=np.int64)
+
+
+def _extract(gmsh, sides, surface, curves) -> DefectMesh:
+    tags, coords, _ = gmsh.model.mesh.getNodes()
+    tags = np.asarray(tags, dtype=np.int64)
+    xy = np.asarray(coords, dtype=float).reshape(-1, 3)[:, :2]
+    _, conn = gmsh.model.mesh.getElementsByType(2, surface)
+    tri_tags = np.asarray(conn, dtype=np.int64).reshape(-1, 3)
+    used = np.unique(tri_tags)                    # drops nodes of free (control) points
+    pos = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
+    pos[tags] = np.arange(len(tags))
+    index = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
+    index[used] = np.arange(len(used))
+    points = np.ascontiguousarray(xy[pos[used]].T)
+    tri = index[tri_tags]
+    p = points[:, tri]                            # (2, nt, 3)
+    area2 = ((p[0, :, 1] - p[0, :, 0]) * (p[1, :, 2] - p[1, :, 0])
+             - (p[0, :, 2] - p[0, :, 0]) * (p[1, :, 1] - p[1, :, 0]))
+    tri[area2 < 0] = tri[area2 < 0][:, [0, 2, 1]]
+    defect_nodes = [index[_chain(gmsh, ct, start)] for ct, start in curves]
+    boundary = {}
+    for side, side_tags in sides.items():
+        b = np.unique(np.concatenate([gmsh.model.mesh.getNodes(1, t, includeBoundary=True)[0] for t in side_tags]))
+        b = index[b.astype(np.int64)]
+        axis = 0 if side in ("bottom", "top") else 1
+        boundary[side] = b[np.argsort(points[axis, b], kind="stable")]
+    if any((d < 0).any() for d in defect_nodes) or any((b < 0).any() for b in boundary.values()):
+        raise RuntimeError("gmsh left a defect or boundary node outside the triangle mesh")
+    return DefectMesh(points, np.ascontiguousarray(tri.T), defect_nodes,
+                      {s: boundary[s] for s in SIDES})
+
+
+def mesh_with_defects(width: float, height: float, defects: list[dict], mesh_size: float,
+                      tip_size: float | None = None) -> DefectMesh:
+    """Mesh (0, width) x (0, height) with first-order triangles of size about ``mesh_size``
+    (``tip_size`` near the defect tips), the defects embedded as internal edges.
+
+    ``defects``: tables ``{"points": (k, 2), "curve": "polyline" | "spline"}`` (other keys are
+    ignored). Raises InputError on bad input (see :func:`validate`), MissingDependency without gmsh.
+    """
+    parsed = validate(width, height, defects, mesh_size, tip_size)
+    gmsh = _import_gmsh()
+    with _session(gmsh):
+        sides, surface, curves, tips = _build(gmsh, float(width), float(height), parsed)
+        _size_fields(gmsh, float(mesh_size), None if tip_size is None else float(tip_size), tips)
+        try:
+            gmsh.model.mesh.generate(2)
+        except Exception as exc:  # gmsh raises a bare Exception with its last error message
+            raise RuntimeError(f"gmsh could not mesh the body with its defects: {exc}") from exc
+        return _extract(gmsh, sides, surface, curves)
