@@ -1,0 +1,148 @@
+"""General defect geometry on the problem layer: polylines with kinks, several defects, per-defect
+delta, rigid rotation of the scene (issue 16). Physics checks: the patch test on the cut mesh
+(a uniform stress gives, on each face copy of a defect node, exactly the face traction), rigid
+motions, invariance of the solution under rotation."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dualfem.errors import InputError
+from dualfem.scene import load_scene
+from problems.thin_defect import lame
+
+KINKED = [{"points": [[0.25, 0.5], [0.5, 0.5], [0.75, 0.75]]}]
+
+
+def defect_polylines(qp) -> list[np.ndarray]:
+    """Ordered node ids (tips included, "-" copies inside) of each defect, from the maps."""
+    m = qp.maps
+    tips = np.asarray(m["defect_tips"]).reshape(-1, 2)
+    ids = np.asarray(m["defect_id"])
+    return [np.r_[tips[k, 0], np.asarray(m["defect_lower"])[ids == k], tips[k, 1]] for k in range(tips.shape[0])]
+
+
+def face_forces(qp, sigma: np.ndarray) -> np.ndarray:
+    """Per constrained node j, sum over its two defect edges e of sigma nu_e |e| / 2, shape (m, 2)."""
+    X = np.asarray(qp.maps["nodes"])
+    out = []
+    for nodes in defect_polylines(qp):
+        d = np.diff(X[:, nodes], axis=1)
+        nu_len = np.vstack([-d[1], d[0]])  # edge normal times edge length (tangent turned by +90 degrees)
+        half = 0.5 * (nu_len[:, :-1] + nu_len[:, 1:])
+        out.append((sigma @ half).T)
+    return np.vstack(out)
+
+
+def patch_check(problem, qp) -> None:
+    """Uniform strain on every node (both copies): K u on the copies equals -/+ the face tractions."""
+    E, nu, plane = qp.params["E"], qp.params["nu"], qp.params["plane"]
+    lam, mu = lame(E, nu, plane)
+    eps = np.array([[2e-3, 0.7e-3], [0.7e-3, -1e-3]])
+    sigma = lam * np.trace(eps) * np.eye(2) + 2 * mu * eps
+    K_all, _, _ = problem.assemble()
+    X = np.asarray(qp.maps["nodes"])
+    u = (eps @ X).T.ravel() + np.tile([0.3, -0.1], X.shape[1])  # DOF 2 i + c
+    f = (K_all @ u).reshape(-1, 2)
+    ref = face_forces(qp, sigma)
+    up, lo = qp.maps["defect_upper"], qp.maps["defect_lower"]
+    scale = np.abs(ref).max()
+    assert np.abs(f[up] + ref).max() <= 1e-10 * scale
+    assert np.abs(f[lo] - ref).max() <= 1e-10 * scale
+    # nodes off the defect (and not on the outer boundary) feel no force
+    inner = np.ones(X.shape[1], bool)
+    inner[np.r_[up, lo]] = False
+    W, H = qp.params["width"], qp.params["height"]
+    c = problem.cut()[0].points
+    inner &= (c[0] > 1e-9) & (c[0] < W - 1e-9) & (c[1] > 1e-9) & (c[1] < H - 1e-9)
+    assert np.abs(f[inner]).max() <= 1e-10 * scale
+
+
+def test_kinked_polyline_on_the_grid():
+    problem = load_scene("f2", {"N": 16, "defects": KINKED})
+    qp = problem.build()
+    assert qp.m == 7 and "normal" not in qp.maps  # 3 + kink + 3 doubled nodes; no single normal
+    j = 3  # the kink at (0.5, 0.5)
+    assert np.allclose(qp.maps["nodes"][:, qp.maps["defect_lower"][j]], [0.5, 0.5])
+    n = np.array([0, 1]) + np.array([-1, 1]) / np.sqrt(2)
+    assert np.allclose(qp.maps["defect_normals"][:, j], n / np.linalg.norm(n), atol=1e-15)
+    assert qp.weights[j] == pytest.approx((1 + np.sqrt(2)) / 32, rel=1e-14)
+    assert np.allclose(qp.maps["defect_s"], np.r_[np.arange(1, 5) / 16, 0.25 + np.arange(1, 4) * np.sqrt(2) / 16])
+    patch_check(problem, qp)
+    # rigid motions only in the kernel (the doubled nodes add none): exactly three zero eigenvalues
+    ev = np.linalg.eigvalsh(problem.assemble()[0].toarray())
+    assert np.sum(ev < 1e-9 * ev.max()) == 3
+
+
+def test_defects_table_equals_defect_key_and_deltas_add_up():
+    a = load_scene("f2", {"N": 16}).build()
+    b = load_scene("f2", {"N": 16, "defects": [{"points": [[0.25, 0.5], [0.75, 0.5]]}]}).build()
+    assert abs(a.K - b.K).max() == 0 and np.array_equal(a.F, b.F) and abs(a.B - b.B).max() == 0
+    two = [{"points": [[0.25, 0.25], [0.5, 0.25]], "delta": 1e-3}, {"points": [[0.5, 0.75], [0.25, 0.5]]}]
+    problem = load_scene("f2", {"N": 16, "delta": 1e-2, "defects": two})
+    qp = problem.build()
+    assert np.array_equal(np.unique(qp.maps["defect_id"]), [0, 1]) and qp.m == 3 + 3
+    # second defect runs from upper right to lower left: its normal is the tangent turned by +90 degrees
+    assert np.allclose(qp.maps["defect_normals"][:, qp.maps["defect_id"] == 1].T, [np.sqrt(0.5), -np.sqrt(0.5)])
+    patch_check(problem, qp)
+    # interface term: sum_j w_j / delta_j |jump_j|^2 with each defect's delta
+    x = np.random.default_rng(1).standard_normal(qp.n)
+    nd, up, lo = qp.maps["node_dofs"], qp.maps["defect_upper"], qp.maps["defect_lower"]
+    jump2 = (x[nd[0, up]] - x[nd[0, lo]]) ** 2 + (x[nd[1, up]] - x[nd[1, lo]]) ** 2
+    delta = np.where(qp.maps["defect_id"] == 0, 1e-3, 1e-2)
+    assert x @ ((qp.K - qp.K_fixed) @ x) == pytest.approx(np.sum(qp.weights / delta * jump2), rel=1e-12)
+
+
+def _solve(over):
+    from dualfem.runner import run
+
+    qp = load_scene("f2", over).build()
+    sol = run("pdas", qp)
+    assert sol.ok
+    return qp, sol
+
+
+def rotation_check(over: dict, deg: float) -> None:
+    """Energy, contact set and |jump| (normal and whole vector) unchanged by ``rotate_deg`` to 1e-9."""
+    from dualfem import evaluator
+    from dualfem.post import nodal_displacement
+
+    qp0, s0 = _solve(over)
+    qp1, s1 = _solve({**over, "rotate_deg": deg})
+    R = np.array([[np.cos(np.deg2rad(deg)), -np.sin(np.deg2rad(deg))],
+                  [np.sin(np.deg2rad(deg)), np.cos(np.deg2rad(deg))]])
+    c = np.array([qp0.params["width"], qp0.params["height"]]) / 2
+    assert np.allclose(qp1.maps["nodes"], R @ (qp0.maps["nodes"] - c[:, None]) + c[:, None], atol=1e-14)
+    assert qp1.energy(s1.x) == pytest.approx(qp0.energy(s0.x), rel=1e-9)
+    assert np.array_equal(evaluator.contact_set(qp0, s0.x), evaluator.contact_set(qp1, s1.x))
+    j0, j1 = qp0.B @ s0.x, qp1.B @ s1.x
+    assert np.abs(j1 - j0).max() <= 1e-9 * np.abs(j0).max()
+    u0 = nodal_displacement(qp0, s0.x).T
+    u1 = nodal_displacement(qp1, s1.x).T
+    assert np.abs(u1 - R @ u0).max() <= 1e-9 * np.abs(u0).max()  # displacements rotate with the body
+    assert np.abs(s1.multipliers - s0.multipliers).max() <= 1e-9 * np.abs(s0.multipliers).max()
+
+
+@pytest.mark.parametrize("deg", [90.0, 37.0])
+def test_rotation_leaves_solution_unchanged_structured(deg):
+    rotation_check({"N": 16, "delta": 1e-5, "defects": KINKED}, deg)
+
+
+@pytest.mark.parametrize("over, words", [
+    ({"defects": [{"points": [[0.25, 0.5], [0.75, 0.5]], "curve": "spline"}]}, "defects\\[0\\].curve.*gmsh"),
+    ({"defects": [{"points": [[0.25, 0.5], [0.75, 0.5]], "curve": "bezier"}]}, "defects\\[0\\].curve"),
+    ({"defects": [{"points": [[0.25, 0.5], [0.75, 0.5]], "width": 1}]}, "defects\\[0\\].*unknown key 'width'"),
+    ({"defects": [{"curve": "polyline"}]}, "defects\\[0\\].points is missing"),
+    ({"defects": [{"points": [[0.25, 0.5]]}]}, "defects\\[0\\].points.*at least two"),
+    ({"defects": [{"points": [[0.25, 0.5], [1.25, 0.5]]}]}, "defects\\[0\\].points.*strictly inside"),
+    ({"defects": [{"points": [[0.25, 0.5], [0.75, 0.5]], "delta": -1}]}, "defects\\[0\\].delta"),
+    ({"defects": "0.25,0.5,0.75,0.5"}, "list of tables"),
+    ({"defects": [{"points": [[0.25, 0.5], [0.75, 0.5]]}], "defect": [[0.25, 0.25], [0.5, 0.25]]}, "either defect"),
+    ({"defects": [{"points": [[0.25, 0.5], [0.75, 0.5]]}, {"points": [[0.5, 0.25], [0.5, 0.75]]}]}, "touch"),
+    ({"defects": [{"points": [[0.25, 0.5], [0.5, 0.5], [0.375, 0.5]]}]}, "retraces"),
+    ({"mesh": "delaunay"}, "mesh must be one of structured, gmsh"),
+    ({"mesh_size": -0.1}, "mesh_size"), ({"tip_size": "big"}, "tip_size"), ({"rotate_deg": float("inf")}, "rotate_deg"),
+])
+def test_bad_defect_keys(over, words):
+    with pytest.raises(InputError, match=words):
+        load_scene("f2", {"N": 16, **over}).build()
