@@ -146,3 +146,51 @@ def test_rotation_leaves_solution_unchanged_structured(deg):
 def test_bad_defect_keys(over, words):
     with pytest.raises(InputError, match=words):
         load_scene("f2", {"N": 16, **over}).build()
+
+
+def mirror_symmetric_grid(N: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Unit-square N x N grid whose squares are cut by (1, -1) diagonals left of x = 1/2 and by (1, 1)
+    diagonals right of it: the mesh is its own mirror image about x = 1/2. Returns nodes, triangles
+    and the grid index ix[i, j] of node (i / N, j / N)."""
+    x = np.linspace(0, 1, N + 1)
+    p = np.vstack([np.repeat(x, N + 1), np.tile(x, N + 1)])
+    ix = np.arange((N + 1) ** 2).reshape(N + 1, N + 1)
+    ll, ul, ur, lr = ix[:-1, :-1], ix[:-1, 1:], ix[1:, 1:], ix[1:, :-1]
+    left = np.broadcast_to((np.arange(N) < N // 2)[:, None], ll.shape)
+    t1 = np.where(left, np.stack([ll, lr, ul]), np.stack([ll, lr, ur]))
+    t2 = np.where(left, np.stack([lr, ur, ul]), np.stack([ll, ur, ul]))
+    return p, np.hstack([t1.reshape(3, -1), t2.reshape(3, -1)]).astype(np.int32), ix
+
+
+@pytest.mark.parametrize("vee, load", [(False, "-30*exp(-100*(x-0.5)**2) + 6"), (True, "f1")])
+def test_mirror_symmetric_scene_gives_symmetric_contact(vee, load):
+    """A body, mesh, load and defect symmetric about x = 1/2 (a straight defect, or a V kinked at the
+    axis): the contact set is its own mirror image and so is the solution."""
+    from dualfem import evaluator
+    from dualfem.post import nodal_displacement
+    from dualfem.runner import run
+    from problems.thin_defect import ThinDefect
+
+    N = 32
+
+    class Mirrored(ThinDefect):
+        def _reference_mesh(self):
+            p, t, ix = mirror_symmetric_grid(N)
+            i = np.arange(N // 4, 3 * N // 4 + 1)
+            j = np.abs(i - N // 2) + N // 2 if vee else np.full(i.size, N // 2)
+            return p, t, [ix[i, j]]
+
+    pts = [[0.25, 0.75], [0.5, 0.5], [0.75, 0.75]] if vee else [[0.25, 0.5], [0.75, 0.5]]
+    qp = Mirrored(N=N, load=load, delta=1e-5, defects=[{"points": pts}]).build()
+    sol = run("pdas", qp)
+    c = evaluator.contact_set(qp, sol.x)
+    assert np.array_equal(c, c[::-1])
+    assert 0 < c.sum() < c.size if not vee else c.all()
+    # the solution: u1(1 - x, y) = -u1(x, y), u2(1 - x, y) = u2(x, y) at mirrored nodes (same face)
+    X = qp.maps["nodes"]
+    u = nodal_displacement(qp, sol.x)
+    key = {(round(a, 9), round(b, 9), k >= (N + 1) ** 2): k for k, (a, b) in enumerate(X.T)}
+    mirror = np.array([key[(round(1 - a, 9), round(b, 9), k >= (N + 1) ** 2)] for k, (a, b) in enumerate(X.T)])
+    scale = np.abs(u).max()
+    assert np.abs(u[mirror, 0] + u[:, 0]).max() <= 1e-9 * scale
+    assert np.abs(u[mirror, 1] - u[:, 1]).max() <= 1e-9 * scale
