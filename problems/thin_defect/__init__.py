@@ -128,8 +128,10 @@ class ThinDefect(Problem):
         h = p["mesh_size"] or min(W, H) / N
         dm = mesh_with_defects(W, H, [{"points": d["points"], "curve": d["curve"]} for d in self._defects],
                                h, p["tip_size"] or None)
-        return (np.asarray(dm.points, dtype=float), np.asarray(dm.triangles, dtype=np.int32),
-                [np.asarray(n, dtype=np.int64) for n in dm.defect_nodes])
+        pts, tri = np.asarray(dm.points, dtype=float), np.asarray(dm.triangles, dtype=np.int32)
+        if np.bincount(tri.ravel(), minlength=pts.shape[1]).min() == 0:
+            raise RuntimeError("the gmsh mesh has nodes in no triangle (problems/gmsh_mesh.py must drop them)")
+        return pts, tri, [np.asarray(n, dtype=np.int64) for n in dm.defect_nodes]
 
     def cut(self) -> tuple[Cut, np.ndarray]:
         """The doubled mesh in the reference frame, and its node coordinates after ``rotate_deg``."""
