@@ -120,3 +120,15 @@ def test_mirror_symmetric_scene_gives_symmetric_contact(vee, load):
     scale = np.abs(u).max()
     assert np.abs(u[mirror, 0] + u[:, 0]).max() <= 1e-9 * scale
     assert np.abs(u[mirror, 1] - u[:, 1]).max() <= 1e-9 * scale
+
+
+def test_post_defect_fields_use_the_per_node_normals():
+    from dualfem.post import defect_fields
+    from dualfem.runner import run
+
+    qp = load_scene("f2", {"N": 16, "defects": KINKED, "rotate_deg": 20}).build()
+    sol = run("pdas", qp)
+    f = defect_fields(qp, sol.x, sol.multipliers)
+    assert np.allclose(f["jump_normal"][f["interior"]], qp.B @ sol.x, rtol=0, atol=1e-12 * np.abs(sol.x).max())
+    assert f["s"][-1] == pytest.approx(0.25 + 0.25 * np.sqrt(2), rel=1e-14)  # arc length, kink included
+    assert np.all(np.diff(f["s"]) > 0)
