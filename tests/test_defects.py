@@ -62,7 +62,7 @@ def test_rotation_leaves_solution_unchanged_structured(deg):
     ({"defects": [{"points": [[0.25, 0.5]]}]}, "defects\\[0\\].points.*at least two"),
     ({"defects": [{"points": [[0.25, 0.5], [1.25, 0.5]]}]}, "defects\\[0\\].points.*strictly inside"),
     ({"defects": [{"points": [[0.25, 0.5], [0.75, 0.5]], "delta": -1}]}, "defects\\[0\\].delta"),
-    ({"defects": "0.25,0.5,0.75,0.5"}, "list of tables"),
+    ({"defects": "0.25,0.5,0.75,0.5"}, "list of tables"), ({"defects": 3}, "list of tables"),
     ({"defects": [{"points": [[0.25, 0.5], [0.75, 0.5]]}], "defect": [[0.25, 0.25], [0.5, 0.25]]}, "either defect"),
     ({"defects": [{"points": [[0.25, 0.5], [0.75, 0.5]]}, {"points": [[0.5, 0.25], [0.5, 0.75]]}]}, "touch"),
     ({"defects": [{"points": [[0.25, 0.5], [0.5, 0.5], [0.375, 0.5]]}]}, "retraces"),

@@ -109,7 +109,9 @@ class ThinDefect(Problem):
             raise InputError(f"rotate_deg must be a finite number (degrees), got {rot!r}")
         p["defect"] = parse_defect(p["defect"])
         default_defect = np.asarray(self.defaults["defect"], dtype=float)
-        if len(p["defects"]) and not np.array_equal(p["defect"], default_defect):
+        tables = p["defects"]
+        if not (isinstance(tables, (list, tuple)) and len(tables) == 0) \
+                and not np.array_equal(p["defect"], default_defect):
             raise InputError("give either defect = [[x1, y1], [x2, y2]] or [[defects]] tables, not both")
         self._defects = parse_defects(p["defects"], p["defect"], p["delta"], p["width"], p["height"], p["mesh"])
         with np.errstate(all="ignore"):  # a NaN-producing expression is refused below, without warnings
@@ -223,7 +225,7 @@ class ThinDefect(Problem):
             maps["normal"], maps["tangent"] = R @ np.array([-tau[1], tau[0]]), R @ tau
         params = {k: (v if isinstance(v, (int, float, str)) else str(np.asarray(v).tolist()))
                   for k, v in p.items() if not callable(v) and k != "defects"}
-        if len(p["defects"]):
+        if isinstance(p["defects"], (list, tuple)) and len(p["defects"]):
             params["defects"] = defects_label(self._defects)
         self.jump_operators = J
         return QP(K=K, F=F, B=B, weights=c.weights, K_fixed=K_el, local_dofs=local,

@@ -62,10 +62,10 @@ def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height
     ``curve`` in CURVES (``"spline"`` needs ``mesh = "gmsh"``), ``delta`` > 0; unknown keys refused.
     Whether defects touch or cross is checked by the mesher (gmsh) or on the grid (structured).
     """
-    if tables is None or (not isinstance(tables, str) and len(tables) == 0):
+    if tables is None or (isinstance(tables, (list, tuple)) and len(tables) == 0):
         _check_inside("defect", defect, width, height)
         return [{"points": defect, "curve": "polyline", "delta": delta}]
-    if isinstance(tables, (str, dict)) or not all(isinstance(t, dict) for t in tables):
+    if not isinstance(tables, (list, tuple)) or not all(isinstance(t, dict) for t in tables):
         raise InputError("defects must be a list of tables ([[defects]] in TOML) with points = [[x, y], ...], "
                          f"optional curve and delta; got {tables!r}")
     out = []
