@@ -51,9 +51,17 @@ def stiffness(p: np.ndarray, t: np.ndarray, lam: float, mu: float, node_dofs: np
     rows = np.empty((4, 3, 3, nt), dtype=np.int32)
     cols = np.empty((4, 3, 3, nt), dtype=np.int32)
     # block a (3, 3, nt): entry (i, j) couples component r_a of node t[i] with component c_a of node t[j]
-    np.multiply(area, lm * gx[:, None] * gx[None] + mu * gy[:, None] * gy[None], out=vals[0])
-    np.multiply(area, lm * gy[:, None] * gy[None] + mu * gx[:, None] * gx[None], out=vals[1])
-    np.multiply(area, lam * gx[:, None] * gy[None] + mu * gy[:, None] * gx[None], out=vals[2])
+    # (few large temporaries: fresh memory costs page faults, which dominate at N = 512)
+    gx, gy = gx * np.sqrt(area), gy * np.sqrt(area)
+    tmp = np.empty((3, 3, nt))
+    # block 0: lm gx_i gx_j + mu gy_i gy_j; 1: lm gy_i gy_j + mu gx_i gx_j; 2: lam gx_i gy_j + mu gy_i gx_j
+    for out, (a1, b1, ca, a2, b2, cb) in zip(vals[:3], ((gx, gx, lm, gy, gy, mu), (gy, gy, lm, gx, gx, mu),
+                                                     (gx, gy, lam, gy, gx, mu)), strict=True):
+        np.multiply(a1[:, None], b1[None], out=out)
+        out *= ca
+        np.multiply(a2[:, None], b2[None], out=tmp)
+        tmp *= cb
+        out += tmp
     vals[3] = vals[2].transpose(1, 0, 2)
     for a, (r, c) in enumerate(((0, 0), (1, 1), (0, 1), (1, 0))):
         rows[a] = d[r][:, None]
