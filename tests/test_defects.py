@@ -132,3 +132,12 @@ def test_post_defect_fields_use_the_per_node_normals():
     assert np.allclose(f["jump_normal"][f["interior"]], qp.B @ sol.x, rtol=0, atol=1e-12 * np.abs(sol.x).max())
     assert f["s"][-1] == pytest.approx(0.25 + 0.25 * np.sqrt(2), rel=1e-14)  # arc length, kink included
     assert np.all(np.diff(f["s"]) > 0)
+
+
+def test_cut_refuses_defect_nodes_not_joined_by_edges():
+    from problems.thin_defect.cut import cut
+    from problems.thin_defect.mesh import structured_mesh
+
+    p, t = structured_mesh(4, 1.0, 1.0)
+    with pytest.raises(ValueError, match="not joined by mesh edges"):
+        cut(p, t, [np.array([6, 12, 16])])  # node (i, j) = 5 i + j: (1, 1), (2, 2), (3, 1): the last step is no edge

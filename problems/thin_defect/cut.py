@@ -86,6 +86,7 @@ def cut(points: np.ndarray, triangles: np.ndarray, defects: list[np.ndarray], me
         ids.append(np.full(nodes.size - 2, k, dtype=np.int64))
         tips.append(nodes[[0, -1]])
         length.append(ln.sum())
+    _check_edges(triangles, defects, seen >= 0)
     lower_a = np.concatenate(lower)
     upper_a = nn + np.arange(lower_a.size)
     t = _assign_sides(points, triangles, lower_a, upper_a, np.concatenate(prev), np.concatenate(nxt))
@@ -93,6 +94,20 @@ def cut(points: np.ndarray, triangles: np.ndarray, defects: list[np.ndarray], me
                defect_id=np.concatenate(ids), normals=np.hstack(nrm), tangents=np.hstack(tng),
                weights=np.concatenate(w), s=np.concatenate(s), tips=np.concatenate(tips),
                length=np.array(length))
+
+
+def _check_edges(t: np.ndarray, defects: list[np.ndarray], on_defect: np.ndarray) -> None:
+    """Every pair of consecutive defect nodes must be a mesh edge (else the mesher is at fault)."""
+    near = t[:, on_defect[t].any(axis=0)].astype(np.int64)
+    nn = on_defect.size
+    e = np.hstack([near[[0, 1]], near[[1, 2]], near[[2, 0]]])
+    have = np.minimum(e[0], e[1]) * nn + np.maximum(e[0], e[1])
+    for k, nodes in enumerate(defects):
+        nodes = np.asarray(nodes, dtype=np.int64)
+        want = np.minimum(nodes[:-1], nodes[1:]) * nn + np.maximum(nodes[:-1], nodes[1:])
+        if not np.all(np.isin(want, have)):
+            raise ValueError(f"defect {k}: consecutive defect nodes are not joined by mesh edges "
+                             f"(the mesh does not carry the defect)")
 
 
 def _assign_sides(p, t, lower, upper, prev, nxt) -> np.ndarray:
