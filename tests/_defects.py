@@ -75,7 +75,8 @@ def rotation_check(over: dict, deg: float) -> None:
     assert qp1.energy(s1.x) == pytest.approx(qp0.energy(s0.x), rel=1e-9)
     assert np.array_equal(evaluator.contact_set(qp0, s0.x), evaluator.contact_set(qp1, s1.x))
     j0, j1 = qp0.B @ s0.x, qp1.B @ s1.x
-    assert np.abs(j1 - j0).max() <= 1e-9 * np.abs(j0).max()
+    # (scale: the largest jump, or the contact tolerance 1e-6 |x| when the defect is closed everywhere)
+    assert np.abs(j1 - j0).max() <= 1e-9 * max(np.abs(j0).max(), 1e-6 * np.abs(s0.x).max())
     u0 = nodal_displacement(qp0, s0.x).T
     u1 = nodal_displacement(qp1, s1.x).T
     assert np.abs(u1 - R @ u0).max() <= 1e-9 * np.abs(u0).max()  # displacements rotate with the body
