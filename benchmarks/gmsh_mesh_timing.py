@@ -26,7 +26,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    from problems.gmsh_mesh import mesh_with_defects
+    from dualfem.problems.gmsh_mesh import mesh_with_defects
 
     sc = tomllib.loads(Path(a.scene).read_text(encoding="utf-8"))
     W, H = sc.get("width", 1.0), sc.get("height", 1.0)

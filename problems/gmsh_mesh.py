@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from dualfem.errors import InputError, MissingDependency, check_positive
+from dualfem.core.errors import InputError, MissingDependency, check_positive
 
 CURVES = ("polyline", "spline")
 SIDES = ("bottom", "top", "left", "right")

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dualfem.errors import InputError, MissingDependency
-from problems.gmsh_mesh import (
+from dualfem.core.errors import InputError, MissingDependency
+from dualfem.problems.gmsh_mesh import (
     DefectMesh,
     estimate_triangles,
     mesh_with_defects,
@@ -265,7 +265,7 @@ def test_near_boundary_scene_is_near_but_inside():
 
 
 def test_symmetric_scene_is_symmetric():
-    from problems.loads import resolve_load
+    from dualfem.problems.loads import resolve_load
 
     sc = _scene(next(p for p in SCENES if p.stem == "symmetric"))
     W = sc.get("width", 1.0)
@@ -292,7 +292,7 @@ def test_reproducible_across_processes():
     import os
     import subprocess
 
-    code = ("import hashlib, sys; from problems.gmsh_mesh import mesh_with_defects; "
+    code = ("import hashlib, sys; from dualfem.problems.gmsh_mesh import mesh_with_defects; "
             f"m = mesh_with_defects(1.0, 1.0, {TWO!r}, 0.04, tip_size=0.01); "
             "h = hashlib.sha256(m.points.tobytes() + m.triangles.tobytes()); "
             "[h.update(a.tobytes()) for a in [*m.defect_nodes, *m.boundary.values()]]; "
@@ -311,7 +311,7 @@ SYM = [{"points": [[0.1, 0.3], [0.3, 0.35], [0.4, 0.3]], "curve": "spline"},
 
 
 def test_symmetric_mesh_is_a_mirror_image():
-    from problems.gmsh_symmetric import mesh_symmetric
+    from dualfem.problems.gmsh_symmetric import mesh_symmetric
 
     m = mesh_symmetric(1.0, 1.0, SYM, 0.05, tip_size=0.0125)
     _check_mesh(m, SYM)
@@ -331,7 +331,7 @@ def test_symmetric_mesh_is_a_mirror_image():
 
 
 def test_symmetric_mesh_pairs_in_any_order_and_direction():
-    from problems.gmsh_symmetric import mesh_symmetric
+    from dualfem.problems.gmsh_symmetric import mesh_symmetric
 
     defects = [{"points": SYM[1]["points"][::-1], "curve": "spline"}, SYM[0]]   # right one first, reversed
     m = mesh_symmetric(1.0, 1.0, defects, 0.05)
@@ -340,7 +340,7 @@ def test_symmetric_mesh_pairs_in_any_order_and_direction():
 
 
 def test_symmetric_scene_meshes_symmetrically():
-    from problems.gmsh_symmetric import mesh_symmetric
+    from dualfem.problems.gmsh_symmetric import mesh_symmetric
 
     sc = _scene(next(p for p in SCENES if p.stem == "symmetric"))
     m = mesh_symmetric(1.0, 1.0, sc["defects"], sc["mesh_size"], sc.get("tip_size"))
@@ -355,7 +355,7 @@ def test_symmetric_scene_meshes_symmetrically():
     (_defs([[0.2, 0.2], [0.8, 0.8]], [[0.2, 0.8], [0.8, 0.2]]), r"defects\[0\] and defects\[1\] cross"),
 ])
 def test_symmetric_mesh_refuses_asymmetric_defects(defects, message):
-    from problems.gmsh_symmetric import mesh_symmetric
+    from dualfem.problems.gmsh_symmetric import mesh_symmetric
 
     with pytest.raises(InputError, match=message):
         mesh_symmetric(1.0, 1.0, defects, 0.05)

@@ -50,9 +50,12 @@ def coo_from_arrays(d: dict, name: str, where: str, rows: int | None = None,
     if shape.size != 2 or shape.min() < 0:
         raise InputError(f"array {name}_shape in {where} must hold 2 sizes >= 0, got {shape.tolist()}")
     nr, nc = int(shape[0]), int(shape[1])
+    if rows is not None and rows == cols and nr != nc:
+        raise InputError(f"{name} must be square, but {name}_shape in {where} declares ({nr}, {nc})")
     for want, got, what in ((rows, nr, "rows"), (cols, nc, "columns")):
         if want is not None and got != want:
-            raise InputError(f"array {name}_shape in {where} declares {got} {what}, but the other arrays imply {want}")
+            raise InputError(f"{name} must have {want} {what} (the length of F), but {name}_shape in {where} "
+                             f"declares {got}")
     if not (data.size == row.size == col.size):
         raise InputError(f"{name}_data, {name}_row, {name}_col in {where} must have equal lengths, "
                          f"got {data.size}, {row.size}, {col.size}")
@@ -236,12 +239,14 @@ class QP:
                 K = coo_from_arrays(d, "K", where, rows=n, cols=n)
                 B = coo_from_arrays(d, "B", where, cols=n)
             w = d["weights"].ravel() if "weights" in d else None
+        except InputError:
+            raise
         except KeyError as exc:
             raise InputError(f"{where} lacks the array {exc.args[0]!r}") from None
         except ValueError as exc:
             raise InputError(f"{where} has inconsistent arrays: {exc}") from None
         maps = {k[4:]: v for k, v in d.items() if k.startswith("map_")}
-        params = {k[6:]: v.item() if np.ndim(v) == 0 else v for k, v in d.items() if k.startswith("param_")}
+        params = {k[6:]: v.item() if np.size(v) == 1 else v for k, v in d.items() if k.startswith("param_")}
         check_params(params, where)
         qp = cls(K=K, F=F, B=B, weights=w, name=path.stem, maps=maps, params=params)
         qp.check()

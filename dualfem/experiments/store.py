@@ -212,6 +212,12 @@ def write_csv(path: str | Path, rows: list[dict]) -> Path:
     return atomic_write_text(path, buf.getvalue())
 
 
+#: columns that hold text even when it looks like a number (a hex run id such as "5e12..." is not 5e12)
+TEXT_COLUMNS = {"run_id", "kind", "spec", "scene", "scene_key", "label", "solver", "variant", "tier", "status",
+                "claimed_status", "grade", "message", "ref_solver", "git", "started_utc", "cpu", "threads", "python",
+                "platform", "versions", "axis", "solver_params", "iterations", "coords"}
+
+
 def read_results(path: str | Path) -> list[dict]:
     """Rows of a results.csv (or of the results.csv inside a directory), numbers parsed."""
     path = Path(path)
@@ -228,7 +234,7 @@ def read_results(path: str | Path) -> list[dict]:
                 raise InputError(f"{str(path)!r} is not a dualfem bench results.csv (no column "
                                  f"{', '.join(sorted(missing))})")
             for r in reader:
-                out.append({k: _parse(v) for k, v in r.items()})
+                out.append({k: (v if k in TEXT_COLUMNS else _parse(v)) for k, v in r.items()})
     except (UnicodeDecodeError, csv.Error) as exc:
         raise InputError(f"{str(path)!r} is not a readable results.csv: {exc}") from None
     return out

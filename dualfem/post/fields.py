@@ -155,21 +155,27 @@ def defect_fields(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> d
     nrm = np.asarray(m.get("normal", (0.0, 1.0)), dtype=float)
     tau = np.asarray(m.get("tangent", (nrm[1], -nrm[0])), dtype=float)
     tips = np.asarray(m.get("defect_tips", []), dtype=np.int64)
+    # per-node normals and tangents of general (kinked, curved, several) defects, else the single ones
+    nrm_j = np.asarray(m["defect_normals"], dtype=float).T if "defect_normals" in m else np.tile(nrm, (up.size, 1))
+    tau_j = np.asarray(m["defect_tangents"], dtype=float).T if "defect_tangents" in m else np.tile(tau, (up.size, 1))
     if tips.size == 2:
         # tips: the single nodes at s = 0 and s = L
         t0, t1 = tips
-        L = float(tau @ (nodes[:, t1] - nodes[:, t0]))
+        L = float(s_in[-1] + np.linalg.norm(nodes[:, t1] - nodes[:, lo[-1]])) if "defect_normals" in m \
+            else float(tau @ (nodes[:, t1] - nodes[:, t0]))
         s = np.r_[0.0, s_in, L]
         upper = np.r_[t0, up, t1]
         lower = np.r_[t0, lo, t1]
         interior = np.r_[False, np.ones(up.size, bool), False]
+        nrm_j, tau_j = np.vstack([nrm_j[:1], nrm_j, nrm_j[-1:]]), np.vstack([tau_j[:1], tau_j, tau_j[-1:]])
     else:
         s, upper, lower, interior = s_in, up, lo, np.ones(up.size, bool)
     u = nodal_displacement(qp, x)
     uu, ul = u[upper], u[lower]
     d = uu - ul
     out = {"s": s, "X": nodes[:, lower], "upper": upper, "lower": lower, "interior": interior,
-           "u_upper": uu, "u_lower": ul, "jump_normal": d @ nrm, "jump_tangent": d @ tau}
+           "u_upper": uu, "u_lower": ul, "jump_normal": np.sum(d * nrm_j, axis=1),
+           "jump_tangent": np.sum(d * tau_j, axis=1)}
     if multipliers is not None:
         mu = np.asarray(multipliers, dtype=float)
         if mu.shape != (qp.m,):

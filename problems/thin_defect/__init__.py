@@ -1,0 +1,224 @@
+"""The thin-defect scene of Zhiltsov & Maksimova (2023) as a QP, for any defect geometry.
+
+Body: the rectangle (0, width) x (0, height) (unit square by default), isotropic linear
+elasticity (E, nu; ``plane = "strain"`` by default, ``"stress"`` supported: the paper does not
+say which it used), clamped on the bottom side x2 = 0, a traction on the top side x2 = height
+(:mod:`problems.loads`), other sides free. Defects: polylines (or splines, gmsh mesh only)
+strictly inside the body; the normal nu of a defect is its tangent, from its first to its last
+point, turned by +90 degrees (so for the default horizontal defect nu = (0, 1) and the "+" face
+is the upper one); see :mod:`.cut`. Energy (paper, section 1), one term per defect d:
+
+    Pi(v) = 1/2 a(v, v) - (f, v) + sum_d 1/(2 delta_d) int_gamma_d |[v]|^2,   [v_nu] >= 0 on every gamma_d.
+
+Scene keys beyond the paper's: ``mesh`` = ``"structured"`` (default: N x N squares cut by their
+(1, 1) diagonal, the paper's scenes; defect vertices must be grid nodes and its segments run
+along grid edges) or ``"gmsh"`` (unstructured, defects embedded; :mod:`problems.gmsh_mesh`),
+``mesh_size`` (gmsh target element size; 0 = min(width, height) / N), ``tip_size`` (gmsh size
+at the defect tips; 0 = mesh_size), ``rotate_deg`` (rigid counter-clockwise rotation of the whole
+scene about the body's centre: body, defects, loads and supports; the mesh is generated once in
+the reference frame and rotated; the clamped and loaded sides are those of the reference frame),
+and ``defects`` (TOML ``[[defects]]`` tables: ``points`` = [[x, y], ...] in the reference frame,
+``curve`` = "polyline" | "spline", optional ``delta``). Without ``defects`` the single segment
+``defect = [[x1, y1], [x2, y2]]`` is used.
+
+P1 elements; nodes strictly inside a defect are doubled (tips not); the interface integral uses
+the trapezoid rule. Units are whatever the inputs use (paper: MPa and a unit length). The QP and
+its multiplier convention are described in :mod:`dualfem.qp`. ``QP.maps``: ``nodes`` (2, n),
+``triangles`` (3, nt), ``node_dofs`` (2, n; -1 = clamped), per constrained defect node j (row j
+of B) ``defect_lower``/``defect_upper`` (node ids of the - / + copies), ``defect_id``,
+``defect_s`` (arc length from the defect's first point), ``defect_normals``/``defect_tangents``
+(2, m); ``defect_tips`` (first and last node of each defect, flat); and, for a single straight
+defect, ``normal`` and ``tangent`` (2,).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from dualfem.core.elasticity import PLANES, lame  # noqa: F401  (re-exported)
+from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
+from dualfem.core.problem import Problem
+from dualfem.core.qp import QP
+from dualfem.core.registry import register_problem
+
+from ..loads import resolve_load
+from .assemble import boundary_edges_on, free_dofs, interface, stiffness, traction_vector
+from .cut import Cut, cut
+from .geometry import defects_label, parse_defect, parse_defects
+from .mesh import rotate, rotation, structured_defect_nodes, structured_mesh
+
+MESHES = ("structured", "gmsh")
+
+
+def _load_label(load) -> str:
+    return repr(load) if isinstance(load, str) else getattr(load, "__name__", "function")
+
+
+@register_problem
+class ThinDefect(Problem):
+    """Elastic rectangle with thin defects (fracture parameter delta), structured or gmsh mesh."""
+
+    name = "thin_defect"
+    description = "2D elastic body with thin defects (Zhiltsov & Maksimova 2023)"
+    defaults = {
+        "N": 64,
+        "delta": 1e-5,
+        "E": 69000.0,
+        "nu": 0.3,
+        "plane": "strain",
+        "load": "f2",
+        "load_scale": 1.0,
+        "defect": ((0.25, 0.5), (0.75, 0.5)),
+        "width": 1.0,
+        "height": 1.0,
+        "mesh": "structured",
+        "mesh_size": 0.0,
+        "tip_size": 0.0,
+        "rotate_deg": 0.0,
+        "defects": (),
+    }
+    presets = {"f1": {"load": "f1"}, "f2": {"load": "f2"}, "f3": {"load": "f3"}}
+
+    def validate(self) -> None:
+        p = self.params
+        p["N"] = check_int("N", p["N"], 2, 4096)
+        p["delta"] = check_positive("delta", p["delta"])
+        p["E"] = check_positive("E", p["E"])
+        p["nu"] = check_open_interval("nu", p["nu"], -1.0, 0.5)
+        p["width"] = check_positive("width", p["width"])
+        p["height"] = check_positive("height", p["height"])
+        ls = p["load_scale"]
+        if not isinstance(ls, (int, float)) or not np.isfinite(ls):
+            raise InputError(f"load_scale must be a finite number, got {ls!r}")
+        if p["plane"] not in PLANES:
+            raise InputError(f"plane must be one of {', '.join(PLANES)}, got {p['plane']!r}")
+        if p["mesh"] not in MESHES:
+            raise InputError(f"mesh must be one of {', '.join(MESHES)}, got {p['mesh']!r}")
+        p["mesh_size"] = check_positive("mesh_size", p["mesh_size"], allow_zero=True)
+        p["tip_size"] = check_positive("tip_size", p["tip_size"], allow_zero=True)
+        rot = p["rotate_deg"]
+        if not isinstance(rot, (int, float)) or not np.isfinite(rot):
+            raise InputError(f"rotate_deg must be a finite number (degrees), got {rot!r}")
+        p["defect"] = parse_defect(p["defect"])
+        default_defect = np.asarray(self.defaults["defect"], dtype=float)
+        tables = p["defects"]
+        if not (isinstance(tables, (list, tuple)) and len(tables) == 0) \
+                and not np.array_equal(p["defect"], default_defect):
+            raise InputError("give either defect = [[x1, y1], [x2, y2]] or [[defects]] tables, not both")
+        self._defects = parse_defects(p["defects"], p["defect"], p["delta"], p["width"], p["height"], p["mesh"])
+        with np.errstate(all="ignore"):  # a NaN-producing expression is refused below, without warnings
+            self._traction = resolve_load(p["load"], p["width"])
+
+    # ----------------------------------------------------------------- mesh
+    def _reference_mesh(self) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+        """(nodes, triangles, ordered node ids of each defect) in the reference (unrotated) frame."""
+        p = self.params
+        N, W, H = p["N"], p["width"], p["height"]
+        if p["mesh"] == "structured":
+            pts, tri = structured_mesh(N, W, H)
+            return pts, tri, [structured_defect_nodes(N, W, H, d["points"]) for d in self._defects]
+        from dualfem.problems.gmsh_mesh import mesh_with_defects
+
+        h = p["mesh_size"] or min(W, H) / N
+        dm = mesh_with_defects(W, H, [{"points": d["points"], "curve": d["curve"]} for d in self._defects],
+                               h, p["tip_size"] or None)
+        pts, tri = np.asarray(dm.points, dtype=float), np.asarray(dm.triangles, dtype=np.int32)
+        if np.bincount(tri.ravel(), minlength=pts.shape[1]).min() == 0:
+            raise RuntimeError("the gmsh mesh has nodes in no triangle (problems/gmsh_mesh.py must drop them)")
+        return pts, tri, [np.asarray(n, dtype=np.int64) for n in dm.defect_nodes]
+
+    def cut(self) -> tuple[Cut, np.ndarray]:
+        """The doubled mesh in the reference frame, and its node coordinates after ``rotate_deg``."""
+        if getattr(self, "_cut", None) is None:
+            pts, tri, dn = self._reference_mesh()
+            p = self.params
+            label = f"N={p['N']}" if p["mesh"] == "structured" else f"mesh_size={p['mesh_size'] or 'width/N'}"
+            c = cut(pts, tri, dn, label)
+            centre = np.array([p["width"], p["height"]]) / 2
+            self._cut = (c, rotate(c.points, float(p["rotate_deg"]), centre))
+        return self._cut
+
+    def mesh(self):
+        """(scikit-fem MeshTri of the doubled, rotated mesh, the Cut)."""
+        from skfem import MeshTri
+
+        c, pts = self.cut()
+        return MeshTri(pts, c.triangles), c
+
+    def basis(self):
+        """P1 vector basis on the doubled mesh (scikit-fem; its DOF 2 i + c is component c of node i)."""
+        from skfem import Basis, ElementTriP1, ElementVector
+
+        return Basis(self.mesh()[0], ElementVector(ElementTriP1()))
+
+    # ------------------------------------------------------------- assembly
+    def _sides(self, c: Cut) -> tuple[np.ndarray, np.ndarray]:
+        p = self.params
+        tol = 1e-9 * max(p["width"], p["height"])
+        y = c.points[1]
+        return np.flatnonzero(np.abs(y) <= tol), np.abs(y - p["height"]) <= tol
+
+    def nodal_load(self) -> np.ndarray:
+        """Nodal forces (2, nnodes) of the top traction, in the rotated frame."""
+        p = self.params
+        c, _ = self.cut()
+        edges = boundary_edges_on(c.points, c.triangles, self._sides(c)[1])
+        with np.errstate(all="ignore"):
+            try:
+                Fn = traction_vector(c.points, edges, self._traction, float(p["load_scale"]))
+            except InputError:
+                raise
+            except Exception as exc:  # a user-given load function that breaks
+                raise InputError(f"load {_load_label(p['load'])} cannot be evaluated on the top side: "
+                                 f"{type(exc).__name__}: {exc}") from None
+        if not np.all(np.isfinite(Fn)):
+            raise InputError(f"load {_load_label(p['load'])} gives NaN or infinite values on the top side "
+                             f"(x2 = {p['height']:g}, 0 <= x1 <= {p['width']:g}); it must be finite there")
+        return Fn if p["rotate_deg"] == 0 else rotation(float(p["rotate_deg"])) @ Fn
+
+    def assemble(self):
+        """Elastic stiffness and top-traction load on all DOFs (before boundary conditions).
+
+        Returns ``(K_all, F_all, basis)``; DOF 2 i + c is component c of node i (``basis.nodal_dofs``).
+        """
+        c, pts = self.cut()
+        nn = pts.shape[1]
+        nd = np.arange(2 * nn).reshape(nn, 2).T
+        lam, mu = lame(self.params["E"], self.params["nu"], self.params["plane"])
+        K_all = stiffness(pts, c.triangles, lam, mu, nd, 2 * nn)
+        return K_all, self.nodal_load().T.ravel(), self.basis()
+
+    def build(self) -> QP:
+        """Assemble K (elastic + interface/delta), F (top traction), B (normal jumps)."""
+        p = self.params
+        c, pts = self.cut()
+        lam, mu = lame(p["E"], p["nu"], p["plane"])
+        node_dofs = free_dofs(self._sides(c)[0], pts.shape[1])
+        n = int(node_dofs.max()) + 1
+        K_el = stiffness(pts, c.triangles, lam, mu, node_dofs, n)
+        Fn = self.nodal_load()
+        F = np.zeros(n)
+        free = node_dofs >= 0
+        F[node_dofs[free]] = Fn[free]
+        R = rotation(float(p["rotate_deg"]))
+        normals = R @ c.normals
+        delta = np.array([d["delta"] for d in self._defects])[c.defect_id]
+        K_par, B, J = interface(node_dofs, c.lower, c.upper, normals, c.weights / delta, n)
+        K = (K_el + K_par).tocsc()
+        local = np.unique(np.concatenate([node_dofs[:, c.upper].ravel(), node_dofs[:, c.lower].ravel()]))
+        maps = {
+            "nodes": pts, "triangles": c.triangles, "node_dofs": node_dofs,
+            "defect_upper": c.upper, "defect_lower": c.lower, "defect_tips": c.tips, "defect_s": c.s,
+            "defect_id": c.defect_id, "defect_normals": normals, "defect_tangents": R @ c.tangents,
+        }
+        if len(self._defects) == 1 and len(self._defects[0]["points"]) == 2:
+            a, b = self._defects[0]["points"]
+            tau = (b - a) / np.linalg.norm(b - a)
+            maps["normal"], maps["tangent"] = R @ np.array([-tau[1], tau[0]]), R @ tau
+        params = {k: (v if isinstance(v, (int, float, str)) else str(np.asarray(v).tolist()))
+                  for k, v in p.items() if not callable(v) and k != "defects"}
+        if isinstance(p["defects"], (list, tuple)) and len(p["defects"]):
+            params["defects"] = defects_label(self._defects)
+        self.jump_operators = J
+        return QP(K=K, F=F, B=B, weights=c.weights, K_fixed=K_el, local_dofs=local,
+                  name=f"thin_defect[{p['load'] if isinstance(p['load'], str) else 'custom'}]",
+                  params=params, maps=maps)
