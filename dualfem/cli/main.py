@@ -31,6 +31,9 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
     """SCENE and ``--set KEY=VALUE`` (shared by every scene-taking command)."""
     p.add_argument("scene", metavar="SCENE", help="built-in scene (f1, f2, f3, ...: see 'dualfem list'), "
                    "a .toml scene file, or a .npz/.mat QP file")
+    p.add_argument("--max-memory", type=float, default=None, metavar="GB",
+                   help="memory a run may use (default: what the machine has available); a scene whose "
+                        "estimated peak exceeds it is refused before assembly")
     p.add_argument("--set", dest="set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene parameter (N, delta, plane, E, nu, load, ...)")
 
@@ -43,9 +46,15 @@ def add_param_args(p: argparse.ArgumentParser) -> None:
 
 def scene_from_args(args: argparse.Namespace):
     """Problem instance from SCENE + --set."""
+    from dualfem.core.memory import check_fits
     from dualfem.core.scene import load_scene, parse_set
 
-    return load_scene(args.scene, parse_set(args.set))
+    problem = load_scene(args.scene, parse_set(args.set))
+    mm = getattr(args, "max_memory", None)
+    if mm is not None and not (mm > 0 and mm < 1e6):
+        raise InputError(f"--max-memory must be a number of GB in (0, 1e6), got {mm!r}")
+    check_fits(problem, None if mm is None else mm * 1e9)     # before any allocation
+    return problem
 
 
 def dumps(obj: Any) -> str:
@@ -81,15 +90,17 @@ def _cfg_list(p):
 @command("list", "list problems, scenes and solvers (and whether each is installed)")(_cfg_list)
 def cmd_list(args) -> int:
     from dualfem.core.registry import entry_point_errors, problems, solvers
-    from dualfem.core.scene import presets
+    from dualfem.core.scene import describe, library, presets
 
     sol = {n: {"installed": c.missing() is None, "missing": c.missing(), "description": c.description,
                "exact": c.exact, "parameters": c.defaults} for n, c in sorted(solvers().items())}
     prb = {n: {"description": c.description, "parameters": {k: str(v) for k, v in c.defaults.items()}}
            for n, c in sorted(problems().items())}
     scn = {n: {"problem": pn, **{k: str(v) for k, v in prm.items()}} for n, (pn, prm) in sorted(presets().items())}
+    lib = {n: {"file": str(p), "description": describe(p)} for n, p in library().items()}
     if args.json:
-        print(dumps({"problems": prb, "scenes": scn, "solvers": sol, "plugin_errors": entry_point_errors()}))
+        print(dumps({"problems": prb, "scenes": scn, "scene_library": lib, "solvers": sol,
+                     "plugin_errors": entry_point_errors()}))
         return 0
     print("problems:")
     for n, d in prb.items():
@@ -97,6 +108,9 @@ def cmd_list(args) -> int:
     print("scenes:")
     for n, d in scn.items():
         print(f"  {n:14s} {d}")
+    print("scene library (dualfem solve NAME):")
+    for n, d in lib.items():
+        print(f"  {n:14s} {d['description']}")
     print("solvers:")
     for n, d in sol.items():
         state = "installed" if d["installed"] else f"NOT INSTALLED ({d['missing']})"

@@ -37,6 +37,12 @@ class Problem:
     def validate(self) -> None:
         """Check ``self.params``; raise InputError naming the parameter and its range."""
 
+    def size_estimate(self) -> tuple[int, str] | None:
+        """(estimated number of unknowns, a label such as "N=512") before assembly, or None if unknown.
+
+        Used to refuse, before any allocation, a scene that cannot fit in memory."""
+        return None
+
     def build(self) -> QP:  # pragma: no cover - abstract
         """Assemble the QP of this scene."""
         raise NotImplementedError

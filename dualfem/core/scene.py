@@ -19,6 +19,26 @@ def presets() -> dict[str, tuple[str, dict[str, Any]]]:
     return out
 
 
+def library() -> dict[str, Path]:
+    """The scene library (the repository's ``scenes/`` folder, installed as ``dualfem.scenes``): name -> file."""
+    import importlib.resources
+
+    try:
+        root = importlib.resources.files("dualfem.scenes")
+    except ModuleNotFoundError:
+        return {}
+    return {Path(str(p)).stem: Path(str(p)) for p in sorted(root.iterdir(), key=lambda p: p.name)
+            if p.name.endswith(".toml")}
+
+
+def describe(path: Path) -> str:
+    """The first comment line of a scene file (its one-line description)."""
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if line.startswith("#"):
+            return line.lstrip("# ").strip()
+    return ""
+
+
 def parse_set(items: list[str] | None, flag: str = "--set") -> dict[str, str]:
     """Parse ``KEY=VALUE`` strings (from ``--set`` or ``-p``) into a dict; InputError if malformed."""
     out: dict[str, str] = {}
@@ -47,6 +67,9 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
     """
     overrides = dict(overrides or {})
     pre = presets()
+    lib = library()
+    if spec in lib and spec not in pre and not Path(spec).exists():
+        spec = str(lib[spec])
     if spec in pre:
         pname, params = pre[spec]
     elif Path(spec).suffix in (".npz", ".mat"):
@@ -74,7 +97,8 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
         _check_toml_types(spec, get_problem(pname).defaults, data)
         params.update(data)
     else:
-        raise InputError(f"unknown scene {spec!r}; use a built-in scene "
-                         f"({', '.join(sorted(pre))}) or a path to a .toml scene file or a .npz/.mat QP file")
+        raise InputError(f"unknown scene {spec!r}; use a built-in scene ({', '.join(sorted(pre))}), a scene of the "
+                         f"library ({', '.join(sorted(lib)) or 'none installed'}) or a path to a .toml scene file "
+                         f"or a .npz/.mat QP file")
     params.update(overrides)
     return get_problem(pname)(**params)

@@ -47,6 +47,8 @@ from .geometry import defects_label, parse_defect, parse_defects
 from .mesh import rotate, rotation, structured_defect_nodes, structured_mesh
 
 MESHES = ("structured", "gmsh")
+#: smallest delta * E / max(width, height) accepted (dimensionless; see ThinDefect.validate)
+MIN_DELTA_E_OVER_L = 1e-12
 
 
 def _load_label(load) -> str:
@@ -105,8 +107,26 @@ class ThinDefect(Problem):
                 and not np.array_equal(p["defect"], default_defect):
             raise InputError("give either defect = [[x1, y1], [x2, y2]] or [[defects]] tables, not both")
         self._defects = parse_defects(p["defects"], p["defect"], p["delta"], p["width"], p["height"], p["mesh"])
+        for i, d in enumerate(self._defects):
+            # the interface stiffness ~ 1/delta must not swamp the elastic stiffness ~ E beyond double
+            # precision (at 1e-12 the elasticity still keeps 4 digits at N = 4096); scale-free
+            ratio = d["delta"] * p["E"] / max(p["width"], p["height"])
+            if ratio < MIN_DELTA_E_OVER_L:
+                raise InputError(f"delta of defect {i} ({d['delta']:g}) is too small for E = {p['E']:g} and the body "
+                                 f"size: delta * E / max(width, height) = {ratio:.1e} must be "
+                                 f">= {MIN_DELTA_E_OVER_L:g} "
+                                 f"(below it the defect is glued to double precision)")
         with np.errstate(all="ignore"):  # a NaN-producing expression is refused below, without warnings
             self._traction = resolve_load(p["load"], p["width"])
+
+    def size_estimate(self) -> tuple[int, str]:
+        """Unknowns before assembly: 2 per grid node (structured), or from the gmsh element size."""
+        p = self.params
+        if p["mesh"] == "structured":
+            return 2 * (p["N"] + 1) ** 2, f"N={p['N']}"
+        h = p["mesh_size"] or min(p["width"], p["height"]) / p["N"]
+        nodes = 1.2 * p["width"] * p["height"] / (0.5 * 3 ** 0.5 / 2 * h * h) / 2 + 1   # equilateral triangles
+        return int(2 * nodes), f"mesh_size={h:g}"
 
     # ----------------------------------------------------------------- mesh
     def _reference_mesh(self) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:

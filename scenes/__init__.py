@@ -1,0 +1,1 @@
+"""The scene library: small TOML scenes (``dualfem solve NAME``; ``dualfem list`` shows them)."""
