@@ -69,3 +69,29 @@ def test_malformed_toml(tmp_path, capsys):
     bad.write_text("N = [\n")
     assert main(["solve", str(bad)]) == 2
     assert "malformed TOML" in capsys.readouterr().err
+
+
+def test_solve_json_reports_stages_threads_and_memory(capsys):
+    """The JSON of solve carries time_s (assembly, setup, solve, total), threads and peak_rss_mb;
+    progress lines go to stderr only when the command runs longer than ~2 s (never to stdout)."""
+    rc = main(["solve", "f2", "--set", "N=16", "--solver", "pdas", "--json", "--threads", "1"])
+    out, err = capsys.readouterr()
+    rec = json.loads(out)
+    assert rc == 0 and rec["threads"] == 1 and rec["peak_rss_mb"] > 10
+    t = rec["time_s"]
+    assert {"assembly", "setup", "solve", "total"} <= set(t)
+    assert t["total"] >= t["assembly"] + t["setup"] + t["solve"]
+    assert rec["claimed_status"] == rec["status"] == "solved"
+    assert "dualfem solve:" not in err         # a quick solve prints no stages
+
+
+def test_stages_print_once_slow(capsys, monkeypatch):
+    from dualfem.cli import stages
+
+    monkeypatch.setattr(stages, "QUIET_FOR", 0.0)
+    s = stages.Stages("solve")
+    s("assembly", 0.5)
+    quiet = stages.Stages("solve", quiet=True)
+    quiet("assembly", 0.5)
+    err = capsys.readouterr().err
+    assert err.count("dualfem solve: assembly 0.50 s") == 1

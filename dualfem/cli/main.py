@@ -8,9 +8,11 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from collections.abc import Callable
 from typing import Any
 
+from dualfem.cli.stages import Stages
 from dualfem.core.errors import InputError, MissingDependency
 
 DEFAULT_SOLVER = "uzawa"
@@ -150,6 +152,9 @@ def _cfg_solve(p):
     p.add_argument("--vtk", metavar="FILE.vtu", default=None,
                    help="also write the solution for ParaView (displacement, stresses, defect jump/pressure)")
     p.add_argument("--xdmf", metavar="FILE.xdmf", default=None, help="the same as XDMF + HDF5 (needs h5py)")
+    p.add_argument("--threads", type=int, default=None, metavar="N",
+                   help="threads for BLAS and the factorization (default: all cores)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 
 
 @command("solve", "solve one scene with one solver")(_cfg_solve)
@@ -168,10 +173,20 @@ def cmd_solve(args) -> int:
         for path, kind in ((args.vtk, "vtu"), (args.xdmf, "xdmf")):
             if path:
                 check_path(path, kind)
+    threads = check_threads(args.threads)
+    stages = Stages("solve", quiet=args.quiet)
+    t0 = time.perf_counter()
     problem = scene_from_args(args)
-    qp = problem.build()
-    sol = run(solver, qp)
+    with thread_limit(threads):
+        t1 = time.perf_counter()
+        qp = problem.build()
+        t2 = time.perf_counter()
+        stages("assembly (mesh, matrices)", t2 - t1)
+        sol = run(solver, qp, progress=stages)
     rec = summary(qp, sol)
+    rec["time_s"] = {**rec["time_s"], "assembly": t2 - t1, "total": time.perf_counter() - t0}
+    rec["threads"] = threads
+    rec["peak_rss_mb"] = peak_rss_mb()
     post = getattr(args, "_post", None)
     if post:
         post(problem, qp, sol, rec)
@@ -188,6 +203,36 @@ def cmd_solve(args) -> int:
     else:
         print(human_summary(rec))
     return 0 if sol.status == Status.SOLVED else 1
+
+
+def check_threads(n: int | None) -> int:
+    """The thread count of ``--threads`` (default: every core of this machine), validated."""
+    import os
+
+    cores = os.cpu_count() or 1
+    if n is None:
+        return cores
+    if not 1 <= n <= 4 * cores:
+        raise InputError(f"--threads must be an integer in 1..{4 * cores} (4 x the {cores} cores), got {n}")
+    return n
+
+
+def thread_limit(n: int):
+    """Context limiting BLAS/OpenMP/MKL thread pools to ``n`` (threadpoolctl; a no-op without it)."""
+    import contextlib
+
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=n)
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process so far, in MB (Linux ru_maxrss is in KB)."""
+    import resource
+
+    return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
 
 
 def human_summary(rec: dict) -> str:

@@ -14,6 +14,7 @@ the plugin's own claim stays in ``Solution.info["claimed_status"]``.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -31,13 +32,16 @@ def make_solver(name: str, params: dict[str, Any] | None = None) -> Solver:
     return get_solver(name)(**(params or {}))
 
 
-def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, tol: float | None = None) -> Solution:
+def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, tol: float | None = None,
+        progress: Callable[[str, float], None] | None = None) -> Solution:
     """Solve ``qp`` with ``solver`` (an instance, or a registry name plus ``params``).
 
     ``tol``: the relative accuracy asked for (e.g. a benchmark tier, with the parameters of
     ``Solver.tolerance_params(tol)``); the answer is certified to ``max(tol, solver.tolerance)``.
-    Without it, to the tolerance the solver declares.
+    Without it, to the tolerance the solver declares. ``progress(stage, seconds)`` is called as
+    each stage (setup, solve, certify) finishes.
     """
+    tick = progress or (lambda stage, seconds: None)
     if isinstance(solver, str):
         solver = make_solver(solver, params)
     reason = solver.missing() or solver.skip(qp)
@@ -47,8 +51,10 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
     try:
         solver.setup(qp)
         t1 = time.perf_counter()
+        tick("setup (factorization)", t1 - t0)
         sol = solver.solve()
         t2 = time.perf_counter()
+        tick("solve (iterations)", t2 - t1)
     except InputError:
         raise
     except Exception as exc:  # the solver broke: say so, never hide it
@@ -64,6 +70,7 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
     declared = float(solver.tolerance) if asked is None else max(float(solver.tolerance), asked)
     certify_status(qp, sol, declared, bool(solver.exact))
     sol.time_s["certify"] = time.perf_counter() - t3
+    tick("certification", sol.time_s["certify"])
     return sol
 
 
