@@ -61,27 +61,9 @@ def scene_from_args(args: argparse.Namespace):
 
 def dumps(obj: Any) -> str:
     """JSON with NaN/inf written as null (valid JSON for every consumer)."""
-    return json.dumps(_clean(obj), indent=None)
+    from dualfem.core.io import jsonable
 
-
-def _clean(o: Any) -> Any:
-    import math
-
-    import numpy as np
-
-    if isinstance(o, dict):
-        return {str(k): _clean(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_clean(v) for v in o]
-    if isinstance(o, (np.floating, float)):
-        return float(o) if math.isfinite(o) else None
-    if isinstance(o, np.integer):
-        return int(o)
-    if isinstance(o, np.bool_):
-        return bool(o)
-    if isinstance(o, np.ndarray):
-        return _clean(o.tolist())
-    return o
+    return json.dumps(jsonable(obj), indent=None)
 
 
 # --------------------------------------------------------------------------- list

@@ -1,12 +1,33 @@
 """Atomic file output: a results file is either complete or absent, never half-written."""
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 from dualfem.core.errors import InputError
+
+
+def jsonable(o: Any) -> Any:
+    """Plain JSON data: numpy scalars and arrays as Python numbers and lists, NaN/inf as None."""
+    if isinstance(o, dict):
+        return {str(k): jsonable(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [jsonable(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return jsonable(o.tolist())
+    if isinstance(o, np.bool_):
+        return bool(o)
+    if isinstance(o, (float, np.floating)):
+        return float(o) if math.isfinite(o) else None
+    if isinstance(o, np.integer):
+        return int(o)
+    return o
 
 
 def check_output_path(path: str | Path, flag: str) -> Path:

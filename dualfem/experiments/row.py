@@ -15,10 +15,9 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-import numpy as np
-
 from dualfem.core.evaluator import RESIDUALS
 from dualfem.core.grade import grade
+from dualfem.core.io import jsonable
 
 
 @dataclass
@@ -159,17 +158,4 @@ _DICT_FIELDS = {"solver_params", "iterations", "coords"}
 COLUMNS = list(_NAMES)
 
 
-def _plain(v: Any) -> Any:
-    if isinstance(v, (float, np.floating)):
-        return float(v) if math.isfinite(v) else None
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, np.bool_):
-        return bool(v)
-    if isinstance(v, np.ndarray):
-        return [_plain(x) for x in v.tolist()]
-    if isinstance(v, dict):
-        return {str(k): _plain(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_plain(x) for x in v]
-    return v
+_plain = jsonable
