@@ -1,0 +1,1 @@
+"""Numerical building blocks: sparse factorization backends, threads and memory estimates."""
