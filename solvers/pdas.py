@@ -43,6 +43,7 @@ from dualfem.solution import Solution, Status
 from dualfem.solver import Solver, positive
 
 from dualfem.linalg import MAX_LOCAL, too_many_local  # noqa: E402  (shared with penalty, uzawa)
+from dualfem.numerics.factor import from_param  # noqa: E402
 
 
 class ReducedDualSolver(Solver):
@@ -56,7 +57,7 @@ class ReducedDualSolver(Solver):
         from dualfem.linalg import LocalReduction
 
         self.qp = qp
-        self.red = LocalReduction(qp)
+        self.red = LocalReduction(qp, factor=from_param(self))
         self.cho = self.red.S_cho
         self.D, self.b0 = self.red.dual()
 
@@ -77,9 +78,11 @@ class PDASSolver(ReducedDualSolver):
         "sigma": 1e-4,
         "max_backtracks": 30,
         "refine": 1,
+        "factor": "auto",         # K factorization: auto (--factor/DUALFEM_FACTOR/fastest) or a backend
     }
 
     def validate(self) -> None:
+        from_param(self)
         positive(self, "max_iter", "tol", "sigma", "max_backtracks")
         if self.params["refine"] < 0:
             raise InputError(f"parameter 'refine' of solver 'pdas' must be >= 0, got {self.params['refine']!r}")

@@ -91,3 +91,14 @@ def missing_fast_backend_hint(n_unknowns: int) -> str | None:
     return (f"{n_unknowns} unknowns: MKL PARDISO is not installed; it factorizes this kind of matrix "
             f"~2.4-3x faster than SuperLU on 2 cores (f2, N = 512: 4.3 s vs 12.8 s for factor + Schur "
             f"complement + solve, benchmarks/factor_backends.py). Install it with: pip install 'dualfem[pardiso]'")
+
+
+def from_param(solver) -> str | None:
+    """The backend a solver's ``factor`` parameter names ("auto" -> None: the process-wide choice).
+
+    Raises InputError for an unknown or uninstalled name (call it in ``Solver.validate``).
+    """
+    v = solver.params.get("factor", "auto")
+    if v is None or str(v).strip().lower() in ("", "auto"):
+        return None
+    return _check(v, f"parameter 'factor' of solver {solver.name!r} ('auto' or a backend)")
