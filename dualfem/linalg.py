@@ -33,6 +33,7 @@ import scipy.sparse as sp
 from .numerics.factor import Backend, Factorization
 from .numerics.factor import choose as choose_backend
 from .numerics.factor.ordering import geometric_nested_dissection, nested_dissection, ordering  # noqa: F401
+from .numerics.threads import ensure_threads
 from .qp import QP
 
 
@@ -104,6 +105,7 @@ def factor_fixed(qp: QP, factor: str | Backend | None = None, cache: FactorCache
     ``--factor`` / ``DUALFEM_FACTOR`` / the fastest installed); ``cache``: default DEFAULT_CACHE.
     """
     backend = choose_backend(factor)
+    ensure_threads()
     cache = DEFAULT_CACHE if cache is None else cache
     local = np.asarray(qp.local_dofs, np.int64)
     Kf = qp.K_fixed.tocsr()
@@ -127,6 +129,7 @@ def factor_fixed(qp: QP, factor: str | Backend | None = None, cache: FactorCache
 
 def sparse_factor(A: sp.spmatrix, factor: str | Backend | None = None) -> Factorization:
     """Factorization of a whole SPD sparse matrix by the chosen backend (no Schur set, not cached)."""
+    ensure_threads()
     return choose_backend(factor).factor(A)
 
 

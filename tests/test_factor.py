@@ -16,9 +16,9 @@ BACKENDS = fb.available()
 BOTH = pytest.mark.skipif("pardiso" not in BACKENDS, reason="pypardiso not installed")
 
 
-def _dense_schur(K: np.ndarray, I: np.ndarray) -> np.ndarray:
-    R = np.setdiff1d(np.arange(K.shape[0]), I)
-    return K[np.ix_(I, I)] - K[np.ix_(I, R)] @ np.linalg.solve(K[np.ix_(R, R)], K[np.ix_(R, I)])
+def _dense_schur(K: np.ndarray, loc: np.ndarray) -> np.ndarray:
+    R = np.setdiff1d(np.arange(K.shape[0]), loc)
+    return K[np.ix_(loc, loc)] - K[np.ix_(loc, R)] @ np.linalg.solve(K[np.ix_(R, R)], K[np.ix_(R, loc)])
 
 
 @pytest.mark.parametrize("name", BACKENDS)
@@ -26,20 +26,20 @@ def _dense_schur(K: np.ndarray, I: np.ndarray) -> np.ndarray:
 def test_backend_solves_and_schur(scene, name, scene_name, delta):
     _, qp = scene(scene_name, 16, delta)
     K = qp.K.toarray()
-    I = np.asarray(qp.local_dofs)[::-1].copy()          # any order: the Schur block follows it
-    f = fb.choose(name).factor(qp.K, local=I)
+    loc = np.asarray(qp.local_dofs)[::-1].copy()          # any order: the Schur block follows it
+    f = fb.choose(name).factor(qp.K, local=loc)
     rng = np.random.default_rng(1)
     b = rng.standard_normal((qp.n, 3))
     ref = np.linalg.solve(K, b)
     assert np.abs(f.solve(b) - ref).max() <= 1e-10 * np.abs(ref).max()
     assert np.abs(f.solve(b[:, 0]) - ref[:, 0]).max() <= 1e-10 * np.abs(ref).max()
-    S_ref = _dense_schur(K, I)
+    S_ref = _dense_schur(K, loc)
     S = f.schur()
     assert np.abs(S - S_ref).max() <= 1e-10 * np.abs(S_ref).max()
     # another order of the same set, and a set not declared at analysis (computed by solves)
-    p = rng.permutation(I.size)
-    assert np.abs(f.schur(I[p]) - S_ref[np.ix_(p, p)]).max() <= 1e-10 * np.abs(S_ref).max()
-    J = I[: I.size // 2]
+    p = rng.permutation(loc.size)
+    assert np.abs(f.schur(loc[p]) - S_ref[np.ix_(p, p)]).max() <= 1e-10 * np.abs(S_ref).max()
+    J = loc[: loc.size // 2]
     S_J = _dense_schur(K, J)
     assert np.abs(f.schur(J) - S_J).max() <= 1e-9 * np.abs(S_J).max()
     assert f.info["backend"] == name and f.info["time_s"]["factorize"] >= 0
@@ -53,11 +53,11 @@ def test_analysis_reused_across_deltas(scene, name):
     _, b = scene("f2", 16, 1e-9)
     Ka, Kb = a.K.tocsr(), b.K.tocsr()
     assert np.array_equal(Ka.indices, Kb.indices) and not np.allclose(Ka.data, Kb.data)
-    I = np.asarray(a.local_dofs)
-    f = fb.choose(name).make(I).analyze(Ka)
+    loc = np.asarray(a.local_dofs)
+    f = fb.choose(name).make(loc).analyze(Ka)
     f.factorize(Ka)
     f.factorize(Kb)
-    g = fb.choose(name).factor(Kb, local=I)
+    g = fb.choose(name).factor(Kb, local=loc)
     r = np.random.default_rng(2).standard_normal(b.n)
     x, y = f.solve(r), g.solve(r)
     assert np.abs(x - y).max() <= 1e-12 * np.abs(y).max()
