@@ -155,3 +155,38 @@ def test_missing_fast_backend_hint(monkeypatch):
     monkeypatch.setattr(fb, "_HINTED", False)
     monkeypatch.setattr(fb, "_AVAILABLE", {"pardiso": True, "cholmod": False, "superlu": True})
     assert fb.missing_fast_backend_hint(200_000) is None
+
+
+def test_memory_model_matches_its_calibration_and_uses_the_analysis():
+    from dualfem.numerics import memory
+
+    for n, build_peak, held in memory.CALIBRATION["build"]:
+        for b in ("superlu", "pardiso"):
+            extra = dict(memory.CALIBRATION[b])[n]
+            measured = max(build_peak, held + extra)
+            assert abs(memory.estimate_peak_bytes(n, b) / memory.MB - measured) <= 0.3 * measured + 40
+    n = 2_100_000
+    assert memory.estimate_peak_bytes(n, "superlu") > memory.estimate_peak_bytes(n, "pardiso")
+    big = {"peak_bytes": 100 * 2**30}
+    assert memory.estimate_peak_bytes(n, "pardiso", analysis=big) > 100 * 2**30
+    assert memory.available_bytes() > 0
+    ok, est, lim = memory.fits(n, "pardiso", limit_bytes=2**30)
+    assert not ok and est > lim
+    with pytest.raises(InputError, match="backend"):
+        memory.estimate_peak_bytes(n, "mumps")
+    with pytest.raises(InputError, match="n_unknowns"):
+        memory.estimate_peak_bytes(0)
+
+
+def test_threads_context_and_bad_counts():
+    from threadpoolctl import threadpool_info
+
+    from dualfem.numerics import threads
+
+    before = {d["filepath"]: d["num_threads"] for d in threadpool_info()}
+    with threads.threads(1) as k:
+        assert k == 1 and all(d["num_threads"] == 1 for d in threadpool_info())
+    assert {d["filepath"]: d["num_threads"] for d in threadpool_info()} == before
+    for bad in (0, -1, 1.5, "two"):
+        with pytest.raises(InputError, match="threads"):
+            threads.set_threads(bad)

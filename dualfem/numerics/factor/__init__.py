@@ -4,9 +4,12 @@
 the name given, else the process-wide choice (:func:`set_default`, e.g. from ``--factor``),
 else the environment variable ``DUALFEM_FACTOR``, else the fastest installed one.
 
-Preference pardiso > cholmod > superlu: factor + solve of the f2 stiffness matrix on 2 cores
-(benchmarks/factor_backends.py and shared/notes/performance.md): at N = 512 (526 k unknowns)
-PARDISO 3.5-4.8 s, CHOLMOD 5.7 s, SuperLU 9.3-12 s.
+Preference pardiso > cholmod > superlu, f2 at N = 512 (526 k unknowns), 2 cores shared with other
+jobs (benchmarks/factor_backends.py, two runs): factorization of K_fixed with the Schur complement
+onto the 1,020 defect unknowns + one solve (what the exact solvers' setup does) PARDISO 3.8-5.7 s,
+SuperLU 12.7-13.6 s; factor + solve of K PARDISO 6.0 s, SuperLU 8.0-9.1 s; peak RSS 1.33 GB vs
+3.03 GB. CHOLMOD (not installed here; shared/notes/performance.md) 5.7 s for K. Below ~50 k
+unknowns SuperLU is as fast or faster (N = 128: 0.29 s vs 0.36 s), but every backend is < 0.4 s.
 """
 from __future__ import annotations
 
@@ -88,9 +91,9 @@ def missing_fast_backend_hint(n_unknowns: int) -> str | None:
     if _HINTED or n_unknowns < HINT_MIN_UNKNOWNS or "pardiso" in available():
         return None
     _HINTED = True
-    return (f"{n_unknowns} unknowns: MKL PARDISO is not installed; it factorizes this kind of matrix "
-            f"~2.4-3x faster than SuperLU on 2 cores (f2, N = 512: 4.3 s vs 12.8 s for factor + Schur "
-            f"complement + solve, benchmarks/factor_backends.py). Install it with: pip install 'dualfem[pardiso]'")
+    return (f"{n_unknowns} unknowns: MKL PARDISO is not installed; it makes the exact solvers' factorization "
+            f"2.2-3.6x faster than SuperLU with less than half the memory (f2 N = 512 on 2 cores: 3.8-5.7 s "
+            f"vs 12.7-13.6 s, 1.3 GB vs 3.0 GB peak). Install it with: pip install 'dualfem[pardiso]'")
 
 
 def from_param(solver) -> str | None:

@@ -67,7 +67,7 @@ class CholmodFactorization(Factorization):
 
 class CholmodBackend(Backend):
     name = "cholmod"
-    install_hint = "pip install scikit-sparse  (needs SuiteSparse/CHOLMOD)"
+    install_hint = "pip install 'dualfem[cholmod]'  (scikit-sparse; needs SuiteSparse headers)"
 
     @classmethod
     def available(cls) -> bool:
