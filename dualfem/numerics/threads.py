@@ -16,6 +16,11 @@ jobs (load average ~3.9), median of 5 (benchmarks/factor_backends.py --dense):
 | 1020 x 255 | 25 ms / 983 ms | 38 ms / 136 ms | 0.31 ms / 15.6 ms |
 | 2044 x 511 | 143 ms / 1726 ms | 229 ms / 380 ms | 2.2 ms / 15.8 ms |
 
+A second run (load average 6): 1020: 9.6 / 532, 15 / 76, 0.11 / 8.2 ms; 2044: 73 / 1096, 113 / 212,
+1.1 / 11.7 ms. PARDISO itself (N = 256, Schur + solve, medians of 3, two alternations) showed no
+consistent difference between 1 and 2 threads under that load (1.16/1.02 s vs 1.21/0.81 s), so it
+keeps all cores, the issue's default.
+
 (Two OpenBLAS threads that compete with other busy threads spin and lose 4-40x; one thread
 never does.) :func:`set_threads` loads pypardiso's MKL first so that threadpoolctl sees it.
 """
