@@ -190,3 +190,15 @@ def test_threads_context_and_bad_counts():
     for bad in (0, -1, 1.5, "two"):
         with pytest.raises(InputError, match="threads"):
             threads.set_threads(bad)
+
+
+@pytest.mark.parametrize("name", BACKENDS)
+def test_schur_onto_every_unknown_is_the_matrix(name):
+    """A QP whose constraints touch every unknown (e.g. an obstacle problem, B = I): S = A."""
+    n = 40
+    A = sp.diags([-np.ones(n - 1), 2.5 * np.ones(n), -np.ones(n - 1)], [-1, 0, 1], format="csr")
+    loc = np.arange(n)[::-1].copy()
+    f = fb.choose(name).factor(A, local=loc)
+    assert np.abs(f.schur() - A.toarray()[np.ix_(loc, loc)]).max() <= 1e-12 * 2.5
+    b = np.arange(n, dtype=float)
+    assert np.abs(A @ f.solve(b) - b).max() <= 1e-12 * n

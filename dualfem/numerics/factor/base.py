@@ -158,7 +158,9 @@ def _square_csr(A: sp.spmatrix) -> sp.csr_matrix:
     A = sp.csr_matrix(A, dtype=float)
     if A.shape[0] != A.shape[1]:
         raise ValueError(f"matrix must be square, got shape {A.shape}")
-    A.sort_indices()
+    if not A.has_canonical_format:      # sorted, no duplicates (PARDISO needs both); never touch the caller's
+        A = A.copy()
+        A.sum_duplicates()
     return A
 
 

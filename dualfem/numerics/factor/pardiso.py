@@ -84,12 +84,15 @@ class PardisoFactorization(Factorization):
         ip[9] = 8          # pivot perturbation 1e-8 (unused for SPD)
         ip[17] = -1        # report the factor's nonzeros
         ip[34] = 1         # zero-based indices
-        ip[35] = 2 if self.local.size else 0
+        # Schur by PARDISO only when something is eliminated; onto all unknowns S = A (no
+        # Schur mode: an empty eliminated block is an edge case of MKL best not entered)
+        self._all_local = self.local.size == self.n
+        ip[35] = 2 if 0 < self.local.size < self.n else 0
         self._iparm = ip
         self._perm = np.zeros(self.n, np.int32)
         self._perm[self.local] = 1
         self._alive = True
-        dummy = np.zeros(1)
+        dummy = np.zeros(self.n)
         self._call(11, dummy, dummy.copy())
         kb = 1024
         self.info.update({"factor_nnz": int(ip[17]), "analysis_peak_bytes": int(ip[14]) * kb,
@@ -101,8 +104,12 @@ class PardisoFactorization(Factorization):
     def _factorize(self, A: sp.csr_matrix) -> None:
         self._a = np.ascontiguousarray(sp.triu(A, format="csr").data, float)
         ns = self.local.size
-        x = np.zeros(max(ns * ns, 1))
-        self._call(22, np.zeros(1), x)
+        if self._all_local:
+            self._call(22, np.zeros(self.n), np.zeros(self.n))
+            self._schur_buf = A[self.local][:, self.local].toarray()
+            return
+        x = np.zeros(max(ns * ns, self.n))
+        self._call(22, np.zeros(max(ns * ns, self.n)), x)
         if ns:
             S = x[: ns * ns].reshape(ns, ns)                     # rows/cols: local in increasing order
             rank = np.argsort(np.argsort(self.local))            # position of local[i] in sorted order
@@ -120,7 +127,7 @@ class PardisoFactorization(Factorization):
 
     def free(self) -> None:
         if self._alive:
-            dummy = np.zeros(1)
+            dummy = np.zeros(max(self.n, 1))
             try:
                 self._call(-1, dummy, dummy.copy())
             finally:
