@@ -37,6 +37,8 @@ from dualfem.core.errors import InputError
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver, positive
+from dualfem.numerics.factor import from_param
+from dualfem.numerics.linalg import sparse_factor
 
 
 @register_solver
@@ -52,11 +54,13 @@ class DualGradient(Solver):
         "accelerate": True,    # FISTA with gradient restart; False: plain projected gradient
         "step_safety": 1.0,    # step = step_safety / L; must be in (0, 2)
         "max_n": 20000,        # skip QPs with more unknowns than this
+        "factor": "auto",      # K factorization: auto (--factor/DUALFEM_FACTOR/fastest) or a backend
     }
     tolerance = 1e-6
     exact = True
 
     def validate(self) -> None:
+        from_param(self)
         positive(self, "tol", "max_iter", "max_n")
         s = self.params["step_safety"]
         if not (isinstance(s, (int, float)) and 0 < s < 2):
@@ -77,7 +81,7 @@ class DualGradient(Solver):
 
     def setup(self, qp) -> None:
         self.qp = qp
-        self._lu = sla.splu(qp.K.tocsc(), permc_spec="MMD_AT_PLUS_A")
+        self._lu = sparse_factor(qp.K, from_param(self))
         B = qp.B
         if qp.m == 0:
             self.L = 1.0

@@ -41,6 +41,7 @@ from dualfem.core.errors import InputError
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver, positive
+from dualfem.numerics.factor import from_param  # noqa: E402
 from dualfem.numerics.linalg import MAX_LOCAL, too_many_local  # noqa: E402  (shared with penalty, uzawa)
 
 
@@ -55,7 +56,7 @@ class ReducedDualSolver(Solver):
         from dualfem.numerics.linalg import LocalReduction
 
         self.qp = qp
-        self.red = LocalReduction(qp)
+        self.red = LocalReduction(qp, factor=from_param(self))
         self.cho = self.red.S_cho
         self.D, self.b0 = self.red.dual()
 
@@ -76,9 +77,11 @@ class PDASSolver(ReducedDualSolver):
         "sigma": 1e-4,
         "max_backtracks": 30,
         "refine": 1,
+        "factor": "auto",         # K factorization: auto (--factor/DUALFEM_FACTOR/fastest) or a backend
     }
 
     def validate(self) -> None:
+        from_param(self)
         positive(self, "max_iter", "tol", "sigma", "max_backtracks")
         if self.params["refine"] < 0:
             raise InputError(f"parameter 'refine' of solver 'pdas' must be >= 0, got {self.params['refine']!r}")

@@ -44,6 +44,7 @@ import scipy.linalg as sla
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import positive
+from dualfem.numerics.factor import from_param
 
 from .pdas import ReducedDualSolver
 
@@ -67,9 +68,11 @@ class PenaltySolver(ReducedDualSolver):
         "max_newton": 50,
         "sigma": 1e-4,
         "max_backtracks": 40,
+        "factor": "auto",         # K factorization: auto (--factor/DUALFEM_FACTOR/fastest) or a backend
     }
 
     def validate(self) -> None:
+        from_param(self)
         positive(self, "penetration_tol", "rho0_factor", "rho_growth", "rho_max_factor",
                  "newton_tol", "max_newton", "sigma", "max_backtracks")
         from dualfem.core.errors import InputError

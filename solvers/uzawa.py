@@ -67,12 +67,13 @@ import time
 import numpy as np
 import scipy.linalg as la
 import scipy.sparse as sp
-import scipy.sparse.linalg as sla
 
 from dualfem.core.errors import InputError
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver, positive
+from dualfem.numerics.factor import from_param
+from dualfem.numerics.linalg import sparse_factor
 
 
 def _contraction(history: list[dict], last: int = 5) -> float:
@@ -86,13 +87,13 @@ def _contraction(history: list[dict], last: int = 5) -> float:
 class _ReducedSpace:
     """Dense linear algebra on the local unknowns I (exact reduction)."""
 
-    def __init__(self, qp, norm: str):
+    def __init__(self, qp, norm: str, factor: str | None = None):
         from dualfem.numerics.linalg import LocalReduction
 
         if norm != "energy":
             raise InputError("parameter 'inner_norm' of solver 'uzawa' must be 'energy' with "
                              "linalg='reduced' ('euclidean' needs linalg='full')")
-        self.red = red = LocalReduction(qp)
+        self.red = red = LocalReduction(qp, factor=factor)
         self.Q, self.q, self.B = red.S, red.g, red.BI
         self.c0 = red.c0
         self._chol_S = la.cho_factor(self.Q, lower=True, check_finite=False)
@@ -137,14 +138,14 @@ class _ReducedSpace:
 class _FullSpace:
     """Textbook sparse linear algebra on all unknowns (refactorizes every Newton step)."""
 
-    def __init__(self, qp, norm: str):
-        self.Q, self.q, self.B = qp.K.tocsc(), qp.F, qp.B.tocsr()
-        self.qp, self.norm = qp, norm
+    def __init__(self, qp, norm: str, factor: str | None = None):
+        self.Q, self.q, self.B = qp.K.tocsr(), qp.F, qp.B.tocsr()
+        self.qp, self.norm, self.factor = qp, norm, factor
         self.factorizations = 0
 
     def start(self):
         self.factorizations += 1
-        return sla.splu(self.Q, permc_spec="MMD_AT_PLUS_A").solve(self.q)
+        return sparse_factor(self.Q, self.factor).solve(self.q)
 
     def qgrad(self, z):
         return self.Q @ z - self.q
@@ -156,15 +157,15 @@ class _FullSpace:
         return float(z @ (self.Q @ z)) if self.norm == "energy" else float(z @ z)
 
     def newton(self, coef, rhs):
-        H = (self.Q + self.B.T @ sp.diags(coef) @ self.B).tocsc()
+        H = (self.Q + self.B.T @ sp.diags(coef) @ self.B).tocsr()
         self.factorizations += 1
-        return sla.splu(H, permc_spec="MMD_AT_PLUS_A").solve(rhs)
+        return sparse_factor(H, self.factor).solve(rhs)
 
     def full(self, z):
         return z
 
     def dual_compliance(self, w):
-        return _ReducedSpace(self.qp, "energy").dual_compliance(w)
+        return _ReducedSpace(self.qp, "energy", self.factor).dual_compliance(w)
 
 
 @register_solver
@@ -188,6 +189,7 @@ class Uzawa(Solver):
         "max_backtracks": 80,
         "l0": 0.0,                # starting pressure l^0 (same at every defect node)
         "linalg": "reduced",      # "reduced" (fast, exact) or "full" (textbook)
+        "factor": "auto",         # K factorization: auto (--factor/DUALFEM_FACTOR/fastest) or a backend
         "inner_norm": "energy",   # norm of the inner stop test
         "shortcut": True,         # return the unconstrained minimizer when it is admissible
         "stall_window": 1000,     # stop with 'stagnation' if the dual change has not improved for this many outer its
@@ -196,6 +198,7 @@ class Uzawa(Solver):
     }
 
     def validate(self) -> None:
+        from_param(self)
         positive(self, "r", "r_factor", "error_factor", "tol_outer", "tol_inner", "armijo_c", "max_outer", "max_inner",
                  "max_backtracks", "stall_window")
         p = self.params
@@ -233,7 +236,7 @@ class Uzawa(Solver):
     def setup(self, qp) -> None:
         self.qp = qp
         space = _ReducedSpace if self.params["linalg"] == "reduced" else _FullSpace
-        self.space = space(qp, self.params["inner_norm"])
+        self.space = space(qp, self.params["inner_norm"], from_param(self))
         self.r = float(self.params["r"])
         self._mu = None
         if self.params["r_rule"] == "auto" and qp.m:

@@ -6,11 +6,12 @@ import shlex
 import sys
 from pathlib import Path
 
-from dualfem.cli.main import command
+from dualfem.cli.main import add_factor_arg, apply_factor, command
 from dualfem.core.errors import InputError
 
 
 def _cfg(p):
+    add_factor_arg(p)
     p.add_argument("spec", metavar="SPEC.toml", help="sweep spec (see benchmarks/default.toml)")
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="parallel worker processes (joblib/loky); default 1 (timings are cleanest serially)")
@@ -28,6 +29,7 @@ def _cfg(p):
 
 @command("bench", "run (or resume) a benchmark sweep: every solver, error against time")(_cfg)
 def cmd_bench(args) -> int:
+    apply_factor(args)
     from dualfem.experiments.bench import run_sweep
     from dualfem.experiments.spec import load_spec
     from dualfem.experiments.store import default_out

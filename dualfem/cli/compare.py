@@ -9,12 +9,13 @@ one JSON object on stdout; one progress line per finished solver goes to stderr.
 """
 from __future__ import annotations
 
-from dualfem.cli.main import add_scene_args, command, dumps, scene_from_args
+from dualfem.cli.main import add_factor_arg, add_scene_args, apply_factor, command, dumps, scene_from_args
 from dualfem.core.errors import InputError
 from dualfem.core.quiet import c_stdout_to_stderr
 
 
 def _cfg(p):
+    add_factor_arg(p)
     add_scene_args(p)
     p.add_argument("--solvers", default=None, metavar="A,B,...",
                    help="comma-separated solver names (default: every registered solver)")
@@ -41,6 +42,7 @@ def parse_solver_params(items: list[str], names: list[str]) -> dict[str, dict[st
 
 @command("compare", "run several solvers on one scene and cross-check them against a certified reference")(_cfg)
 def cmd_compare(args) -> int:
+    apply_factor(args)
     from dualfem.core.registry import get_solver
     from dualfem.experiments.compare import compare_solvers, default_solvers, stderr_progress, table
 

@@ -40,6 +40,25 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
                    help="override a scene parameter (N, delta, plane, E, nu, load, ...)")
 
 
+def add_factor_arg(p: argparse.ArgumentParser) -> None:
+    """``--factor NAME``: the sparse factorization backend (default: $DUALFEM_FACTOR, else the fastest installed)."""
+    p.add_argument("--factor", default=None, metavar="NAME",
+                   help="factorization backend: pardiso, cholmod or superlu (default: the environment variable "
+                        "DUALFEM_FACTOR, else the fastest installed)")
+
+
+def apply_factor(args: argparse.Namespace) -> str:
+    """Make ``--factor`` the process-wide backend (and the one worker processes inherit); its name."""
+    import os
+
+    from dualfem.numerics.factor import get_default, set_default
+
+    if getattr(args, "factor", None):
+        set_default(args.factor)                       # InputError for an unknown/uninstalled name
+        os.environ["DUALFEM_FACTOR"] = get_default()
+    return get_default()
+
+
 def add_param_args(p: argparse.ArgumentParser) -> None:
     """``--param KEY=VALUE`` for solver parameters."""
     p.add_argument("-p", "--param", action="append", default=[], metavar="KEY=VALUE",
@@ -48,8 +67,8 @@ def add_param_args(p: argparse.ArgumentParser) -> None:
 
 def scene_from_args(args: argparse.Namespace):
     """Problem instance from SCENE + --set."""
-    from dualfem.core.memory import check_fits
     from dualfem.core.scene import load_scene, parse_set
+    from dualfem.numerics.memory import check_fits
 
     problem = load_scene(args.scene, parse_set(args.set))
     mm = getattr(args, "max_memory", None)
@@ -135,8 +154,9 @@ def _cfg_solve(p):
                    help="also write the solution for ParaView (displacement, stresses, defect jump/pressure)")
     p.add_argument("--xdmf", metavar="FILE.xdmf", default=None, help="the same as XDMF + HDF5 (needs h5py)")
     p.add_argument("--threads", type=int, default=None, metavar="N",
-                   help="threads for BLAS and the factorization (default: all cores)")
+                   help="threads for the factorization (default: all cores; dense phases use what is fastest)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    add_factor_arg(p)
 
 
 @command("solve", "solve one scene with one solver")(_cfg_solve)
@@ -155,18 +175,25 @@ def cmd_solve(args) -> int:
         for path, kind in ((args.vtk, "vtu"), (args.xdmf, "xdmf")):
             if path:
                 check_path(path, kind)
-    threads = check_threads(args.threads)
+    from dualfem.numerics.factor import missing_fast_backend_hint
+    from dualfem.numerics.threads import set_threads
+
+    factor = apply_factor(args)
+    threads = set_threads(check_threads(args.threads))
     stages = Stages("solve", quiet=args.quiet)
     t0 = time.perf_counter()
     problem = scene_from_args(args)
-    with thread_limit(threads):
-        t1 = time.perf_counter()
-        qp = problem.build()
-        t2 = time.perf_counter()
-        stages("assembly (mesh, matrices)", t2 - t1)
-        sol = run(solver, qp, progress=stages)
+    t1 = time.perf_counter()
+    qp = problem.build()
+    t2 = time.perf_counter()
+    stages("assembly (mesh, matrices)", t2 - t1)
+    hint = missing_fast_backend_hint(qp.n)
+    if hint and not args.quiet:
+        print(f"dualfem solve: note: {hint}", file=sys.stderr)
+    sol = run(solver, qp, progress=stages)
     rec = summary(qp, sol)
     rec["time_s"] = {**rec["time_s"], "assembly": t2 - t1, "total": time.perf_counter() - t0}
+    rec["factor"] = factor
     rec["threads"] = threads
     rec["peak_rss_mb"] = peak_rss_mb()
     post = getattr(args, "_post", None)
@@ -197,17 +224,6 @@ def check_threads(n: int | None) -> int:
     if not 1 <= n <= 4 * cores:
         raise InputError(f"--threads must be an integer in 1..{4 * cores} (4 x the {cores} cores), got {n}")
     return n
-
-
-def thread_limit(n: int):
-    """Context limiting BLAS/OpenMP/MKL thread pools to ``n`` (threadpoolctl; a no-op without it)."""
-    import contextlib
-
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=n)
 
 
 def peak_rss_mb() -> float:

@@ -7,11 +7,12 @@ import sys
 import time
 from pathlib import Path
 
-from dualfem.cli.main import command
+from dualfem.cli.main import add_factor_arg, apply_factor, command
 from dualfem.core.errors import InputError
 
 
 def _cfg(p):
+    add_factor_arg(p)
     p.add_argument("--quick", action="store_true",
                    help="small version: N=16 base scene, load f2 only on the delta axis, N up to 128, "
                         "20 s per-run time limit (default: N=32, loads f1/f2/f3, N up to 1024, 120 s)")
@@ -35,6 +36,7 @@ def _cfg(p):
 
 @command("stress", "run the numerical-stability grid (delta, r, units, load, nu, N) over every solver")(_cfg)
 def cmd_stress(args) -> int:
+    apply_factor(args)
     from dualfem.core.errors import check_int, check_positive
     from dualfem.core.registry import solvers
     from dualfem.experiments import reference, stress

@@ -55,12 +55,12 @@ def refinement_step(qp: QP, ksolve, D: np.ndarray, x: np.ndarray, mu: np.ndarray
 
 
 class _SparseK:
-    """Fallback K-solver (a sparse LU of K) when the QP has no usable local structure."""
+    """Fallback K-solver (the chosen backend's factorization of K) when the QP has no usable local structure."""
 
-    def __init__(self, qp: QP):
-        import scipy.sparse.linalg as spla
+    def __init__(self, qp: QP, factor=None):
+        from dualfem.numerics.linalg import sparse_factor
 
-        self.lu = spla.splu(qp.K.tocsc())
+        self.lu = sparse_factor(qp.K, factor)
 
     def solve(self, r):
         return self.lu.solve(r)
@@ -70,15 +70,15 @@ class KSolver:
     """r -> K^-1 r (cached local reduction when possible, else a sparse LU), and the Delassus
     matrix D = B K^-1 B' (dense, from the reduction, or by m solves for small m)."""
 
-    def __init__(self, qp: QP):
+    def __init__(self, qp: QP, factor=None):
         self.qp = qp
         self.red = None
         try:
             from dualfem.numerics.linalg import LocalReduction
 
-            self.red = LocalReduction(qp)
-        except Exception:  # noqa: BLE001 - any structure problem: plain sparse LU
-            self._lu = _SparseK(qp)
+            self.red = LocalReduction(qp, factor=factor)
+        except Exception:  # noqa: BLE001 - any structure problem: a plain sparse factorization of K
+            self._lu = _SparseK(qp, factor)
         self._D: np.ndarray | None = None
 
     def __call__(self, r: np.ndarray) -> np.ndarray:

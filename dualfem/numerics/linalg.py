@@ -9,10 +9,11 @@ So the QP reduces exactly to the local unknowns:
     Pi(x) = 1/2 x_I' S x_I - g' x_I + c0,    S = S_fixed + K_param[I, I],
     S_fixed = K_II - K_IR K_RR^-1 K_RI       (dense, |I| x |I|, |I| = 4 m for the defect)
 
-:class:`FixedFactor` factorizes ``K_fixed`` once, with a nested-dissection ordering of R and the
-unknowns I ordered *last*; then the trailing blocks of the LU factors give the Schur complement
-directly, ``S_fixed = L_II U_II`` (no extra solves). It is cached by a hash of ``K_fixed`` and
-I, so every delta, load case and solver that shares the mesh reuses it.
+:class:`FixedFactor` factorizes ``K_fixed`` once with a backend of :mod:`dualfem.numerics.factor`
+(PARDISO computes S_fixed itself; SuperLU/CHOLMOD order I *last* and read S_fixed from the
+trailing blocks of the factors, no extra solves). It is cached in a :class:`FactorCache` by a
+hash of ``K_fixed``, I and the backend, so every delta, load case and solver that shares the mesh
+reuses it.
 
 :class:`LocalReduction` is what solvers use: ``S``, ``g``, ``B_I`` (dense), ``full(x_I)`` to
 recover all of x with one more solve, ``c0`` (energy constant), ``k_solve`` (K^-1 r for the whole
@@ -28,15 +29,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg as dla
 import scipy.sparse as sp
-import scipy.sparse.csgraph as csgraph
-import scipy.sparse.linalg as sla
 
 from dualfem.core.qp import QP
-
-#: unknowns per leaf of the nested dissection
-_LEAF = 64
-_CACHE: OrderedDict[str, FixedFactor] = OrderedDict()
-_CACHE_SIZE = 4
+from dualfem.numerics.factor import Backend, Factorization
+from dualfem.numerics.factor import choose as choose_backend
+from dualfem.numerics.factor.ordering import geometric_nested_dissection, nested_dissection, ordering  # noqa: F401
+from dualfem.numerics.threads import ensure_threads
 
 
 def _hash(*arrays: np.ndarray) -> str:
@@ -46,248 +44,98 @@ def _hash(*arrays: np.ndarray) -> str:
     return h.hexdigest()
 
 
-# ----------------------------------------------------------------------------- ordering
-def nested_dissection(adj: sp.csr_matrix, leaf: int = _LEAF) -> np.ndarray:
-    """Fill-reducing elimination order of a symmetric sparsity graph (level-set separators).
-
-    Each part is split by a middle breadth-first level set seen from a pseudo-peripheral
-    vertex; the two halves are ordered recursively, the separator last. Works on any mesh graph.
-    """
-    adj = sp.csr_matrix(adj)
-    adj = (adj + adj.T).tocsr()
-    adj.setdiag(0)
-    adj.eliminate_zeros()
-    adj.data[:] = 1.0
-    out: list[np.ndarray] = []
-
-    def rec(part: np.ndarray, sub: sp.csr_matrix) -> None:
-        if part.size <= leaf:
-            out.append(part)
-            return
-        ncomp, lab = csgraph.connected_components(sub, directed=False)
-        if ncomp > 1:
-            for c in range(ncomp):
-                idx = np.flatnonzero(lab == c)
-                rec(part[idx], sub[idx][:, idx])
-            return
-        dist = csgraph.breadth_first_order(sub, 0, directed=False, return_predecessors=False)
-        far = dist[-1]
-        lev = _levels(sub, far)
-        lev = _levels(sub, int(np.argmax(lev)))
-        counts = np.bincount(lev)
-        cum = np.cumsum(counts)
-        mid = int(np.searchsorted(cum, part.size / 2))
-        mid = min(max(mid, 1), len(counts) - 2) if len(counts) >= 3 else None
-        if mid is None:
-            out.append(part)
-            return
-        a = np.flatnonzero(lev < mid)
-        b = np.flatnonzero(lev > mid)
-        s = np.flatnonzero(lev == mid)
-        rec(part[a], sub[a][:, a])
-        rec(part[b], sub[b][:, b])
-        out.append(part[s])
-
-    n = adj.shape[0]
-    rec(np.arange(n), adj)
-    perm = np.concatenate(out) if out else np.arange(0)
-    assert perm.size == n
-    return perm
-
-
-def geometric_nested_dissection(coords: np.ndarray, adj: sp.spmatrix, leaf: int = _LEAF) -> np.ndarray:
-    """Fill-reducing order from node coordinates: recursive median bisection, all parts at once.
-
-    Each part is cut at the median of its longer coordinate extent; the vertex separator is the
-    set of nodes on the upper side with a neighbour on the lower side (on a structured mesh, one
-    grid line: the shortest possible separator). Parts are processed level by level with
-    vectorized numpy, so the cost is O(n log n) with no per-part Python overhead.
-    """
-    n = coords.shape[1]
-    if n == 0:
-        return np.zeros(0, np.int64)
-    adj = sp.coo_matrix(adj)
-    ei, ej = adj.row, adj.col
-    keep = ei != ej
-    ei, ej = np.r_[ei[keep], ej[keep]], np.r_[ej[keep], ei[keep]]
-    part = np.zeros(n, np.int64)        # current part id; -1 once a node's position is final
-    code = np.zeros(n, np.int64)        # base-3 path: 0 = lower half, 1 = upper half, 2 = separator
-    depth = np.zeros(n, np.int64)
-    d = 0
-    while True:
-        act = np.flatnonzero(part >= 0)
-        if act.size == 0:
-            break
-        sizes = np.bincount(part[act])
-        small = sizes[part[act]] <= leaf
-        part[act[small]] = -1                   # leaves: final, internal order = index order
-        act = act[~small]
-        if act.size == 0:
-            break
-        # longer extent of each part's bounding box, then the median along it
-        pid = part[act]
-        order = np.argsort(pid, kind="stable")
-        a_sorted, p_sorted = act[order], pid[order]
-        starts = np.flatnonzero(np.r_[True, p_sorted[1:] != p_sorted[:-1]])
-        ext = [np.maximum.reduceat(coords[k, a_sorted], starts) - np.minimum.reduceat(coords[k, a_sorted], starts)
-               for k in range(coords.shape[0])]
-        axis_of = np.argmax(np.vstack(ext), axis=0)              # per part (in 'starts' order)
-        uniq = p_sorted[starts]
-        axis_map = np.zeros(part.max() + 1, np.int64)
-        axis_map[uniq] = axis_of
-        c = coords[axis_map[pid], act]
-        o2 = np.lexsort((c, pid))
-        a2, p2, c2 = act[o2], pid[o2], c[o2]
-        st2 = np.flatnonzero(np.r_[True, p2[1:] != p2[:-1]])
-        cnt = np.diff(np.r_[st2, a2.size])
-        med = np.zeros(part.max() + 1)
-        med[p2[st2]] = c2[st2 + cnt // 2]
-        upper = np.zeros(n, bool)
-        upper[act] = c >= med[pid]
-        # separator: upper-side nodes adjacent to a lower-side node of the same part
-        same = (part[ei] == part[ej]) & (part[ei] >= 0)
-        lower_i = same & ~upper[ei] & upper[ej]
-        sep = np.zeros(n, bool)
-        sep[ej[lower_i]] = True
-        sep &= part >= 0
-        digit = np.where(sep, 2, np.where(upper, 1, 0))
-        code[act] = code[act] * 3 + digit[act]
-        depth[act] += 1
-        newpart = part.copy()
-        newpart[act] = 2 * part[act] + (digit[act] == 1)
-        newpart[sep] = -1
-        # compact the part ids
-        live = newpart >= 0
-        present = np.zeros(2 * int(part.max()) + 2, bool)
-        present[newpart[live]] = True
-        newpart[live] = (np.cumsum(present) - 1)[newpart[live]]
-        part = newpart
-        d += 1
-        if d > 60:
-            raise RuntimeError("geometric nested dissection did not terminate")
-    key = code * (3 ** (depth.max() - depth))
-    return np.argsort(key, kind="stable")
-
-
-def _levels(g: sp.csr_matrix, src: int) -> np.ndarray:
-    d = csgraph.shortest_path(g, method="D", unweighted=True, indices=src)
-    return d.astype(np.int64)
-
-
-def _node_groups(qp: QP) -> np.ndarray | None:
-    """(k, n_nodes) array of the unknowns of each mesh node, if the QP carries ``node_dofs``."""
-    nd = qp.maps.get("node_dofs")
-    if nd is None:
-        return None
-    nd = np.asarray(nd)
-    keep = np.all(nd >= 0, axis=0)
-    return nd[:, keep]
-
-
-def ordering(qp: QP, local: np.ndarray) -> np.ndarray:
-    """Order of all unknowns: nested dissection of the non-local ones, then ``local`` last."""
-    n = qp.n
-    is_local = np.zeros(n, bool)
-    is_local[local] = True
-    groups = _node_groups(qp)
-    pattern = qp.K_fixed.tocsr()
-    if groups is not None and np.all(is_local[groups].all(axis=0) | ~is_local[groups].any(axis=0)) \
-            and np.unique(groups).size == groups.size and groups.size == n:
-        # compress to the node graph (all components of a node together)
-        node_of = np.empty(n, np.int64)
-        node_of[groups.ravel()] = np.tile(np.arange(groups.shape[1]), groups.shape[0])
-        nn = groups.shape[1]
-        P = sp.csr_matrix((np.ones(n), (node_of, np.arange(n))), shape=(nn, n))
-        G = (P @ (pattern != 0).astype(float) @ P.T).tocsr()
-        rest_nodes = np.flatnonzero(~is_local[groups[0]])
-        Gr = G[rest_nodes][:, rest_nodes]
-        coords = qp.maps.get("nodes")
-        if coords is not None and np.asarray(qp.maps.get("node_dofs")).shape[1] == np.asarray(coords).shape[1]:
-            xy = np.asarray(coords, float)[:, np.all(np.asarray(qp.maps["node_dofs"]) >= 0, axis=0)][:, rest_nodes]
-            order_nodes = rest_nodes[geometric_nested_dissection(xy, Gr)]
-        else:
-            order_nodes = rest_nodes[nested_dissection(Gr)]
-        rest = groups[:, order_nodes].T.ravel()
-    else:
-        rest_idx = np.flatnonzero(~is_local)
-        rest = rest_idx[nested_dissection(pattern[rest_idx][:, rest_idx])]
-    return np.concatenate([rest, np.asarray(local, np.int64)])
-
-
 # --------------------------------------------------------------------------- factor
 @dataclass
 class FixedFactor:
-    """LU of ``K_fixed`` with the local unknowns last, and its Schur complement onto them."""
+    """Factorization of ``K_fixed`` (by the chosen backend) and its Schur complement onto the local unknowns."""
 
     n: int
     local: np.ndarray
-    perm: np.ndarray
-    lu: object
+    fact: Factorization
     S_fixed: np.ndarray
     time_s: dict = field(default_factory=dict)
 
+    @property
+    def backend(self) -> str:
+        """Name of the factorization backend (superlu, pardiso, cholmod)."""
+        return self.fact.backend
+
     def solve(self, b: np.ndarray) -> np.ndarray:
-        """K_fixed^-1 b."""
-        pb = b[self.perm]
-        y = self.lu.solve(pb)
-        x = np.empty_like(y)
-        x[self.perm] = y
-        return x
+        """K_fixed^-1 b (b of shape (n,) or (n, k))."""
+        return self.fact.solve(b)
 
 
-def factor_fixed(qp: QP) -> FixedFactor:
-    """Factorize ``qp.K_fixed`` with ``qp.local_dofs`` last (cached across QPs sharing them)."""
+class FactorCache:
+    """Factorizations of ``K_fixed`` kept by (values of K_fixed, local unknowns, backend), LRU.
+
+    Every delta, load case and solver sharing the mesh reuses one entry. ``DEFAULT_CACHE`` is the
+    process-wide instance :func:`factor_fixed` uses unless given another one.
+    """
+
+    def __init__(self, size: int = 4):
+        self.size = int(size)
+        self._d: OrderedDict[str, FixedFactor] = OrderedDict()
+
+    def get(self, key: str) -> FixedFactor | None:
+        ff = self._d.get(key)
+        if ff is not None:
+            self._d.move_to_end(key)
+        return ff
+
+    def put(self, key: str, ff: FixedFactor) -> None:
+        self._d[key] = ff
+        while len(self._d) > self.size:
+            self._d.popitem(last=False)
+
+    def clear(self) -> None:
+        """Forget every entry (their memory is released when no solver holds them any more)."""
+        self._d.clear()
+
+    def __len__(self) -> int:
+        return len(self._d)
+
+
+DEFAULT_CACHE = FactorCache()
+
+
+def factor_fixed(qp: QP, factor: str | Backend | None = None, cache: FactorCache | None = None) -> FixedFactor:
+    """Factorize ``qp.K_fixed`` with its Schur complement onto ``qp.local_dofs`` (cached).
+
+    ``factor``: backend name or object (default: :func:`dualfem.numerics.factor.choose`, i.e.
+    ``--factor`` / ``DUALFEM_FACTOR`` / the fastest installed); ``cache``: default DEFAULT_CACHE.
+    """
+    backend = choose_backend(factor)
+    ensure_threads()
+    cache = DEFAULT_CACHE if cache is None else cache
     local = np.asarray(qp.local_dofs, np.int64)
-    Kf = qp.K_fixed.tocsc()
-    key = _hash(Kf.indptr, Kf.indices, Kf.data, local)
-    if key in _CACHE:
-        _CACHE.move_to_end(key)
-        return _CACHE[key]
+    Kf = qp.K_fixed.tocsr()
+    key = _hash(Kf.indptr, Kf.indices, Kf.data, local) + ":" + backend.name
+    ff = cache.get(key)
+    if ff is not None:
+        return ff
     t0 = time.perf_counter()
-    perm = ordering(qp, local)
-    Kp = Kf[perm][:, perm].tocsc()
+    fact = backend.make(local, order=lambda: ordering(qp, local))
+    fact.analyze(Kf)
     t1 = time.perf_counter()
-    lu = sla.splu(Kp, permc_spec="NATURAL", diag_pivot_thresh=0.0,
-                  options={"SymmetricMode": True})
+    fact.factorize(Kf)
     t2 = time.perf_counter()
-    n, nl = Kp.shape[0], local.size
-    # the trailing nl columns must still be the local unknowns after SuperLU's postordering
-    pc = lu.perm_c
-    pr = lu.perm_r
-    tail = np.sort(pc[n - nl:]) if nl else pc[:0]
-    if nl and not (np.array_equal(tail, np.arange(n - nl, n)) and np.array_equal(pr[n - nl:], pc[n - nl:])):
-        raise RuntimeError("SuperLU moved the local unknowns: cannot read the Schur complement")
-    S = _trailing_schur(lu, n, nl)
-    # SuperLU's perm_c may permute within the trailing block: map back to ``local`` order
-    if nl:
-        inv = np.empty(n, np.int64)
-        inv[pc] = np.arange(n)          # position in factor of original (permuted-matrix) column
-        pos = inv[np.arange(n - nl, n)] - (n - nl)
-        S = S[np.ix_(pos, pos)]
-    S = 0.5 * (S + S.T)
+    S = fact.schur()
     t3 = time.perf_counter()
-    ff = FixedFactor(n=n, local=local, perm=perm, lu=lu, S_fixed=S,
+    ff = FixedFactor(n=Kf.shape[0], local=local, fact=fact, S_fixed=S,
                      time_s={"ordering": t1 - t0, "factorize": t2 - t1, "schur": t3 - t2})
-    _CACHE[key] = ff
-    while len(_CACHE) > _CACHE_SIZE:
-        _CACHE.popitem(last=False)
+    cache.put(key, ff)
     return ff
 
 
-def _trailing_schur(lu, n: int, nl: int) -> np.ndarray:
-    """L_II U_II from the trailing nl x nl blocks of SuperLU's factors."""
-    if nl == 0:
-        return np.zeros((0, 0))
-    L = lu.L.tocsc()[:, n - nl:]
-    L = L[n - nl:, :].toarray()
-    U = lu.U.tocsc()[:, n - nl:]
-    U = U[n - nl:, :].toarray()
-    return L @ U
+def sparse_factor(A: sp.spmatrix, factor: str | Backend | None = None) -> Factorization:
+    """Factorization of a whole SPD sparse matrix by the chosen backend (no Schur set, not cached)."""
+    ensure_threads()
+    return choose_backend(factor).factor(A)
 
 
 def clear_cache() -> None:
-    """Forget every cached factorization."""
-    _CACHE.clear()
+    """Forget every cached factorization (of DEFAULT_CACHE)."""
+    DEFAULT_CACHE.clear()
 
 
 # ------------------------------------------------------------------------ reduction
@@ -297,12 +145,13 @@ class LocalReduction:
     Attributes: ``I`` (indices into x), ``S`` (dense Schur complement of K onto I, includes the
     parameter part), ``g`` (reduced load), ``BI`` (dense ``B[:, I]``), ``c0`` (energy constant:
     ``Pi(full(xI)) = 1/2 xI'S xI - g'xI + c0``), ``factor`` (the shared :class:`FixedFactor`).
+    ``factor=`` names the backend (default: the process-wide choice), ``cache=`` the FactorCache.
     """
 
-    def __init__(self, qp: QP):
+    def __init__(self, qp: QP, factor: str | Backend | None = None, cache: FactorCache | None = None):
         self.qp = qp
         t0 = time.perf_counter()
-        self.factor = ff = factor_fixed(qp)
+        self.factor = ff = factor_fixed(qp, factor, cache)
         t1 = time.perf_counter()
         I = ff.local
         self.I = I

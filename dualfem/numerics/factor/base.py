@@ -1,0 +1,177 @@
+"""The factorization interface: one symmetric positive definite sparse matrix, three phases.
+
+A :class:`Backend` makes :class:`Factorization` objects. Their phases are separate so that the
+expensive, pattern-only part is reused:
+
+* ``analyze(A)``: fill-reducing ordering and symbolic factorization. Depends on the sparsity
+  pattern of ``A`` and on the Schur set ``local`` only, never on the values.
+* ``factorize(A)``: numeric factorization (call again with new values on the same pattern).
+* ``solve(b)``: ``A^-1 b`` for a 1-D ``b`` (n,) or a 2-D ``b`` (n, k).
+* ``schur(local)``: the dense Schur complement ``A_II - A_IR A_RR^-1 A_RI`` onto the indices
+  ``local`` (rows and columns in the order given). Fast when ``local`` is the set declared at
+  analysis (the backend orders it last / lets the library compute it); otherwise it is computed
+  from |I| solves (``S = ((A^-1)_II)^-1``, exact for SPD ``A``).
+* ``info``: backend name, factor size / memory where the backend reports it, seconds per phase.
+* ``free()``: release the factor.
+
+A new backend (e.g. a GPU one) is one more module with a :class:`Backend` subclass registered
+in :mod:`dualfem.numerics.factor`.
+"""
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+
+import numpy as np
+import scipy.linalg as dla
+import scipy.sparse as sp
+
+#: an order of all unknowns (a permutation, local unknowns last) or a function computing it lazily
+OrderHint = np.ndarray | Callable[[], np.ndarray] | None
+
+
+class Factorization(ABC):
+    """Factorization of one SPD sparse matrix (see module docstring for the phases)."""
+
+    backend: str = "?"
+
+    def __init__(self, local: np.ndarray | None = None, order: OrderHint = None):
+        self.local = np.zeros(0, np.int64) if local is None else np.asarray(local, np.int64).ravel()
+        self._order = order
+        self.n = 0
+        self.info: dict = {"backend": self.backend, "time_s": {}}
+        self._schur: np.ndarray | None = None      # Schur onto self.local (in self.local's order)
+        self.factorized = False
+
+    # ----------------------------------------------------------------- phases
+    @abstractmethod
+    def _analyze(self, A: sp.csr_matrix) -> None: ...
+
+    @abstractmethod
+    def _factorize(self, A: sp.csr_matrix) -> None: ...
+
+    @abstractmethod
+    def _solve(self, b: np.ndarray) -> np.ndarray: ...
+
+    def analyze(self, A: sp.spmatrix) -> Factorization:
+        """Ordering + symbolic factorization of the pattern of ``A`` (values unused)."""
+        A = _square_csr(A)
+        self.n = A.shape[0]
+        if self.local.size and (self.local.min() < 0 or self.local.max() >= self.n
+                                or np.unique(self.local).size != self.local.size):
+            raise ValueError(f"local indices must be distinct and in [0, {self.n})")
+        with _timer(self, "analyze"):
+            self._analyze(A)
+        self._pattern = (A.indptr.copy(), A.indices.copy())
+        return self
+
+    def factorize(self, A: sp.spmatrix) -> Factorization:
+        """Numeric factorization of ``A`` (same pattern as at :meth:`analyze`; analyzes if not yet)."""
+        A = _square_csr(A)
+        if self.n == 0 and A.shape[0]:
+            self.analyze(A)
+        elif not (np.array_equal(A.indptr, self._pattern[0]) and np.array_equal(A.indices, self._pattern[1])):
+            raise ValueError("factorize: the sparsity pattern differs from the analyzed one")
+        self._schur = None
+        with _timer(self, "factorize"):
+            self._factorize(A)
+        self.factorized = True
+        return self
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        """``A^-1 b`` for b of shape (n,) or (n, k)."""
+        if not self.factorized:
+            raise RuntimeError("solve before factorize")
+        b = np.asarray(b, float)
+        if b.shape[0] != self.n or b.ndim not in (1, 2):
+            raise ValueError(f"right-hand side of shape {b.shape}: expected ({self.n},) or ({self.n}, k)")
+        if b.ndim == 2 and b.shape[1] == 0:
+            return np.zeros_like(b)
+        return self._solve(b)
+
+    def schur(self, local: np.ndarray | None = None) -> np.ndarray:
+        """Dense Schur complement onto ``local`` (default: the set declared at construction)."""
+        if not self.factorized:
+            raise RuntimeError("schur before factorize")
+        want = self.local if local is None else np.asarray(local, np.int64).ravel()
+        if want.size == 0:
+            return np.zeros((0, 0))
+        if self.local.size == want.size and np.array_equal(np.sort(self.local), np.sort(want)):
+            if self._schur is None:
+                with _timer(self, "schur"):
+                    self._schur = self._own_schur()
+            pos = np.empty(self.n, np.int64)
+            pos[self.local] = np.arange(self.local.size)
+            p = pos[want]
+            return self._schur[np.ix_(p, p)]
+        with _timer(self, "schur"):
+            return schur_by_solves(self.solve, self.n, want)
+
+    def _own_schur(self) -> np.ndarray:
+        """Schur complement onto ``self.local`` in that order; backends override with their fast path."""
+        return schur_by_solves(self.solve, self.n, self.local)
+
+    def free(self) -> None:
+        """Release the factor (the object can be factorized again after :meth:`analyze`)."""
+        self.factorized = False
+        self._schur = None
+
+    def order(self) -> np.ndarray | None:
+        """The order hint given at construction, evaluated (None if none was given)."""
+        if callable(self._order):
+            self._order = np.asarray(self._order(), np.int64)
+        return self._order
+
+
+class Backend(ABC):
+    """A factorization library. ``make(local, order)`` returns an un-analyzed :class:`Factorization`."""
+
+    name: str = "?"
+    #: pip requirement that installs it (shown in error messages)
+    install_hint: str = ""
+
+    @classmethod
+    @abstractmethod
+    def available(cls) -> bool:
+        """True if the library imports here."""
+
+    @abstractmethod
+    def make(self, local: np.ndarray | None = None, order: OrderHint = None) -> Factorization: ...
+
+    def factor(self, A: sp.spmatrix, local: np.ndarray | None = None, order: OrderHint = None) -> Factorization:
+        """analyze + factorize in one call."""
+        return self.make(local, order).analyze(A).factorize(A)
+
+
+def schur_by_solves(solve: Callable[[np.ndarray], np.ndarray], n: int, local: np.ndarray) -> np.ndarray:
+    """Schur complement onto ``local`` of an SPD A from |I| solves: ``S = ((A^-1)_II)^-1``."""
+    E = np.zeros((n, local.size))
+    E[local, np.arange(local.size)] = 1.0
+    W = solve(E)[local]
+    W = 0.5 * (W + W.T)
+    S = dla.cho_solve(dla.cho_factor(W, lower=True), np.eye(local.size))
+    return 0.5 * (S + S.T)
+
+
+def _square_csr(A: sp.spmatrix) -> sp.csr_matrix:
+    A = sp.csr_matrix(A, dtype=float)
+    if A.shape[0] != A.shape[1]:
+        raise ValueError(f"matrix must be square, got shape {A.shape}")
+    if not A.has_canonical_format:      # sorted, no duplicates (PARDISO needs both); never touch the caller's
+        A = A.copy()
+        A.sum_duplicates()
+    return A
+
+
+class _timer:
+    def __init__(self, f: Factorization, key: str):
+        self.f, self.key = f, key
+
+    def __enter__(self):
+        self.t0 = time.perf_counter()
+
+    def __exit__(self, *exc):
+        ts = self.f.info.setdefault("time_s", {})
+        ts[self.key] = ts.get(self.key, 0.0) + time.perf_counter() - self.t0
+        return False

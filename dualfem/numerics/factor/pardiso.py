@@ -1,0 +1,158 @@
+"""MKL PARDISO through pypardiso's loaded ``mkl_rt`` (mtype 2: real SPD, METIS ordering).
+
+pypardiso finds and loads MKL; its ``solve``/``factorize`` cannot pass a Schur set or keep the
+analysis apart from the numeric phase, so this module calls the library function it loaded with
+its own buffers: the upper triangle of A in zero-based CSR (``iparm[34] = 1``), analysis =
+phase 11 (it reports the factor's size and the peak memory, ``iparm[14..17]``), numeric
+factorization = phase 22, solve = phase 33 (iterative refinement as PARDISO decides).
+
+Schur complement: with ``iparm[35] = 2`` and the local unknowns marked 1 in ``perm`` (set before
+phase 11), phase 22 writes the dense Schur block (unknowns in increasing index order) into the
+solution buffer; in this mode phase 33 still solves with the whole matrix (checked against dense
+solves in tests/test_factor.py). Mode 1 needs the forward/backward phases 331/333 around a dense
+Schur solve; mode 2 measured as fast (N = 256 f2: analysis 0.9 s + factorization 0.36 s vs
+0.8 + 0.49 s).
+"""
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+import scipy.sparse as sp
+
+from .base import Backend, Factorization, OrderHint
+
+_LIB = None
+_ERRORS = {-1: "input inconsistent", -2: "not enough memory", -3: "reordering problem",
+           -4: "zero pivot (matrix not positive definite?)", -5: "unclassified internal error",
+           -6: "reordering failed", -7: "diagonal matrix is singular", -8: "32-bit integer overflow",
+           -9: "not enough memory for out-of-core", -10: "error opening out-of-core files",
+           -11: "read/write error with out-of-core files", -12: "wrong pardiso_64 call",
+           -13: "interrupted by the callback"}
+
+
+def _lib():
+    """MKL's pardiso function as loaded by pypardiso (raises ImportError if unavailable)."""
+    global _LIB
+    if _LIB is None:
+        import pypardiso
+
+        _LIB = pypardiso.PyPardisoSolver()._mkl_pardiso
+    return _LIB
+
+
+class PardisoFactorization(Factorization):
+    backend = "pardiso"
+
+    def __init__(self, local=None, order: OrderHint = None):
+        super().__init__(local, order)          # PARDISO orders with METIS itself: the hint is unused
+        self._pt = np.zeros(64, np.int64)
+        self._alive = False
+
+    def _call(self, phase: int, b: np.ndarray, x: np.ndarray, nrhs: int = 1) -> None:
+        P = ctypes.POINTER
+        i32 = ctypes.c_int32
+        err = i32(0)
+        _lib()(self._pt.ctypes.data_as(P(ctypes.c_int64)), ctypes.byref(i32(1)), ctypes.byref(i32(1)),
+               ctypes.byref(i32(2)), ctypes.byref(i32(phase)), ctypes.byref(i32(self.n)),
+               self._a.ctypes.data_as(P(ctypes.c_double)), self._ia.ctypes.data_as(P(i32)),
+               self._ja.ctypes.data_as(P(i32)), self._perm.ctypes.data_as(P(i32)), ctypes.byref(i32(nrhs)),
+               self._iparm.ctypes.data_as(P(i32)), ctypes.byref(i32(0)), b.ctypes.data_as(P(ctypes.c_double)),
+               x.ctypes.data_as(P(ctypes.c_double)), ctypes.byref(err))
+        if err.value != 0:
+            raise RuntimeError(f"PARDISO phase {phase} failed with error {err.value}: "
+                               f"{_ERRORS.get(err.value, 'unknown error')}")
+
+    def _set_values(self, A: sp.csr_matrix) -> None:
+        U = sp.triu(A, format="csr")
+        U.sort_indices()
+        if U.nnz >= 2**31:
+            raise ValueError("PARDISO (32-bit indices): too many nonzeros")
+        self._a = np.ascontiguousarray(U.data, float)
+        self._ia = U.indptr.astype(np.int32)
+        self._ja = U.indices.astype(np.int32)
+        if np.any(np.diff(self._ia) == 0):
+            raise ValueError("PARDISO: the matrix has an empty row in its upper triangle (not SPD)")
+
+    def _analyze(self, A: sp.csr_matrix) -> None:
+        _lib()
+        self.free()
+        self._set_values(A)
+        ip = np.zeros(64, np.int32)
+        ip[0] = 1          # own values below
+        ip[1] = 2          # METIS nested dissection
+        ip[9] = 8          # pivot perturbation 1e-8 (unused for SPD)
+        ip[17] = -1        # report the factor's nonzeros
+        ip[34] = 1         # zero-based indices
+        # Schur by PARDISO only when something is eliminated; onto all unknowns S = A (no
+        # Schur mode: an empty eliminated block is an edge case of MKL best not entered)
+        self._all_local = self.local.size == self.n
+        ip[35] = 2 if 0 < self.local.size < self.n else 0
+        self._iparm = ip
+        self._perm = np.zeros(self.n, np.int32)
+        self._perm[self.local] = 1
+        self._alive = True
+        dummy = np.zeros(self.n)
+        self._call(11, dummy, dummy.copy())
+        kb = 1024
+        self.info.update({"factor_nnz": int(ip[17]), "analysis_peak_bytes": int(ip[14]) * kb,
+                          "permanent_bytes": int(ip[15]) * kb, "factor_bytes": int(ip[16]) * kb,
+                          # MKL: total peak = max(iparm[14], iparm[15] + iparm[16])
+                          "peak_bytes": int(max(ip[14], ip[15] + ip[16])) * kb,
+                          "ordering": "METIS"})
+
+    def _factorize(self, A: sp.csr_matrix) -> None:
+        self._a = np.ascontiguousarray(sp.triu(A, format="csr").data, float)
+        ns = self.local.size
+        if self._all_local:
+            self._call(22, np.zeros(self.n), np.zeros(self.n))
+            self._schur_buf = A[self.local][:, self.local].toarray()
+            return
+        x = np.zeros(max(ns * ns, self.n))
+        self._call(22, np.zeros(max(ns * ns, self.n)), x)
+        if ns:
+            S = x[: ns * ns].reshape(ns, ns)                     # rows/cols: local in increasing order
+            rank = np.argsort(np.argsort(self.local))            # position of local[i] in sorted order
+            S = S[np.ix_(rank, rank)]
+            self._schur_buf = 0.5 * (S + S.T)
+
+    def _solve(self, b: np.ndarray) -> np.ndarray:
+        bf = np.asfortranarray(b, float)
+        x = np.zeros_like(bf)
+        self._call(33, bf, x, 1 if b.ndim == 1 else b.shape[1])
+        return np.ascontiguousarray(x)
+
+    def _own_schur(self) -> np.ndarray:
+        return self._schur_buf
+
+    def free(self) -> None:
+        if self._alive:
+            dummy = np.zeros(max(self.n, 1))
+            try:
+                self._call(-1, dummy, dummy.copy())
+            finally:
+                self._alive = False
+                self._pt[:] = 0
+        super().free()
+
+    def __del__(self):
+        try:
+            self.free()
+        except Exception:  # noqa: BLE001 - interpreter shutdown: nothing left to release
+            pass
+
+
+class PardisoBackend(Backend):
+    name = "pardiso"
+    install_hint = "pip install 'dualfem[pardiso]'  (pypardiso, MKL)"
+
+    @classmethod
+    def available(cls) -> bool:
+        try:
+            _lib()
+        except (ImportError, OSError):
+            return False
+        return True
+
+    def make(self, local: np.ndarray | None = None, order: OrderHint = None) -> Factorization:
+        return PardisoFactorization(local, order)

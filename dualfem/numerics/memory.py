@@ -1,0 +1,113 @@
+"""Peak memory of a solve from the number of unknowns and the factorization backend.
+
+A model calibrated on measured runs of the f2 scene (plane strain, delta = 1e-5; peak RSS of
+one process that builds the QP, factorizes K_fixed with the Schur complement onto the defect
+unknowns and solves once: benchmarks/factor_backends.py, results in
+benchmarks/results/factor/):
+
+    peak(n) = max( build_peak(n),  held(n) + factor_peak(n) )
+
+* ``build_peak(n) = a + b n``: peak RSS of the scene -> QP assembly (the import baseline included);
+* ``held(n) = a + b n``: RSS the QP keeps afterwards;
+* ``factor_peak(n) = c n log2(n)`` per backend: for superlu the measured RSS increase of the
+  factorization (the LU, the permuted matrix, the trailing blocks read for the Schur block), for
+  pardiso PARDISO's own analysis report (max(iparm[14], iparm[15] + iparm[16]) KiB), which
+  :func:`estimate_peak_bytes` uses instead of the model when given (``analysis=``).
+
+Least-squares fits of the points in CALIBRATION (so adding a measured point refines the model).
+The iterations and the certification of the exact solvers work on m x m dense blocks and add
+little; they are not in the model. :func:`fits` applies a SAFETY margin. CHOLMOD, not measured
+here, is modelled as PARDISO (a supernodal Cholesky of the same size).
+"""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from dualfem.core.errors import InputError
+
+MB = 2**20
+#: measured (n unknowns, peak RSS of the build, RSS held by the QP, factor's extra peak) in MB;
+#: superlu: RSS increase of factor_fixed + solve; pardiso: PARDISO's analysis report
+CALIBRATION = {
+    "build": [(8382, 99, 91), (33150, 164, 132), (131838, 424, 307), (525822, 1327, 611)],
+    "superlu": [(8382, 112 - 91), (33150, 227 - 132), (131838, 750 - 307), (525822, 3027 - 610)],
+    "pardiso": [(8382, 23), (33150, 50), (131838, 165), (525822, 669)],
+}
+#: multiply the estimate by this before comparing with the available memory
+SAFETY = 1.25
+
+
+@functools.cache
+def _coefficients() -> dict:
+    build = np.array(CALIBRATION["build"], float)
+    A = np.column_stack([np.ones(len(build)), build[:, 0]])
+    coef = {"build_peak": np.linalg.lstsq(A, build[:, 1], rcond=None)[0],
+            "held": np.linalg.lstsq(A, build[:, 2], rcond=None)[0]}
+    for b in ("superlu", "pardiso"):
+        pts = np.array(CALIBRATION[b], float)
+        x = pts[:, 0] * np.log2(pts[:, 0])
+        coef[b] = float(x @ pts[:, 1] / (x @ x))          # MB per n log2 n, through the origin
+    coef["cholmod"] = coef["pardiso"]
+    return coef
+
+
+def estimate_peak_bytes(n_unknowns: int, backend: str = "pardiso", analysis: dict | None = None) -> int:
+    """Estimated peak RSS (bytes) of building and factorizing a QP with n unknowns.
+
+    ``analysis``: a factorization's ``info`` after its analysis phase; PARDISO's ``peak_bytes``
+    replaces the model of the factor's peak.
+    """
+    n = int(n_unknowns)
+    if n < 1:
+        raise InputError(f"n_unknowns must be >= 1, got {n_unknowns!r}")
+    c = _coefficients()
+    if backend not in ("superlu", "pardiso", "cholmod"):
+        raise InputError(f"backend must be superlu, pardiso or cholmod, got {backend!r}")
+    build_peak = c["build_peak"][0] + c["build_peak"][1] * n
+    held = c["held"][0] + c["held"][1] * n
+    if analysis and analysis.get("peak_bytes"):
+        factor = analysis["peak_bytes"] / MB
+    else:
+        factor = c[backend] * n * np.log2(max(n, 2))
+    return int(max(build_peak, held + factor) * MB)
+
+
+def available_bytes() -> int:
+    """Memory available for a new process now (Linux ``MemAvailable``; else total physical)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    import os
+
+    return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+
+
+def fits(n_unknowns: int, backend: str = "pardiso", limit_bytes: int | None = None,
+         analysis: dict | None = None) -> tuple[bool, int, int]:
+    """(fits, SAFETY x estimate, limit): limit defaults to :func:`available_bytes`."""
+    est = int(SAFETY * estimate_peak_bytes(n_unknowns, backend, analysis))
+    lim = available_bytes() if limit_bytes is None else int(limit_bytes)
+    return est <= lim, est, lim
+
+
+def check_fits(problem, max_bytes: float | None = None, backend: str | None = None) -> None:
+    """InputError naming the size, the estimate and the memory when a scene cannot fit (before assembly)."""
+    from dualfem.numerics.factor import get_default
+
+    est = problem.size_estimate() if hasattr(problem, "size_estimate") else None
+    if est is None:
+        return
+    n, label = est
+    backend = backend or get_default()
+    ok, need, have = fits(n, backend, None if max_bytes is None else int(max_bytes))
+    if not ok:
+        raise InputError(f"{label} ({n / 1e6:.1f} M unknowns) needs about {need / 1e9:.0f} GB of memory with the "
+                         f"{backend} factorization (estimate x {SAFETY:g}), "
+                         f"{'allowed' if max_bytes is not None else 'available'}: {have / 1e9:.1f} GB; use a smaller "
+                         f"size, or --max-memory GB to override")
