@@ -6,7 +6,9 @@ set -uo pipefail
 cd "$(dirname "$0")/.."
 . scripts/_env.sh
 "$PY" -m pip install -q --upgrade pip >/dev/null || exit 1
-"$PY" -m pip install -q -e ".[test,parallel,xdmf]" || exit 1
+EXTRAS="test,parallel,xdmf,gmsh"
+case "$(uname -m)" in x86_64|AMD64) EXTRAS="$EXTRAS,pardiso" ;; esac   # MKL PARDISO wheels: x86-64 only
+"$PY" -m pip install -q -e ".[$EXTRAS]" || exit 1
 "$PY" -m ruff check . || { echo "ruff found problems (see above)" >&2; exit 1; }
 "$PY" -m mypy || { echo "mypy found problems in dualfem/core (see above)" >&2; exit 1; }
 "$PY" -m pytest -q "$@"
