@@ -173,3 +173,38 @@ def test_convergence_rates_known_answer(p):
     tr = triple_rates(list(np.sqrt(hh ** 1.6 + 1e-2 * hh ** 1.0)), with_reference=False)
     assert all(0.5 < b < a < 0.8 for a, b in zip(tr, tr[1:]))
     assert triple_rates([1.0, 1.0, 0.5], with_reference=False) == [None]  # no decrease: undefined, not a number
+
+
+@pytest.mark.skipif("uzawa" not in solvers(), reason="the uzawa solver is not registered")
+def test_report_paper_small(tmp_path, monkeypatch):
+    """Run, store the data, re-render from it without solving; the inner stop test study is consistent."""
+    import dualfem.core.runner as runner
+    from dualfem.experiments.paper import INNER_VARIANTS
+    from dualfem.reports.paper import report_paper
+
+    md = tmp_path / "paper.md"
+    assert report_paper(["--N", "8,12", "--inner-N", "8", "--out", str(md)]) == 0
+    data = json.loads((tmp_path / "paper.json").read_text())
+    text = md.read_text()
+    assert "| **paper** | 18 / 24 |" in text and "Closest: **N=" in text
+    runs = data["inner"]["runs"]
+    assert {r["variant"] for r in runs} == set(INNER_VARIANTS) and len(runs) == 9 * len(INNER_VARIANTS)
+    # the inner test changes m only: the same k in every variant, and the default variant is Table 1's run
+    for load in ("f1", "f2", "f3"):
+        for d in (1e-7, 1e-5, 1e-1):
+            cell = [r for r in runs if r["load"] == load and r["delta"] == d]
+            assert len({r["k"] for r in cell}) == 1
+            (t1,) = [r for r in data["tables"] if (r["N"], r["plane"], r["load"], r["delta"], r["factor"])
+                     == (8, data["inner"]["plane"], load, d, 2.0)]
+            assert (t1["k"], t1["m"]) == next((r["k"], r["m"]) for r in cell if r["variant"] == "energy")
+            # a weaker (squared) test never needs more Newton steps than the plain one of the same norm
+            m = {r["variant"]: r["m"] for r in cell}
+            assert m["energy_sq"] <= m["energy"] and m["euclidean_sq"] <= m["euclidean"]
+    md.unlink()
+
+    def no_solver(*a, **k):
+        raise AssertionError("render-only ran a solver")
+
+    monkeypatch.setattr(runner, "run", no_solver)
+    assert report_paper(["--render-only", "--out", str(md)]) == 0
+    assert md.read_text() == text

@@ -18,7 +18,7 @@ import numpy as np
 
 from dualfem.cli.report import register_report
 from dualfem.core.errors import InputError
-from dualfem.experiments.convergence import fit_rate, triple_rates
+from dualfem.experiments.convergence import errors, fit_rate, triple_rates  # noqa: F401  (errors: old import path)
 
 DEFAULT_DELTAS = (1e-1, 1e-5, 1e-9)
 DEFAULT_NS = (16, 32, 64, 128, 256, 512)
