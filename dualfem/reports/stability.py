@@ -80,8 +80,10 @@ def _heatmaps(recs, rowf, colf, title, rowlabel, collabel, path: Path, keep_col_
             t = (r.get("setup_s") or 0) + (r.get("solve_s") or 0)
             if t > 0 and r["grade"] not in ("skipped", "timeout", "crashed"):
                 TM[i, j] = math.log10(t)
-    panels = [(A, "outcome", cmap, (-0.5, len(outs) - 0.5)), (np.clip(E, -14, 1), "log10 rel. energy-norm error (clipped to [-14, 1])", "viridis", (-14, 1)),
-              (IT, "log10 iterations (main counter)", "magma_r", None), (TM, "log10 time setup+solve [s]", "cividis", None)]
+    panels = [(A, "outcome", cmap, (-0.5, len(outs) - 0.5)),
+              (np.clip(E, -14, 1), "log10 rel. energy-norm error (clipped to [-14, 1])", "viridis", (-14, 1)),
+              (IT, "log10 iterations (main counter)", "magma_r", None),
+              (TM, "log10 time setup+solve [s]", "cividis", None)]
     for ax, (M, name, cm, lim) in zip(axs, panels):
         kw = {"vmin": lim[0], "vmax": lim[1]} if lim else {}
         im = ax.imshow(np.ma.masked_invalid(M), cmap=cm, aspect="auto", **kw)
@@ -143,7 +145,8 @@ def _boundaries(recs, colf, colname) -> list[str]:
     lines = []
     by = defaultdict(list)
     for r in recs:
-        by[r["solver"] + (" " + ",".join(f"{k}={_fmt(v)}" for k, v in r["solver_params"].items()) if r.get("solver_params") else "")].append(r)
+        sp_ = r.get("solver_params")
+        by[r["solver"] + (" " + ",".join(f"{k}={_fmt(v)}" for k, v in sp_.items()) if sp_ else "")].append(r)
     for s, rs in sorted(by.items()):
         rs = sorted(rs, key=lambda r: _sortkey(colf(r)))
         good = [colf(r) for r in rs if r["grade"] == "correct"]
@@ -234,9 +237,11 @@ def _findings(recs) -> list[str]:
         y = np.log10([r["main_iterations"] for r in rr])
         if np.ptp(x) > 0:
             slope = float(np.polyfit(x, y, 1)[0])
+            pairs = ", ".join(f"{_fmt(a)}: {int(b)}" for a, b in
+                              sorted((r["coords"]["r"] * r["coords"]["delta"], r["main_iterations"]) for r in rr))
             out.append(f"- **Uzawa at small delta**: for delta <= 1e-6 and r x delta <= 1 the outer iterations "
-                       f"needed to meet the outer test behave like (r delta)^({slope:.2f}) (least-squares fit over {len(rr)} runs, "
-                       f"{', '.join(f'{_fmt(a)}: {int(b)}' for a, b in sorted((r['coords']['r'] * r['coords']['delta'], r['main_iterations']) for r in rr))}): the slowest dual "
+                       f"needed to meet the outer test behave like (r delta)^({slope:.2f}) (least-squares fit over "
+                       f"{len(rr)} runs, {pairs}): the slowest dual "
                        "mode has a compliance ~ delta (the 1/delta interface term), so it contracts by about "
                        "1 / (1 + r delta) per outer iteration. The paper's r = 1e7 gives r delta = 1e-2 at delta = "
                        "1e-9 (its ~900 iterations); choosing r from delta (or from the dual compliance, as "
@@ -271,23 +276,28 @@ def _classification(meta: dict) -> list[str]:
     refs = meta.get("references") or []
     return ["## How a run is graded", "",
             "Every run is compared with a reference solution of the same QP, chosen by dualfem's one reference "
-            f"policy (`dualfem.experiments.reference`): the first trusted run of {', '.join(f'`{r}`' for r in refs) or '?'} "
+            "policy (`dualfem.experiments.reference`): the first trusted run of "
+            f"{', '.join(f'`{r}`' for r in refs) or '?'} "
             "(a run of a reference solver is compared with the next one, never with itself). A reference is trusted "
-            f"only if it claims solved, its own independent KKT residual is below {meta.get('ref_kkt', 1e-7):g} and its "
-            "certified energy-norm error bound (from the QP alone) is finite. On the *units* and *load* axes the reference "
+            f"only if it claims solved, its own independent KKT residual is below {meta.get('ref_kkt', 1e-7):g} and "
+            "its certified energy-norm error bound (from the QP alone) is finite. On the *units* and *load* axes the "
+            "reference "
             "is the base scene's reference mapped by exact physics (change of units; x(sF) = s x(F)), so no solver is "
             "trusted on scaled data.", "",
             "The error is the relative energy-norm error |x - x_ref|_K / |x_ref|_K. With t the tolerance the solver "
-            "instance declares and b the reference's certified error bound (`dualfem.core.grade.grade`, the same policy "
+            "instance declares and b the reference's certified error bound (`dualfem.core.grade.grade`, the same "
+            "policy "
             "as `dualfem compare` and `dualfem bench`):", "",
             "- **correct** (`ok`): status solved, KKT residuals <= t and error <= t + b;",
             "- **failed** (`F`, honest): the status says not solved (max_iter, stagnation, numerical_error, ...);",
             "- **flagged** (`FL`, honest): status solved, but the evaluator's largest KKT residual is > t, so a user "
             "checking residuals sees it;",
-            "- **timeout** (`T`) / **crashed** (`X`): the harness killed the run or the process died (honest: no answer);",
+            "- **timeout** (`T`) / **crashed** (`X`): the harness killed the run or the process died (honest: no "
+            "answer);",
             "- **silent wrong answer** (`WRONG`): status solved, KKT residuals <= t, error > t + b;",
             "- **unverified** (`?`): no trusted reference;",
-            "- **skipped** (`-`): the solver does not apply, or the previous N already exceeded the time or memory budget.",
+            "- **skipped** (`-`): the solver does not apply, or the previous N already exceeded the time or memory "
+            "budget.",
             "",
             "Declared tolerances: " + ", ".join(f"`{k}` {v:g}" for k, v in sorted(meta.get("tolerances", {}).items()))
             + ". Solvers wrapping a third-party library (non-empty `requires`): "
