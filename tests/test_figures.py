@@ -133,9 +133,13 @@ def test_report_convergence_small(tmp_path):
     lv = res["deltas"]["0.1"]["levels"]
     assert [x["N"] for x in lv] == [8, 16]
     assert lv[1]["energy_norm"] < lv[0]["energy_norm"]
-    assert lv[1]["rate_energy_norm"] == pytest.approx(np.log2(lv[0]["energy_norm"] / lv[1]["energy_norm"]))
+    # the energy-norm order on a cracked body lies between the h^(1/2) of the tip singularity and the
+    # h^1 of P1 elements for a smooth solution (a reference only 2x finer inflates it: allow up to 1.5)
+    assert 0.4 < lv[1]["rate_energy_norm"] < 1.5
     md = (tmp_path / "convergence.md").read_text()
     assert "| 16 |" in md and "h^(1/2)" in md
+    # the triple-wise order 8-16-32 (the reference closes the triple) is rendered
+    assert "| 8-16-32 |" in md and "triple-wise energy-norm order" in md
     for name in ("convergence_errors.png", "convergence_quantities.png"):
         assert (tmp_path / "figures" / name).stat().st_size > 1000
     # re-render from the JSON
@@ -144,3 +148,63 @@ def test_report_convergence_small(tmp_path):
     assert (tmp_path / "convergence.md").read_text() == md
     with pytest.raises(InputError, match="ref-N"):
         report(["--N", "8,12", "--ref-N", "32", "--out", str(tmp_path)])
+
+
+@pytest.mark.parametrize("p", [0.5, 0.72, 1.0])
+def test_convergence_rates_known_answer(p):
+    """rates / triple_rates / fit_rate recover the order of synthetic errors built with a known order."""
+    from dualfem.experiments.convergence import fit_rate, rates, triple_rates
+
+    Ns, ref_N, C = [16, 32, 64, 128], 256, 3.0
+    h, h_ref = np.array([1.0 / n for n in Ns]), 1.0 / ref_N
+    # plain C h^p: every successive rate is p
+    assert rates(list(C * h ** p))[1:] == pytest.approx([p] * 3)
+    # errors against a discrete reference under Galerkin orthogonality: |u_ref - u_N|^2 = C^2 (h^2p - h_ref^2p)
+    measured = C * np.sqrt(h ** (2 * p) - h_ref ** (2 * p))
+    plain = rates(list(measured))[1:]
+    assert plain[-1] > p + 0.02  # the naive rate is inflated by the reference's own error ...
+    assert triple_rates(list(measured)) == pytest.approx([p] * 3)  # ... the triple-wise order is not
+    assert triple_rates(list(measured), with_reference=False) == pytest.approx([p] * 2)
+    fit = fit_rate(h, measured, h_ref)
+    assert fit[0] == pytest.approx(p, abs=2e-3) and fit[1] == pytest.approx(C, rel=1e-2)
+    # a smooth part of order 0.8 plus a singular part of order 0.5 (squared errors add): the triple-wise
+    # order falls from near 0.8 toward 0.5 as h decreases, as the singular part takes over
+    hh = 1.0 / 2.0 ** np.arange(4, 12)
+    tr = triple_rates(list(np.sqrt(hh ** 1.6 + 1e-2 * hh ** 1.0)), with_reference=False)
+    assert all(0.5 < b < a < 0.8 for a, b in zip(tr, tr[1:]))
+    assert triple_rates([1.0, 1.0, 0.5], with_reference=False) == [None]  # no decrease: undefined, not a number
+
+
+@pytest.mark.skipif("uzawa" not in solvers(), reason="the uzawa solver is not registered")
+def test_report_paper_small(tmp_path, monkeypatch):
+    """Run, store the data, re-render from it without solving; the inner stop test study is consistent."""
+    import dualfem.core.runner as runner
+    from dualfem.experiments.paper import INNER_VARIANTS
+    from dualfem.reports.paper import report_paper
+
+    md = tmp_path / "paper.md"
+    assert report_paper(["--N", "8,12", "--inner-N", "8", "--out", str(md)]) == 0
+    data = json.loads((tmp_path / "paper.json").read_text())
+    text = md.read_text()
+    assert "| **paper** | 18 / 24 |" in text and "Closest: **N=" in text
+    runs = data["inner"]["runs"]
+    assert {r["variant"] for r in runs} == set(INNER_VARIANTS) and len(runs) == 9 * len(INNER_VARIANTS)
+    # the inner test changes m only: the same k in every variant, and the default variant is Table 1's run
+    for load in ("f1", "f2", "f3"):
+        for d in (1e-7, 1e-5, 1e-1):
+            cell = [r for r in runs if r["load"] == load and r["delta"] == d]
+            assert len({r["k"] for r in cell}) == 1
+            (t1,) = [r for r in data["tables"] if (r["N"], r["plane"], r["load"], r["delta"], r["factor"])
+                     == (8, data["inner"]["plane"], load, d, 2.0)]
+            assert (t1["k"], t1["m"]) == next((r["k"], r["m"]) for r in cell if r["variant"] == "energy")
+            # a weaker (squared) test never needs more Newton steps than the plain one of the same norm
+            m = {r["variant"]: r["m"] for r in cell}
+            assert m["energy_sq"] <= m["energy"] and m["euclidean_sq"] <= m["euclidean"]
+    md.unlink()
+
+    def no_solver(*a, **k):
+        raise AssertionError("render-only ran a solver")
+
+    monkeypatch.setattr(runner, "run", no_solver)
+    assert report_paper(["--render-only", "--out", str(md)]) == 0
+    assert md.read_text() == text

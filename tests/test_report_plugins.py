@@ -23,3 +23,23 @@ def test_report_plugins_small(tmp_path):
 def test_report_plugins_bad_args(argv, tmp_path):
     with pytest.raises(InputError):
         report(argv + ["--out", str(tmp_path)])
+
+
+def test_report_plugins_renders_without_solving(tmp_path, monkeypatch):
+    """The experiment's data is plain JSON; the renderer draws and writes from it without running a solver."""
+    import json
+
+    import dualfem.core.runner as runner
+    from dualfem.experiments.plugins import collect
+    from dualfem.reports.plugins import render
+
+    data = json.loads(json.dumps(collect(N=8, sizes=(8,), progress=lambda m: None)))
+
+    def no_solver(*a, **k):
+        raise AssertionError("the renderer ran a solver")
+
+    monkeypatch.setattr(runner, "run", no_solver)
+    text = render(data, tmp_path, dpi=40)
+    assert (tmp_path / "figures" / "plugins_signorini.png").stat().st_size > 5000
+    assert f"Reference: `{data['reference']}`" in text and data["reference"] in ("pdas", "clarabel")
+    assert text.count("| solved |") >= 2 and "| 8 | strain |" in text

@@ -25,21 +25,9 @@ from pathlib import Path
 
 from dualfem.cli.report import register_report
 from dualfem.core.errors import InputError
-
-COMPETITORS = ("clarabel", "osqp")
-
-
-def _f(v) -> float:
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        return float("nan")
-    return f
-
-
-def _fmt(v, spec=".3g") -> str:
-    f = _f(v)
-    return "n/a" if not math.isfinite(f) else format(f, spec)
+from dualfem.reports._bench_plots import plots
+from dualfem.reports._bench_targets import targets
+from dualfem.reports._bench_util import _f, _fmt
 
 
 def _sgm(times: list[float], shift: float) -> float:
@@ -83,201 +71,6 @@ def tier_table(runs: list[dict], tier: str, tol: float, shift: float) -> tuple[l
     return stats, len(common)
 
 
-def _scene_of(r: dict) -> tuple:
-    return (str(r.get("scene")), _f(r.get("scene_N")), _f(r.get("scene_delta")))
-
-
-def _plots(runs, floors, figdir: Path) -> tuple[list[str], list[str]]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import FormatStrFormatter, NullFormatter
-
-    figdir.mkdir(parents=True, exist_ok=True)
-    variants = sorted({r["variant"] for r in runs})
-    cmap = plt.get_cmap("tab10")
-    color = {v: cmap(i % 10) for i, v in enumerate(variants)}
-    floor_t = {}
-    for f in floors:
-        if f["status"] in ("solved", "inaccurate"):
-            floor_t[_f(f.get("scene_N"))] = (_f(f["n_unknowns"]), _f(f["total_s"]), f["solver"])
-    loads = sorted({str(r["scene"]) for r in runs})
-    Ns = sorted({_f(r.get("scene_N")) for r in runs if math.isfinite(_f(r.get("scene_N")))})
-    deltas = sorted({_f(r.get("scene_delta")) for r in runs if math.isfinite(_f(r.get("scene_delta")))},
-                    reverse=True)
-    wp_files, sc_files = [], []
-    has = [r for r in runs if r["status"] != "skipped"]
-    # ---------------- work-precision: one figure per (scene, N), one panel per delta
-    for load in loads:
-        for N in Ns:
-            sel = [r for r in has if r["scene"] == load and _f(r.get("scene_N")) == N]
-            if not sel:
-                continue
-            ds = [d for d in deltas if any(_f(r.get("scene_delta")) == d for r in sel)] or [float("nan")]
-            fig, axes = plt.subplots(1, len(ds), figsize=(3.6 * len(ds), 3.4), squeeze=False, sharey=True)
-            for ax, d in zip(axes[0], ds):
-                pts = [r for r in sel if _f(r.get("scene_delta")) == d or not math.isfinite(d)]
-                for var in variants:
-                    vr = [r for r in pts if r["variant"] == var and math.isfinite(_f(r.get("err_x_energy")))
-                          and math.isfinite(_f(r.get("total_s")))]
-                    if not vr:
-                        continue
-                    vr.sort(key=lambda r: -_f(r.get("tol")) if math.isfinite(_f(r.get("tol"))) else 0)
-                    x = [_f(r["total_s"]) for r in vr]
-                    y = [max(_f(r["err_x_energy"]), 1e-16) for r in vr]
-                    ax.plot(x, y, "-", color=color[var], lw=1, alpha=0.7)
-                    for r, xi, yi in zip(vr, x, y):
-                        ok = r["status"] == "solved"
-                        ax.plot([xi], [yi], "o", color=color[var], mfc=color[var] if ok else "none",
-                                label=var if r is vr[0] else None)
-                if N in floor_t:
-                    ax.axvline(floor_t[N][1], color="k", ls="--", lw=0.8, label="floor")
-                ax.set_xscale("log")
-                ax.set_yscale("log")
-                lo, hi = ax.get_xlim()
-                if hi < 10 * lo:     # within one decade: no major tick, so label the minor ones
-                    ax.xaxis.set_minor_formatter(FormatStrFormatter("%g"))
-                else:
-                    ax.xaxis.set_minor_formatter(NullFormatter())
-                ax.set_title(f"{load} N={N:g} delta={d:g}", fontsize=9)
-                ax.set_xlabel("time (setup + solve) [s]")
-                ax.grid(True, which="major", alpha=0.3)
-            axes[0][0].set_ylabel("relative energy-norm error of x")
-            wp_files.append(_save_with_legend(fig, axes[0], figdir, f"wp_{load}_N{int(N)}.png"))
-    # ---------------- scaling: one figure per scene, one panel per delta
-    for load in loads:
-        sel = [r for r in has if r["scene"] == load]
-        ds = [d for d in deltas if any(_f(r.get("scene_delta")) == d for r in sel)]
-        if not ds or len(Ns) < 2:
-            continue
-        fig, axes = plt.subplots(1, len(ds), figsize=(3.6 * len(ds), 3.4), squeeze=False, sharey=True)
-        for ax, d in zip(axes[0], ds):
-            for var in variants:
-                pts = {}
-                for r in sel:
-                    if r["variant"] != var or _f(r.get("scene_delta")) != d or r["status"] != "solved":
-                        continue
-                    n, t, tol = _f(r.get("n_unknowns")), _f(r.get("total_s")), _f(r.get("tol"))
-                    tol = tol if math.isfinite(tol) else 0.0
-                    if n not in pts or tol < pts[n][1]:     # the tightest solved tier
-                        pts[n] = (t, tol)
-                if pts:
-                    ns = sorted(pts)
-                    ax.plot(ns, [pts[n][0] for n in ns], "o-", color=color[var], label=var, ms=4)
-            if floor_t:
-                fl = sorted(floor_t.values())
-                ax.plot([a for a, _, _ in fl], [b for _, b, _ in fl], "k--", lw=1.2, label="floor: factor+solve K")
-                ax.plot([a for a, _, _ in fl], [1.5 * b for _, b, _ in fl], "k:", lw=0.8, label="1.5 x floor")
-            ax.set_xscale("log")
-            ax.set_yscale("log")
-            ax.xaxis.set_minor_formatter(NullFormatter())
-            ax.set_title(f"{load} delta={d:g}", fontsize=9)
-            ax.set_xlabel("unknowns")
-            ax.grid(True, which="major", alpha=0.3)
-        axes[0][0].set_ylabel("time (setup + solve) [s], tightest solved tier")
-        sc_files.append(_save_with_legend(fig, axes[0], figdir, f"scaling_{load}.png"))
-    return wp_files, sc_files
-
-
-def targets(runs, floors, ours: list[str], err_target: float, floor_target: float, speed_target: float,
-            top: int = 2, tag_sources: bool = False) -> list[str]:
-    """Markdown lines checking the performance targets at the largest N of the sweep
-    (``tag_sources``: mark each time with the [number] of the results it comes from)."""
-    def tag(r: dict) -> str:
-        return f" [{r['_source'] + 1}]" if tag_sources and r.get("_source") is not None else ""
-
-    lines = []
-    floor_t = {_f(f.get("scene_N")): f for f in floors if f["status"] in ("solved", "inaccurate")}
-    Ns = sorted({_f(r.get("scene_N")) for r in runs if r["status"] != "skipped"
-                 and math.isfinite(_f(r.get("scene_N")))})[-top:]
-    present = sorted({r["solver"] for r in runs if r["solver"] in ours and r["status"] != "skipped"})
-    if not present:
-        return [f"No run of {', '.join(ours)} in these results: the targets cannot be checked."]
-    lines.append(f"Checked at N in {{{', '.join(f'{n:g}' for n in Ns)}}} (the largest sizes of this sweep), "
-                 f"for {', '.join(present)}. A run counts when its status is solved and its relative "
-                 f"energy-norm error against the reference is <= {err_target:g}; its time is setup + solve.")
-    lines.append("")
-    lines.append(f"| scene | N | delta | solver | time [s] (setup + solve) | floor [s] | x floor (target <= {floor_target:g}) "
-                 f"| fastest of {'/'.join(COMPETITORS)} at error <= {err_target:g} [s] | speed-up (target >= {speed_target:g}) |")
-    lines.append("|---|---|---|---|---|---|---|---|---|")
-    misses = []
-    scenes = sorted({_scene_of(r) for r in runs if _f(r.get("scene_N")) in Ns}, key=lambda s: (s[1], s[0], -s[2]))
-    for sc in scenes:
-        srows = [r for r in runs if _scene_of(r) == sc and r["status"] != "skipped"]
-        comp = [r for r in srows if r["solver"] in COMPETITORS]
-        comp_ok = [r for r in comp if r["status"] == "solved" and _f(r.get("err_x_energy")) <= err_target]
-        fl = floor_t.get(sc[1])
-        flt = _f(fl["total_s"]) if fl else float("nan")
-        for s in present:
-            mine = [r for r in srows if r["solver"] == s and r["status"] == "solved"
-                    and _f(r.get("err_x_energy")) <= err_target]
-            if not mine:
-                st = sorted({r["status"] for r in srows if r["solver"] == s}) or ["not run"]
-                # accurate but not claimed: the solver's own test did not certify what the reference shows
-                quiet = [r for r in srows if r["solver"] == s and _f(r.get("err_x_energy")) <= err_target
-                         and math.isfinite(_f(r.get("total_s")))]
-                if quiet:
-                    q = min(quiet, key=lambda r: _f(r["total_s"]))
-                    qt = _f(q["total_s"])
-                    qr = f"{qt / flt:.2f} x the floor" if math.isfinite(flt) and flt > 0 else "floor n/a"
-                    lines.append(f"| {sc[0]} | {sc[1]:g} | {sc[2]:g} | {s} | status {q['status']}{tag(q)}: error "
-                                 f"{_f(q['err_x_energy']):.1e} in {qt:.3g} s ({qr}), not claimed by the solver "
-                                 f"| {_fmt(flt)} | MISSED | | |")
-                    misses.append(f"{s} at {sc[0]} N={sc[1]:g} delta={sc[2]:g}: status {q['status']}, although its "
-                                  f"error against the reference is {_f(q['err_x_energy']):.1e} ({qr}): its own "
-                                  f"stopping test could not certify the answer ({str(q.get('message') or '')[:200]})")
-                    continue
-                lines.append(f"| {sc[0]} | {sc[1]:g} | {sc[2]:g} | {s} | no run reached {err_target:g} ({', '.join(st)}) "
-                             f"| {_fmt(flt)} | MISSED | | |")
-                misses.append(f"{s} at {sc[0]} N={sc[1]:g} delta={sc[2]:g}: no run reached error {err_target:g}")
-                continue
-            best = min(mine, key=lambda r: _f(r["total_s"]))
-            t = _f(best["total_s"])
-            ratio = t / flt if math.isfinite(flt) and flt > 0 else float("nan")
-            fmark = "" if not math.isfinite(ratio) else (" ok" if ratio <= floor_target else " MISSED")
-            if math.isfinite(ratio) and ratio > floor_target:
-                su, so = _f(best.get("setup_s")), _f(best.get("solve_s"))
-                why = ""
-                if math.isfinite(su) and math.isfinite(so) and t > 0:
-                    part = "setup (matrix factorizations)" if su >= so else "solve (iterations)"
-                    why = (f"; {part} dominates: setup {su:.3g} s = {su / flt:.2f} x the floor, "
-                           f"solve {so:.3g} s = {so / flt:.2f} x the floor")
-                misses.append(f"{s} at {sc[0]} N={sc[1]:g} delta={sc[2]:g}: {ratio:.2f} x the floor "
-                              f"({ratio / floor_target:.2f} x over the target){why}; floor {_fmt(flt)} s "
-                              f"({fl['solver']})")
-            if comp_ok:
-                cb = min(comp_ok, key=lambda r: _f(r["total_s"]))
-                ct = _f(cb["total_s"])
-                sp = ct / t
-                cmp_txt = f"{ct:.3g} ({cb['variant']}, tier {cb['tier']}){tag(cb)}"
-                sp_txt = f"{sp:.1f}" + (" ok" if sp >= speed_target else " MISSED")
-                if sp < speed_target:
-                    misses.append(f"{s} at {sc[0]} N={sc[1]:g} delta={sc[2]:g}: {sp:.1f} x faster than "
-                                  f"{cb['variant']} (target {speed_target:g} x: {100 * (1 - sp / speed_target):.0f} % short)")
-            elif comp:
-                slowest = max((_f(r.get("total_s")) for r in comp if math.isfinite(_f(r.get("total_s")))),
-                              default=float("nan"))
-                if any(r["status"] == "time_limit" for r in comp):
-                    slowest = max(slowest if math.isfinite(slowest) else 0.0,
-                                  max(_f(r.get("time_limit")) for r in comp))
-                errs = [_f(r.get("err_x_energy")) for r in comp if math.isfinite(_f(r.get("err_x_energy")))]
-                be = f"best error {min(errs):.1e}" if errs else "no error measured"
-                cmp_txt = f"none reached {err_target:g} ({be}; statuses {', '.join(sorted({r['status'] for r in comp}))})"
-                sp_txt = f"> {slowest / t:.1f} (lower bound)" if math.isfinite(slowest) else "n/a"
-            else:
-                cmp_txt, sp_txt = "not run at this size (spec limit or skipped)", "n/a"
-            lines.append(f"| {sc[0]} | {sc[1]:g} | {sc[2]:g} | {s} | {t:.3g} ({_fmt(best.get('setup_s'))} + "
-                         f"{_fmt(best.get('solve_s'))}){tag(best)} | {_fmt(flt)}{tag(fl) if fl else ''} | {_fmt(ratio, '.2f')}{fmark} | {cmp_txt} | {sp_txt} |")
-    lines.append("")
-    if misses:
-        lines.append(f"**Targets missed ({len(misses)}):**")
-        lines.append("")
-        lines += [f"- {m}" for m in misses]
-    else:
-        lines.append("All targets that could be checked in these results were met.")
-    return lines
-
 
 def _slot(r: dict) -> tuple:
     """What a row measures: rows of two sweeps with the same slot measure the same thing."""
@@ -319,27 +112,8 @@ def load_sources(results: list[str | Path]) -> tuple[list[dict], list[dict]]:
         src["kept"] = sum(r["_source"] == i for r in rows)
     return rows, sources
 
-
-def build_report(results: str | Path | list[str | Path], md: str | Path, figdir: str | Path, *,
-                 ours: list[str], shift: float = 10.0, err_target: float = 1e-8, floor_target: float = 1.5,
-                 speed_target: float = 10.0, command: str = "") -> Path:
-    """Write the markdown report and its figures from one or several results; returns the markdown path."""
-    from dualfem.core.io import atomic_write_text
-
-    results = [results] if isinstance(results, (str, Path)) else list(results)
-    if not results:
-        raise InputError("give at least one RESULTS (a results.csv or a sweep's output directory)")
-    rows, sources = load_sources(results)
-    runs = [r for r in rows if r["kind"] == "run"]
-    refs = [r for r in rows if r["kind"] == "reference"]
-    floors = [r for r in rows if r["kind"] == "floor"]
-    md, figdir = Path(md), Path(figdir)
-    wp, sc = _plots(runs, floors, figdir)
-    try:
-        figrel = figdir.resolve().relative_to(md.parent.resolve())
-    except ValueError:
-        figrel = figdir.resolve()
-
+def _header(results: list, sources: list[dict], rows: list[dict], command: str) -> list[str]:
+    """Title, the command, and one line per merged results directory."""
     L = ["# Benchmark: run time against error", ""]
     names = " ".join(str(x) for x in results)
     L.append(f"Generated by `{command or 'dualfem report bench ' + names}` from "
@@ -367,9 +141,12 @@ def build_report(results: str | Path | list[str | Path], md: str | Path, figdir:
             L.append(f"  This results directory was written by {len(inv)} invocations (a resumed or extended "
                      "sweep; results.csv keeps the rows of the current spec only): "
                      + "; ".join(f"`{x['command']}` at {x['started_utc']}" for x in inv) + ".")
-    L.append("")
-    # -------------------------------------------------------------- machine
-    L += ["## Machine and versions", ""]
+    return L + [""]
+
+
+def _machine(rows: list[dict], sources: list[dict]) -> list[str]:
+    """Machine, versions and the load average while the sweeps ran."""
+    L = ["## Machine and versions", ""]
     mach = defaultdict(set)
     for r in rows:
         for k in ("cpu", "cores", "affinity", "threads", "python", "platform", "versions", "git"):
@@ -382,7 +159,8 @@ def build_report(results: str | Path | list[str | Path], md: str | Path, figdir:
                        if r["_source"] == i and math.isfinite(_f(r.get("loadavg"))))
         if loads:
             jobs = src["meta"].get("jobs")
-            L.append(f"- 1-minute load average when a task started{f' ([{i + 1}], jobs {jobs})' if len(sources) > 1 else ''}"
+            which = f" ([{i + 1}], jobs {jobs})" if len(sources) > 1 else ""
+            L.append(f"- 1-minute load average when a task started{which}"
                      f": min {loads[0]:.1f}, median {loads[len(loads) // 2]:.1f}, max {loads[-1]:.1f} (the sweep's "
                      "own workers count; above the core count, processes shared the machine and every time is "
                      "inflated: compare ratios measured together, not seconds)")
@@ -391,113 +169,119 @@ def build_report(results: str | Path | list[str | Path], md: str | Path, figdir:
             L.append("- versions: " + ", ".join(f"{a} {b}" for a, b in sorted(json.loads(v).items())))
         except ValueError:
             L.append(f"- versions: {v}")
-    L.append("")
-    # -------------------------------------------------------------- method
+    return L + [""]
+
+
+def _method(runs: list[dict], shift: float) -> list[str]:
     cold = {str(r.get("cold_setup")) for r in runs}
     reps = sorted({str(r.get("repeats")) for r in runs})
-    L += ["## How it was measured", "",
-          f"- Time of a run = setup (assembly of solver data, scaling, factorizations) + solve, median of "
-          f"{'/'.join(reps)} timed repeats after one untimed warm-up run (per scene block of the spec). "
-          f"Assembly of the QP itself (scikit-fem) is excluded and recorded separately (`assembly_s`).",
-          f"- Cold setup: {'yes' if cold == {'True'} else 'no' if cold == {'False'} else 'mixed'} - "
-          "`dualfem.linalg.clear_cache()` is called before every timed repeat, so a solver that factorizes "
-          "K_fixed pays for it in every repeat (the cache that shares it across delta and loads is not "
-          "allowed to hide it).",
-          "- Floor: one sparse factorization + one solve of the unconstrained K of the same size (scipy "
-          "`splu` with `permc_spec=\"MMD_AT_PLUS_A\"`, symmetric mode; CHOLMOD too when scikit-sparse is "
-          "installed, the faster one is the floor).",
-          "- Errors: against a reference per scene, solved once by a certified exact solver and checked by "
-          "the evaluator (KKT error below the spec's `reference.certify`); relative energy-norm error of x, "
-          "relative max error of the multipliers, relative objective gap. A run of the reference's own solver "
-          "is compared against itself (error 0 or near): its accuracy is certified by the KKT residuals only.",
-          f"- Success at a tier: status solved and the evaluator's KKT error <= the tier's tolerance. Correct: "
-          f"(status == solved) == (KKT error <= tolerance). Shifted geometric mean of time: shift {shift:g} s, "
-          "failures counted at the time limit, over the scenes every solver of the tier ran, normalised to the "
-          "best (1.00). Solvers without tolerance options (tier `any`) are scored in every tier with one run.",
-          "- Failed runs (error, time_limit, max_iter, ...) are rows with their status and message, never "
-          "results: they have no error columns unless the solver returned an iterate.", ""]
-    # -------------------------------------------------------------- references
-    L += ["## References", ""]
-    ok_refs = [r for r in refs if r["status"] == "solved"]
-    bad_refs = [r for r in refs if r["status"] != "solved"]
-    L.append(f"{len(ok_refs)} certified references computed in this results directory "
-             f"({', '.join(sorted({r['solver'] for r in ok_refs})) or 'none'}); references cached by an earlier "
-             "sweep are not listed again.")
-    if ok_refs:
-        ks = [_f(r.get("kkt_error")) for r in ok_refs]
-        L.append(f"KKT error of the references: max {_fmt(max(ks), '.1e')}, median {_fmt(sorted(ks)[len(ks) // 2], '.1e')}.")
+    return ["## How it was measured", "",
+            f"- Time of a run = setup (assembly of solver data, scaling, factorizations) + solve, median of "
+            f"{'/'.join(reps)} timed repeats after one untimed warm-up run (per scene block of the spec). "
+            f"Assembly of the QP itself (scikit-fem) is excluded and recorded separately (`assembly_s`).",
+            f"- Cold setup: {'yes' if cold == {'True'} else 'no' if cold == {'False'} else 'mixed'} - "
+            "`dualfem.linalg.clear_cache()` is called before every timed repeat, so a solver that factorizes "
+            "K_fixed pays for it in every repeat (the cache that shares it across delta and loads is not "
+            "allowed to hide it).",
+            "- Floor: one sparse factorization + one solve of the unconstrained K of the same size (scipy "
+            "`splu` with `permc_spec=\"MMD_AT_PLUS_A\"`, symmetric mode; CHOLMOD too when scikit-sparse is "
+            "installed, the faster one is the floor).",
+            "- Errors: against a reference per scene, solved once by a certified exact solver and checked by "
+            "the evaluator (KKT error below the spec's `reference.certify`); relative energy-norm error of x, "
+            "relative max error of the multipliers, relative objective gap. A run of the reference's own solver "
+            "is compared against itself (error 0 or near): its accuracy is certified by the KKT residuals only.",
+            f"- Success at a tier: status solved and the evaluator's KKT error <= the tier's tolerance. Correct: "
+            f"(status == solved) == (KKT error <= tolerance). Shifted geometric mean of time: shift {shift:g} s, "
+            "failures counted at the time limit, over the scenes every solver of the tier ran, normalised to the "
+            "best (1.00). Solvers without tolerance options (tier `any`) are scored in every tier with one run.",
+            "- Failed runs (error, time_limit, max_iter, ...) are rows with their status and message, never "
+            "results: they have no error columns unless the solver returned an iterate.", ""]
+
+
+def _cached_references(sources: list[dict]) -> list[tuple[str, float]]:
+    """(solver, KKT error) of every reference in the results directories' refs/ caches."""
+    import numpy as np
+
     cached = {}
     for src in sources:
         if (src["dir"] / "refs").is_dir():
-            import numpy as np
-
             for f in sorted((src["dir"] / "refs").glob("[!.]*.npz")):
                 try:
                     with np.load(f, allow_pickle=False) as d:
                         cached[f.name] = (str(d["solver"]), float(d["kkt"]))
                 except (OSError, ValueError, KeyError):
                     continue
-    cached = list(cached.values())
+    return list(cached.values())
+
+
+def _references(refs: list[dict], sources: list[dict]) -> list[str]:
+    L = ["## References", ""]
+    ok_refs = [r for r in refs if r["status"] == "solved"]
+    L.append(f"{len(ok_refs)} certified references computed in this results directory "
+             f"({', '.join(sorted({r['solver'] for r in ok_refs})) or 'none'}); references cached by an earlier "
+             "sweep are not listed again.")
+    if ok_refs:
+        ks = [_f(r.get("kkt_error")) for r in ok_refs]
+        L.append(f"KKT error of the references: max {_fmt(max(ks), '.1e')}, "
+                 f"median {_fmt(sorted(ks)[len(ks) // 2], '.1e')}.")
+    cached = _cached_references(sources)
     if cached:
         ks = sorted(k for _, k in cached)
-        L.append(f"Reference cache of {'these results directories' if len(sources) > 1 else 'this results directory'}: "
-                 f"{len(cached)} certified references "
+        where = "these results directories" if len(sources) > 1 else "this results directory"
+        L.append(f"Reference cache of {where}: {len(cached)} certified references "
                  f"({', '.join(sorted({s for s, _ in cached}))}), evaluator KKT error max {ks[-1]:.1e}, "
                  f"median {ks[len(ks) // 2]:.1e}.")
-    for r in bad_refs:
-        L.append(f"- NO certified reference for {r['label']}: {r.get('message')}")
-    L.append("")
-    # -------------------------------------------------------------- tiers
+    L += [f"- NO certified reference for {r['label']}: {r.get('message')}" for r in refs if r["status"] != "solved"]
+    return L + [""]
+
+
+def _tiers(runs: list[dict], shift: float) -> list[str]:
     tiers = sorted({(r["tier"], _f(r.get("tol"))) for r in runs if r["tier"] not in ("any", "")},
                    key=lambda t: -t[1])
-    L += ["## Per tolerance tier", ""]
+    L = ["## Per tolerance tier", ""]
     for tier, tol in tiers:
         stats, ncommon = tier_table(runs, tier, tol, shift)
-        L.append(f"### tier {tier} (tol {tol:g})")
+        L += [f"### tier {tier} (tol {tol:g})", "",
+              f"Shifted geometric means over {ncommon} scenes that every solver of this tier ran.", "",
+              "| solver | runs | success rate | correct rate | shifted GM of time (rel.) | plain GM of time (rel.) |",
+              "|---|---|---|---|---|---|"]
+        L += [f"| {s['variant']} | {s['n']} | {100 * s['success']:.0f} % | {100 * s['correct']:.0f} % "
+              f"| {_fmt(s['sgm_rel'], '.2f')} ({_fmt(s['sgm'])} s) | {_fmt(s['gm_rel'], '.2f')} |" for s in stats]
         L.append("")
-        L.append(f"Shifted geometric means over {ncommon} scenes that every solver of this tier ran.")
-        L.append("")
-        L.append("| solver | runs | success rate | correct rate | shifted GM of time (rel.) | plain GM of time (rel.) |")
-        L.append("|---|---|---|---|---|---|")
-        for s in stats:
-            L.append(f"| {s['variant']} | {s['n']} | {100 * s['success']:.0f} % | {100 * s['correct']:.0f} % "
-                     f"| {_fmt(s['sgm_rel'], '.2f')} ({_fmt(s['sgm'])} s) | {_fmt(s['gm_rel'], '.2f')} |")
-        L.append("")
-    # -------------------------------------------------------------- targets
-    L += ["## Performance targets", ""]
-    L += targets(runs, floors, ours, err_target, floor_target, speed_target, tag_sources=len(sources) > 1)
-    L.append("")
-    # -------------------------------------------------------------- figures
-    L += ["## Work-precision", "",
-          "Relative energy-norm error of x against time (setup + solve), one curve per solver through its "
-          "tiers; hollow markers: status not solved; dashed line: the floor. Errors below 1e-16 are drawn at 1e-16."
-          + (f" The references were computed by {', '.join(sorted({r['solver'] for r in ok_refs}))}: that solver's "
-             "own runs agree with them by construction (error near 0), their accuracy is the KKT error in the "
-             "tier tables." if ok_refs else ""), ""]
+    return L
+
+
+def _figures(wp: list[str], sc: list[str], figrel, ok_solvers: list[str]) -> list[str]:
+    """Work-precision (largest N per scene inline, the others linked) and scaling figures."""
+    L = ["## Work-precision", "",
+         "Relative energy-norm error of x against time (setup + solve), one curve per solver through its "
+         "tiers; hollow markers: status not solved; dashed line: the floor. Errors below 1e-16 are drawn at 1e-16."
+         + (f" The references were computed by {', '.join(ok_solvers)}: that solver's "
+            "own runs agree with them by construction (error near 0), their accuracy is the KKT error in the "
+            "tier tables." if ok_solvers else ""), ""]
     largest = {}
     for name in wp:
         load, n = name[3:-4].rsplit("_N", 1)
         if int(n) >= largest.get(load, (0, ""))[0]:
             largest[load] = (int(n), name)
     for load, (n, name) in sorted(largest.items()):
-        L.append(f"![work-precision {load} N={n}]({figrel}/{name})")
-        L.append("")
+        L += [f"![work-precision {load} N={n}]({figrel}/{name})", ""]
     others = [n for n in wp if n not in {v[1] for v in largest.values()}]
     if others:
-        L.append("Other sizes: " + ", ".join(f"[{n[3:-4]}]({figrel}/{n})" for n in others))
-        L.append("")
+        L += ["Other sizes: " + ", ".join(f"[{n[3:-4]}]({figrel}/{n})" for n in others), ""]
     L += ["## Scaling", "",
           "Time of the tightest solved tier against the number of unknowns; dashed: the floor (one "
           "factorization + one solve of K), dotted: 1.5 x the floor.", ""]
     for name in sc:
-        L.append(f"![scaling {name[8:-4]}]({figrel}/{name})")
-        L.append("")
-    # -------------------------------------------------------------- statuses
-    L += ["## Statuses", ""]
+        L += [f"![scaling {name[8:-4]}]({figrel}/{name})", ""]
+    return L
+
+
+def _statuses(runs: list[dict]) -> list[str]:
+    L = ["## Statuses", ""]
     variants = sorted({r["variant"] for r in runs})
     statuses = sorted({r["status"] for r in runs})
-    L.append("| solver | " + " | ".join(statuses) + " |")
-    L.append("|---|" + "---|" * len(statuses))
+    L += ["| solver | " + " | ".join(statuses) + " |", "|---|" + "---|" * len(statuses)]
     for v in variants:
         cnt = defaultdict(int)
         for r in runs:
@@ -510,11 +294,37 @@ def build_report(results: str | Path | list[str | Path], md: str | Path, figdir:
         if r["status"] not in ("solved",):
             msgs[(r["variant"], r["status"], str(r.get("message") or "")[:160])].append(r["label"])
     if msgs:
-        L.append("Messages of the runs that did not end solved (first scene of each):")
+        L += ["Messages of the runs that did not end solved (first scene of each):", ""]
+        L += [f"- {v} / {st} x{len(labels)} ({labels[0]}): {m}" for (v, st, m), labels in sorted(msgs.items())[:60]]
         L.append("")
-        for (v, st, m), labels in sorted(msgs.items())[:60]:
-            L.append(f"- {v} / {st} x{len(labels)} ({labels[0]}): {m}")
-        L.append("")
+    return L
+
+
+def build_report(results: str | Path | list[str | Path], md: str | Path, figdir: str | Path, *,
+                 ours: list[str], shift: float = 10.0, err_target: float = 1e-8, floor_target: float = 1.5,
+                 speed_target: float = 10.0, command: str = "") -> Path:
+    """Write the markdown report and its figures from one or several results; returns the markdown path."""
+    from dualfem.core.io import atomic_write_text
+
+    results = [results] if isinstance(results, (str, Path)) else list(results)
+    if not results:
+        raise InputError("give at least one RESULTS (a results.csv or a sweep's output directory)")
+    rows, sources = load_sources(results)
+    runs = [r for r in rows if r["kind"] == "run"]
+    refs = [r for r in rows if r["kind"] == "reference"]
+    floors = [r for r in rows if r["kind"] == "floor"]
+    md, figdir = Path(md), Path(figdir)
+    wp, sc = plots(runs, floors, figdir)
+    try:
+        figrel = figdir.resolve().relative_to(md.parent.resolve())
+    except ValueError:
+        figrel = figdir.resolve()
+    L = _header(results, sources, rows, command) + _machine(rows, sources) + _method(runs, shift)
+    L += _references(refs, sources) + _tiers(runs, shift) + ["## Performance targets", ""]
+    L += targets(runs, floors, ours, err_target, floor_target, speed_target, tag_sources=len(sources) > 1)
+    L.append("")
+    L += _figures(wp, sc, figrel, sorted({r["solver"] for r in refs if r["status"] == "solved"}))
+    L += _statuses(runs)
     atomic_write_text(md, "\n".join(L) + "\n")
     return md
 
@@ -531,7 +341,8 @@ def run(argv: list[str]) -> int:
                         "the rows of an earlier one that measure the same thing")
     p.add_argument("--md", default="reports/benchmark.md", help="markdown output (default reports/benchmark.md)")
     p.add_argument("--figdir", default="reports/bench", help="figure directory (default reports/bench)")
-    p.add_argument("--ours", default="uzawa,uzawa_auto,pdas", help="comma-separated solvers checked against the targets")
+    p.add_argument("--ours", default="uzawa,uzawa_auto,pdas",
+                   help="comma-separated solvers checked against the targets")
     p.add_argument("--shift", type=float, default=10.0, help="shift of the geometric mean in seconds (10)")
     p.add_argument("--error", type=float, default=1e-8, help="equal-error level of the targets (1e-8)")
     try:
@@ -547,22 +358,3 @@ def run(argv: list[str]) -> int:
                       err_target=a.error, command=cmd)
     print(f"wrote {md} and figures in {a.figdir}", file=sys.stderr)
     return 0
-
-
-def _save_with_legend(fig, axes, figdir, name: str) -> str:
-    """One legend for all panels (labels de-duplicated), saved as figdir/name; returns name."""
-    import matplotlib.pyplot as plt
-
-    h, lab = [], []
-    for ax in axes:
-        for hh, ll in zip(*ax.get_legend_handles_labels()):
-            if ll not in lab:
-                h.append(hh)
-                lab.append(ll)
-    fig.legend(h, lab, loc="upper center", ncol=min(len(lab), 8), fontsize=8, bbox_to_anchor=(0.5, 1.08))
-    fig.tight_layout()
-    from dualfem.core.io import atomic_savefig
-
-    atomic_savefig(fig, figdir / name, dpi=90, bbox_inches="tight")
-    plt.close(fig)
-    return name

@@ -1,6 +1,7 @@
 """``dualfem report plugins``: the second problem plugin (Signorini) and the template solver, measured.
 
-Writes ``reports/plugins.md`` and ``reports/figures/plugins_signorini.png``:
+Render only: the runs are :mod:`dualfem.experiments.plugins`. Writes ``reports/plugins.md`` and
+``reports/figures/plugins_signorini.png``:
 
 * the Signorini scene (``problems/signorini.py``) solved by every registered, installed solver:
   status, iterations, time, difference to the exact reference, and the physical checks (total
@@ -23,161 +24,124 @@ from dualfem.cli.report import register_report
 from dualfem.core.errors import check_int
 
 
-def _progress(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
+def _solvers_section(data: dict) -> list[str]:
+    p, N = data["scene"], data["N"]
+    md = ["## Signorini contact: every solver\n",
+          f"`problems/signorini.py`: elastic rectangle {p['width']:g} x {p['height']:g} (E = {p['E']:g}, nu = "
+          f"{p['nu']:g}, plane {p['plane']}), N = {N} ({data['n']} unknowns, {data['m']} bottom nodes), pressed by a "
+          f"flat frictionless punch (indentation {p['indent']:g}) onto a rigid obstacle with initial gap "
+          f"g(x) = {p['obstacle']}. Reference: `{data['reference']}`. `x error` = relative energy-norm difference to "
+          f"the reference; `punch + sum(mu)` = global vertical equilibrium (the punch force comes from rows of the "
+          f"full stiffness matrix that the QP does not contain), relative to sum(mu).\n",
+          "| solver | status | iterations | setup + solve (s) | KKT (evaluator) | x error | contact nodes | sum(mu) "
+          "| punch + sum(mu) |",
+          "|---|---|---|---|---|---|---|---|---|"]
+    for r in data["solvers"]:
+        if not r["ok"]:
+            md.append(f"| {r['solver']} | {r['status']} | | | | | | | {r['message'][:60]} |")
+            continue
+        md.append(f"| {r['solver']} | {r['status']} | {r['iterations']} | {r['time_s']:.3f} | "
+                  f"{r['kkt']:.1e} | {r['x_error']:.1e} | {r['contact']}/{r['m']} | "
+                  f"{r['sum_mu']:.6g} | {r['equilibrium']:.1e} |")
+    return md + [""]
 
 
-def _reference(names) -> str:
-    for n in ("pdas", "clarabel"):
-        if n in names:
-            return n
-    raise RuntimeError("no exact reference solver (pdas, clarabel) is installed")
+def _flat_section(data: dict) -> list[str]:
+    md = ["## Flat foundation: the exact answer\n",
+          "With `obstacle = \"0\"` (`dualfem solve signorini_flat`) the exact solution is homogeneous uniaxial "
+          "compression, which P1 elements reproduce: contact pressure p = E' indent / height on the whole bottom "
+          "(E' = E / (1 - nu^2) in plane strain, E in plane stress).\n",
+          "| N | plane | exact p | max relative error of mu / w (reference solver) | nodes in contact |",
+          "|---|---|---|---|---|"]
+    md += [f"| {r['N']} | {r['plane']} | {r['exact']:.6g} | {r['error']:.1e} | {r['contact']}/{r['m']} |"
+           for r in data["flat"]]
+    return md + [""]
 
 
-def _kkt(sol) -> float:
-    from dualfem.core.evaluator import kkt_error
+def _draw_body(ax, fig_data: dict, N: int) -> None:
+    """Left panel: the deformed mesh on the obstacle, the nodes in contact marked."""
+    X, u = np.array(fig_data["nodes"]), np.array(fig_data["u"])
+    height = fig_data["height"]
+    scale = 0.1 * height / max(np.abs(u).max(), 1e-300)
+    ax.triplot(X[0] + scale * u[0], X[1] + scale * u[1], np.array(fig_data["triangles"]), lw=0.3, color="0.4")
+    xs, gap = np.array(fig_data["obstacle_x"]), np.array(fig_data["gap"])
+    ax.fill_between(xs, -scale * gap, -scale * gap.max() - 0.05 * height, color="0.8", label="rigid obstacle")
+    c = np.array(fig_data["contact_nodes"], dtype=int)
+    ax.plot(X[0, c] + scale * u[0, c], X[1, c] + scale * u[1, c], "o", ms=3, color="C3", label="nodes in contact")
+    ax.set_aspect("equal")
+    ax.set_title(f"deformed body (displacements x {scale:.0f}), N = {N}")
+    ax.legend(loc="upper right", fontsize=8)
 
-    return kkt_error(sol.residuals) if sol.residuals else float("nan")
+
+def _draw_pressures(ax, fig_data: dict) -> None:
+    """Right panel: contact pressure per indentation; reference as a line, other exact solvers as markers."""
+    markers = "osd^v<>p*h"
+    ref, exact = fig_data["reference"], fig_data["exact"]
+    indents = sorted({r["indent"] for r in fig_data["pressures"]})
+    for r in fig_data["pressures"]:
+        k, j = indents.index(r["indent"]), exact.index(r["solver"])
+        kw = dict(ls="-", lw=1.2, color=f"C{k}") if r["solver"] == ref else \
+            dict(ls="none", marker=markers[j % len(markers)], ms=3.5, mfc="none", color=f"C{k}")
+        ax.plot(r["x"], r["pressure"], label=f"indent {r['indent']:g}" if r["solver"] == ref else None, **kw)
+    ax.set_xlabel("x1 along the bottom")
+    ax.set_ylabel("contact pressure mu / w (MPa)")
+    ax.set_title("contact pressure; line: " + ref + ", markers: " + ", ".join(n for n in exact if n != ref),
+                 fontsize=8)
+    ax.legend(fontsize=8)
 
 
-def generate(out: Path, N: int = 32, dpi: int = 110, sizes=(16, 32, 64, 128)) -> str:
+def _figure_section(data: dict, out: Path, dpi: int) -> list[str]:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from dualfem.core import evaluator
     from dualfem.core.io import atomic_savefig
-    from dualfem.core.registry import solvers
-    from dualfem.core.runner import run
-    from dualfem.core.scene import load_scene
-    from dualfem.core.solution import Status
 
-    avail = {n: c for n, c in sorted(solvers().items()) if c.missing() is None}
-    ref_name = _reference(avail)
-    md = ["# Plugins: a second problem (Signorini contact) and the template solver\n",
-          "Generated by `dualfem report plugins`. How to write such plugins: `docs/plugins.md`.\n"]
-
-    # ------------------------------------------------------------------ every solver on Signorini
-    prob = load_scene("signorini", {"N": N})
-    qp = prob.build()
-    p = prob.params
-    ref = run(ref_name, qp)
-    md += ["## Signorini contact: every solver\n",
-           f"`problems/signorini.py`: elastic rectangle {p['width']:g} x {p['height']:g} (E = {p['E']:g}, nu = "
-           f"{p['nu']:g}, plane {p['plane']}), N = {N} ({qp.n} unknowns, {qp.m} bottom nodes), pressed by a flat "
-           f"frictionless punch (indentation {p['indent']:g}) onto a rigid obstacle with initial gap "
-           f"g(x) = {p['obstacle']}. Reference: `{ref_name}`. `x error` = relative energy-norm difference to the "
-           f"reference; `punch + sum(mu)` = global vertical equilibrium (the punch force comes from rows of the full "
-           f"stiffness matrix that the QP does not contain), relative to sum(mu).\n",
-           "| solver | status | iterations | setup + solve (s) | KKT (evaluator) | x error | contact nodes | sum(mu) | punch + sum(mu) |",
-           "|---|---|---|---|---|---|---|---|---|"]
-    for name in avail:
-        s = run(name, qp)
-        _progress(f"signorini N={N} {name}: {s.status} {s.iterations}")
-        if s.x is None or s.status == Status.SKIPPED:
-            md.append(f"| {name} | {s.status} | | | | | | | {s.message[:60]} |")
-            continue
-        d = evaluator.compare(qp, s.x, s.multipliers, ref.x, ref.multipliers)
-        punch, _ = prob.punch_force(s.x)
-        tot = float(s.multipliers.sum())
-        md.append(f"| {name} | {s.status} | {s.iterations} | {s.time_s['setup'] + s.time_s['solve']:.3f} | "
-                  f"{_kkt(s):.1e} | {d['x_energy']:.1e} | {int(evaluator.contact_set(qp, s.x).sum())}/{qp.m} | "
-                  f"{tot:.6g} | {abs(punch + tot) / max(abs(tot), 1e-300):.1e} |")
-    md.append("")
-
-    # ------------------------------------------------------------------ flat foundation: exact answer
-    md += ["## Flat foundation: the exact answer\n",
-           "With `obstacle = \"0\"` (`dualfem solve signorini_flat`) the exact solution is homogeneous uniaxial "
-           "compression, which P1 elements reproduce: contact pressure p = E' indent / height on the whole bottom "
-           "(E' = E / (1 - nu^2) in plane strain, E in plane stress).\n",
-           "| N | plane | exact p | max relative error of mu / w (reference solver) | nodes in contact |",
-           "|---|---|---|---|---|"]
-    for n_ in (8, N):
-        for plane in ("strain", "stress"):
-            fp = load_scene("signorini_flat", {"N": n_, "plane": plane})
-            fq = fp.build()
-            fs = run(ref_name, fq)
-            err = float(np.abs(fq.pressure(fs.multipliers) / fp.flat_pressure() - 1).max())
-            md.append(f"| {n_} | {plane} | {fp.flat_pressure():.6g} | {err:.1e} | "
-                      f"{int(evaluator.contact_set(fq, fs.x).sum())}/{fq.m} |")
-    md.append("")
-
-    # ------------------------------------------------------------------ the figure
-    exact = [n for n, c in avail.items() if c.exact]
     fig, axes = plt.subplots(1, 2, figsize=(12.5, 4.6))
-    ax = axes[0]
-    X = qp.maps["nodes"]
-    nd = qp.maps["node_dofs"]
-    u = np.zeros_like(X)
-    full = prob.displacement(ref.x)
-    for c in range(2):
-        has = nd[c] >= 0
-        u[c, has] = full[nd[c, has]]
-    u[1] -= p["indent"]          # from the punch's frame to the foundation's (a rigid translation)
-    scale = 0.1 * p["height"] / max(np.abs(u).max(), 1e-300)
-    ax.triplot(X[0] + scale * u[0], X[1] + scale * u[1], qp.maps["triangles"].T, lw=0.3, color="0.4")
-    xs = np.linspace(0, p["width"], 400)
-    gap = prob._gap(xs)
-    ax.fill_between(xs, -scale * gap, -scale * gap.max() - 0.05 * p["height"], color="0.8", label="rigid obstacle")
-    cn = qp.maps["contact_nodes"]
-    cset = evaluator.contact_set(qp, ref.x)
-    ax.plot(X[0, cn[cset]] + scale * u[0, cn[cset]], X[1, cn[cset]] + scale * u[1, cn[cset]], "o", ms=3,
-            color="C3", label="nodes in contact")
-    ax.set_aspect("equal")
-    ax.set_title(f"deformed body (displacements x {scale:.0f}), N = {N}")
-    ax.legend(loc="upper right", fontsize=8)
-    ax = axes[1]
-    markers = "osd^v<>p*h"
-    for k, indent in enumerate((0.002, 0.005, 0.01)):
-        pk = load_scene("signorini", {"N": N, "indent": indent})
-        qk = pk.build()
-        xb = qk.maps["contact_x"]
-        for j, name in enumerate(exact):
-            s = run(name, qk)
-            if not s.ok:
-                continue
-            kw = dict(ls="-", lw=1.2, color=f"C{k}") if name == ref_name else \
-                dict(ls="none", marker=markers[j % len(markers)], ms=3.5, mfc="none", color=f"C{k}")
-            ax.plot(xb, qk.pressure(s.multipliers), label=f"indent {indent:g}" if name == ref_name else None, **kw)
-    ax.set_xlabel("x1 along the bottom")
-    ax.set_ylabel("contact pressure mu / w (MPa)")
-    ax.set_title("contact pressure; line: " + ref_name + ", markers: " + ", ".join(n for n in exact if n != ref_name),
-                 fontsize=8)
-    ax.legend(fontsize=8)
+    _draw_body(axes[0], data["figure"], data["N"])
+    _draw_pressures(axes[1], data["figure"])
     fig.tight_layout()
     figdir = out / "figures"
     figdir.mkdir(parents=True, exist_ok=True)
     path = figdir / "plugins_signorini.png"
     atomic_savefig(fig, path, dpi=dpi)
     plt.close(fig)
-    md += [f"![Signorini contact](figures/{path.name})\n",
-           "Left: the body on the obstacle (`dualfem solve signorini`). Right: contact pressure along the bottom for "
-           "three punch indentations; every exact solver is drawn (markers on the reference line).\n"]
+    return [f"![Signorini contact](figures/{path.name})\n",
+            "Left: the body on the obstacle (`dualfem solve signorini`). Right: contact pressure along the bottom for "
+            "three punch indentations; every exact solver is drawn (markers on the reference line).\n"]
 
-    # ------------------------------------------------------------------ template solver cost
-    fast = "pdas" if "pdas" in avail else ref_name
-    md += ["## Cost of the template solver `dual_gradient`\n",
-           f"Scene f2 (delta = 1e-5). Iterations of projected gradient on the dual (one sparse solve each) grow with "
-           f"the mesh, the accelerated variant (FISTA + restart, default) much less; `{fast}` for scale. "
-           "Times are wall-clock setup + solve on this machine (single runs); `max_n` is raised so that N = 128 "
-           "(above the default skip threshold of 20000 unknowns) is measured too.\n",
-           "| N | unknowns | plain: iterations | plain: time (s) | accelerated: iterations | accelerated: time (s) | "
-           f"{fast}: time (s) | accelerated x error |",
-           "|---|---|---|---|---|---|---|---|"]
-    for n_ in sizes:
-        q2 = load_scene("f2", {"N": n_}).build()
-        r = run(fast, q2)
-        a = run("dual_gradient", q2, {"max_n": 10**7})
-        b = run("dual_gradient", q2, {"accelerate": False, "max_n": 10**7})
-        d = evaluator.compare(q2, a.x, a.multipliers, r.x, r.multipliers)["x_energy"] \
-            if (r.ok and a.x is not None) else float("nan")
-        _progress(f"f2 N={n_}: plain {b.iterations} accelerated {a.iterations}")
-        t = lambda s: s.time_s["setup"] + s.time_s["solve"]  # noqa: E731
-        md.append(f"| {n_} | {q2.n} | {b.iterations['gradient']} ({b.status}) | {t(b):.3f} | "
-                  f"{a.iterations['gradient']} ({a.status}) | {t(a):.3f} | {t(r):.3f} ({r.status}) | {d:.1e} |")
-    md.append("")
+
+def _cost_section(data: dict) -> list[str]:
+    fast = data["fast"]
+    md = ["## Cost of the template solver `dual_gradient`\n",
+          f"Scene f2 (delta = 1e-5). Iterations of projected gradient on the dual (one sparse solve each) grow with "
+          f"the mesh, the accelerated variant (FISTA + restart, default) much less; `{fast}` for scale. "
+          "Times are wall-clock setup + solve on this machine (single runs); `max_n` is raised so that N = 128 "
+          "(above the default skip threshold of 20000 unknowns) is measured too.\n",
+          "| N | unknowns | plain: iterations | plain: time (s) | accelerated: iterations | accelerated: time (s) | "
+          f"{fast}: time (s) | accelerated x error |",
+          "|---|---|---|---|---|---|---|---|"]
+    md += [f"| {r['N']} | {r['n']} | {r['plain_iterations']} ({r['plain_status']}) | {r['plain_time_s']:.3f} | "
+           f"{r['accel_iterations']} ({r['accel_status']}) | {r['accel_time_s']:.3f} | "
+           f"{r['fast_time_s']:.3f} ({r['fast_status']}) | {r['x_error']:.1e} |" for r in data["cost"]]
+    return md + [""]
+
+
+def render(data: dict, out: Path, dpi: int = 110) -> str:
+    """The Markdown of plugins.md (and its figure in ``out/figures``) from
+    :func:`dualfem.experiments.plugins.collect` data."""
+    md = ["# Plugins: a second problem (Signorini contact) and the template solver\n",
+          "Generated by `dualfem report plugins`. How to write such plugins: `docs/plugins.md`.\n"]
+    md += _solvers_section(data) + _flat_section(data) + _figure_section(data, out, dpi) + _cost_section(data)
     return "\n".join(md)
+
+
+def generate(out: Path, N: int = 32, dpi: int = 110, sizes=(16, 32, 64, 128)) -> str:
+    """Run the experiment, then render (the text of plugins.md)."""
+    from dualfem.experiments.plugins import collect
+
+    return render(collect(N=N, sizes=sizes), out, dpi)
 
 
 @register_report("plugins", "Signorini problem plugin and template solver: every solver, physics checks, figure")
@@ -207,5 +171,5 @@ def run(argv: list[str]) -> int:
     from dualfem.core.io import atomic_write_text
 
     atomic_write_text(out / "plugins.md", text + f"\n_Wall time {time.perf_counter() - t0:.0f} s._\n")
-    _progress(f"wrote {out / 'plugins.md'}")
+    print(f"wrote {out / 'plugins.md'}", file=sys.stderr)
     return 0

@@ -8,12 +8,14 @@ Figures go to ``reports/stability/`` next to the Markdown file; every file is wr
 from __future__ import annotations
 
 import argparse
+import copy
 import math
 from collections import Counter, defaultdict
 from pathlib import Path
 
 from dualfem.cli.report import register_report
 from dualfem.core.errors import InputError
+from dualfem.reports._stability_findings import _findings
 
 COLORS = {"correct": "#2e9d4f", "failed": "#f0a030", "flagged": "#f5d040", "timeout": "#c77c2a",
           "crashed": "#8c4a1a", "silent_wrong": "#d62728", "unverified": "#9ecae1", "skipped": "#d9d9d9"}
@@ -51,8 +53,8 @@ def _heatmaps(recs, rowf, colf, title, rowlabel, collabel, path: Path, keep_col_
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib import patheffects
     import numpy as np
+    from matplotlib import patheffects
     from matplotlib.colors import ListedColormap
 
     rows, cols, cell = _grid(recs, rowf, colf)
@@ -79,8 +81,10 @@ def _heatmaps(recs, rowf, colf, title, rowlabel, collabel, path: Path, keep_col_
             t = (r.get("setup_s") or 0) + (r.get("solve_s") or 0)
             if t > 0 and r["grade"] not in ("skipped", "timeout", "crashed"):
                 TM[i, j] = math.log10(t)
-    panels = [(A, "outcome", cmap, (-0.5, len(outs) - 0.5)), (np.clip(E, -14, 1), "log10 rel. energy-norm error (clipped to [-14, 1])", "viridis", (-14, 1)),
-              (IT, "log10 iterations (main counter)", "magma_r", None), (TM, "log10 time setup+solve [s]", "cividis", None)]
+    panels = [(A, "outcome", cmap, (-0.5, len(outs) - 0.5)),
+              (np.clip(E, -14, 1), "log10 rel. energy-norm error (clipped to [-14, 1])", "viridis", (-14, 1)),
+              (IT, "log10 iterations (main counter)", "magma_r", None),
+              (TM, "log10 time setup+solve [s]", "cividis", None)]
     for ax, (M, name, cm, lim) in zip(axs, panels):
         kw = {"vmin": lim[0], "vmax": lim[1]} if lim else {}
         im = ax.imshow(np.ma.masked_invalid(M), cmap=cm, aspect="auto", **kw)
@@ -142,7 +146,8 @@ def _boundaries(recs, colf, colname) -> list[str]:
     lines = []
     by = defaultdict(list)
     for r in recs:
-        by[r["solver"] + (" " + ",".join(f"{k}={_fmt(v)}" for k, v in r["solver_params"].items()) if r.get("solver_params") else "")].append(r)
+        sp_ = r.get("solver_params")
+        by[r["solver"] + (" " + ",".join(f"{k}={_fmt(v)}" for k, v in sp_.items()) if sp_ else "")].append(r)
     for s, rs in sorted(by.items()):
         rs = sorted(rs, key=lambda r: _sortkey(colf(r)))
         good = [colf(r) for r in rs if r["grade"] == "correct"]
@@ -202,87 +207,33 @@ def _scatter_r_delta(recs, solver: str, path: Path) -> None:
     plt.close(fig)
 
 
-def _findings(recs) -> list[str]:
-    """Explanations of the boundaries, each stated only when the data show the effect."""
-    import numpy as np
-
-    out = []
-    wrong1 = [r for r in recs if r["grade"] == "silent_wrong" and r.get("main_iterations") == 1]
-    if wrong1:
-        prods = sorted({r["coords"]["r"] * r["coords"]["delta"] for r in wrong1 if "r" in r["coords"]
-                        and isinstance(r["coords"]["r"], float)})
-        out.append(f"- **Silent wrong answers after one iteration** ({len(wrong1)} runs: "
-                   + ", ".join(sorted({r['solver'] for r in wrong1}))
-                   + (f"; r x delta = {', '.join(_fmt(p) for p in prods)}" if prods else "")
-                   + "). These runs stopped after the first outer iteration with status solved. The outer stopping "
-                   "test is an absolute bound on the change of the dual variable (max_j |l_j^(k+1) - l_j^k| <= "
-                   "tol_outer); when r x delta is tiny the first update r [u_nu] is already below it, so 'no "
-                   "progress' passes as 'converged'. The evaluator's KKT residuals do not catch it either: at "
-                   "delta = 1e-12 the interface term dominates K and the scaled stationarity residual stays small "
-                   "while the contact forces are wrong.")
-    # the interface-dominated regime: delta <= 1e-6 (interface stiffness >> elastic stiffness)
-    # runs that ended by meeting their own outer test (solved, or inaccurate after a rate check)
-    rr = [r for r in recs if r["axis"] == "r" and r.get("status") in ("solved", "inaccurate")
-          and (r.get("main_iterations") or 0) > 1
-          and r["coords"]["r"] * r["coords"]["delta"] <= 1.0 and r["coords"]["delta"] <= 1e-6
-          and (r.get("params_used") or {}).get("r_rule", "fixed") == "fixed"]
-    if len(rr) >= 3:
-        x = np.log10([r["coords"]["r"] * r["coords"]["delta"] for r in rr])
-        y = np.log10([r["main_iterations"] for r in rr])
-        if np.ptp(x) > 0:
-            slope = float(np.polyfit(x, y, 1)[0])
-            out.append(f"- **Uzawa at small delta**: for delta <= 1e-6 and r x delta <= 1 the outer iterations "
-                       f"needed to meet the outer test behave like (r delta)^({slope:.2f}) (least-squares fit over {len(rr)} runs, "
-                       f"{', '.join(f'{_fmt(a)}: {int(b)}' for a, b in sorted((r['coords']['r'] * r['coords']['delta'], r['main_iterations']) for r in rr))}): the slowest dual "
-                       "mode has a compliance ~ delta (the 1/delta interface term), so it contracts by about "
-                       "1 / (1 + r delta) per outer iteration. The paper's r = 1e7 gives r delta = 1e-2 at delta = "
-                       "1e-9 (its ~900 iterations); choosing r from delta (or from the dual compliance, as "
-                       "`uzawa_auto` does) keeps r delta, and the iteration count, constant.")
-    scaled_fail = [r for r in recs if r["axis"] in ("load", "units") and r.get("third_party")
-                   and r["grade"] in HONEST_OR_WRONG and (r.get("params_used") or {}).get("scale") is True]
-    if scaled_fail:
-        out.append(f"- **Scaled third-party backends on the load and units axes** ({len(scaled_fail)} runs: "
-                   + ", ".join(sorted({f"{r['solver']} ({_fmt(list(r['coords'].values())[0])})" for r in scaled_fail}))
-                   + "). They receive the QP normalised by `dualfem.scaling`, which multiplies the objective by "
-                   "c = 1 / max|D F|: the scaled Hessian c D K D then grows like 1 / (load magnitude) and the "
-                   "unknowns shrink like the load, which Clarabel's absolute tolerances and OSQP's rho do not "
-                   "follow. Measured remedy (not applied here, core code): scale the unknowns by the load "
-                   "instead (x = s D y with s = max|D F|, P = D K D, q = -D F / s): in the side test "
-                   "`python benchmarks/stress_scaling_check.py` (N = 16) both backends then solve every load "
-                   "scale 1e-6..1e6 and every unit system to a relative error <= 1e-10.")
-    nu_fail = [r for r in recs if r["axis"] == "nu" and r["grade"] not in ("correct", "skipped", "unverified")]
-    if nu_fail:
-        out.append(f"- **Near-incompressible** (nu -> 0.5): {len(nu_fail)} runs not correct ("
-                   + ", ".join(sorted({f"{r['solver']} at nu = {_fmt(r['coords']['nu'])}" for r in nu_fail}))
-                   + "); lambda / mu = 2 nu / (1 - 2 nu) reaches 5000 at nu = 0.4999.")
-    return (["## What sets the boundaries", ""] + out + [""]) if out else []
-
-
-HONEST_OR_WRONG = ("failed", "flagged", "timeout", "crashed", "silent_wrong")
-
-
 def _classification(meta: dict) -> list[str]:
     """How runs are graded: the one policy of :mod:`dualfem.core.grade`, in words."""
     refs = meta.get("references") or []
     return ["## How a run is graded", "",
             "Every run is compared with a reference solution of the same QP, chosen by dualfem's one reference "
-            f"policy (`dualfem.experiments.reference`): the first trusted run of {', '.join(f'`{r}`' for r in refs) or '?'} "
+            "policy (`dualfem.experiments.reference`): the first trusted run of "
+            f"{', '.join(f'`{r}`' for r in refs) or '?'} "
             "(a run of a reference solver is compared with the next one, never with itself). A reference is trusted "
-            f"only if it claims solved, its own independent KKT residual is below {meta.get('ref_kkt', 1e-7):g} and its "
-            "certified energy-norm error bound (from the QP alone) is finite. On the *units* and *load* axes the reference "
+            f"only if it claims solved, its own independent KKT residual is below {meta.get('ref_kkt', 1e-7):g} and "
+            "its certified energy-norm error bound (from the QP alone) is finite. On the *units* and *load* axes the "
+            "reference "
             "is the base scene's reference mapped by exact physics (change of units; x(sF) = s x(F)), so no solver is "
             "trusted on scaled data.", "",
             "The error is the relative energy-norm error |x - x_ref|_K / |x_ref|_K. With t the tolerance the solver "
-            "instance declares and b the reference's certified error bound (`dualfem.core.grade.grade`, the same policy "
+            "instance declares and b the reference's certified error bound (`dualfem.core.grade.grade`, the same "
+            "policy "
             "as `dualfem compare` and `dualfem bench`):", "",
             "- **correct** (`ok`): status solved, KKT residuals <= t and error <= t + b;",
             "- **failed** (`F`, honest): the status says not solved (max_iter, stagnation, numerical_error, ...);",
             "- **flagged** (`FL`, honest): status solved, but the evaluator's largest KKT residual is > t, so a user "
             "checking residuals sees it;",
-            "- **timeout** (`T`) / **crashed** (`X`): the harness killed the run or the process died (honest: no answer);",
+            "- **timeout** (`T`) / **crashed** (`X`): the harness killed the run or the process died (honest: no "
+            "answer);",
             "- **silent wrong answer** (`WRONG`): status solved, KKT residuals <= t, error > t + b;",
             "- **unverified** (`?`): no trusted reference;",
-            "- **skipped** (`-`): the solver does not apply, or the previous N already exceeded the time or memory budget.",
+            "- **skipped** (`-`): the solver does not apply, or the previous N already exceeded the time or memory "
+            "budget.",
             "",
             "Declared tolerances: " + ", ".join(f"`{k}` {v:g}" for k, v in sorted(meta.get("tolerances", {}).items()))
             + ". Solvers wrapping a third-party library (non-empty `requires`): "
@@ -291,34 +242,32 @@ def _classification(meta: dict) -> list[str]:
             "solver's only counter).", ""]
 
 
-def render(meta: dict, recs: list[dict], md_path: Path) -> str:
-    """Write the figures next to ``md_path`` and return the Markdown text."""
-    fig_dir = md_path.parent / "stability"
-    rel = fig_dir.name
-    L: list[str] = []
-    L += ["# Numerical stability under stress", "",
-          "Generated by `dualfem report stability RESULTS` from the runs of `dualfem stress` "
-          f"({'QUICK grid' if meta.get('quick') else 'full grid'}"
-          f"{'' if meta.get('complete', True) else ', INCOMPLETE: not every run finished'}; "
-          f"started {meta.get('started', '?')}, finished {meta.get('finished', '?')}; "
-          f"{len(recs)} runs; code at commit {meta.get('git_commit') or '?'}"
-          + "".join(f"; resumed {r.get('started')} at commit {r.get('git_commit')} for "
-                    f"{', '.join(r.get('solvers') or [])} on axis {', '.join(r.get('axes') or [])}"
-                    for r in meta.get("resumed", []))
-          + "). Do not edit by hand: rerun "
-          "`dualfem stress` and `dualfem report stability benchmarks/results/stress`.", ""]
+def _head(meta: dict, recs: list) -> list[str]:
+    L = ["# Numerical stability under stress", "",
+         "Generated by `dualfem report stability RESULTS` from the runs of `dualfem stress` "
+         f"({'QUICK grid' if meta.get('quick') else 'full grid'}"
+         f"{'' if meta.get('complete', True) else ', INCOMPLETE: not every run finished'}; "
+         f"started {meta.get('started', '?')}, finished {meta.get('finished', '?')}; "
+         f"{len(recs)} runs; code at commit {meta.get('git_commit') or '?'}"
+         + "".join(f"; resumed {r.get('started')} at commit {r.get('git_commit')} for "
+                   f"{', '.join(r.get('solvers') or [])} on axis {', '.join(r.get('axes') or [])}"
+                   for r in meta.get("resumed", []))
+         + "). Do not edit by hand: rerun "
+         "`dualfem stress` and `dualfem report stability benchmarks/results/stress`.", ""]
     env = meta.get("environment", {})
     if env:
         L += [f"Machine: {env.get('cpus')} CPUs, Python {env.get('python')}, "
               + ", ".join(f"{k} {v}" for k, v in env.get("versions", {}).items()) + ".", ""]
-    L += _classification(meta)
-    # ---------------------------------------------------------------- summary
+    return L + _classification(meta)
+
+
+def _summary(recs: list) -> list[str]:
+    """Counts per solver and grade, then every silent wrong answer and the unverified runs."""
     solvers = sorted({r["solver"] for r in recs})
     c = {s: Counter(r["grade"] for r in recs if r["solver"] == s) for s in solvers}
     outs = [o for o in COLORS if any(c[s][o] for s in solvers)]
-    L += ["## Summary", "", "| solver | " + " | ".join(outs) + " |", "|---" * (len(outs) + 1) + "|"]
-    for s in solvers:
-        L.append(f"| {s} | " + " | ".join(str(c[s][o]) for o in outs) + " |")
+    L = ["## Summary", "", "| solver | " + " | ".join(outs) + " |", "|---" * (len(outs) + 1) + "|"]
+    L += [f"| {s} | " + " | ".join(str(c[s][o]) for o in outs) + " |" for s in solvers]
     L.append("")
     wrong = [r for r in recs if r["grade"] == "silent_wrong"]
     ours = [r for r in wrong if not r.get("third_party")]
@@ -326,41 +275,70 @@ def render(meta: dict, recs: list[dict], md_path: Path) -> str:
     L += ["## Silent wrong answers", "",
           f"**Our solvers: {len(ours)}** (target 0). **Third-party solvers: {len(theirs)}.**", ""]
     if wrong:
-        L += ["| solver | axis | scene; solver params | status | error | KKT | message |", "|---|---|---|---|---|---|---|"]
+        L += _unbounded_note(wrong)
+        L += ["| solver | axis | scene; solver params | status | error | KKT | reference (certified bound) | message |",
+              "|---|---|---|---|---|---|---|---|"]
         for r in sorted(wrong, key=lambda r: (bool(r.get("third_party")), r["solver"], r["axis"])):
+            b = r.get("ref_bound")
+            ref = f"{r.get('ref_solver')} ({'not recorded' if b is None else format(b, '.1e')})"
             L.append(f"| {r['solver']}{'' if r.get('third_party') else ' (ours)'} | {r['axis']} | {_scene_str(r)} | "
-                     f"{r.get('status')} | {r['err_x_energy']:.1e} | {r['kkt_error']:.1e} | {(r.get('message') or '')[:80]} |")
+                     f"{r.get('status')} | {r['err_x_energy']:.1e} | {r['kkt_error']:.1e} | {ref} | "
+                     f"{(r.get('message') or '')[:80]} |")
         L.append("")
     L += _findings(recs)
     unv = [r for r in recs if r["grade"] == "unverified"]
     if unv:
         L += [f"Unverified runs ({len(unv)}): " + "; ".join(
             f"{r['solver']} {r['axis']} {_scene_str(r)} ({(r.get('reason') or '')[:120]})" for r in unv[:20]), ""]
-    # ---------------------------------------------------------------- axes
-    fig_dir.mkdir(parents=True, exist_ok=True)
+    return L
 
-    def section(axis, rowf, colf, rowlabel, collabel, colname, extra=None, subset=None, suffix="", col_order=None):
-        rs = subset if subset is not None else [r for r in recs if r["axis"] == axis]
-        if not rs:
-            return
-        name = f"{axis}{suffix}"
-        _heatmaps(rs, rowf, colf, AXIS_TITLE.get(axis, axis) + (f" [{suffix.strip('_')}]" if suffix else ""),
-                  rowlabel, collabel, fig_dir / f"{name}.png", col_order)
-        L.extend([f"### {AXIS_TITLE.get(axis, axis)}{(' - ' + suffix.strip('_')) if suffix else ''}", "",
-                  f"![{name}]({rel}/{name}.png)", "", _table(rs, rowf, colf, col_order), ""])
-        if extra:
-            L.extend(extra)
-        L.extend(["Boundaries:", ""] + _boundaries(rs, colf, colname) + [""])
 
-    def solver_row(r):
-        p = r.get("solver_params") or {}
-        return r["solver"] + ("" if not p else " " + ",".join(f"{k}={_fmt(v)}" for k, v in p.items()))
+def _unbounded_note(wrong: list) -> list[str]:
+    """A caveat when silent wrong answers were graded without the reference's certified bound."""
+    nob = [r for r in wrong if r.get("ref_bound") is None]
+    if not nob:
+        return []
+    errs = sorted(r["err_x_energy"] for r in nob)
+    tols = sorted({r.get("tol") if r.get("tol") is not None else r.get("tolerance") for r in nob}, key=str)
+    return [f"**Caveat: {len(nob)} of these {len(wrong)} were graded without the reference's certified error "
+            "bound** (the records predate it, so the grade's slack b is 0): their errors "
+            f"({errs[0]:.1e} to {errs[-1]:.1e}) are measured against references "
+            f"({', '.join(sorted({str(r.get('ref_solver')) for r in nob}))}) whose own error is not known "
+            f"to be below the declared tolerance ({', '.join(str(t) for t in tols)}). They are wrong answers "
+            "only if the reference is more accurate than that; rerunning `dualfem stress` records the bound "
+            "and settles it.", ""]
 
-    L += ["## The grid", ""]
-    L += [f"Base scene: the paper's f2 (E = 69000, nu = 0.3, plane strain, delta = 1e-5) at N = "
-          f"{16 if meta.get('quick') else 32}; each axis varies one thing. Per-run solver time limit "
-          f"{meta.get('time_limit')} s.", ""]
+
+def _section(fig_dir: Path, rs: list, axis: str, rowf, colf, rowlabel: str, collabel: str, colname: str,
+             extra=None, suffix: str = "", col_order=None) -> list[str]:
+    """One axis of the grid: colour maps, the table, the boundaries."""
+    if not rs:
+        return []
+    name = f"{axis}{suffix}"
+    _heatmaps(rs, rowf, colf, AXIS_TITLE.get(axis, axis) + (f" [{suffix.strip('_')}]" if suffix else ""),
+              rowlabel, collabel, fig_dir / f"{name}.png", col_order)
+    L = [f"### {AXIS_TITLE.get(axis, axis)}{(' - ' + suffix.strip('_')) if suffix else ''}", "",
+         f"![{name}]({fig_dir.name}/{name}.png)", "", _table(rs, rowf, colf, col_order), ""]
+    return L + (extra or []) + ["Boundaries:", ""] + _boundaries(rs, colf, colname) + [""]
+
+
+def _solver_row(r) -> str:
+    p = r.get("solver_params") or {}
+    return r["solver"] + ("" if not p else " " + ",".join(f"{k}={_fmt(v)}" for k, v in p.items()))
+
+
+def _with_coords(rec, **coords):
+    """A copy of the run record ``rec`` (a Row or a dict) with some coordinates replaced."""
+    c = copy.copy(rec)
+    if hasattr(c, "extra"):
+        c.extra = dict(c.extra)
+    c["coords"] = {**rec["coords"], **coords}
+    return c
+
+
+def _delta_axis(recs: list, fig_dir: Path) -> list[str]:
     d = [r for r in recs if r["axis"] == "delta"]
+    L = []
     for load in sorted({r["coords"]["load"] for r in d}):
         sub = [r for r in d if r["coords"]["load"] == load]
         ratio = sorted({(r["coords"]["delta"], r.get("stiffness_ratio")) for r in sub if r.get("stiffness_ratio")})
@@ -369,18 +347,24 @@ def render(meta: dict, recs: list[dict], md_path: Path) -> str:
             extra = ["Interface stiffness over elastic stiffness (max diagonal of the 1/delta part of K / max "
                      "diagonal of the elastic part), the source of ill-conditioning at small delta: "
                      + ", ".join(f"delta={_fmt(a)}: {b:.1e}" for a, b in ratio) + ".", ""]
-        section("delta", solver_row, lambda r: r["coords"]["delta"], "solver", "delta", "delta", extra,
-                subset=sub, suffix=f"_{load}")
+        L += _section(fig_dir, sub, "delta", _solver_row, lambda r: r["coords"]["delta"], "solver", "delta",
+                      "delta", extra, suffix=f"_{load}")
+    return L
+
+
+def _r_axis(recs: list, fig_dir: Path) -> list[str]:
+    """Uzawa's r axis per solver, beside the solver's default (and its auto-r variants) from the delta axis."""
+    d = [r for r in recs if r["axis"] == "delta"]
     rr = [r for r in recs if r["axis"] == "r"]
+    L = []
     for s in sorted({r["solver"] for r in rr}):
         sub = [r for r in rr if r["solver"] == s]
-        dflt = [dict(r, coords={**r["coords"], "r": "default"}) for r in d
-                if r["solver"] == s and r["coords"].get("load") == "f2"]
+        dflt = [_with_coords(r, r="default") for r in d if r["solver"] == s and r["coords"].get("load") == "f2"]
         dparams = dflt[0].get("params_used", {}).get("r") if dflt else None
         # variants of the same method that choose r themselves (e.g. uzawa_auto), side by side
         variants = sorted({r["solver"] for r in d if r["solver"].startswith(s + "_")})
         for v in variants:
-            dflt += [dict(r, coords={**r["coords"], "r": f"{v} (default)"}) for r in d
+            dflt += [_with_coords(r, r=f"{v} (default)") for r in d
                      if r["solver"] == v and r["coords"].get("load") == "f2"]
         extra = [f"Rows: r (stress per length); the row `default` is `{s}` with its default parameters "
                  f"(from the delta axis, f2{'' if dparams is None else ', r = ' + str(dparams)}); the paper used "
@@ -390,32 +374,52 @@ def render(meta: dict, recs: list[dict], md_path: Path) -> str:
                  + ". The table below gives the outer iterations against r x delta "
                  "(dimensionless: the augmentation r compared with the interface stiffness 1/delta).", ""]
         _scatter_r_delta(sub, s, fig_dir / f"r_delta_{s}.png")
-        tab = [f"![r x delta]({rel}/r_delta_{s}.png)", "",
-               "Outer iterations of the correct runs against r x delta: "
-               + "; ".join(f"r delta = {_fmt(k)}: {', '.join(str(int(x)) for x in v)}"
-                           for k, v in sorted(_by_product(sub).items())) + ".", ""]
-        extra = extra + tab
-        section("r", lambda r: r["coords"]["r"], lambda r: r["coords"]["delta"], "r", "delta", "delta", extra,
-                subset=sub + dflt, suffix=f"_{s}")
-    section("units", solver_row, lambda r: r["coords"]["units"] + ("" if r["coords"].get("r") == "default" else ""),
-            "solver", "unit system", "units", [
-                "Unit systems relative to the paper's (MPa, length unit read as m): MPa-mm multiplies lengths by "
-                "1e3, Pa-m stresses by 1e6, Pa-mm both, GPa-km divides both by 1e3. delta (a length per stress) "
-                "and the load are converted; the reference is the MPa-m reference mapped exactly. Rows with "
-                "`r=1e+07` keep the paper's number unconverted, to show what a fixed r does.", ""],
-            col_order=["MPa-m", "MPa-mm", "Pa-m", "Pa-mm", "GPa-km"])
-    section("load", solver_row, lambda r: r["coords"]["load_scale"], "solver", "load scale", "load scale",
-            ["The QP is positively homogeneous in the load: the reference is s x the reference at s = 1.", ""])
-    section("nu", solver_row, lambda r: r["coords"]["nu"], "solver", "nu", "nu",
-            ["P1 elements lock as nu -> 0.5 (lambda / mu = 2 nu / (1 - 2 nu) = 5000 at nu = 0.4999): the "
-             "discrete problem stays well posed but K's conditioning grows with lambda / mu.", ""])
-    section("N", solver_row, lambda r: r["coords"]["N"], "solver", "N", "N",
-            ["Large N only for the solvers that fit the budgets: a solver is not attempted at 2N when its "
-             "time at N x 6 exceeds the per-run time limit, or its peak memory at N x 4.5 exceeds 80% of the "
-             "memory available at that moment (a shared machine), or it skipped N itself; the reason is in "
-             "each skipped run's record. An error of exactly 0 (blank in the error map) means a bit-for-bit copy "
-             "of the reference (e.g. a backend polished by the same active-set code), not an independent check.",
-             ""])
+        extra += [f"![r x delta]({fig_dir.name}/r_delta_{s}.png)", "",
+                  "Outer iterations of the correct runs against r x delta: "
+                  + "; ".join(f"r delta = {_fmt(k)}: {', '.join(str(int(x)) for x in v)}"
+                              for k, v in sorted(_by_product(sub).items())) + ".", ""]
+        L += _section(fig_dir, sub + dflt, "r", lambda r: r["coords"]["r"], lambda r: r["coords"]["delta"], "r",
+                      "delta", "delta", extra, suffix=f"_{s}")
+    return L
+
+
+def _other_axes(recs: list, fig_dir: Path) -> list[str]:
+    def on(axis):
+        return [r for r in recs if r["axis"] == axis]
+
+    L = _section(fig_dir, on("units"), "units", _solver_row, lambda r: r["coords"]["units"], "solver",
+                 "unit system", "units", [
+                     "Unit systems relative to the paper's (MPa, length unit read as m): MPa-mm multiplies lengths "
+                     "by 1e3, Pa-m stresses by 1e6, Pa-mm both, GPa-km divides both by 1e3. delta (a length per "
+                     "stress) and the load are converted; the reference is the MPa-m reference mapped exactly. Rows "
+                     "with `r=1e+07` keep the paper's number unconverted, to show what a fixed r does.", ""],
+                 col_order=["MPa-m", "MPa-mm", "Pa-m", "Pa-mm", "GPa-km"])
+    L += _section(fig_dir, on("load"), "load", _solver_row, lambda r: r["coords"]["load_scale"], "solver",
+                  "load scale", "load scale",
+                  ["The QP is positively homogeneous in the load: the reference is s x the reference at s = 1.", ""])
+    L += _section(fig_dir, on("nu"), "nu", _solver_row, lambda r: r["coords"]["nu"], "solver", "nu", "nu",
+                  ["P1 elements lock as nu -> 0.5 (lambda / mu = 2 nu / (1 - 2 nu) = 5000 at nu = 0.4999): the "
+                   "discrete problem stays well posed but K's conditioning grows with lambda / mu.", ""])
+    L += _section(fig_dir, on("N"), "N", _solver_row, lambda r: r["coords"]["N"], "solver", "N", "N",
+                  ["Large N only for the solvers that fit the budgets: a solver is not attempted at 2N when its "
+                   "time at N x 6 exceeds the per-run time limit, or its peak memory at N x 4.5 exceeds 80% of the "
+                   "memory available at that moment (a shared machine), or it skipped N itself; the reason is in "
+                   "each skipped run's record. An error of exactly 0 (blank in the error map) means a bit-for-bit "
+                   "copy of the reference (e.g. a backend polished by the same active-set code), not an independent "
+                   "check.", ""])
+    return L
+
+
+def render(meta: dict, recs: list, md_path: Path) -> str:
+    """Write the figures next to ``md_path`` (folder ``stability/``) and return the Markdown text."""
+    fig_dir = md_path.parent / "stability"
+    L = _head(meta, recs) + _summary(recs)
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    L += ["## The grid", "",
+          f"Base scene: the paper's f2 (E = 69000, nu = 0.3, plane strain, delta = 1e-5) at N = "
+          f"{16 if meta.get('quick') else 32}; each axis varies one thing. Per-run solver time limit "
+          f"{meta.get('time_limit')} s.", ""]
+    L += _delta_axis(recs, fig_dir) + _r_axis(recs, fig_dir) + _other_axes(recs, fig_dir)
     return "\n".join(L) + "\n"
 
 

@@ -1,0 +1,183 @@
+"""The runs behind ``reports/figures.md``: the solutions pictured and the Uzawa histories.
+
+Runs only; :mod:`dualfem.reports.figures` draws and writes. The figures need whole fields, so
+:func:`collect` returns the scenes' QPs and the solvers' :class:`~dualfem.core.solution.Solution`
+objects (keyed by scene, delta and solver) together with the plain numbers of the report's
+tables. Solutions of the pictures come from the one reference policy's first installed exact
+candidate (:func:`dualfem.experiments.reference.candidates`: pdas, else Clarabel) unless a solver
+is named; the convergence histories come from ``uzawa`` (the paper's method) and from every
+other registered solver that records a per-iteration history.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from dualfem.core.errors import InputError
+
+#: deltas of the jump / pressure / history figures (the paper's range)
+SWEEP = (1e-1, 1e-3, 1e-5, 1e-7, 1e-9)
+#: (scene, delta, caption) of the deformed-body pictures (paper Figs 2, 3, 4, 7)
+DEFORMED = (("f1", 1e-5, "Fig. 2: f1 (pressing down), faces closed"),
+            ("f2", 1e-7, "Fig. 3 (left): f2, delta = 1e-7, faces nearly glued"),
+            ("f2", 1e-5, "Fig. 3 (right): f2, delta = 1e-5, a stress concentrator at the crack tip"),
+            ("f2", 1e-1, "Fig. 4: f2, delta = 1e-1, a crack"),
+            ("f3", 1e-1, "Fig. 7: f3 (pulling up), faces fully apart"))
+#: radius around the defect tips for the "stress at the tips" column (triangle centroids)
+TIP_RADIUS = 0.05
+#: history quantity per solver, first one found in the solver's history rows
+HISTORY_KEYS = ("dual_change", "residual", "grad", "complementarity", "primal")
+#: deltas at which the other solvers' histories are drawn, with their line styles
+OTHER_DELTAS = ((1e-5, "-"), (1e-9, "--"))
+
+
+def history_key(sol) -> str | None:
+    """The first key of :data:`HISTORY_KEYS` present in ``sol.history``."""
+    from dualfem.post.figures import history_series
+
+    for key in HISTORY_KEYS:
+        if history_series(sol, key) is not None:
+            return key
+    return None
+
+
+def solvers_with_history(exclude=(), probe_N: int = 8) -> list[str]:
+    """Registered, installed solvers that record a per-iteration history (a key of
+    :data:`HISTORY_KEYS`), found by one solve of a tiny f2 scene (N = ``probe_N``): libraries
+    without a history are not run at full size just to find that out."""
+    from dualfem.core.registry import solvers
+    from dualfem.core.runner import run
+    from dualfem.core.scene import load_scene
+
+    qp = load_scene("f2", {"N": probe_N, "delta": 1e-5}).build()
+    out = []
+    for name, cls in sorted(solvers().items()):
+        if name in exclude or cls.missing() is not None:
+            continue
+        if history_key(run(name, qp)) is not None:
+            out.append(name)
+    return out
+
+
+def picture_solver(name: str | None = None) -> str:
+    """``name`` if given (an installed solver), else the reference policy's first exact candidate."""
+    from dualfem.core.registry import get_solver
+    from dualfem.experiments.reference import candidates
+
+    if name is not None:
+        cls = get_solver(name)
+        if cls.missing():
+            raise InputError(cls.missing())
+        return name
+    names = [n for n, _ in candidates()]
+    if not names:
+        raise InputError("no exact reference solver (pdas, clarabel) is registered and installed")
+    return names[0]
+
+
+class Cases:
+    """Solve each (scene, delta) once with a given solver and remember the QP and the result."""
+
+    def __init__(self, N: int, progress: Callable[[str], None]):
+        self.N = N
+        self.progress = progress
+        self.qps: dict = {}
+        self.sols: dict = {}
+
+    def qp(self, scene: str, delta: float):
+        from dualfem.core.scene import load_scene
+
+        key = (scene, delta)
+        if key not in self.qps:
+            self.qps[key] = load_scene(scene, {"N": self.N, "delta": delta}).build()
+        return self.qps[key]
+
+    def solve(self, solver: str, scene: str, delta: float, require_x: bool = False):
+        """The Solution of ``solver`` (cached); ``require_x``: raise if it has no x (a pictured solve)."""
+        from dualfem.core.runner import run
+
+        key = (solver, scene, delta)
+        if key not in self.sols:
+            t0 = time.perf_counter()
+            self.sols[key] = sol = run(solver, self.qp(scene, delta))
+            self.progress(f"{scene} delta={delta:g} {solver}: {sol.status} {sol.iterations} "
+                          f"({time.perf_counter() - t0:.1f} s)")
+        sol = self.sols[key]
+        if require_x and sol.x is None:
+            raise RuntimeError(f"{scene} delta={delta:g}: solver {solver} returned no solution "
+                               f"({sol.status}: {sol.message})")
+        return sol
+
+
+def picture_row(qp, sol, scene: str, delta: float, caption: str) -> dict:
+    """Numbers of one pictured solution: max von Mises (MPa) overall and near the tips, max normal
+    jump, closed defect nodes, total contact force (force per unit thickness), KKT error."""
+    from dualfem.core import evaluator
+    from dualfem.post.fields import Post
+
+    p = Post(qp, sol)
+    tips = qp.maps["nodes"][:, qp.maps["defect_tips"]]
+    cen = p.nodes[:, p.triangles].mean(axis=1)
+    near = np.min(np.linalg.norm(cen[:, :, None] - tips[:, None, :], axis=0), axis=1) < TIP_RADIUS
+    return {"scene": scene, "delta": delta, "caption": caption, "von_mises": float(p.von_mises.max()),
+            "von_mises_tips": float(p.von_mises[near].max()) if near.any() else float("nan"),
+            "max_jump": float(p.defect["jump_normal"].max()), "closed": int(evaluator.contact_set(qp, sol.x).sum()),
+            "m": qp.m, "total_force": float(sol.multipliers.sum()), "kkt": evaluator.kkt_error(sol.residuals)}
+
+
+def uzawa_runs(cases: Cases, exact: str, sweep) -> dict:
+    """``uzawa`` on f1/f2/f3 at every delta of ``sweep``: iteration counts and its agreement with ``exact``."""
+    from dualfem.core import evaluator
+
+    counts, agree = {}, []
+    for scene in ("f1", "f2", "f3"):
+        for d in sweep:
+            s = cases.solve("uzawa", scene, d)
+            counts[(scene, d)] = {"outer": s.iterations.get("outer", "?"), "inner": s.iterations.get("inner", "?"),
+                                  "ok": s.ok, "status": str(s.status)}
+            ref = cases.solve(exact, scene, d) if s.x is not None else None
+            if ref is not None and ref.x is not None and exact != "uzawa":
+                c = evaluator.compare(cases.qp(scene, d), s.x, s.multipliers, ref.x, ref.multipliers)
+                agree.append({"scene": scene, "delta": d, "x_energy": c["x_energy"], "multipliers": c["multipliers"],
+                              "contact_mismatch": c["contact_mismatch"]})
+    return {"counts": counts, "agree": agree}
+
+
+def other_runs(cases: Cases, others: list[str]) -> dict:
+    """The other history solvers on f1/f2/f3 at :data:`OTHER_DELTAS`: which key each records."""
+    measures: dict[str, str] = {}
+    no_hist: set[str] = set()
+    for scene in ("f1", "f2", "f3"):
+        for name in others:
+            for d, _ in OTHER_DELTAS:
+                key = history_key(cases.solve(name, scene, d))
+                if key is None:
+                    no_hist.add(name)
+                else:
+                    measures[name] = key
+    return {"measures": measures, "no_history": sorted(no_hist - set(measures))}
+
+
+def collect(N: int = 64, solver: str | None = None, sweep=SWEEP, history_solvers: list[str] | None = None,
+            progress: Callable[[str], None] = print) -> dict:
+    """Every solve the figures report needs (see the module docstring)."""
+    from dualfem.core.registry import solvers
+
+    exact = picture_solver(solver)
+    cases = Cases(N, progress)
+    rows = [picture_row(cases.qp(sc, d), cases.solve(exact, sc, d, True), sc, d, cap) for sc, d, cap in DEFORMED]
+    for d in sweep:
+        cases.solve(exact, "f2", d, True)
+    data = {"N": N, "exact": exact, "sweep": list(sweep), "rows": rows, "cases": cases, "uzawa": None}
+    reg = solvers()
+    if "uzawa" in reg:
+        others = history_solvers if history_solvers is not None else solvers_with_history(exclude=("uzawa",))
+        data["uzawa"] = {"defaults": dict(reg["uzawa"].defaults), "others": list(others),
+                         **uzawa_runs(cases, exact, sweep), **other_runs(cases, others)}
+        if history_solvers is None:
+            installed = {n for n, c in reg.items() if c.missing() is None}
+            data["uzawa"]["no_history"] = sorted(set(data["uzawa"]["no_history"])
+                                                 | (installed - set(others) - {"uzawa"}))
+    return data
