@@ -142,7 +142,8 @@ def mprgp(matvec, b0: np.ndarray, alpha: float, gamma: float, tol: float, max_it
     while True:
         gp = np.linalg.norm(phi + beta)
         if gp <= target:
-            return mu, counts, Status.SOLVED, f"converged: |g^P| = {gp / max(np.linalg.norm(b0), 1e-300):.1e} |b0|", history
+            rel = gp / max(np.linalg.norm(b0), 1e-300)
+            return mu, counts, Status.SOLVED, f"converged: |g^P| = {rel:.1e} |b0|", history
         if k >= max_iter:
             return mu, counts, Status.MAX_ITER, f"no convergence in {max_iter} iterations (|g^P|/|b0| = " \
                 f"{gp / np.linalg.norm(b0):.1e})", history
