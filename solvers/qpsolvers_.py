@@ -26,7 +26,8 @@ vs pdas) over the 18 runs that claimed success; declared tolerance in brackets):
 highs 1.1e-3 (1e-2), osqp 9.2e-9 (1e-7; 'inaccurate' once), piqp 1.1e-5 (1e-4), proxqp 3.3e-8
 (1e-6), pyqpmad 6.5e-12 (1e-9), qpalm 2.3e-8 (1e-6), qtqp 2.9e-5 (1e-4), quadprog 1.5e-11 (1e-9),
 scs 9.6e-12 (1e-8), sip 2.5e-7 (1e-5). The jax backends (qpax, jaxopt_osqp; run in float64) were
-measured on f1/f2 at N = 16/32 only: accurate iterates, but often 'not found' (1e-2 declared).
+checked only by the contract suite (N = 16) and compare (f2, N = 32): accurate iterates, but often
+"not found" (1e-2 declared, not measured over the full set).
 """
 from __future__ import annotations
 
