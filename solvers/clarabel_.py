@@ -47,12 +47,10 @@ class ClarabelSolver(Solver):
     # certified solution; tighter tol_* settings end 'AlmostSolved'. polish=True removes that error.
     tolerance = 1e-5
     defaults = {
-        "tol_gap_abs": 1e-10,
-        "tol_gap_rel": 1e-10,
-        "tol_feas": 1e-10,
+        "tol": 1e-10,             # Clarabel's tol_gap_abs = tol_gap_rel = tol_feas
         "tol_ktratio": 1e-8,
         "max_iter": 200,
-        "time_limit": 0.0,
+        "time_limit": 600.0,      # seconds; 0 = none
         "equilibrate_enable": True,
         "direct_solve_method": "qdldl",
         "verbose": False,
@@ -60,12 +58,14 @@ class ClarabelSolver(Solver):
         "polish": False,
     }
 
+    renamed = {"tol_gap_abs": "tol", "tol_gap_rel": "tol", "tol_feas": "tol"}
+
     def validate(self) -> None:
-        positive(self, "tol_gap_abs", "tol_gap_rel", "tol_feas", "tol_ktratio", "max_iter")
+        positive(self, "tol", "tol_ktratio", "max_iter")
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
-        return {"tol_gap_abs": tol, "tol_gap_rel": tol, "tol_feas": tol}
+        return {"tol": tol}
 
     def setup(self, qp) -> None:
         import clarabel
@@ -73,9 +73,11 @@ class ClarabelSolver(Solver):
         self.qp = qp
         settings = clarabel.DefaultSettings()
         for k, v in self.params.items():
-            if k in ("scale", "polish") or (k == "time_limit" and v <= 0):
+            if k in ("scale", "polish", "tol") or (k == "time_limit" and v <= 0):
                 continue
             setattr(settings, k, v)
+        for k in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
+            setattr(settings, k, self.params["tol"])
         self._scaled = s = scale(qp, self.params["scale"])
         self._solver = clarabel.DefaultSolver(sp.triu(s.P, format="csc"), s.q, (-s.A).tocsc(), np.zeros(qp.m),
                                               [clarabel.NonnegativeConeT(qp.m)], settings)

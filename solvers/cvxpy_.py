@@ -65,6 +65,16 @@ def _eps_options(backend: str, eps: float) -> dict:
     return {}
 
 
+def _time_options(backend: str, time_limit: float) -> dict:
+    if time_limit <= 0:
+        return {}
+    if backend in ("CLARABEL", "OSQP"):
+        return {"time_limit": time_limit}
+    if backend == "SCS":
+        return {"time_limit_secs": time_limit}
+    return {}
+
+
 def _iter_options(backend: str, max_iter: int) -> dict:
     if backend in ("CLARABEL", "OSQP"):
         return {"max_iter": max_iter}
@@ -84,15 +94,18 @@ class CvxpySolver(Solver):
     exact = True
     defaults = {
         "solver": "CLARABEL",
-        "eps": 1e-10,
+        "tol": 1e-10,             # the backend's accuracy options (see _eps_options)
         "max_iter": 10000,
+        "time_limit": 600.0,      # seconds (CLARABEL, OSQP, SCS; other backends ignore it); 0 = none
         "scale": True,
         "polish": True,
         "verbose": False,
     }
 
+    renamed = {"eps": "tol"}
+
     def validate(self) -> None:
-        positive(self, "eps", "max_iter")
+        positive(self, "tol", "max_iter")
         backend = str(self.params["solver"]).upper()
         self.params["solver"] = backend
         if self.missing() is None:
@@ -107,7 +120,7 @@ class CvxpySolver(Solver):
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
-        return {"eps": float(tol)}
+        return {"tol": float(tol)}
 
     def setup(self, qp) -> None:
         import cvxpy as cp
@@ -125,9 +138,11 @@ class CvxpySolver(Solver):
         import cvxpy as cp
 
         backend = self.params["solver"]
-        opts = {**_eps_options(backend, self.params["eps"]), **_iter_options(backend, self.params["max_iter"])}
+        opts = {**_eps_options(backend, self.params["tol"]), **_iter_options(backend, self.params["max_iter"]),
+                **_time_options(backend, float(self.params["time_limit"]))}
         try:
-            with warnings.catch_warnings(), (contextlib.nullcontext() if self.params["verbose"] else c_stdout_to_stderr()):
+            quiet = contextlib.nullcontext() if self.params["verbose"] else c_stdout_to_stderr()
+            with warnings.catch_warnings(), quiet:
                 # cvxpy warns "Solution may be inaccurate": the status says it already
                 warnings.simplefilter("ignore", UserWarning)
                 self._prob.solve(solver=backend, verbose=bool(self.params["verbose"]), **opts)

@@ -28,6 +28,7 @@ attaches its true residuals).
 """
 from __future__ import annotations
 
+import sys
 import time
 
 import numpy as np
@@ -51,6 +52,7 @@ class DualGradient(Solver):
         "tol": 1e-10,          # stopping threshold on the evaluator's primal & complementarity residuals
         "max_iter": 20000,
         "time_limit": 60.0,    # seconds of solve time; <= 0 means no limit
+        "verbose": False,      # print the residuals every 100 iterations to stderr
         "accelerate": True,    # FISTA with gradient restart; False: plain projected gradient
         "step_safety": 1.0,    # step = step_safety / L; must be in (0, 2)
         "max_n": 20000,        # skip QPs with more unknowns than this
@@ -149,6 +151,8 @@ class DualGradient(Solver):
             primal, compl = self._residuals(x, mu)
             if it % 100 == 0 or it <= 10:
                 history.append({"iter": it, "primal": primal, "complementarity": compl})
+                if p["verbose"]:
+                    print(f"dual_gradient: {it} primal {primal:.2e} complementarity {compl:.2e}", file=sys.stderr)
             if not (np.all(np.isfinite(x)) and np.all(np.isfinite(mu))):
                 status = Status.NUMERICAL_ERROR
                 break

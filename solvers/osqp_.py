@@ -2,7 +2,8 @@
 
 OSQP's multiplier y of ``l <= Ax <= u`` is <= 0 at an active lower bound, so our nodal contact
 force is ``mu = -y``. Only the upper triangle of K is passed. With ``scale=True`` (default) the QP is
-normalised first (:mod:`dualfem.scaling`): this turns 7000+ ADMM iterations into ~50 at small delta. ADMM is accurate to about
+normalised first (:mod:`dualfem.numerics.scaling`): this turns 7000+ ADMM iterations into ~50 at small
+delta. ADMM is accurate to about
 ``eps_rel`` in the residuals, not in x: on the stiff delta -> 0 scenes its error in x can be much
 larger (see notes/ecosystem.md, osqp issue 364); the evaluator reports it either way.
 """
@@ -39,23 +40,23 @@ class OSQPSolver(Solver):
     requires = ("osqp",)
     tolerance = 1e-3
     defaults = {
-        "eps_abs": 1e-9,
-        "eps_rel": 1e-9,
+        "tol": 1e-9,              # OSQP's eps_abs = eps_rel (on the normalised QP)
         "max_iter": 200000,
-        "polishing": True,
+        "polish": True,           # OSQP's polishing
         "scaling": 10,
         "adaptive_rho": True,
-        "time_limit": 0.0,
+        "time_limit": 600.0,      # seconds; 0 = none
         "verbose": False,
         "scale": True,
     }
+    renamed = {"eps_abs": "tol", "eps_rel": "tol", "polishing": "polish"}
 
     def validate(self) -> None:
-        positive(self, "eps_abs", "eps_rel", "max_iter")
+        positive(self, "tol", "max_iter")
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
-        return {"eps_abs": tol, "eps_rel": tol}
+        return {"tol": tol}
 
     def setup(self, qp) -> None:
         import osqp
@@ -63,7 +64,8 @@ class OSQPSolver(Solver):
         self.qp = qp
         self._scaled = s = scale(qp, self.params["scale"])
         settings = {k: v for k, v in self.params.items()
-                    if k != "scale" and not (k == "time_limit" and v <= 0)}
+                    if k not in ("scale", "tol", "polish") and not (k == "time_limit" and v <= 0)}
+        settings.update(eps_abs=self.params["tol"], eps_rel=self.params["tol"], polishing=self.params["polish"])
         self._solver = osqp.OSQP()
         with c_stdout_to_stderr():
             self._solver.setup(P=sp.triu(s.P, format="csc"), q=s.q, A=s.A.tocsc(), l=np.zeros(qp.m),

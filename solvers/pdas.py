@@ -34,6 +34,9 @@ Multipliers are the nodal contact forces mu >= 0 with ``K x - F = B' mu``; x is 
 """
 from __future__ import annotations
 
+import sys
+import time
+
 import numpy as np
 import scipy.linalg as sla
 
@@ -78,11 +81,13 @@ class PDASSolver(ReducedDualSolver):
         "max_backtracks": 30,
         "refine": 1,
         "factor": "auto",         # K factorization: auto (--factor/DUALFEM_FACTOR/fastest) or a backend
+        "time_limit": 600.0,      # seconds of solve time (checked once per Newton step)
+        "verbose": False,         # print one line per Newton step to stderr
     }
 
     def validate(self) -> None:
         from_param(self)
-        positive(self, "max_iter", "tol", "sigma", "max_backtracks")
+        positive(self, "max_iter", "tol", "sigma", "max_backtracks", "time_limit")
         if self.params["refine"] < 0:
             raise InputError(f"parameter 'refine' of solver 'pdas' must be >= 0, got {self.params['refine']!r}")
         if self.params["c"] < 0 or not np.isfinite(self.params["c"]):
@@ -185,6 +190,7 @@ class PDASSolver(ReducedDualSolver):
         status, message = Status.MAX_ITER, f"no convergence in {p['max_iter']} Newton steps"
         k = 0
         projected = False
+        deadline = time.perf_counter() + p["time_limit"]
         while True:
             scale = max(scale0, np.abs(mu).max(initial=0.0))
             res = np.abs(Phi).max(initial=0.0) / scale
@@ -194,6 +200,9 @@ class PDASSolver(ReducedDualSolver):
                     message += " (after a cycle, by projected Newton)"
                 break
             if k >= p["max_iter"]:
+                break
+            if time.perf_counter() > deadline:
+                status, message = Status.TIME_LIMIT, f"time limit {p['time_limit']:g} s after {k} Newton steps"
                 break
             k += 1
             if projected:
@@ -256,6 +265,9 @@ class PDASSolver(ReducedDualSolver):
             theta = 0.5 * Phi @ Phi
             history.append({"iter": k, "active": nA, "step": t, "kind": how,
                             "residual": float(np.abs(Phi).max(initial=0.0) / max(scale0, np.abs(mu).max(initial=0.0)))})
+            if p["verbose"]:
+                print(f"pdas: step {k} {how} t={t:g} active {nA} residual {history[-1]['residual']:.2e}",
+                      file=sys.stderr)
         if status == Status.SOLVED:
             # polish on the final active set: the exact Newton point of the converged set
             # (kept only if consistent: forces >= 0 on the set, gaps >= 0 off it, to rounding)

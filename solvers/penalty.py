@@ -33,10 +33,13 @@ stiffness rho w of one node equal to the stiffness of its unknowns, taken from t
 (so it works for any QP and any units): of order E/h at large delta; at small delta the
 interface term w/delta dominates diag K and rho_0 grows like 1/delta with it. rho is multiplied
 by ``rho_growth`` (warm-started Newton each time) until the relative penetration is at most
-``penetration_tol`` or rho reaches ``rho_max_factor`` * rho_0; in the latter case the status is
+``tol`` or rho reaches ``rho_max_factor`` * rho_0; in the latter case the status is
 ``INACCURATE`` (the penetration is then reported, never hidden).
 """
 from __future__ import annotations
+
+import sys
+import time
 
 import numpy as np
 import scipy.linalg as sla
@@ -60,21 +63,24 @@ class PenaltySolver(ReducedDualSolver):
     # <= 2.5e-10 (energy norm, vs pdas) on f1/f2, delta 1e-9..1e-1, N = 16..128
     tolerance = 1e-8
     defaults = {
-        "penetration_tol": 1e-10,
+        "tol": 1e-10,             # relative penetration max(-Bx) / |x| accepted
         "rho0_factor": 1.0,
         "rho_growth": 100.0,
         "rho_max_factor": 1e14,
         "newton_tol": 1e-12,
-        "max_newton": 50,
+        "max_iter": 50,           # Newton steps per penalty stage
         "sigma": 1e-4,
         "max_backtracks": 40,
         "factor": "auto",         # K factorization: auto (--factor/DUALFEM_FACTOR/fastest) or a backend
+        "time_limit": 600.0,      # seconds of solve time (checked between Newton steps)
+        "verbose": False,         # print one line per penalty stage to stderr
     }
+    renamed = {"penetration_tol": "tol", "max_newton": "max_iter"}
 
     def validate(self) -> None:
         from_param(self)
-        positive(self, "penetration_tol", "rho0_factor", "rho_growth", "rho_max_factor",
-                 "newton_tol", "max_newton", "sigma", "max_backtracks")
+        positive(self, "tol", "rho0_factor", "rho_growth", "rho_max_factor",
+                 "newton_tol", "max_iter", "sigma", "max_backtracks", "time_limit")
         from dualfem.core.errors import InputError
 
         if self.params["rho_growth"] <= 1:
@@ -87,7 +93,7 @@ class PenaltySolver(ReducedDualSolver):
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
         # the x error follows the relative penetration; ask for 100x less penetration than tol
-        return {"penetration_tol": float(tol) * 1e-2}
+        return {"tol": float(tol) * 1e-2}
 
     def setup(self, qp) -> None:
         super().setup(qp)
@@ -152,7 +158,7 @@ class PenaltySolver(ReducedDualSolver):
             gn = np.abs(grad).max(initial=0.0) / max(gscale, np.abs(S @ xI).max(initial=0.0))
             if gn <= p["newton_tol"]:
                 return xI, steps, True
-            if steps >= p["max_newton"]:
+            if steps >= p["max_iter"] or time.perf_counter() > self._deadline:
                 return xI, steps, False
             steps += 1
             A = gap < 0
@@ -226,6 +232,7 @@ class PenaltySolver(ReducedDualSolver):
     def solve(self) -> Solution:
         p, red, w = self.params, self.red, self.qp.weights
         xI = sla.cho_solve(self.cho, red.g)             # unconstrained minimiser
+        self._deadline = time.perf_counter() + p["time_limit"]
         rho = self.rho0
         rho_max = self.rho0 * p["rho_max_factor"]
         history: list[dict] = []
@@ -240,6 +247,8 @@ class PenaltySolver(ReducedDualSolver):
             if not ok:
                 status = Status.MAX_ITER
                 message = f"Newton did not converge at rho = {rho:.3g} ({steps} steps)"
+                if time.perf_counter() > self._deadline:
+                    status, message = Status.TIME_LIMIT, f"time limit {p['time_limit']:g} s at rho = {rho:.3g}"
                 mu = rho * w * np.maximum(-(red.BI @ xI), 0.0)
                 break
             pol = self._polish(xI, rho)
@@ -249,14 +258,17 @@ class PenaltySolver(ReducedDualSolver):
             else:
                 xI, mu, pen = pol
             xs = max(np.abs(xI).max(initial=0.0), 1e-300)
-            if pen <= p["penetration_tol"] * xs:
+            if p["verbose"]:
+                print(f"penalty: stage {stage} rho {rho:.3g} newton {steps} penetration {pen / xs:.1e}",
+                      file=sys.stderr)
+            if pen <= p["tol"] * xs:
                 status = Status.SOLVED
                 message = f"penetration {pen / xs:.1e} relative at rho = {rho:.3g}"
                 break
             if rho * p["rho_growth"] > rho_max * (1 + 1e-12):
                 status = Status.INACCURATE
                 message = (f"rho reached its cap {rho:.3g} with penetration {pen / xs:.1e} relative "
-                           f"> penetration_tol {p['penetration_tol']:g}")
+                           f"> tol {p['tol']:g}")
                 break
             rho *= p["rho_growth"]
         x = self.red.full(xI)

@@ -9,7 +9,7 @@ paper's alpha_j at defect node j) and w_j the trapezoid weights, the discrete mo
 
     x^{k+1} = argmin_x M(x, l^k),      l^{k+1} = (l^k - r [x^{k+1}_nu])^+,
 
-stopping when max_j |l^{k+1}_j - l^k_j| <= tol_outer. The inner minimization is the generalized
+stopping when max_j |l^{k+1}_j - l^k_j| <= tol. The inner minimization is the generalized
 Newton method (counter m, summed over all outer iterations): with lambda = l - r B x and the
 active set A = {lambda_j > 0},
 
@@ -37,7 +37,7 @@ Choices where the paper is silent or misprinted (documented here once):
 * Honest stop: the paper's outer test bounds only the last change of l. Two estimates of the
   remaining error of l: change * rho / (1 - rho) with the observed linear rate rho, and the
   proximal-point bound change / (r mu_min) (mu_min = smallest dual compliance, see below), which
-  also holds after one outer iteration. When the larger exceeds ``error_factor * tol_outer`` the
+  also holds after one outer iteration. When the larger exceeds ``error_factor * tol`` the
   status is ``inaccurate`` (with both numbers in the message) instead of ``solved``. The iterates
   and the counts k, m are not affected.
 * Shortcut (``shortcut=True``, with l^0 = 0): if the unconstrained minimizer has no negative
@@ -62,6 +62,7 @@ and stop tests are the same numbers, computed in a smaller space.
 """
 from __future__ import annotations
 
+import sys
 import time
 
 import numpy as np
@@ -179,12 +180,12 @@ class Uzawa(Solver):
         "r": 1e7,                 # augmentation parameter (stress / length), used with r_rule="fixed"
         "r_rule": "fixed",        # "fixed": r as given (paper); "auto": r = r_factor / mu_min(B K^-1 B' W)
         "r_factor": 100.0,        # with r_rule="auto": slowest dual mode contracts by 1/(1 + r_factor) per outer it
-        "tol_outer": 1e-5,        # on max_j |l^{k+1}_j - l^k_j| (stress units if tol_mode="absolute", as the paper)
-        "tol_mode": "absolute",   # "relative": tol_outer is relative to max_j l^{k+1}_j (unit-free)
+        "tol": 1e-5,        # on max_j |l^{k+1}_j - l^k_j| (stress units if tol_mode="absolute", as the paper)
+        "tol_mode": "absolute",   # "relative": tol is relative to max_j l^{k+1}_j (unit-free)
         "tol_inner": 1e-7,        # on ||x^{m+1} - x^m|| / ||x^{m+1}||
         "step_factor": 2.0,       # Armijo backtracking divides s by this (paper: 2 or 1.1)
         "armijo_c": 1e-4,         # sufficient-decrease constant
-        "max_outer": 20000,
+        "max_iter": 20000,
         "max_inner": 200,         # Newton steps per outer iteration
         "max_backtracks": 80,
         "l0": 0.0,                # starting pressure l^0 (same at every defect node)
@@ -193,38 +194,48 @@ class Uzawa(Solver):
         "inner_norm": "energy",   # norm of the inner stop test
         "shortcut": True,         # return the unconstrained minimizer when it is admissible
         "stall_window": 1000,     # stop with 'stagnation' if the dual change has not improved for this many outer its
-        "time_limit": 0.0,        # seconds, 0 = none
-        "error_factor": 10.0,     # 'inaccurate' if the estimated dual error exceeds this x tol_outer
+        "time_limit": 600.0,      # seconds, 0 = none
+        "error_factor": 10.0,     # 'inaccurate' if the estimated dual error exceeds this x tol
+        "verbose": False,         # print one line per outer iteration to stderr
     }
+    renamed = {"tol_outer": "tol", "max_outer": "max_iter"}
 
     def validate(self) -> None:
         from_param(self)
-        positive(self, "r", "r_factor", "error_factor", "tol_outer", "tol_inner", "armijo_c", "max_outer", "max_inner",
+        positive(self, "r", "r_factor", "error_factor", "tol", "tol_inner", "armijo_c", "max_iter", "max_inner",
                  "max_backtracks", "stall_window")
         p = self.params
         if not p["step_factor"] > 1 or not np.isfinite(p["step_factor"]):
-            raise InputError(f"parameter 'step_factor' of solver '{self.name}' must be a finite number > 1, got {p['step_factor']!r}")
+            raise InputError(f"parameter 'step_factor' of solver '{self.name}' must be a finite number > 1, "
+                             f"got {p['step_factor']!r}")
         if not p["armijo_c"] < 1:
-            raise InputError(f"parameter 'armijo_c' of solver '{self.name}' must be in (0, 1), got {p['armijo_c']!r}")
+            raise InputError(f"parameter 'armijo_c' of solver '{self.name}' must be in (0, 1), "
+                             f"got {p['armijo_c']!r}")
         if not (np.isfinite(p["l0"]) and p["l0"] >= 0):
-            raise InputError(f"parameter 'l0' of solver '{self.name}' must be a finite number >= 0, got {p['l0']!r}")
+            raise InputError(f"parameter 'l0' of solver '{self.name}' must be a finite number >= 0, "
+                             f"got {p['l0']!r}")
         if p["tol_mode"] not in ("absolute", "relative"):
-            raise InputError(f"parameter 'tol_mode' of solver '{self.name}' must be 'absolute' or 'relative', got {p['tol_mode']!r}")
+            raise InputError(f"parameter 'tol_mode' of solver '{self.name}' must be 'absolute' or 'relative', "
+                             f"got {p['tol_mode']!r}")
         if p["r_rule"] not in ("fixed", "auto"):
-            raise InputError(f"parameter 'r_rule' of solver '{self.name}' must be 'fixed' or 'auto', got {p['r_rule']!r}")
+            raise InputError(f"parameter 'r_rule' of solver '{self.name}' must be 'fixed' or 'auto', "
+                             f"got {p['r_rule']!r}")
         if p["linalg"] not in ("reduced", "full"):
-            raise InputError(f"parameter 'linalg' of solver '{self.name}' must be 'reduced' or 'full', got {p['linalg']!r}")
+            raise InputError(f"parameter 'linalg' of solver '{self.name}' must be 'reduced' or 'full', "
+                             f"got {p['linalg']!r}")
         if p["inner_norm"] not in ("energy", "euclidean"):
-            raise InputError(f"parameter 'inner_norm' of solver '{self.name}' must be 'energy' or 'euclidean', got {p['inner_norm']!r}")
+            raise InputError(f"parameter 'inner_norm' of solver '{self.name}' must be 'energy' or 'euclidean', "
+                             f"got {p['inner_norm']!r}")
         if p["inner_norm"] == "euclidean" and p["linalg"] != "full":
             raise InputError(f"parameter 'inner_norm' of solver '{self.name}' must be 'energy' with "
                              "linalg='reduced' ('euclidean' needs linalg='full')")
         if not (np.isfinite(p["time_limit"]) and p["time_limit"] >= 0):
-            raise InputError(f"parameter 'time_limit' of solver '{self.name}' must be >= 0, got {p['time_limit']!r}")
+            raise InputError(f"parameter 'time_limit' of solver '{self.name}' must be >= 0, "
+                             f"got {p['time_limit']!r}")
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
-        return {"tol_outer": tol * 10.0, "tol_inner": tol * 1e-2}
+        return {"tol": tol * 10.0, "tol_inner": tol * 1e-2}
 
     def skip(self, qp) -> str | None:
         if self.params["linalg"] == "reduced":
@@ -277,7 +288,7 @@ class Uzawa(Solver):
             return result(Status.SOLVED, "unconstrained minimizer is admissible (shortcut)")
 
         best, best_k = np.inf, 0
-        while k < p["max_outer"]:
+        while k < p["max_iter"]:
             z, steps, inner_ok, msg = self._inner(z, l, r, w, deadline)
             m_total += len(steps)
             if not np.all(np.isfinite(z)):
@@ -289,9 +300,12 @@ class Uzawa(Solver):
                             "active": int(np.count_nonzero(l_new > 0)), "inner_converged": inner_ok,
                             "inner_ratios": list(self._ratios)})
             l = l_new
+            if p["verbose"]:
+                print(f"{self.name}: outer {k} dual change {change:.3e} inner {len(steps)} "
+                      f"active {history[-1]['active']}", file=sys.stderr)
             if not np.isfinite(change):
                 return result(Status.NUMERICAL_ERROR, "NaN/inf in the multiplier update")
-            tol = p["tol_outer"] * (1.0 if p["tol_mode"] == "absolute" else max(np.abs(l).max(initial=0.0), 1e-300))
+            tol = p["tol"] * (1.0 if p["tol_mode"] == "absolute" else max(np.abs(l).max(initial=0.0), 1e-300))
             if change <= tol:
                 if not inner_ok:
                     return result(Status.INACCURATE, f"outer test met but last inner loop failed: {msg}")
@@ -305,9 +319,9 @@ class Uzawa(Solver):
                 if est > p["error_factor"] * tol:
                     return result(Status.INACCURATE,
                                   f"outer test met, but the estimated multiplier error {est:.2g} > "
-                                  f"{p['error_factor']:g} x tol_outer (observed rate {rho:.4f}, r x min dual "
+                                  f"{p['error_factor']:g} x tol (observed rate {rho:.4f}, r x min dual "
                                   f"compliance = {r * self._mu_min():.2g}, which should be >> 1); "
-                                  f"use r_rule='auto' (solver uzawa_auto) or a smaller tol_outer")
+                                  f"use r_rule='auto' (solver uzawa_auto) or a smaller tol")
                 return result(Status.SOLVED)
             if change < best:
                 best, best_k = change, k
@@ -316,7 +330,7 @@ class Uzawa(Solver):
                                                  f"{p['stall_window']} outer iterations")
             if time.perf_counter() > deadline:
                 return result(Status.TIME_LIMIT, f"time limit {p['time_limit']} s reached")
-        return result(Status.MAX_ITER, f"max_outer={p['max_outer']} reached; last dual change {change:.3g}")
+        return result(Status.MAX_ITER, f"max_iter={p['max_iter']} reached; last dual change {change:.3g}")
 
     def _inner(self, z, l, r, w, deadline):
         """Generalized Newton-Armijo for min_x M(x, l); returns (z, step sizes, converged, msg)."""
@@ -375,10 +389,10 @@ class UzawaAuto(Uzawa):
     name = "uzawa_auto"
     description = "Uzawa / modified Lagrangian + Newton-Armijo, r = 100 / (min dual compliance), relative tolerance"
     tolerance = 1e-8
-    defaults = {**Uzawa.defaults, "r_rule": "auto", "tol_mode": "relative", "tol_outer": 1e-10}
+    defaults = {**Uzawa.defaults, "r_rule": "auto", "tol_mode": "relative", "tol": 1e-10}
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
         # the relative dual change cannot go below ~1e-10: with r ~ 100/delta, r times the
         # round-off of the jump is ~1e-10 of the pressure at delta = 1e-9 (measured: 1e-11 stalls)
-        return {"tol_outer": max(tol * 1e-2, 1e-10), "tol_inner": max(tol * 1e-2, 1e-12)}
+        return {"tol": max(tol * 1e-2, 1e-10), "tol_inner": max(tol * 1e-2, 1e-12)}

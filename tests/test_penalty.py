@@ -22,7 +22,7 @@ def f2():
 def test_declares_inexact():
     cls = get_solver("penalty")
     assert cls.exact is False
-    assert cls.tolerance_params(1e-6)["penetration_tol"] < 1e-6
+    assert cls.tolerance_params(1e-6)["tol"] < 1e-6
 
 
 @pytest.mark.parametrize("delta", [1e-1, 1e-9])
@@ -35,7 +35,7 @@ def test_agrees_with_exact_and_reports_penetration(delta):
     assert d["x_energy"] <= get_solver("penalty").tolerance
     pen = sol.info["penetration"]
     assert pen == pytest.approx(max(0.0, -(qp.B @ sol.x).min()), rel=1e-3, abs=1e-30)
-    assert sol.info["penetration_rel"] <= sol.params["penetration_tol"] * 1.0001
+    assert sol.info["penetration_rel"] <= sol.params["tol"] * 1.0001
     # the multiplier estimate is the penalty force: >= 0, zero where the faces are open
     mu = sol.multipliers
     assert np.all(mu >= 0)
@@ -78,7 +78,7 @@ def test_rho_cap_gives_inaccurate_not_solved(f2):
     sol = run("penalty", f2, {"rho_max_factor": 1.0})
     assert sol.status == Status.INACCURATE
     assert "penetration" in sol.message
-    assert sol.info["penetration_rel"] > sol.params["penetration_tol"]
+    assert sol.info["penetration_rel"] > sol.params["tol"]
     assert evaluator.residuals(f2, sol.x, sol.multipliers)["primal"] > 1e-10
 
 
@@ -89,7 +89,7 @@ def test_open_defect_needs_no_penalty():
     assert sol.iterations["continuation"] == 1 and np.all(sol.multipliers == 0)
 
 
-@pytest.mark.parametrize("bad", [{"rho_growth": 1.0}, {"penetration_tol": 0}, {"sigma": 0.6}, {"rho0_factor": -1}])
+@pytest.mark.parametrize("bad", [{"rho_growth": 1.0}, {"tol": 0}, {"sigma": 0.6}, {"rho0_factor": -1}])
 def test_bad_parameters(bad):
     with pytest.raises(InputError):
         make_solver("penalty", bad)

@@ -174,8 +174,8 @@ def test_mass_norm_matches_skfem(qp8):
 def test_transfer_errors_decrease():
     """Coarse exact solutions approach a finer one (energy-norm and L2 errors shrink with h)."""
     from dualfem.core.runner import run
-    from dualfem.post.figures import pick_solver
     from dualfem.experiments.convergence import errors
+    from dualfem.post.figures import pick_solver
 
     solver = pick_solver()
     fine = load_scene("f2", {"N": 32, "delta": 1e-1}).build()

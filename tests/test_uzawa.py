@@ -120,17 +120,17 @@ def test_step_factor_changes_line_search_only(scene):
     assert np.abs(a.x - b.x).max() < 1e-6 * np.abs(a.x).max()
 
 
-def test_max_outer_reported_honestly(scene):
+def test_max_iter_reported_honestly(scene):
     _, qp = scene("f2", 16, 1e-9)
-    sol = run("uzawa", qp, {"max_outer": 10})
+    sol = run("uzawa", qp, {"max_iter": 10})
     assert sol.status.value == "max_iter" and sol.iterations["outer"] == 10
-    assert "max_outer" in sol.message
+    assert "max_iter" in sol.message
 
 
 @pytest.mark.parametrize("params, words", [
-    ({"r": 0}, "'r'"), ({"tol_outer": -1}, "tol_outer"), ({"step_factor": 1.0}, "step_factor"),
+    ({"r": 0}, "'r'"), ({"tol": -1}, "tol"), ({"step_factor": 1.0}, "step_factor"),
     ({"armijo_c": 1.5}, "armijo_c"), ({"linalg": "dense"}, "linalg"), ({"l0": -1}, "l0"),
-    ({"inner_norm": "euclidean"}, "inner_norm"), ({"max_outer": 2.5}, "max_outer"),
+    ({"inner_norm": "euclidean"}, "inner_norm"), ({"max_iter": 2.5}, "max_iter"),
     ({"r_rule": "magic"}, "r_rule"), ({"error_factor": 0}, "error_factor"),
 ])
 def test_bad_parameters(params, words):

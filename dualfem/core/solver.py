@@ -8,7 +8,13 @@ A solver plugin is a subclass of :class:`Solver` that declares
 * ``tolerance``: the accuracy it promises at default settings, as a relative energy-norm error
   of x and a bound on the evaluator's residuals (the contract tests hold it to that);
 * ``exact``: False for methods with an intrinsic error (e.g. penalty), whose answer is
-  compared against the reference with ``tolerance`` only.
+  compared against the reference with ``tolerance`` only;
+* ``renamed``: old parameter names still accepted, ``{"old": "new"}`` (a DeprecationWarning
+  names the new one).
+
+One parameter vocabulary for every solver: ``tol`` (the relative accuracy the solver aims for),
+``max_iter`` (its main iteration cap), ``time_limit`` (seconds, finite default), ``verbose``;
+solver-specific parameters keep their own names.
 
 and implements ``setup(qp)`` (work that depends on the matrices only: scaling, factorizations)
 and ``solve()`` returning a :class:`~dualfem.solution.Solution`. ``skip(qp)`` returns a reason
@@ -18,11 +24,19 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import warnings
 from typing import Any, ClassVar
 
 from dualfem.core.errors import InputError
 from dualfem.core.qp import QP
 from dualfem.core.solution import Solution
+
+
+class RenamedParameterWarning(DeprecationWarning):
+    """A solver parameter was given by its old name (shown once per call site, even from the CLI)."""
+
+
+warnings.filterwarnings("default", category=RenamedParameterWarning)
 
 
 class Solver:
@@ -35,8 +49,10 @@ class Solver:
     extra: ClassVar[str | None] = None
     tolerance: ClassVar[float] = 1e-6
     exact: ClassVar[bool] = True
+    renamed: ClassVar[dict[str, str]] = {}
 
     def __init__(self, **params: Any) -> None:
+        params = _apply_renames(self.name, self.renamed, params)
         unknown = sorted(set(params) - set(self.defaults))
         if unknown:
             allowed = ", ".join(sorted(self.defaults)) or "(none)"
@@ -82,6 +98,24 @@ class Solver:
     def solve(self) -> Solution:  # pragma: no cover - abstract
         """Solve the QP given to :meth:`setup` (timed as solve)."""
         raise NotImplementedError
+
+
+def _apply_renames(solver: str, renamed: dict[str, str], params: dict[str, Any]) -> dict[str, Any]:
+    """Map deprecated parameter names to the new ones, with a DeprecationWarning each."""
+    if not renamed or not set(params) & set(renamed):
+        return params
+    out = {k: v for k, v in params.items() if k not in renamed}
+    for old, value in params.items():
+        if old not in renamed:
+            continue
+        new = renamed[old]
+        warnings.warn(f"parameter {old!r} of solver {solver!r} is deprecated: use {new!r}",
+                      RenamedParameterWarning, stacklevel=4)
+        if new in out and out[new] != value:
+            raise InputError(f"parameters {old!r} (deprecated) and {new!r} of solver {solver!r} "
+                             f"disagree: {value!r} vs {out[new]!r}; give only {new!r}")
+        out[new] = value
+    return out
 
 
 def _coerce(key: str, value: Any, default: Any, solver: str, owner: str = "solver") -> Any:
