@@ -169,14 +169,55 @@ class PDASSolver(ReducedDualSolver):
         return x, mu, kept
 
     # ------------------------------------------------------------------ solve
+    def _stop(self, res: float, k: int, deadline: float, projected: bool) -> tuple[Status, str] | None:
+        """(status, message) when the iteration ends before Newton step k + 1, else None."""
+        p = self.params
+        if res <= p["tol"]:
+            extra = " (after a cycle, by projected Newton)" if projected else ""
+            return Status.SOLVED, f"converged: |min(mu, c gap)| = {res:.1e} (relative){extra}"
+        if k >= p["max_iter"]:
+            return Status.MAX_ITER, f"no convergence in {p['max_iter']} Newton steps"
+        if time.perf_counter() > deadline:
+            return Status.TIME_LIMIT, f"time limit {p['time_limit']:g} s after {k} Newton steps"
+        return None
+
+    def _armijo(self, mu: np.ndarray, d: np.ndarray, theta: float, phi) -> tuple[float, str]:
+        """Step length along d by backtracking on the merit 1/2 |Phi|^2 (sufficient decrease sigma)."""
+        p, t = self.params, 1.0
+        for _ in range(int(p["max_backtracks"]) + 1):
+            mt = mu + t * d
+            Pt = phi(mt, self.D @ mt + self.b0)
+            if 0.5 * Pt @ Pt <= (1.0 - 2.0 * p["sigma"] * t) * theta:
+                return t, "full"
+            t *= 0.5
+        return 1.0, "safeguard"
+
+    def _newton_point(self, mu: np.ndarray, gap: np.ndarray, c: float) -> tuple[np.ndarray, np.ndarray]:
+        """The semismooth Newton (PDAS) point for the active set A = {mu - c gap > 0}, and A."""
+        A = (mu - c * gap) > 0
+        mu_n = np.zeros(mu.size)
+        if A.any():
+            mu_n[A] = sla.solve(self.D[np.ix_(A, A)], -self.b0[A], assume_a="pos")
+        return mu_n, A
+
+    def _polish(self, mu: np.ndarray) -> np.ndarray:
+        """The exact Newton point of the converged active set, kept only if consistent (forces >= 0
+        on the set, gaps >= 0 off it, to rounding); else mu clipped at 0."""
+        D, b0 = self.D, self.b0
+        A = mu > 0
+        mu_p = np.zeros(b0.size)
+        if A.any():
+            mu_p[A] = sla.solve(D[np.ix_(A, A)], -b0[A], assume_a="pos")
+        gap_p = D @ mu_p + b0
+        if np.all(mu_p >= 0) and np.all(gap_p[~A] >= -self.params["tol"] * max(np.abs(b0).max(initial=0.0), 1e-300)):
+            return mu_p
+        return np.maximum(mu, 0.0)
+
     def solve(self) -> Solution:
         p = self.params
         D, b0 = self.D, self.b0
-        m = b0.size
-        dD = np.diag(D)
-        c = p["c"] if p["c"] > 0 else (1.0 / dD.mean() if m else 1.0)
-        mu = np.zeros(m)
-        gap = b0.copy()
+        c = p["c"] if p["c"] > 0 else (1.0 / np.diag(D).mean() if b0.size else 1.0)
+        mu, gap = np.zeros(b0.size), b0.copy()
         # scale of Phi for the stopping test: forces c*|gap| and |mu| at the unconstrained point
         scale0 = max(c * np.abs(b0).max(initial=0.0), 1e-300)
 
@@ -187,22 +228,13 @@ class PDASSolver(ReducedDualSolver):
         theta = 0.5 * Phi @ Phi
         used_full: set[bytes] = set()
         history: list[dict] = []
-        status, message = Status.MAX_ITER, f"no convergence in {p['max_iter']} Newton steps"
-        k = 0
-        projected = False
+        k, projected = 0, False
         deadline = time.perf_counter() + p["time_limit"]
         while True:
-            scale = max(scale0, np.abs(mu).max(initial=0.0))
-            res = np.abs(Phi).max(initial=0.0) / scale
-            if res <= p["tol"]:
-                status, message = Status.SOLVED, f"converged: |min(mu, c gap)| = {res:.1e} (relative)"
-                if projected:
-                    message += " (after a cycle, by projected Newton)"
-                break
-            if k >= p["max_iter"]:
-                break
-            if time.perf_counter() > deadline:
-                status, message = Status.TIME_LIMIT, f"time limit {p['time_limit']:g} s after {k} Newton steps"
+            res = np.abs(Phi).max(initial=0.0) / max(scale0, np.abs(mu).max(initial=0.0))
+            stop = self._stop(res, k, deadline, projected)
+            if stop is not None:
+                status, message = stop
                 break
             k += 1
             if projected:
@@ -216,29 +248,13 @@ class PDASSolver(ReducedDualSolver):
                 mu, t, nA = step
                 how = "projected"
             else:
-                A = (mu - c * gap) > 0
-                nA = int(A.sum())
-                mu_n = np.zeros(m)
-                if A.any():
-                    try:
-                        mu_n[A] = sla.solve(D[np.ix_(A, A)], -b0[A], assume_a="pos")
-                    except (np.linalg.LinAlgError, ValueError) as exc:
-                        status, message = Status.NUMERICAL_ERROR, f"Newton system singular: {exc}"
-                        break
-                d = mu_n - mu
-                key = np.packbits(A).tobytes()
-                t, how = 1.0, "full"
-                if p["globalize"] == "armijo":
-                    accepted = False
-                    for _ in range(int(p["max_backtracks"]) + 1):
-                        mt = mu + t * d
-                        Pt = phi(mt, D @ mt + b0)
-                        if 0.5 * Pt @ Pt <= (1.0 - 2.0 * p["sigma"] * t) * theta:
-                            accepted = True
-                            break
-                        t *= 0.5
-                    if not accepted:
-                        t, how = 1.0, "safeguard"
+                try:
+                    mu_n, A = self._newton_point(mu, gap, c)
+                except (np.linalg.LinAlgError, ValueError) as exc:
+                    status, message = Status.NUMERICAL_ERROR, f"Newton system singular: {exc}"
+                    break
+                nA, d, key = int(A.sum()), mu_n - mu, np.packbits(A).tobytes()
+                t, how = self._armijo(mu, d, theta, phi) if p["globalize"] == "armijo" else (1.0, "full")
                 if t == 1.0 and key in used_full:
                     if p["globalize"] == "none":
                         status = Status.STAGNATION
@@ -269,17 +285,7 @@ class PDASSolver(ReducedDualSolver):
                 print(f"pdas: step {k} {how} t={t:g} active {nA} residual {history[-1]['residual']:.2e}",
                       file=sys.stderr)
         if status == Status.SOLVED:
-            # polish on the final active set: the exact Newton point of the converged set
-            # (kept only if consistent: forces >= 0 on the set, gaps >= 0 off it, to rounding)
-            A = mu > 0
-            mu_p = np.zeros(m)
-            if A.any():
-                mu_p[A] = sla.solve(D[np.ix_(A, A)], -b0[A], assume_a="pos")
-            gap_p = D @ mu_p + b0
-            if np.all(mu_p >= 0) and np.all(gap_p[~A] >= -p["tol"] * max(np.abs(b0).max(initial=0.0), 1e-300)):
-                mu = mu_p
-            else:
-                mu = np.maximum(mu, 0.0)
+            mu = self._polish(mu)
         xI = sla.cho_solve(self.cho, self.red.g + self.red.BI.T @ mu)
         x = self.red.full(xI)
         refined = 0

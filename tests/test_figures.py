@@ -18,8 +18,8 @@ from dualfem.core.registry import solvers  # noqa: E402
 from dualfem.core.runner import run  # noqa: E402
 from dualfem.core.scene import load_scene  # noqa: E402
 from dualfem.core.solution import Solution, Status  # noqa: E402
-from dualfem.post.fields import Post  # noqa: E402
 from dualfem.post import figures as F  # noqa: E402
+from dualfem.post.fields import Post  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -40,25 +40,11 @@ def cmd_stress(args) -> int:
     from dualfem.core.errors import check_int, check_positive
     from dualfem.core.registry import solvers
     from dualfem.experiments import reference, stress
-    from dualfem.experiments.machine import environment
     from dualfem.experiments.store import default_out
 
     reg = solvers()
-    if args.solvers:
-        names = [s.strip() for s in args.solvers.split(",") if s.strip()]
-        unknown = [s for s in names if s not in reg]
-        if unknown or not names:
-            raise InputError(f"--solvers: unknown solver {unknown[0] if unknown else '(empty)'!r}; "
-                             f"known solvers: {', '.join(sorted(reg))}")
-    else:
-        names = sorted(reg)
-    axes = tuple(stress.AXES)
-    if args.axes:
-        axes = tuple(a.strip() for a in args.axes.split(",") if a.strip())
-        bad = [a for a in axes if a not in stress.AXES]
-        if bad or not axes:
-            raise InputError(f"--axes: unknown axis {bad[0] if bad else '(empty)'!r}; allowed: "
-                             f"{', '.join(stress.AXES)}")
+    names = _choice("--solvers", args.solvers, sorted(reg), "solver", "known solvers")
+    axes = tuple(_choice("--axes", args.axes, list(stress.AXES), "axis", "allowed"))
     tl = None if args.time_limit is None else check_positive("--time-limit", args.time_limit)
     max_n = None if args.max_n is None else check_int("--max-n", args.max_n, 8, 4096)
     jobs = check_int("--jobs", args.jobs, 1, 4 * (os.cpu_count() or 1))
@@ -78,17 +64,7 @@ def cmd_stress(args) -> int:
         print(f"total  {len(tasks)} runs, solvers: {', '.join(names)}")
         return 0
     refs = reference.candidates()
-    meta = {"quick": bool(args.quick), "solvers": names, "axes": list(axes),
-            "grading": "dualfem.core.grade: error <= declared tolerance + the reference's certified bound",
-            "ref_kkt": stress.REF_KKT, "references": [r[0] for r in refs],
-            "tolerances": {n: reg[n]().tolerance for n in names if reg[n].missing() is None},
-            "exact": {n: reg[n].exact for n in names},
-            "third_party": {n: bool(reg[n].requires) for n in names},
-            "missing": {n: reg[n].missing() for n in names if reg[n].missing()},
-            "base": stress.BASE, "time_limit": tasks[0].time_limit if tasks else None,
-            "command": "dualfem " + " ".join(sys.argv[1:]) if sys.argv and "dualfem" in sys.argv[0] else None,
-            "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            "environment": environment(), "git_commit": _git_head()}
+    meta = _meta(args, reg, names, axes, tasks, [r[0] for r in refs])
     if args.resume:
         meta = _merge_meta(out / "meta.json", meta)
     tty = sys.stderr.isatty()
@@ -118,6 +94,35 @@ def cmd_stress(args) -> int:
     print("outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(c.items())), file=sys.stderr)
     print(f"results in {out}/runs.jsonl; report: dualfem report stability {out}", file=sys.stderr)
     return 0
+
+
+def _choice(flag: str, value: str | None, allowed: list[str], what: str, word: str) -> list[str]:
+    """The comma-separated names of ``flag`` (default: all of ``allowed``), each checked."""
+    if not value:
+        return list(allowed)
+    names = [s.strip() for s in value.split(",") if s.strip()]
+    bad = [s for s in names if s not in allowed]
+    if bad or not names:
+        raise InputError(f"{flag}: unknown {what} {bad[0] if bad else '(empty)'!r}; {word}: {', '.join(allowed)}")
+    return names
+
+
+def _meta(args, reg: dict, names: list[str], axes: tuple, tasks: list, refs: list[str]) -> dict:
+    """What meta.json records about the grid: its definition, tolerances, machine, commit."""
+    from dualfem.experiments import stress
+    from dualfem.experiments.machine import environment
+
+    return {"quick": bool(args.quick), "solvers": names, "axes": list(axes),
+            "grading": "dualfem.core.grade: error <= declared tolerance + the reference's certified bound",
+            "ref_kkt": stress.REF_KKT, "references": refs,
+            "tolerances": {n: reg[n]().tolerance for n in names if reg[n].missing() is None},
+            "exact": {n: reg[n].exact for n in names},
+            "third_party": {n: bool(reg[n].requires) for n in names},
+            "missing": {n: reg[n].missing() for n in names if reg[n].missing()},
+            "base": stress.BASE, "time_limit": tasks[0].time_limit if tasks else None,
+            "command": "dualfem " + " ".join(sys.argv[1:]) if sys.argv and "dualfem" in sys.argv[0] else None,
+            "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            "environment": environment(), "git_commit": _git_head()}
 
 
 def _coords(c: dict) -> str:
