@@ -339,8 +339,10 @@ def run(argv: list[str]) -> int:
     p.add_argument("results", metavar="RESULTS", nargs="+",
                    help="results.csv or a sweep's output directory; several are merged, a later one replacing "
                         "the rows of an earlier one that measure the same thing")
-    p.add_argument("--md", default="reports/benchmark.md", help="markdown output (default reports/benchmark.md)")
-    p.add_argument("--figdir", default="reports/bench", help="figure directory (default reports/bench)")
+    p.add_argument("--md", default="dualfem-results/reports/benchmark.md",
+                   help="markdown output (default dualfem-results/reports/benchmark.md; reports/benchmark.md for the "
+                        "committed one)")
+    p.add_argument("--figdir", default=None, help="figure directory (default: bench/ beside --md)")
     p.add_argument("--ours", default="uzawa,uzawa_auto,pdas",
                    help="comma-separated solvers checked against the targets")
     p.add_argument("--shift", type=float, default=10.0, help="shift of the geometric mean in seconds (10)")
@@ -354,7 +356,8 @@ def run(argv: list[str]) -> int:
     if not (a.error > 0 and math.isfinite(a.error)):
         raise InputError(f"--error must be a finite number > 0, got {a.error}")
     cmd = "dualfem report bench " + " ".join(shlex.quote(x) for x in argv)
-    md = build_report(a.results, a.md, a.figdir, ours=[s for s in a.ours.split(",") if s], shift=a.shift,
+    figdir = a.figdir or str(Path(a.md).parent / "bench")
+    md = build_report(a.results, a.md, figdir, ours=[s for s in a.ours.split(",") if s], shift=a.shift,
                       err_target=a.error, command=cmd)
-    print(f"wrote {md} and figures in {a.figdir}", file=sys.stderr)
+    print(f"wrote {md} and figures in {figdir}", file=sys.stderr)
     return 0

@@ -407,7 +407,8 @@ def run(argv: list[str]) -> int:
     ap.add_argument("--solver", default=None,
                     help="exact solver (default: the reference policy's first installed candidate, pdas then clarabel)")
     ap.add_argument("--scene", default="f2")
-    ap.add_argument("--out", default="reports", help="output directory (default reports/)")
+    ap.add_argument("--out", default="dualfem-results/reports",
+                    help="output directory (default dualfem-results/reports; reports/ for the committed one)")
     ap.add_argument("--from-json", default=None, metavar="FILE",
                     help="re-render the report and plots from a convergence.json written earlier (no solves)")
     ap.add_argument("--supplement", action="append", default=[], metavar="FILE",

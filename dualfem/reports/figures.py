@@ -228,7 +228,8 @@ def run(argv: list[str]) -> int:
     ap.add_argument("--history-solvers", default=None, metavar="A,B",
                     help="solvers besides uzawa whose histories are drawn (default: every registered one "
                          "that records a history, found by a solve of a tiny scene)")
-    ap.add_argument("--out", default="reports", help="output directory (default reports/)")
+    ap.add_argument("--out", default="dualfem-results/reports",
+                    help="output directory (default dualfem-results/reports; reports/ for the committed one)")
     argv = list(argv)
     if argv[:1] == ["--"]:  # 'dualfem report KIND -- --opt ...' with older dispatchers
         argv = argv[1:]

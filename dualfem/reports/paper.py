@@ -209,7 +209,9 @@ def report_paper(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(prog="dualfem report paper")
     ap.add_argument("--N", default="16,32,64,128,256", help="comma-separated mesh sizes")
     ap.add_argument("--inner-N", default=None, help="mesh sizes of the inner stop test study (default: N <= 128)")
-    ap.add_argument("--out", default="reports/paper_tables.md")
+    ap.add_argument("--out", default="dualfem-results/reports/paper_tables.md",
+                    help="output (default dualfem-results/reports/paper_tables.md; reports/paper_tables.md for the "
+                         "committed one)")
     ap.add_argument("--data", default=None, help="data JSON (default: the --out path with .json)")
     ap.add_argument("--render-only", action="store_true", help="re-render from the data JSON, run nothing")
     args = ap.parse_args(argv)

@@ -151,7 +151,8 @@ def run(argv: list[str]) -> int:
     ap.add_argument("--dpi", type=int, default=110)
     ap.add_argument("--sizes", default="16,32,64,128", metavar="N,N,...",
                     help="mesh sizes of the dual_gradient cost table (scene f2; default 16,32,64,128)")
-    ap.add_argument("--out", default="reports", help="output directory (default reports/)")
+    ap.add_argument("--out", default="dualfem-results/reports",
+                    help="output directory (default dualfem-results/reports; reports/ for the committed one)")
     args = ap.parse_args(argv)
     from dualfem.core.errors import InputError
 

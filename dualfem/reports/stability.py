@@ -439,7 +439,7 @@ def run(argv: list[str]) -> int:
         args = ap.parse_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0)
-    out = Path(args.output_opt or args.output or "reports/stability.md")
+    out = Path(args.output_opt or args.output or "dualfem-results/reports/stability.md")
     if out.suffix != ".md":
         raise InputError(f"OUTPUT must name a .md file, got {str(out)!r}")
     meta, recs = load_results(args.results)
