@@ -9,7 +9,12 @@ from dualfem.core.errors import InputError
 from dualfem.core.registry import solvers
 from dualfem.core.solver import RenamedParameterWarning
 
-BUILTIN = [n for n, c in solvers().items() if c.__module__.startswith("solvers.")]
+BUILTIN = [n for n, c in solvers().items() if c.__module__.startswith("dualfem.solvers.")]
+
+
+def test_the_builtin_solvers_are_found():
+    assert {"uzawa", "uzawa_auto", "pdas", "penalty", "osqp", "clarabel", "cvxpy", "dual_gradient",
+            "mprgp"} <= set(BUILTIN)
 
 
 @pytest.mark.parametrize("name", sorted(BUILTIN))
