@@ -9,9 +9,12 @@ larger (see notes/ecosystem.md, osqp issue 364); the evaluator reports it either
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.sparse as sp
 
+from dualfem.core.errors import InputError
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
@@ -53,6 +56,13 @@ class OSQPSolver(Solver):
 
     def validate(self) -> None:
         positive(self, "tol", "max_iter")
+        p = self.params
+        if not 0 <= p["scaling"] <= 100:
+            raise InputError(f"parameter 'scaling' of solver 'osqp' (OSQP's scaling iterations) must be an integer "
+                             f"in [0, 100], got {p['scaling']!r}")
+        if not (p["time_limit"] >= 0 and math.isfinite(p["time_limit"])):
+            raise InputError(f"parameter 'time_limit' of solver 'osqp' must be a finite number of seconds >= 0 "
+                             f"(0 = none), got {p['time_limit']!r}")
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
