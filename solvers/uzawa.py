@@ -180,8 +180,8 @@ class Uzawa(Solver):
         "r": 1e7,                 # augmentation parameter (stress / length), used with r_rule="fixed"
         "r_rule": "fixed",        # "fixed": r as given (paper); "auto": r = r_factor / mu_min(B K^-1 B' W)
         "r_factor": 100.0,        # with r_rule="auto": slowest dual mode contracts by 1/(1 + r_factor) per outer it
-        "tol": 1e-5,        # on max_j |l^{k+1}_j - l^k_j| (stress units if tol_mode="absolute", as the paper)
-        "tol_mode": "absolute",   # "relative": tol is relative to max_j l^{k+1}_j (unit-free)
+        "tol": 1e-6,              # on max_j |l^{k+1}_j - l^k_j| / max_j l^{k+1}_j (unit-free; see tol_mode)
+        "tol_mode": "relative",   # "absolute": tol in stress units, the paper's test (1e-5 MPa; report paper)
         "tol_inner": 1e-7,        # on ||x^{m+1} - x^m|| / ||x^{m+1}||
         "step_factor": 2.0,       # Armijo backtracking divides s by this (paper: 2 or 1.1)
         "armijo_c": 1e-4,         # sufficient-decrease constant

@@ -7,6 +7,8 @@ import pytest
 from dualfem.core import evaluator
 from dualfem.core.errors import InputError
 from dualfem.core.runner import make_solver, run
+from dualfem.core.scene import load_scene
+from dualfem.core.solution import Status
 
 
 @pytest.fixture(scope="module")
@@ -100,7 +102,9 @@ def test_history_and_counts_consistent(scene):
     assert h[-1]["active"] == evaluator.contact_set(qp, sol.x).sum()
 
 
-# regression values: N = 16, plane strain, paper defaults (r = 1e7, tol 1e-5 / 1e-7, step / 2)
+# regression values: N = 16, plane strain, the paper's settings (r = 1e7, absolute outer tol 1e-5 MPa,
+# inner 1e-7, step / 2)
+PAPER_OUTER = {"tol_mode": "absolute", "tol": 1e-5}
 PINNED = {("f1", 1e-1): (5, 10), ("f2", 1e-5): (6, 11), ("f2", 1e-9): (876, 1403), ("f3", 1e-5): (1, 1)}
 
 
@@ -108,7 +112,7 @@ PINNED = {("f1", 1e-1): (5, 10), ("f2", 1e-5): (6, 11), ("f2", 1e-9): (876, 1403
 def test_iteration_counts_pinned(scene, key):
     name, delta = key
     _, qp = scene(name, 16, delta)
-    sol = run("uzawa", qp)
+    sol = run("uzawa", qp, PAPER_OUTER)
     assert (sol.iterations["outer"], sol.iterations["inner"]) == PINNED[key]
 
 
@@ -178,9 +182,22 @@ def test_stdout_is_one_json_object_even_with_osqp(tmp_path):
 
 @pytest.mark.parametrize("r", [1.0, 1e3])
 def test_no_false_convergence_after_one_outer_iteration(scene, r):
-    """Tiny r at tiny delta: r [u_nu] is below tol_outer at once. The proximal-point bound
-    change / (r mu_min) must flag it (found by the stress grid as a silent wrong answer)."""
+    """Tiny r at tiny delta with the paper's absolute outer test: r [u_nu] is below tol at once. The
+    proximal-point bound change / (r mu_min) must flag it (found by the stress grid as a silent
+    wrong answer)."""
     _, qp = scene("f2", 16, 1e-9)
-    sol = run("uzawa", qp, {"r": r})
+    sol = run("uzawa", qp, {"r": r, **PAPER_OUTER})
     assert sol.iterations["outer"] == 1
     assert sol.status.value == "inaccurate" and "compliance" in sol.message
+
+
+@pytest.mark.parametrize("solver", ["uzawa", "uzawa_auto"])
+def test_stopping_test_is_scale_free(solver):
+    """Scaling the load by 1e-12 .. 1e12 gives the same iterations, status and relative answer
+    (the default outer test is relative; the paper's absolute one is tol_mode='absolute')."""
+    base = run(solver, load_scene("f2", {"N": 16}).build())
+    for s in (1e-12, 1e-6, 1e6, 1e12):
+        sol = run(solver, load_scene("f2", {"N": 16, "load_scale": s}).build())
+        assert sol.status == base.status == Status.SOLVED
+        assert sol.iterations == base.iterations
+        assert np.abs(sol.x / s - base.x).max() <= 1e-8 * np.abs(base.x).max()
