@@ -95,3 +95,12 @@ def test_stages_print_once_slow(capsys, monkeypatch):
     quiet("assembly", 0.5)
     err = capsys.readouterr().err
     assert err.count("dualfem solve: assembly 0.50 s") == 1
+
+
+def test_list_json_shows_parameters_with_defaults_and_renamed_names(capsys):
+    assert main(["list", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    osqp = d["solvers"]["osqp"]
+    assert {"tol", "max_iter", "time_limit", "verbose"} <= set(osqp["parameters"])
+    assert osqp["renamed"]["eps_abs"] == "tol"
+    assert "curved" in d["scene_library"]

@@ -96,7 +96,8 @@ def cmd_list(args) -> int:
     from dualfem.core.scene import describe, library, presets
 
     sol = {n: {"installed": c.missing() is None, "missing": c.missing(), "description": c.description,
-               "exact": c.exact, "parameters": c.defaults} for n, c in sorted(solvers().items())}
+               "exact": c.exact, "parameters": c.defaults,
+               "renamed": dict(getattr(c, "renamed", {}))} for n, c in sorted(solvers().items())}
     prb = {n: {"description": c.description, "parameters": {k: str(v) for k, v in c.defaults.items()}}
            for n, c in sorted(problems().items())}
     scn = {n: {"problem": pn, **{k: str(v) for k, v in prm.items()}} for n, (pn, prm) in sorted(presets().items())}
