@@ -217,15 +217,19 @@ class PDASSolver(ReducedDualSolver):
         p = self.params
         D, b0 = self.D, self.b0
         c = p["c"] if p["c"] > 0 else (1.0 / np.diag(D).mean() if b0.size else 1.0)
-        mu, gap = np.zeros(b0.size), b0.copy()
+        mu = np.zeros(b0.size)
         # scale of Phi for the stopping test: forces c*|gap| and |mu| at the unconstrained point
         scale0 = max(c * np.abs(b0).max(initial=0.0), 1e-300)
 
         def phi(mu_, gap_):
             return np.minimum(mu_, c * gap_)
 
-        Phi = phi(mu, gap)
-        theta = 0.5 * Phi @ Phi
+        def state(mu_):          # gaps, the complementarity function Phi and the merit 1/2 |Phi|^2 at mu_
+            g = D @ mu_ + b0
+            P = phi(mu_, g)
+            return g, P, 0.5 * P @ P
+
+        gap, Phi, theta = state(mu)
         used_full: set[bytes] = set()
         history: list[dict] = []
         k, projected = 0, False
@@ -265,9 +269,7 @@ class PDASSolver(ReducedDualSolver):
                     projected = True        # a cycle: switch to the monotone method
                     mu = np.maximum(mu, 0.0)
                     k -= 1
-                    gap = D @ mu + b0
-                    Phi = phi(mu, gap)
-                    theta = 0.5 * Phi @ Phi
+                    gap, Phi, theta = state(mu)
                     history.append({"iter": k, "kind": "cycle detected: switch to projected Newton"})
                     continue
                 if t == 1.0:
@@ -276,9 +278,7 @@ class PDASSolver(ReducedDualSolver):
                 else:
                     mu = mu + t * d
                     how = "damped"
-            gap = D @ mu + b0
-            Phi = phi(mu, gap)
-            theta = 0.5 * Phi @ Phi
+            gap, Phi, theta = state(mu)
             history.append({"iter": k, "active": nA, "step": t, "kind": how,
                             "residual": float(np.abs(Phi).max(initial=0.0) / max(scale0, np.abs(mu).max(initial=0.0)))})
             if p["verbose"]:
