@@ -497,3 +497,30 @@ def test_unsafe_spec_names_are_refused(name):
 
     with pytest.raises(InputError, match="results folder"):
         default_out("bench", name)
+
+
+def test_results_load_as_a_dataframe(small_sweep):
+    """dualfem.results.load: one row per run with the Row columns; parquet beside results.csv."""
+    pd = pytest.importorskip("pandas")
+    from dualfem import results
+
+    spec, out, summary = small_sweep
+    df = results.load(out)
+    runs = df[df["kind"] == "run"]
+    assert len(runs) == summary.total and list(df.columns[:3]) == ["run_id", "kind", "spec"]
+    assert runs["total_s"].dtype.kind == "f" and set(runs["status"]) <= RUN_STATUSES
+    if (out / "results.parquet").exists():
+        pq = pd.read_parquet(out / "results.parquet")
+        assert set(pq["run_id"]) == set(df["run_id"])
+    with pytest.raises(InputError, match="not a dualfem bench folder"):
+        results.load(out / "rows")
+
+
+def test_stress_results_load_as_a_dataframe(tmp_path):
+    pytest.importorskip("pandas")
+    from dualfem import results
+
+    (tmp_path / "runs.jsonl").write_text('{"id": "a", "axis": "nu", "outcome": "correct", "solver": "pdas", '
+                                         '"status": "solved", "err": 1e-12, "tolerance": 1e-9, "kkt": 1e-13}\n')
+    df = results.load(tmp_path)
+    assert df.loc[0, "grade"] == "correct" and df.loc[0, "err_x_energy"] == 1e-12

@@ -118,12 +118,15 @@ class ResultStore:
             self.write_csv()
 
     def write_csv(self) -> Path:
-        """results.csv of the rows of the current spec (rows of runs no longer in it stay in rows/)."""
+        """results.csv of the rows of the current spec (rows of runs no longer in it stay in rows/),
+        and results.parquet beside it when pandas and pyarrow are installed."""
         self._last_csv = time.monotonic()
         rows = list(self.rows.values())
         if self.keep is not None:
             rows = [r for r in rows if self.keep(r)]
-        return write_csv(self.out / "results.csv", rows)
+        path = write_csv(self.out / "results.csv", rows)
+        write_parquet(self.out / "results.parquet", rows)
+        return path
 
     # ------------------------------------------------------------- references
     def ref_path(self, scene_key: str) -> Path:
@@ -195,6 +198,21 @@ def _spec_name(text: str) -> str | None:
     except (tomllib.TOMLDecodeError, AttributeError):
         return None
     return str(v) if v is not None else None
+
+
+def write_parquet(path: Path, rows: list[dict]) -> Path | None:
+    """The rows as Parquet (atomically), when pandas and pyarrow are installed; else nothing."""
+    try:
+        import pandas as pd
+        import pyarrow  # noqa: F401
+    except ImportError:
+        return None
+    df = pd.DataFrame([(r if isinstance(r, Row) else Row.from_dict(r)).csv_record() for r in rows])
+    mixed = [c for c in df.columns if df[c].dtype == object
+             and len({type(v) for v in df[c] if v is not None}) > 1]
+    for c in mixed:                   # a column of mixed types (e.g. numbers and text) is kept as text
+        df[c] = df[c].map(lambda v: None if v is None else str(v))
+    return atomic_write(path, lambda tmp: df.to_parquet(tmp, index=False))
 
 
 def write_csv(path: str | Path, rows: list[dict]) -> Path:
