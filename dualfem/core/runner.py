@@ -90,11 +90,12 @@ def certify_status(qp: QP, sol: Solution, tol: float, exact: bool) -> Solution:
         from dualfem.core.certify import certified_error
 
         try:
-            cert = certified_error(qp, sol.x, sol.multipliers)["value"]
+            sol.info["certificate"] = certified_error(qp, sol.x, sol.multipliers)
         except (np.linalg.LinAlgError, ValueError, RuntimeError) as exc:
-            cert = float("nan")
+            sol.info["certificate"] = {"bound": float("nan"), "active_set": float("nan"), "value": float("nan"),
+                                       "error": f"{type(exc).__name__}: {exc}"}
             sol.message = f"{sol.message}; certificate unavailable ({type(exc).__name__}: {exc})".lstrip("; ")
-        sol.info["certificate"] = cert
+        cert = sol.info["certificate"]["value"]
         if np.isfinite(cert) and cert > tol:
             why = (f"certified energy-norm error bound {cert:.1e} exceeds the declared tolerance {tol:g} "
                    f"(residuals are within it)")

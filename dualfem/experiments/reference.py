@@ -67,9 +67,14 @@ def certificate(qp, x: np.ndarray | None, mu: np.ndarray | None, ksolve=None) ->
 
     if x is None or mu is None:
         return float("nan")
-    if not np.any(x) and not np.any(qp.F) and not np.any(mu):
+    if exact_zero(qp, x, mu):
         return 0.0
     return float(certified_error(qp, x, mu, ksolve)["value"])
+
+
+def exact_zero(qp, x: np.ndarray, mu: np.ndarray) -> bool:
+    """x = 0, mu = 0 for a zero load: the exact answer, whose relative error the certificate cannot express."""
+    return not np.any(x) and not np.any(qp.F) and not np.any(mu)
 
 
 def trusted(status: str, exact: bool, kkt: float | None, bound: float | None, *, kkt_max: float = KKT_MAX,

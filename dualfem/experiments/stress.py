@@ -244,13 +244,13 @@ def _gate(t: Task, results: dict[str, Row], idle_rss_mb: float) -> str | None:
 class _Scheduler:
     """Feeds tasks to guarded workers (runs of one scene to one worker), honouring N-axis gates."""
 
-    def __init__(self, tasks: list[Task], jobs: int, finish) -> None:
+    def __init__(self, tasks: list[Task], jobs: int, finish, results: dict[str, Row]) -> None:
         self.workers = [GuardedWorker() for _ in range(jobs)]
         self.queues: list[list[Task]] = [[] for _ in self.workers]
         for t in tasks:
             self.queues[int(_sid(t.scene), 16) % jobs].append(t)
         self.finish = finish
-        self.results: dict[str, Row] = {}
+        self.results = results           # every finished row (finish() adds them): the N-axis gates
         self.ref_time: dict[int, float] = {}
 
     def _idle_rss(self) -> float:
@@ -291,7 +291,6 @@ class _Scheduler:
                     res = w.poll(0.0)
                     if res is not None:
                         row = Row.from_dict(res[0])
-                        self.results[row.run_id] = row
                         if row.axis == "N" and row.get("ref_time_s"):
                             self.ref_time[row["scene"]["N"]] = row["ref_time_s"]
                         self.finish(row)
@@ -331,9 +330,7 @@ def _run_grid(tasks: list[Task], out: Path, jobs: int, resume: bool, progress, m
             if progress:
                 progress(finished, total, row)
 
-        sched = _Scheduler(todo, max(1, min(jobs, len(todo) or 1)), finish)
-        sched.results = results
-        sched.run()
+        _Scheduler(todo, max(1, min(jobs, len(todo) or 1)), finish, results).run()
     ordered = [results[t.id] for t in tasks if t.id in results]
     _write_meta(out, {**(meta or {}), "complete": len(ordered) == len(tasks), "n_tasks": len(tasks)})
     return ordered
