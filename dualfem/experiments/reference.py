@@ -135,7 +135,7 @@ def compute(qp, *, exclude: tuple[str, ...] = (), kkt_max: float = KKT_MAX, boun
                      + ("" if ok else f" ({why})"))
         if ok:
             return Reference(solver=name, x=sol.x, multipliers=sol.multipliers, kkt=kkt, bound=bound, time_s=dt,
-                             tolerance=float(getattr(sol, "tolerance", cls.tolerance)), params=p), tried
+                             tolerance=float(cls.tolerance), params=p), tried
     if not tried:
         names = ", ".join(only if only is not None else [n for n, _ in PREFERRED])
         tried.append(f"no exact reference solver ({names}) is registered and installed")

@@ -129,8 +129,8 @@ class Row:
     # ----------------------------------------------------------- serialisation
     def to_dict(self) -> dict:
         """Flat JSON-safe dict (``extra`` merged in; non-finite floats as None)."""
-        out = {f: _plain(getattr(self, f)) for f in _NAMES}
-        out.update({k: _plain(v) for k, v in self.extra.items()})
+        out = {f: jsonable(getattr(self, f)) for f in _NAMES}
+        out.update({k: jsonable(v) for k, v in self.extra.items()})
         return out
 
     def csv_record(self) -> dict:
@@ -156,6 +156,3 @@ _NAMES = tuple(f.name for f in fields(Row) if f.name != "extra")
 _DICT_FIELDS = {"solver_params", "iterations", "coords"}
 #: the columns of results.csv, in order (a row's ``extra`` keys follow, sorted)
 COLUMNS = list(_NAMES)
-
-
-_plain = jsonable

@@ -365,10 +365,9 @@ def _atomic_lines(path: Path, rows: list[Row]) -> None:
 
 
 def _write_meta(out: Path, meta: dict) -> None:
-    from dualfem.core.io import atomic_write_text
-    from dualfem.experiments.row import _plain
+    from dualfem.core.io import atomic_write_text, jsonable
 
-    atomic_write_text(out / "meta.json", json.dumps(_plain(meta), indent=1) + "\n")
+    atomic_write_text(out / "meta.json", json.dumps(jsonable(meta), indent=1) + "\n")
 
 
 #: field names of the stress records written before the one Row type (dualfem <= 0.1, commit d5044e1)
