@@ -84,10 +84,18 @@ class KSolver:
     def __call__(self, r: np.ndarray) -> np.ndarray:
         return self.red.k_solve(r) if self.red is not None else self._lu.solve(r)
 
+    def quad(self, r: np.ndarray) -> tuple[float, np.ndarray]:
+        """(r'K^-1 r, B K^-1 r): one solve of K_fixed with the reduction, one of K otherwise."""
+        if self.red is not None:
+            q, zI = self.red.k_quad(r)
+            return q, self.red.BI @ zI
+        z = self._lu.solve(r)
+        return float(r @ z), self.qp.B @ z
+
     def delassus(self) -> np.ndarray | None:
         if self._D is None:
             if self.red is not None:
-                self._D = self.red.dual()[0]          # symmetric already
+                self._D = self.red.delassus()          # symmetric already
             elif self.qp.m <= 2000:
                 Bd = self.qp.B.toarray()
                 D = Bd @ np.column_stack([self._lu.solve(b) for b in Bd]) if self.qp.m else np.zeros((0, 0))
@@ -106,31 +114,51 @@ def solver_for(qp: QP) -> KSolver:
 FEAS_RTOL = 1e-12
 
 
-def error_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve=None) -> float:
+def _finite(x, mu) -> bool:
+    return x is not None and mu is not None and bool(np.all(np.isfinite(x)) and np.all(np.isfinite(mu)))
+
+
+def _energy_norm(qp: QP, x: np.ndarray) -> float:
+    return float(np.sqrt(max(float(x @ (qp.K @ x)), 0.0)))
+
+
+def _residual_solve(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve) -> tuple[float, np.ndarray]:
+    """(r'K^-1 r, B K^-1 r) for r = K x - F - B'mu; ``ksolve`` a :class:`KSolver` or a callable r -> K^-1 r."""
+    r = qp.K @ x - qp.F - qp.B.T @ mu
+    if isinstance(ksolve, KSolver):
+        return ksolve.quad(r)
+    z = ksolve(r)
+    return float(r @ z), qp.B @ z
+
+
+def error_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve=None, _quad=None) -> float:
     """Relative energy-norm error bound |x - x*|_K / |x|_K (see module docstring).
 
     nan when it does not apply: non-finite data, x = 0, or x infeasible beyond rounding
     (penetration > FEAS_RTOL |x|_inf; e.g. a penalty solution), where the bound is not valid.
     """
-    if x is None or mu is None or not (np.all(np.isfinite(x)) and np.all(np.isfinite(mu))):
+    if not _finite(x, mu):
         return float("nan")
     if -(qp.B @ x).min(initial=0.0) > FEAS_RTOL * np.abs(x).max(initial=0.0):
         return float("nan")
-    ksolve = ksolve or solver_for(qp)
     mu = np.maximum(np.asarray(mu, float), 0.0)
-    r = qp.K @ x - qp.F - qp.B.T @ mu
-    t1 = float(r @ ksolve(r))
+    t1 = (_quad or _residual_solve(qp, x, mu, ksolve or solver_for(qp)))[0]
     t2 = 2.0 * max(0.0, float(mu @ (qp.B @ x)))
-    nx = float(np.sqrt(max(x @ (qp.K @ x), 0.0)))
+    nx = _energy_norm(qp, x)
     if nx == 0.0:
         return float("nan")
     return float(np.sqrt(max(t1, 0.0) + t2) / nx)
 
 
 def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None,
-                     margin: float = 10.0) -> float:
-    """First-order error |dx|_K / |x|_K on the verified active set {mu > 0}; nan if not verified."""
-    if x is None or mu is None or not (np.all(np.isfinite(x)) and np.all(np.isfinite(mu))):
+                     margin: float = 10.0, _quad=None) -> float:
+    """First-order error |dx|_K / |x|_K on the verified active set {mu > 0}; nan if not verified.
+
+    The refinement step of :func:`refinement_step` without forming dx: with z = K^-1 r
+    (r = Kx - F - B'mu), dx = -z + K^-1 B'dmu, so B dx = -Bz + D dmu and
+    |dx|_K^2 = r'K^-1 r - 2 (Bz)'dmu + dmu'D dmu: one solve in all (shared with :func:`error_bound`).
+    """
+    if not _finite(x, mu):
         return float("nan")
     ksolve = ksolve or solver_for(qp)
     mu = np.asarray(mu, float)
@@ -140,28 +168,41 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     D = ksolve.delassus() if A.any() else np.zeros((0, 0))
     if D is None:
         return float("nan")
-    try:
-        dx, dmu = refinement_step(qp, ksolve, D, x, mu, A)
-    except (np.linalg.LinAlgError, ValueError):
-        return float("nan")
-    gap1 = qp.B @ (x + dx)
+    rKr, Bz = _quad or _residual_solve(qp, x, mu, ksolve)
+    gap = qp.B @ x
+    dmu = np.zeros_like(mu)
+    if A.any():
+        try:
+            dmu[A] = sla.solve(D[np.ix_(A, A)], -(gap[A] - Bz[A]), assume_a="pos")
+        except (np.linalg.LinAlgError, ValueError):
+            return float("nan")
+    Bdx = -Bz + (D @ dmu if A.any() else 0.0)
+    dxKdx = rKr - 2.0 * float(Bz @ dmu) + float(dmu @ (D @ dmu) if A.any() else 0.0)
+    gap1 = gap + Bdx
     mu1 = mu + dmu
     step_mu = np.abs(dmu).max(initial=0.0)
-    step_gap = np.abs(qp.B @ dx).max(initial=0.0)
+    step_gap = np.abs(Bdx).max(initial=0.0)
     if A.any() and mu1[A].min() <= margin * step_mu:
         return float("nan")
     if (~A).any() and gap1[~A].min() <= margin * step_gap:
         return float("nan")
-    nx = float(np.sqrt(max(x @ (qp.K @ x), 0.0)))
+    nx = _energy_norm(qp, x)
     if nx == 0.0:
         return float("nan")
-    return float(np.sqrt(max(dx @ (qp.K @ dx), 0.0)) / nx)
+    return float(np.sqrt(max(dxKdx, 0.0)) / nx)
 
 
 def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None) -> dict:
-    """{"bound": duality-gap bound, "active_set": first-order estimate, "value": the smaller}."""
+    """{"bound": duality-gap bound, "active_set": first-order estimate, "value": the smaller}.
+
+    One solve with K in all: both parts share z = K^-1 r (through :meth:`KSolver.quad`).
+    """
     ksolve = ksolve or solver_for(qp)
-    b = error_bound(qp, x, mu, ksolve)
-    a = active_set_error(qp, x, mu, ksolve)
+    quad = None
+    if _finite(x, mu):
+        mu = np.asarray(mu, float)
+        quad = _residual_solve(qp, x, np.maximum(mu, 0.0), ksolve)
+    b = error_bound(qp, x, mu, ksolve, _quad=quad)
+    a = active_set_error(qp, x, mu, ksolve, _quad=quad if quad is not None and np.all(mu >= 0) else None)
     vals = [v for v in (b, a) if np.isfinite(v)]
     return {"bound": b, "active_set": a, "value": min(vals) if vals else float("nan")}

@@ -40,7 +40,7 @@ from dualfem.numerics.threads import ensure_threads
 def _hash(*arrays: np.ndarray) -> str:
     h = hashlib.sha1()
     for a in arrays:
-        h.update(np.ascontiguousarray(a).tobytes())
+        h.update(memoryview(np.ascontiguousarray(a)).cast("B"))      # no copy of contiguous arrays
     return h.hexdigest()
 
 
@@ -108,11 +108,12 @@ def factor_fixed(qp: QP, factor: str | Backend | None = None, cache: FactorCache
     ensure_threads()
     cache = DEFAULT_CACHE if cache is None else cache
     local = np.asarray(qp.local_dofs, np.int64)
-    Kf = qp.K_fixed.tocsr()
-    key = _hash(Kf.indptr, Kf.indices, Kf.data, local) + ":" + backend.name
+    Kf = qp.K_fixed if qp.K_fixed.format in ("csr", "csc") else qp.K_fixed.tocsr()
+    key = _hash(Kf.indptr, Kf.indices, Kf.data, local) + f":{Kf.format}:{backend.name}"
     ff = cache.get(key)
     if ff is not None:
         return ff
+    Kf = Kf.tocsr()
     t0 = time.perf_counter()
     fact = backend.make(local, order=lambda: ordering(qp, local))
     fact.analyze(Kf)
@@ -155,22 +156,38 @@ class LocalReduction:
         t1 = time.perf_counter()
         I = ff.local
         self.I = I
-        Kp = (qp.K - qp.K_fixed).tocoo()
-        is_local = np.zeros(qp.n, bool)
-        is_local[I] = True
-        big = np.abs(Kp.data) > 0
-        if np.any(big & ~(is_local[Kp.row] & is_local[Kp.col])):
-            raise ValueError("K - K_fixed must be supported on local_dofs x local_dofs")
-        Kp = Kp.tocsr()
-        self.S = ff.S_fixed + Kp[I][:, I].toarray()
+        self.S = ff.S_fixed + _local_param_block(qp, I)
         self.S = 0.5 * (self.S + self.S.T)
         self.BI = qp.B[:, I].toarray()
-        self.u_fixed = ff.solve(qp.F)                    # K_fixed^-1 F
-        self.g = ff.S_fixed @ self.u_fixed[I]
-        self.c0 = float(-0.5 * qp.F @ self.u_fixed + 0.5 * self.g @ self.u_fixed[I])
         self.time_s = {"factor": t1 - t0, "reduce": time.perf_counter() - t1}
         self._S_cho = None
         self._dual = None
+        self._D: np.ndarray | None = None
+        self._load: tuple[np.ndarray, np.ndarray, float] | None = None
+
+    def _reduced_load(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """(u_fixed = K_fixed^-1 F, g, c0), computed on first use (one solve)."""
+        if self._load is None:
+            ff = self.factor
+            u_fixed = ff.solve(self.qp.F)
+            g = ff.S_fixed @ u_fixed[self.I]
+            self._load = (u_fixed, g, float(-0.5 * self.qp.F @ u_fixed + 0.5 * g @ u_fixed[self.I]))
+        return self._load
+
+    @property
+    def u_fixed(self) -> np.ndarray:
+        """K_fixed^-1 F."""
+        return self._reduced_load()[0]
+
+    @property
+    def g(self) -> np.ndarray:
+        """Reduced load on the local unknowns."""
+        return self._reduced_load()[1]
+
+    @property
+    def c0(self) -> float:
+        """Energy constant: Pi(full(xI)) = 1/2 xI'S xI - g'xI + c0."""
+        return self._reduced_load()[2]
 
     def full(self, xI: np.ndarray) -> np.ndarray:
         """All unknowns x from the local ones (one solve with the cached factor)."""
@@ -193,14 +210,33 @@ class LocalReduction:
             self._S_cho = dla.cho_factor(self.S, lower=True, check_finite=True)
         return self._S_cho
 
-    def dual(self) -> tuple[np.ndarray, np.ndarray]:
-        """(D, b0) of the reduced dual LCP, computed once: the Delassus matrix D = B K^-1 B'
-        (dense m x m, symmetric positive definite) and b0 = B K^-1 F, the gaps B x at mu = 0.
-        The gaps at contact forces mu are ``D mu + b0``."""
-        if self._dual is None:
+    def delassus(self) -> np.ndarray:
+        """The Delassus matrix D = B K^-1 B' (dense m x m, symmetric positive definite), computed once."""
+        if self._D is None:
             D = self.BI @ dla.cho_solve(self.S_cho, self.BI.T)
-            self._dual = (0.5 * (D + D.T), self.BI @ dla.cho_solve(self.S_cho, self.g))
+            self._D = 0.5 * (D + D.T)
+        return self._D
+
+    def dual(self) -> tuple[np.ndarray, np.ndarray]:
+        """(D, b0) of the reduced dual LCP: :meth:`delassus` and b0 = B K^-1 F, the gaps B x at
+        mu = 0. The gaps at contact forces mu are ``D mu + b0``."""
+        if self._dual is None:
+            self._dual = (self.delassus(), self.BI @ dla.cho_solve(self.S_cho, self.g))
         return self._dual
+
+    def k_quad(self, r: np.ndarray) -> tuple[float, np.ndarray]:
+        """(r'K^-1 r, (K^-1 r)[I]) with ONE solve of K_fixed (no full K^-1 r is formed).
+
+        With u = K_fixed^-1 r and z = K^-1 r (see :meth:`k_solve`): z_I = S^-1 S_fixed u_I and
+        z = u + K_fixed^-1 e with e on I, e_I = S_fixed (z_I - u_I); since (K_fixed^-1)_II = S_fixed^-1,
+        r'z = r'u + u_I' e_I. Used by the a-posteriori certificate, which needs only these.
+        """
+        ff = self.factor
+        u = ff.solve(r)
+        uI = u[self.I]
+        gI = ff.S_fixed @ uI
+        zI = dla.cho_solve(self.S_cho, gI)
+        return float(r @ u + uI @ (ff.S_fixed @ zI - gI)), zI
 
     def k_solve(self, r: np.ndarray) -> np.ndarray:
         """K^-1 r for the whole K (two solves with the cached factor of K_fixed).
@@ -215,6 +251,32 @@ class LocalReduction:
         e = np.zeros_like(r)
         e[self.I] = ff.S_fixed @ xI - gI
         return ff.solve(r + e)
+
+
+def _local_param_block(qp: QP, I: np.ndarray) -> np.ndarray:
+    """Dense ``(K - K_fixed)[I, I]``; ValueError if K - K_fixed has an entry outside I x I.
+
+    When K and K_fixed share their sparsity pattern (the problem layer's case) the difference is
+    taken on the stored values, without forming another n x n sparse matrix.
+    """
+    K, Kf = qp.K, qp.K_fixed
+    if K.format not in ("csr", "csc") or Kf.format != K.format:
+        K, Kf = K.tocsr(), Kf.tocsr()
+    is_local = np.zeros(qp.n, bool)
+    is_local[I] = True
+    if K.has_canonical_format and Kf.has_canonical_format and K.nnz == Kf.nnz \
+            and np.array_equal(K.indptr, Kf.indptr) and np.array_equal(K.indices, Kf.indices):
+        nz = np.flatnonzero(K.data != Kf.data)
+        major = np.searchsorted(K.indptr, nz, side="right") - 1      # rows of CSR, columns of CSC
+        ij = (major, K.indices[nz]) if K.format == "csr" else (K.indices[nz], major)
+        Kp = sp.csr_matrix((K.data[nz] - Kf.data[nz], ij), shape=K.shape)
+    else:
+        Kp = (K - Kf).tocsr()
+    Kp.eliminate_zeros()
+    coo = Kp.tocoo()
+    if np.any(~(is_local[coo.row] & is_local[coo.col])):
+        raise ValueError("K - K_fixed must be supported on local_dofs x local_dofs")
+    return Kp[I][:, I].toarray()
 
 
 #: dense Schur complement onto more local unknowns than this is refused (memory ~ 8 n^2 bytes)
