@@ -23,7 +23,7 @@ Stopping test (scale-free): ``|g^P(mu)| <= tol |b0|``. |D| is estimated by power
 Then, as pdas does, the result is polished on its final active set A = {mu > 0}: the exact
 minimiser of q on that face (``D_AA mu_A = -b0_A``) is kept if it is consistent (mu_A >= 0,
 inactive gaps >= 0), and (dense operator) one iterative-refinement step of the full KKT system
-(:func:`dualfem.certify.refinement_step`) removes the rounding error of the reduction.
+(:func:`dualfem.numerics.polish.refine_on_active_set`) removes the rounding error of the reduction.
 
 Operators: ``operator = "dense"`` (default) uses the dense D of the local reduction (as pdas);
 ``"matrixfree"`` never forms D: one sparse LU of K (SuperLU) and one K-solve per product
@@ -69,13 +69,13 @@ class _Dense:
 
 
 class _MatrixFree:
-    """D v = B K^-1 B'v with one sparse LU of K (no m x m matrix is formed)."""
+    """D v = B K^-1 B'v with one sparse factorization of K (no m x m matrix is formed)."""
 
     def __init__(self, qp):
-        import scipy.sparse.linalg as spla
+        from dualfem.numerics.linalg import sparse_factor
 
         self.qp = qp
-        self.lu = spla.splu(qp.K.tocsc(), permc_spec="MMD_AT_PLUS_A")
+        self.lu = sparse_factor(qp.K)          # the chosen backend (--factor / DUALFEM_FACTOR / fastest)
         self.solves = 1
         self.b0 = qp.B @ self.lu.solve(qp.F)
         self.D = None
@@ -231,6 +231,7 @@ class MPRGPSolver(Solver):
     def setup(self, qp) -> None:
         self.qp = qp
         self.op = _Dense(qp) if self.params["operator"] == "dense" else _MatrixFree(qp)
+        self.reduction = getattr(self.op, "red", None)
         m = qp.m
         self.norm = norm_estimate(self.op.matvec, m, int(self.params["power_iter"])) if m else 0.0
 
@@ -271,25 +272,7 @@ class MPRGPSolver(Solver):
         return mu, False
 
     def _refine(self, x, mu, steps):
-        """Iterative refinement on the final active set (as pdas): kept only if it lowers
-        the full-space residual |Kx - F - B'mu| + |B_A x| |K|."""
-        from dualfem.core.certify import refinement_step
+        """Iterative refinement on the final active set (:func:`dualfem.numerics.polish.refine_on_active_set`)."""
+        from dualfem.numerics.polish import refine_on_active_set
 
-        qp, red, D = self.qp, self.op.red, self.op.D
-        A = mu > 0
-        kd = np.abs(qp.K.diagonal()).max(initial=0.0)
-
-        def resid(x_, mu_):
-            return max(np.abs(qp.K @ x_ - qp.F - qp.B.T @ mu_).max(initial=0.0),
-                       np.abs(qp.B[A] @ x_).max(initial=0.0) * kd)
-
-        r0 = resid(x, mu)
-        kept = 0
-        for _ in range(steps):
-            dx, dmu = refinement_step(qp, red.k_solve, D, x, mu, A)
-            r1 = resid(x + dx, mu + dmu)
-            if not (r1 < r0) or np.any(mu[A] + dmu[A] < 0):
-                break
-            x, mu, r0 = x + dx, mu + dmu, r1
-            kept += 1
-        return x, mu, kept
+        return refine_on_active_set(self.qp, self.op.red, x, mu, steps)

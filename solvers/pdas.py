@@ -59,7 +59,7 @@ class ReducedDualSolver(Solver):
         from dualfem.numerics.linalg import LocalReduction
 
         self.qp = qp
-        self.red = LocalReduction(qp, factor=from_param(self))
+        self.red = self.reduction = LocalReduction(qp, factor=from_param(self))
         self.cho = self.red.S_cho
         self.D, self.b0 = self.red.dual()
 
@@ -135,38 +135,10 @@ class PDASSolver(ReducedDualSolver):
         return None
 
     def _refine(self, x, mu, steps):
-        """Iterative refinement of (x, mu) on the final active set, with full-space residuals.
+        """Iterative refinement on the final active set (:func:`dualfem.numerics.polish.refine_on_active_set`)."""
+        from dualfem.numerics.polish import refine_on_active_set
 
-        The reduced solve loses accuracy as 1/delta and N grow (at N = 256, delta = 1e-9 the
-        full-space stationarity residual was 7e-10, 250x the rounding floor |K||x| eps). One step
-        solves K dx - B_A' dmu_A = F + B'mu - Kx, B_A dx = -B_A x with the cached reduction
-        (r -> K^-1 r in two solves) and the Delassus block D_AA; it is kept only if it lowers
-        the residual. Skipped when the relative residual is already <= 1e-13. Returns
-        (x, mu, steps kept).
-        """
-        from dualfem.core.certify import refinement_step
-
-        qp, red = self.qp, self.red
-        A = mu > 0
-        kept = 0
-
-        def resid(x_, mu_):
-            return max(np.abs(qp.K @ x_ - qp.F - qp.B.T @ mu_).max(initial=0.0),
-                       np.abs(qp.B[A] @ x_).max(initial=0.0) * np.abs(qp.K.diagonal()).max(initial=0.0))
-
-        r0 = resid(x, mu)
-        fs = max(np.abs(qp.F).max(initial=0.0), np.abs(qp.K @ x).max(initial=0.0), 1e-300)
-        if r0 <= 1e-13 * fs:     # already at the rounding floor: skip the (4 solves) refinement
-            return x, mu, 0
-        for _ in range(steps):
-            dx, dmu = refinement_step(qp, red.k_solve, self.D, x, mu, A)
-            x1, mu1 = x + dx, mu + dmu
-            r1 = resid(x1, mu1)
-            if not (r1 < r0) or np.any(mu1[A] < 0):
-                break
-            x, mu, r0 = x1, mu1, r1
-            kept += 1
-        return x, mu, kept
+        return refine_on_active_set(self.qp, self.red, x, mu, steps)
 
     # ------------------------------------------------------------------ solve
     def _stop(self, res: float, k: int, deadline: float, projected: bool) -> tuple[Status, str] | None:

@@ -248,6 +248,7 @@ class Uzawa(Solver):
         self.qp = qp
         space = _ReducedSpace if self.params["linalg"] == "reduced" else _FullSpace
         self.space = space(qp, self.params["inner_norm"], from_param(self))
+        self.reduction = getattr(self.space, "red", None)
         self.r = float(self.params["r"])
         self._mu = None
         if self.params["r_rule"] == "auto" and qp.m:

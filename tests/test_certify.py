@@ -90,3 +90,50 @@ def test_certificate_counts_one_solve(scene, monkeypatch):
     monkeypatch.setattr(ks.red.factor, "solve", lambda b: calls.append(1) or orig(b))
     certify.certified_error(qp, x, mu, ks)
     assert len(calls) == 1
+
+
+@pytest.mark.parametrize("name, delta", [("f2", 1e-5), ("f1", 1e-9)])
+def test_reduced_refinement_step_equals_the_full_space_step(scene, name, delta, monkeypatch):
+    """LocalReduction.refine (two solves) takes the same step as refinement_step (four solves)."""
+    _, qp = scene(name, 16, delta)
+    x, mu = _exact(qp)
+    rng = np.random.default_rng(3)
+    xp = x + 1e-6 * np.abs(x).max() * rng.standard_normal(qp.n)
+    mup = mu * (1 + 1e-6 * rng.standard_normal(mu.size))
+    red = linalg.LocalReduction(qp)
+    A = mup > 0
+    dx, dmu = refinement_step(qp, red.k_solve, red.delassus(), xp, mup, A)
+    calls = []
+    orig = red.factor.solve
+    monkeypatch.setattr(red.factor, "solve", lambda b: calls.append(1) or orig(b))
+    x1, mu1 = red.refine(xp, mup, A)
+    assert len(calls) == 2
+    # the same step to six digits (rounding of the ill-conditioned D at delta = 1e-9 is ~1e-12 of mu)
+    assert np.abs(x1 - (xp + dx)).max() <= 1e-6 * np.abs(dx).max() + 1e-12 * np.abs(xp).max()
+    assert np.abs(mu1 - (mup + dmu)).max() <= 1e-6 * np.abs(dmu).max() + 1e-12 * np.abs(mup).max()
+
+
+def test_runner_certifies_with_the_solvers_own_reduction_only_if_it_is_of_this_qp(scene, monkeypatch):
+    """Certification reuses ``Solver.reduction`` (no second reduction) but never one of another QP."""
+    from dualfem.core import runner
+
+    _, qp = scene("f2", 16, 1e-5)
+    _, other = scene("f2", 16, 1e-3)
+    built = []
+    orig = linalg.LocalReduction.__init__
+
+    def counting(self, *a, **k):
+        built.append(1)
+        orig(self, *a, **k)
+
+    monkeypatch.setattr(linalg.LocalReduction, "__init__", counting)
+    sol = runner.run("pdas", qp)
+    assert sol.status == "solved" and len(built) == 1            # the solver's own, reused by certify
+    solver = runner.make_solver("pdas")
+    solver.setup(qp)
+    sol = solver.solve()
+    runner.attach_residuals(qp, sol)
+    built.clear()
+    runner.certify_status(qp, sol, solver.tolerance, True, reduction=linalg.LocalReduction(other))
+    assert len(built) == 2                                       # the foreign one, then a fresh one of qp
+    assert sol.status == "solved" and sol.info["certificate"]["value"] < 1e-9

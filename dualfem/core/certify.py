@@ -70,16 +70,19 @@ class KSolver:
     """r -> K^-1 r (cached local reduction when possible, else a sparse LU), and the Delassus
     matrix D = B K^-1 B' (dense, from the reduction, or by m solves for small m)."""
 
-    def __init__(self, qp: QP, factor=None):
+    def __init__(self, qp: QP, factor=None, reduction=None):
+        from dualfem.numerics.linalg import LocalReduction
+
         self.qp = qp
         self.red = None
+        self._D: np.ndarray | None = None
+        if reduction is not None and type(reduction) is LocalReduction and reduction.qp is qp:
+            self.red = reduction          # a solver's reduction of this very QP: same factorization, reused
+            return
         try:
-            from dualfem.numerics.linalg import LocalReduction
-
             self.red = LocalReduction(qp, factor=factor)
         except Exception:  # noqa: BLE001 - any structure problem: a plain sparse factorization of K
             self._lu = _SparseK(qp, factor)
-        self._D: np.ndarray | None = None
 
     def __call__(self, r: np.ndarray) -> np.ndarray:
         return self.red.k_solve(r) if self.red is not None else self._lu.solve(r)

@@ -68,14 +68,17 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
     t3 = time.perf_counter()
     asked = None if tol is None or not np.isfinite(tol) else float(tol)
     declared = float(solver.tolerance) if asked is None else max(float(solver.tolerance), asked)
-    certify_status(qp, sol, declared, bool(solver.exact))
+    certify_status(qp, sol, declared, bool(solver.exact), reduction=getattr(solver, "reduction", None))
     sol.time_s["certify"] = time.perf_counter() - t3
     tick("certification", sol.time_s["certify"])
     return sol
 
 
-def certify_status(qp: QP, sol: Solution, tol: float, exact: bool) -> Solution:
-    """Demote an uncertified ``solved`` claim to ``inaccurate`` (see the module docstring)."""
+def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: Any = None) -> Solution:
+    """Demote an uncertified ``solved`` claim to ``inaccurate`` (see the module docstring).
+
+    ``reduction``: the solver's LocalReduction of ``qp`` (``Solver.reduction``), reused if valid.
+    """
     sol.info.setdefault("claimed_status", str(sol.status))
     sol.info["certified_tol"] = tol
     res = sol.residuals
@@ -87,10 +90,10 @@ def certify_status(qp: QP, sol: Solution, tol: float, exact: bool) -> Solution:
     if res[worst] > tol:
         why = f"evaluator residual {worst} = {res[worst]:.1e} exceeds the declared tolerance {tol:g}"
     elif exact:
-        from dualfem.core.certify import certified_error
+        from dualfem.core.certify import KSolver, certified_error
 
         try:
-            sol.info["certificate"] = certified_error(qp, sol.x, sol.multipliers)
+            sol.info["certificate"] = certified_error(qp, sol.x, sol.multipliers, KSolver(qp, reduction=reduction))
         except (np.linalg.LinAlgError, ValueError, RuntimeError) as exc:
             sol.info["certificate"] = {"bound": float("nan"), "active_set": float("nan"), "value": float("nan"),
                                        "error": f"{type(exc).__name__}: {exc}"}

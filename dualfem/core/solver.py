@@ -50,6 +50,10 @@ class Solver:
     tolerance: ClassVar[float] = 1e-6
     exact: ClassVar[bool] = True
     renamed: ClassVar[dict[str, str]] = {}
+    #: optional: the :class:`dualfem.numerics.linalg.LocalReduction` of the QP this solver built in
+    #: ``setup``; the runner's certification then reuses its factorization and dense blocks
+    #: (accepted only if it is exactly that class and belongs to the QP being certified)
+    reduction: Any = None
 
     def __init__(self, **params: Any) -> None:
         params = _apply_renames(self.name, self.renamed, params)

@@ -135,8 +135,12 @@ def sparse_factor(A: sp.spmatrix, factor: str | Backend | None = None) -> Factor
 
 
 def clear_cache() -> None:
-    """Forget every cached factorization (of DEFAULT_CACHE)."""
+    """Forget every cached factorization (of DEFAULT_CACHE) and every other registered process cache
+    (:mod:`dualfem.core.caches`, e.g. a problem's delta-free assembly)."""
+    from dualfem.core import caches
+
     DEFAULT_CACHE.clear()
+    caches.clear_all()
 
 
 # ------------------------------------------------------------------------ reduction
@@ -224,6 +228,12 @@ class LocalReduction:
             self._dual = (self.delassus(), self.BI @ dla.cho_solve(self.S_cho, self.g))
         return self._dual
 
+    def _k_parts(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(u = K_fixed^-1 r, g_I = S_fixed u_I, z_I = (K^-1 r)_I = S^-1 g_I): one solve."""
+        u = self.factor.solve(r)
+        gI = self.factor.S_fixed @ u[self.I]
+        return u, gI, dla.cho_solve(self.S_cho, gI)
+
     def k_quad(self, r: np.ndarray) -> tuple[float, np.ndarray]:
         """(r'K^-1 r, (K^-1 r)[I]) with ONE solve of K_fixed (no full K^-1 r is formed).
 
@@ -231,12 +241,32 @@ class LocalReduction:
         z = u + K_fixed^-1 e with e on I, e_I = S_fixed (z_I - u_I); since (K_fixed^-1)_II = S_fixed^-1,
         r'z = r'u + u_I' e_I. Used by the a-posteriori certificate, which needs only these.
         """
-        ff = self.factor
-        u = ff.solve(r)
-        uI = u[self.I]
-        gI = ff.S_fixed @ uI
-        zI = dla.cho_solve(self.S_cho, gI)
-        return float(r @ u + uI @ (ff.S_fixed @ zI - gI)), zI
+        u, gI, zI = self._k_parts(r)
+        return float(r @ u + u[self.I] @ (self.factor.S_fixed @ zI - gI)), zI
+
+    def refine(self, x: np.ndarray, mu: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One exact refinement step of the KKT system on the active set A, in two solves.
+
+        The step of :func:`dualfem.core.certify.refinement_step`: ``K dx - B_A' dmu_A = -r``,
+        ``B_A dx = -B_A x``, r = Kx - F - B'mu from the full-space K. With u = K_fixed^-1 r and
+        z_I = (K^-1 r)_I (:meth:`_k_parts`, one solve): dmu_A from the Delassus block,
+        dx_I = -z_I + S^-1 B_I' dmu (since (K^-1)_II = S^-1), and the whole
+        ``dx = K_fixed^-1 (v + e)``, v = -r + B'dmu, e_I = S_fixed (dx_I + u_I) - (B'dmu)_I (one
+        more solve; the step is solved from the residual, as iterative refinement must be).
+        Returns (x + dx, mu + dmu).
+        """
+        qp, I, Sf = self.qp, self.I, self.factor.S_fixed
+        r = qp.K @ x - qp.F - qp.B.T @ mu
+        u, _, zI = self._k_parts(r)
+        dmu = np.zeros_like(mu, dtype=float)
+        if A.any():
+            D = self.delassus()
+            dmu[A] = dla.solve(D[np.ix_(A, A)], -(qp.B[A] @ x - self.BI[A] @ zI), assume_a="pos")
+        Bt_dmu = self.BI.T @ dmu
+        dxI = -zI + dla.cho_solve(self.S_cho, Bt_dmu)
+        v = -r + qp.B.T @ dmu
+        v[I] += Sf @ (dxI + u[I]) - Bt_dmu
+        return x + self.factor.solve(v), mu + dmu
 
     def k_solve(self, r: np.ndarray) -> np.ndarray:
         """K^-1 r for the whole K (two solves with the cached factor of K_fixed).

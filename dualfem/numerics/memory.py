@@ -9,10 +9,11 @@ benchmarks/results/factor/):
 
 * ``build_peak(n) = a + b n``: peak RSS of the scene -> QP assembly (the import baseline included);
 * ``held(n) = a + b n``: RSS the QP keeps afterwards;
-* ``factor_peak(n) = c n log2(n)`` per backend: for superlu the measured RSS increase of the
-  factorization (the LU, the permuted matrix, the trailing blocks read for the Schur block), for
-  pardiso PARDISO's own analysis report (max(iparm[14], iparm[15] + iparm[16]) KiB), which
-  :func:`estimate_peak_bytes` uses instead of the model when given (``analysis=``).
+* ``factor_peak(n) = c n log2(n)`` per backend: the measured RSS increase of the factorization
+  with the Schur block (superlu: the LU, the permuted matrix, the trailing blocks read for the
+  Schur block; pardiso: its factor, its copy of the upper triangle, the dense Schur block). Given
+  PARDISO's own analysis report (max(iparm[14], iparm[15] + iparm[16]) KiB, ``analysis=``),
+  :func:`estimate_peak_bytes` uses it, scaled by the measured RSS/report ratio, instead.
 
 Least-squares fits of the points in CALIBRATION (so adding a measured point refines the model).
 The iterations and the certification of the exact solvers work on m x m dense blocks and add
@@ -28,15 +29,26 @@ import numpy as np
 from dualfem.core.errors import InputError
 
 MB = 2**20
-#: measured (n unknowns, peak RSS of the build, RSS held by the QP, factor's extra peak) in MB;
-#: superlu: RSS increase of factor_fixed + solve; pardiso: PARDISO's analysis report
+#: measured (n unknowns, peak RSS of the build, RSS held by the QP; factor's extra peak) in MB.
+#: build and pardiso: benchmarks/results/factor/memory_calibration.md (f2, N = 64 ... 2048, one
+#: worker process per N; pardiso = RSS after the Schur factorization + solve minus the RSS held by
+#: the QP: PARDISO's factor, its copy of the upper triangle and the dense Schur block);
+#: superlu: RSS increase of factor_fixed + solve (benchmarks/results/factor/factor_backends.md)
 CALIBRATION = {
-    "build": [(8382, 99, 91), (33150, 164, 132), (131838, 424, 307), (525822, 1327, 611)],
+    "build": [(8382, 87, 81), (33150, 121, 90), (131838, 252, 130), (525822, 775, 288),
+              (2100222, 2885, 864), (8394750, 11142, 2945)],
     "superlu": [(8382, 112 - 91), (33150, 227 - 132), (131838, 750 - 307), (525822, 3027 - 610)],
-    "pardiso": [(8382, 23), (33150, 50), (131838, 165), (525822, 669)],
+    "pardiso": [(8382, 100 - 81), (33150, 154 - 90), (131838, 366 - 130), (525822, 1199 - 288),
+                (2100222, 4458 - 864), (8394750, 18021 - 2945)],
 }
-#: multiply the estimate by this before comparing with the available memory
-SAFETY = 1.25
+#: PARDISO's own analysis report (max(iparm[14], iparm[15] + iparm[16]), MB) against the measured
+#: RSS increase above (same runs): the report is scaled by the largest ratio of the runs with
+#: n >= 1e5 (1.42 at N = 256; 1.20 at N = 2048) when it refines the estimate
+PARDISO_REPORT = [(131838, 166, 236), (525822, 671, 911), (2100222, 2927, 3594), (8394750, 12597, 15076)]
+#: multiply the estimate by this before comparing with the available memory (the least-squares
+#: fit follows the large runs: 18.1 GB estimated for 18.0 GB measured at N = 2048; it
+#: under-estimates N = 512 by 12 % and N = 256 (a 0.37 GB peak) by 13 %)
+SAFETY = 1.15
 
 
 @functools.cache
@@ -50,6 +62,7 @@ def _coefficients() -> dict:
         x = pts[:, 0] * np.log2(pts[:, 0])
         coef[b] = float(x @ pts[:, 1] / (x @ x))          # MB per n log2 n, through the origin
     coef["cholmod"] = coef["pardiso"]
+    coef["pardiso_report"] = max(rss / rep for n, rep, rss in PARDISO_REPORT if n >= 1e5)
     return coef
 
 
@@ -68,7 +81,7 @@ def estimate_peak_bytes(n_unknowns: int, backend: str = "pardiso", analysis: dic
     build_peak = c["build_peak"][0] + c["build_peak"][1] * n
     held = c["held"][0] + c["held"][1] * n
     if analysis and analysis.get("peak_bytes"):
-        factor = analysis["peak_bytes"] / MB
+        factor = c["pardiso_report"] * analysis["peak_bytes"] / MB
     else:
         factor = c[backend] * n * np.log2(max(n, 2))
     return int(max(build_peak, held + factor) * MB)

@@ -32,8 +32,11 @@ defect, ``normal`` and ``tangent`` (2,).
 """
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
+from dualfem.core import caches
 from dualfem.core.elasticity import PLANES, lame  # noqa: F401  (re-exported)
 from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
 from dualfem.core.problem import Problem
@@ -207,8 +210,26 @@ class ThinDefect(Problem):
         K_all = stiffness(pts, c.triangles, lam, mu, nd, 2 * nn)
         return K_all, self.nodal_load().T.ravel(), self.basis()
 
-    def build(self) -> QP:
-        """Assemble K (elastic + interface/delta), F (top traction), B (normal jumps)."""
+    def _assembly_key(self) -> str | None:
+        """Identity of everything but the deltas (None: not cacheable, e.g. a load given as a function)."""
+        p = self.params
+        if callable(p["load"]):
+            return None
+        free = {k: v for k, v in p.items() if k not in ("delta", "defects")}
+        free["defects"] = [{"points": d["points"], "curve": d.get("curve")} for d in self._defects]
+        return json.dumps(free, sort_keys=True, default=lambda o: np.asarray(o).tolist())
+
+    def _delta_free(self) -> dict:
+        """Mesh, DOF maps, elastic stiffness K_el and load F: everything that does not depend on delta.
+
+        Kept for the last scene in a process (:data:`_ASSEMBLY`), so a sweep over delta on one mesh
+        assembles once; its arrays are read-only (they are shared by the QPs built from it).
+        """
+        key = self._assembly_key()
+        hit = _ASSEMBLY.get(key) if key is not None else None
+        if hit is not None:
+            self._cut = hit["cut_rotated"]
+            return hit
         p = self.params
         c, pts = self.cut()
         lam, mu = lame(p["E"], p["nu"], p["plane"])
@@ -220,25 +241,52 @@ class ThinDefect(Problem):
         free = node_dofs >= 0
         F[node_dofs[free]] = Fn[free]
         R = rotation(float(p["rotate_deg"]))
-        normals = R @ c.normals
-        delta = np.array([d["delta"] for d in self._defects])[c.defect_id]
-        K_par, B, J = interface(node_dofs, c.lower, c.upper, normals, c.weights / delta, n)
-        K = (K_el + K_par).tocsc()
         local = np.unique(np.concatenate([node_dofs[:, c.upper].ravel(), node_dofs[:, c.lower].ravel()]))
         maps = {
             "nodes": pts, "triangles": c.triangles, "node_dofs": node_dofs,
             "defect_upper": c.upper, "defect_lower": c.lower, "defect_tips": c.tips, "defect_s": c.s,
-            "defect_id": c.defect_id, "defect_normals": normals, "defect_tangents": R @ c.tangents,
+            "defect_id": c.defect_id, "defect_normals": R @ c.normals, "defect_tangents": R @ c.tangents,
         }
+        out = {"cut": c, "cut_rotated": self._cut, "n": n, "K_el": K_el, "F": F, "local": local, "maps": maps}
+        for a in (K_el.data, K_el.indices, K_el.indptr, F, local, *maps.values()):
+            a.flags.writeable = False
+        _ASSEMBLY.clear()
+        if key is not None:
+            _ASSEMBLY[key] = out
+        return out
+
+    def build(self) -> QP:
+        """Assemble K (elastic + interface/delta), F (top traction), B (normal jumps).
+
+        The delta-free part (mesh, K_el, F, maps) is reused from the previous build in this process
+        when only the deltas differ; the interface term is assembled for this delta.
+        """
+        p = self.params
+        a = self._delta_free()
+        c, n, maps = a["cut"], a["n"], dict(a["maps"])
+        delta = np.array([d["delta"] for d in self._defects])[c.defect_id]
+        K_par, B, J = interface(maps["node_dofs"], c.lower, c.upper, maps["defect_normals"], c.weights / delta, n)
+        K = (a["K_el"] + K_par).tocsc()
+        R = rotation(float(p["rotate_deg"]))
         if len(self._defects) == 1 and len(self._defects[0]["points"]) == 2:
-            a, b = self._defects[0]["points"]
-            tau = (b - a) / np.linalg.norm(b - a)
+            pa, pb = self._defects[0]["points"]
+            tau = (pb - pa) / np.linalg.norm(pb - pa)
             maps["normal"], maps["tangent"] = R @ np.array([-tau[1], tau[0]]), R @ tau
         params = {k: (v if isinstance(v, (int, float, str)) else str(np.asarray(v).tolist()))
                   for k, v in p.items() if not callable(v) and k != "defects"}
         if isinstance(p["defects"], (list, tuple)) and len(p["defects"]):
             params["defects"] = defects_label(self._defects)
         self.jump_operators = J
-        return QP(K=K, F=F, B=B, weights=c.weights, K_fixed=K_el, local_dofs=local,
+        return QP(K=K, F=a["F"].copy(), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],
                   name=f"thin_defect[{p['load'] if isinstance(p['load'], str) else 'custom'}]",
                   params=params, maps=maps)
+
+
+#: the delta-free assembly of the last scene built in this process (see ThinDefect._delta_free)
+_ASSEMBLY: dict[str, dict] = {}
+
+
+@caches.register
+def clear_assembly_cache() -> None:
+    """Forget the cached delta-free assembly."""
+    _ASSEMBLY.clear()
