@@ -162,3 +162,28 @@ def test_plane_stress_softer_than_plane_strain():
 def test_bad_scene_parameters(params, words):
     with pytest.raises(InputError, match=words):
         load_scene("f2", params).build()
+
+
+def test_delta_free_assembly_is_reused_only_when_only_delta_changes():
+    """A second delta on the same mesh reuses mesh, K_el and F (read-only), and gives the same QP as a fresh build."""
+    import numpy as np
+
+    from dualfem.core.scene import load_scene
+    from dualfem.numerics.linalg import clear_cache
+
+    clear_cache()
+    a = load_scene("f2", {"N": 12, "delta": 1e-5}).build()
+    b = load_scene("f2", {"N": 12, "delta": 1e-3}).build()
+    assert np.shares_memory(b.K_fixed.data, a.K_fixed.data)          # reused
+    clear_cache()
+    fresh = load_scene("f2", {"N": 12, "delta": 1e-3}).build()
+    assert not np.shares_memory(fresh.K_fixed.data, a.K_fixed.data)
+    for M in ("K", "K_fixed", "B"):
+        assert abs(getattr(b, M) - getattr(fresh, M)).max() == 0.0
+    assert np.array_equal(b.F, fresh.F) and np.array_equal(b.maps["node_dofs"], fresh.maps["node_dofs"])
+    with pytest.raises(ValueError):
+        b.K_fixed.data[0] = 1.0                                     # shared, so read-only
+    b.F[0] = 1.0                                                    # F is each QP's own
+    assert load_scene("f2", {"N": 12, "delta": 1e-7}).build().F[0] == fresh.F[0]
+    other = load_scene("f2", {"N": 12, "delta": 1e-3, "E": 1000.0}).build()
+    assert not np.shares_memory(other.K_fixed.data, fresh.K_fixed.data)  # anything but delta: new assembly
