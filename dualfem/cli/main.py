@@ -96,7 +96,7 @@ def cmd_list(args) -> int:
     from dualfem.core.scene import describe, library, presets
 
     sol = {n: {"installed": c.missing() is None, "missing": c.missing(), "description": c.description,
-               "exact": c.exact, "parameters": c.defaults,
+               "exact": c.exact, "parameters": c.defaults, "allowed": c.allowed(),
                "renamed": dict(getattr(c, "renamed", {}))} for n, c in sorted(solvers().items())}
     prb = {n: {"description": c.description, "parameters": {k: str(v) for k, v in c.defaults.items()}}
            for n, c in sorted(problems().items())}
