@@ -28,7 +28,6 @@ string when the solver does not apply to ``qp`` (for example, too large), else N
 """
 from __future__ import annotations
 
-import importlib.util
 import math
 import re
 import warnings
@@ -36,7 +35,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from dualfem.core.errors import InputError
+from dualfem.core.errors import InputError, missing_module
 from dualfem.core.qp import QP
 from dualfem.core.solution import Solution
 
@@ -101,11 +100,7 @@ class Solver:
     @classmethod
     def missing(cls) -> str | None:
         """Return an install hint if a required module is missing, else None."""
-        for mod in cls.requires:
-            if importlib.util.find_spec(mod) is None:
-                hint = f"pip install 'dualfem[{cls.extra}]'" if cls.extra else f"pip install {mod}"
-                return f"solver {cls.name!r} needs the Python module {mod!r}: {hint}"
-        return None
+        return missing_module(f"solver {cls.name!r}", cls.requires, cls.extra)
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict[str, Any]:
