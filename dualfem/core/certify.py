@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
+from dualfem.core.evaluator import size_energy, size_max
 from dualfem.core.qp import QP
 
 
@@ -114,14 +115,14 @@ def error_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve=None) -> float:
     """
     if x is None or mu is None or not (np.all(np.isfinite(x)) and np.all(np.isfinite(mu))):
         return float("nan")
-    if -(qp.B @ x).min(initial=0.0) > FEAS_RTOL * np.abs(x).max(initial=0.0):
+    if -(qp.B @ x).min(initial=0.0) > FEAS_RTOL * size_max(qp, x):
         return float("nan")
     ksolve = ksolve or solver_for(qp)
     mu = np.maximum(np.asarray(mu, float), 0.0)
     r = qp.K @ x - qp.F - qp.B.T @ mu
     t1 = float(r @ ksolve(r))
     t2 = 2.0 * max(0.0, float(mu @ (qp.B @ x)))
-    nx = float(np.sqrt(max(x @ (qp.K @ x), 0.0)))
+    nx = size_energy(qp, x)           # |x|_K; for a shifted QP, of the user's unknowns x + x_shift
     if nx == 0.0:
         return float("nan")
     return float(np.sqrt(max(t1, 0.0) + t2) / nx)
@@ -152,7 +153,7 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
         return float("nan")
     if (~A).any() and gap1[~A].min() <= margin * step_gap:
         return float("nan")
-    nx = float(np.sqrt(max(x @ (qp.K @ x), 0.0)))
+    nx = size_energy(qp, x)
     if nx == 0.0:
         return float("nan")
     return float(np.sqrt(max(dx @ (qp.K @ dx), 0.0)) / nx)
