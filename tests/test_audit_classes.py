@@ -163,3 +163,41 @@ def test_scripts_use_the_active_venv_else_dot_venv(tmp_path, active):
     assert out.stdout.strip() == str(want)
     for script in ("run.sh", "test.sh"):
         assert ". scripts/_env.sh" in (ROOT / "scripts" / script).read_text()
+
+
+# ------------------------------------------------------------------ a refused bench changes nothing
+@pytest.mark.parametrize("bad", ['params = {tol = -1}', 'params = {time_limit = 0}', 'params = {no_such_option = 1}'])
+def test_refused_bench_into_an_existing_folder_changes_nothing(tmp_path, bad, capsys):
+    """The audit: a bad spec on an existing --out rewrote results.csv (182 rows -> 3) and wrote
+    spec.toml / sweep.json. The spec (including every solver parameter) is checked first."""
+    spec = (ROOT / "tests" / "bad_inputs" / "specs" / "good_small.toml").read_text()
+    out = tmp_path / "res"
+    out.mkdir()
+    before = {"results.csv": "run_id,solver\nabc,pdas\n", "spec.toml": spec}
+    for k, v in before.items():
+        (out / k).write_text(v)
+    f = tmp_path / "bad.toml"
+    f.write_text(spec + bad + "\n")
+    assert main(["bench", str(f), "--out", str(out)]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1 and err[0].startswith("dualfem bench: error: "), err
+    assert sorted(os.listdir(out)) == sorted(before)
+    assert all((out / k).read_text() == v for k, v in before.items())
+
+
+# ------------------------------------------------------------------ uzawa_auto's outer iterations
+#: where uzawa_auto needs more than 30 outer iterations; the README's uzawa_auto row says so and why
+UZAWA_AUTO_SLOW = {("f1", 1e-9, 64)}
+
+
+@pytest.mark.parametrize("load", ["f1", "f2", "f3"])
+def test_uzawa_auto_outer_iterations_or_the_readme_says_why(load):
+    readme = next(ln for ln in (ROOT / "README.md").read_text().splitlines() if ln.startswith("| `uzawa_auto`"))
+    for N in (16, 32, 64):
+        for delta in (1e-5, 1e-9):
+            sol = run("uzawa_auto", load_scene(load, {"N": N, "delta": delta}).build())
+            if (load, delta, N) in UZAWA_AUTO_SLOW:
+                assert sol.status != Status.SOLVED or sol.iterations["outer"] > 30, "fixed? update README and this test"
+                assert f"{load} at delta = {delta:.0e}".replace("e-0", "e-") + f", N = {N}" in readme
+            else:
+                assert sol.status == Status.SOLVED and sol.iterations["outer"] <= 30, (load, N, delta, sol.iterations)
