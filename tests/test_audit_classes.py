@@ -201,3 +201,18 @@ def test_uzawa_auto_outer_iterations_or_the_readme_says_why(load):
                 assert f"{load} at delta = {delta:.0e}".replace("e-0", "e-") + f", N = {N}" in readme
             else:
                 assert sol.status == Status.SOLVED and sol.iterations["outer"] <= 30, (load, N, delta, sol.iterations)
+
+
+# ------------------------------------------------------------------ float COO shapes are not truncated
+@pytest.mark.parametrize("key", ["K_shape", "B_shape", "B_col"])
+def test_float_shapes_and_indices_are_refused_not_truncated(tmp_path, key, capsys):
+    src = tmp_path / "qp.npz"
+    assert main(["export", "f2", "--set", "N=8", "-o", str(src)]) == 0
+    a = dict(np.load(src))
+    a[key] = a[key].astype(float) + (0.5 if key.endswith("shape") else 0.0)   # 150.5 would truncate to 150
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **a)
+    capsys.readouterr()
+    assert main(["solve", str(bad), "--solver", "pdas"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and key in err[0] and "integer" in err[0], err
