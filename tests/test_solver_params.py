@@ -121,3 +121,20 @@ def test_list_json_shows_the_allowed_values(capsys):
     assert d["uzawa"]["allowed"]["tol_mode"] == "one of relative, absolute"
     assert d["osqp"]["allowed"]["scaling"] == "an integer in [0, 100]"
     assert d["pdas"]["allowed"]["time_limit"] == "a finite number > 0"
+
+
+def test_a_third_party_plugin_keeps_its_own_meanings_and_gets_the_shared_checks():
+    """A plugin written before ``ranges`` (time_limit = 0 meaning 'none', verbose = 0) still loads;
+    the shared ranges apply to the parameters whose defaults lie in them."""
+    from dualfem.core.solver import Solver
+
+    class OldPlugin(Solver):
+        name = "test_old_plugin"
+        defaults = {"tol": 1e-6, "max_iter": 100, "time_limit": 0.0, "verbose": 0}
+
+    assert set(OldPlugin.param_ranges()) == {"tol", "max_iter"}
+    assert OldPlugin().params["time_limit"] == 0.0
+    with pytest.raises(InputError, match="'tol'.*> 0"):
+        OldPlugin(tol=-1)
+    with pytest.raises(InputError, match="'max_iter'.*integer >= 1"):
+        OldPlugin(max_iter=0)

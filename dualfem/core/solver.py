@@ -78,9 +78,16 @@ class Solver:
 
     @classmethod
     def param_ranges(cls) -> dict[str, Any]:
-        """The declared allowed values of every parameter (shared vocabulary + ``ranges``)."""
-        table = {**COMMON_RANGES, **cls.ranges}
-        return {k: table[k] for k in cls.defaults if k in table}
+        """The declared allowed values of every parameter: ``ranges``, plus the shared vocabulary's
+        (:data:`COMMON_RANGES`) for a parameter whose default lies in it (a third-party plugin whose
+        ``time_limit = 0`` means 'none' keeps its own meaning, checked by its ``validate``)."""
+        table = {}
+        for k, d in cls.defaults.items():
+            if k in cls.ranges:
+                table[k] = cls.ranges[k]
+            elif k in COMMON_RANGES and _fits(k, d, COMMON_RANGES[k], cls.name):
+                table[k] = COMMON_RANGES[k]
+        return table
 
     @classmethod
     def allowed(cls) -> dict[str, str]:
@@ -90,8 +97,10 @@ class Solver:
 
     def check_params(self) -> None:
         """Raise InputError for the first parameter outside its declared range (see :func:`check_value`)."""
+        params = getattr(self, "params", None) or {}      # a plugin may override __init__
         for key, spec in self.param_ranges().items():
-            check_value(key, self.params[key], spec, self.defaults[key], self.name)
+            if key in params:
+                check_value(key, params[key], spec, self.defaults[key], self.name)
 
     # ----------------------------------------------------------- the contract
     def validate(self) -> None:
@@ -174,6 +183,14 @@ def check_value(key: str, value: Any, spec: Any, default: Any, solver: str) -> N
     if not ok:
         raise InputError(f"parameter {key!r} of solver {solver!r} must be {describe_range(spec, integer)}, "
                          f"got {value!r}")
+
+
+def _fits(key: str, default: Any, spec: Any, solver: str) -> bool:
+    try:
+        check_value(key, default, spec, default, solver)
+    except InputError:
+        return False
+    return True
 
 
 def _apply_renames(solver: str, renamed: dict[str, str], params: dict[str, Any]) -> dict[str, Any]:
