@@ -99,6 +99,7 @@ class Signorini(Problem):
         "obstacle": "0.05*(x-0.5)**2",
     }
     presets = {"signorini": {}, "signorini_flat": {"obstacle": "0"}}
+    requires = ("skfem",)
 
     def validate(self) -> None:
         p = self.params

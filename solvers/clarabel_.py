@@ -17,9 +17,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from dualfem.core.errors import InputError
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver, positive
+from dualfem.core.solver import Solver
 from dualfem.numerics.scaling import scale
 
 _STATUS = {
@@ -50,7 +51,7 @@ class ClarabelSolver(Solver):
         "tol": 1e-10,             # Clarabel's tol_gap_abs = tol_gap_rel = tol_feas
         "tol_ktratio": 1e-8,
         "max_iter": 200,
-        "time_limit": 600.0,      # seconds; 0 = none
+        "time_limit": 600.0,      # seconds
         "equilibrate_enable": True,
         "direct_solve_method": "qdldl",
         "verbose": False,
@@ -59,9 +60,12 @@ class ClarabelSolver(Solver):
     }
 
     renamed = {"tol_gap_abs": "tol", "tol_gap_rel": "tol", "tol_feas": "tol"}
+    ranges = {"tol_ktratio": "(0, inf)", "equilibrate_enable": bool, "direct_solve_method": None,
+              "scale": bool, "polish": bool}
 
     def validate(self) -> None:
-        positive(self, "tol", "tol_ktratio", "max_iter")
+        if self.missing() is None:
+            _check_direct_method(self.params["direct_solve_method"])
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -73,7 +77,7 @@ class ClarabelSolver(Solver):
         self.qp = qp
         settings = clarabel.DefaultSettings()
         for k, v in self.params.items():
-            if k in ("scale", "polish", "tol") or (k == "time_limit" and v <= 0):
+            if k in ("scale", "polish", "tol"):
                 continue
             setattr(settings, k, v)
         for k in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
@@ -95,6 +99,27 @@ class ClarabelSolver(Solver):
             iterations={"ipm": int(sol.iterations)}, message=f"clarabel: {name}",
             info={"obj_val": float(sol.obj_val), "solve_time_internal": float(sol.solve_time), **info},
         )
+
+
+def _check_direct_method(method) -> None:
+    """Refuse a ``direct_solve_method`` this Clarabel build lacks (Clarabel says so only at setup)."""
+    import clarabel
+
+    def works(m) -> bool:
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        try:
+            settings.direct_solve_method = m
+            clarabel.DefaultSolver(sp.csc_matrix(np.eye(1)), np.zeros(1), sp.csc_matrix(-np.eye(1)), np.zeros(1),
+                                   [clarabel.NonnegativeConeT(1)], settings)
+        except Exception:  # Clarabel raises a bare Exception("Bad settings: ...")
+            return False
+        return True
+
+    if not (isinstance(method, str) and works(method)):
+        known = [m for m in ("auto", "qdldl", "faer", "mkl", "cholmod") if works(m)]
+        raise InputError(f"parameter 'direct_solve_method' of solver 'clarabel' must be a method this Clarabel "
+                         f"build provides (one of {', '.join(known)}), got {method!r}")
 
 
 def _polish(qp, x, z):

@@ -36,7 +36,7 @@ from dualfem.core.errors import InputError
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver, positive
+from dualfem.core.solver import Solver
 from dualfem.numerics.scaling import scale
 
 #: accuracy promised per backend at default settings (relative energy-norm error of x)
@@ -66,8 +66,6 @@ def _eps_options(backend: str, eps: float) -> dict:
 
 
 def _time_options(backend: str, time_limit: float) -> dict:
-    if time_limit <= 0:
-        return {}
     if backend in ("CLARABEL", "OSQP"):
         return {"time_limit": time_limit}
     if backend == "SCS":
@@ -96,16 +94,16 @@ class CvxpySolver(Solver):
         "solver": "CLARABEL",
         "tol": 1e-10,             # the backend's accuracy options (see _eps_options)
         "max_iter": 10000,
-        "time_limit": 600.0,      # seconds (CLARABEL, OSQP, SCS; other backends ignore it); 0 = none
+        "time_limit": 600.0,      # seconds (CLARABEL, OSQP, SCS; other backends ignore it)
         "scale": True,
         "polish": True,
         "verbose": False,
     }
 
     renamed = {"eps": "tol"}
+    ranges = {"solver": None, "scale": bool, "polish": bool}   # solver: an installed backend (validate)
 
     def validate(self) -> None:
-        positive(self, "tol", "max_iter")
         backend = str(self.params["solver"]).upper()
         self.params["solver"] = backend
         if self.missing() is None:

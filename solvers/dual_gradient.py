@@ -34,10 +34,9 @@ import time
 import numpy as np
 import scipy.sparse.linalg as sla
 
-from dualfem.core.errors import InputError
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver, positive
+from dualfem.core.solver import Solver
 from dualfem.numerics.factor import from_param
 from dualfem.numerics.linalg import sparse_factor
 
@@ -51,7 +50,7 @@ class DualGradient(Solver):
     defaults = {
         "tol": 1e-10,          # stopping threshold on the evaluator's primal & complementarity residuals
         "max_iter": 20000,
-        "time_limit": 60.0,    # seconds of solve time; <= 0 means no limit
+        "time_limit": 60.0,    # seconds of solve time
         "verbose": False,      # print the residuals every 100 iterations to stderr
         "accelerate": True,    # FISTA with gradient restart; False: plain projected gradient
         "step_safety": 1.0,    # step = step_safety / L; must be in (0, 2)
@@ -61,14 +60,10 @@ class DualGradient(Solver):
     tolerance = 1e-6
     exact = True
 
+    ranges = {"accelerate": bool, "step_safety": "(0, 2)", "max_n": "[1, inf)", "factor": None}
+
     def validate(self) -> None:
         from_param(self)
-        positive(self, "tol", "max_iter", "max_n")
-        s = self.params["step_safety"]
-        if not (isinstance(s, (int, float)) and 0 < s < 2):
-            raise InputError(f"parameter 'step_safety' of solver {self.name!r} must be in (0, 2), got {s!r}")
-        if not isinstance(self.params["time_limit"], (int, float)):
-            raise InputError(f"parameter 'time_limit' of solver {self.name!r} must be a number of seconds")
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -119,7 +114,7 @@ class DualGradient(Solver):
         t_start = time.perf_counter()
         step = p["step_safety"] / self.L
         tol, max_iter = p["tol"], int(p["max_iter"])
-        limit = p["time_limit"] if p["time_limit"] > 0 else np.inf
+        limit = p["time_limit"]
         mu = np.zeros(qp.m)
         x = self._x(mu)
         mu_old, x_old = mu, x

@@ -36,10 +36,9 @@ import time
 
 import numpy as np
 
-from dualfem.core.errors import InputError
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver, positive
+from dualfem.core.solver import Solver
 from dualfem.numerics.linalg import MAX_LOCAL, too_many_local
 
 
@@ -210,16 +209,8 @@ class MPRGPSolver(Solver):
         "refine": 1,              # iterative-refinement steps of the final KKT system (dense operator)
     }
 
-    def validate(self) -> None:
-        positive(self, "tol", "max_iter", "time_limit", "gamma", "power_iter")
-        p = self.params
-        if p["operator"] not in ("dense", "matrixfree"):
-            raise InputError(f"parameter 'operator' of solver 'mprgp' must be dense or matrixfree, "
-                             f"got {p['operator']!r}")
-        if not 0 < p["alpha_factor"] <= 2:
-            raise InputError(f"parameter 'alpha_factor' of solver 'mprgp' must be in (0, 2], got {p['alpha_factor']!r}")
-        if p["refine"] < 0:
-            raise InputError(f"parameter 'refine' of solver 'mprgp' must be >= 0, got {p['refine']!r}")
+    ranges = {"operator": ("dense", "matrixfree"), "gamma": "(0, inf)", "alpha_factor": "(0, 2]",
+              "power_iter": "[1, inf)", "refine": "[0, inf)"}
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:

@@ -9,16 +9,13 @@ larger (see notes/ecosystem.md, osqp issue 364); the evaluator reports it either
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.core.errors import InputError
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver, positive
+from dualfem.core.solver import Solver
 from dualfem.numerics.scaling import scale
 
 _STATUS = {
@@ -48,21 +45,12 @@ class OSQPSolver(Solver):
         "polish": True,           # OSQP's polishing
         "scaling": 10,
         "adaptive_rho": True,
-        "time_limit": 600.0,      # seconds; 0 = none
+        "time_limit": 600.0,      # seconds
         "verbose": False,
         "scale": True,
     }
     renamed = {"eps_abs": "tol", "eps_rel": "tol", "polishing": "polish"}
-
-    def validate(self) -> None:
-        positive(self, "tol", "max_iter")
-        p = self.params
-        if not 0 <= p["scaling"] <= 100:
-            raise InputError(f"parameter 'scaling' of solver 'osqp' (OSQP's scaling iterations) must be an integer "
-                             f"in [0, 100], got {p['scaling']!r}")
-        if not (p["time_limit"] >= 0 and math.isfinite(p["time_limit"])):
-            raise InputError(f"parameter 'time_limit' of solver 'osqp' must be a finite number of seconds >= 0 "
-                             f"(0 = none), got {p['time_limit']!r}")
+    ranges = {"polish": bool, "scaling": "[0, 100]", "adaptive_rho": bool, "scale": bool}   # scaling: OSQP's iterations
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -74,7 +62,7 @@ class OSQPSolver(Solver):
         self.qp = qp
         self._scaled = s = scale(qp, self.params["scale"])
         settings = {k: v for k, v in self.params.items()
-                    if k not in ("scale", "tol", "polish") and not (k == "time_limit" and v <= 0)}
+                    if k not in ("scale", "tol", "polish")}
         settings.update(eps_abs=self.params["tol"], eps_rel=self.params["tol"], polishing=self.params["polish"])
         self._solver = osqp.OSQP()
         with c_stdout_to_stderr():

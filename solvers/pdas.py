@@ -40,10 +40,9 @@ import time
 import numpy as np
 import scipy.linalg as sla
 
-from dualfem.core.errors import InputError
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver, positive
+from dualfem.core.solver import Solver
 from dualfem.numerics.factor import from_param  # noqa: E402
 from dualfem.numerics.linalg import MAX_LOCAL, too_many_local  # noqa: E402  (shared with penalty, uzawa)
 
@@ -85,20 +84,11 @@ class PDASSolver(ReducedDualSolver):
         "verbose": False,         # print one line per Newton step to stderr
     }
 
+    ranges = {"c": "[0, inf)", "globalize": ("armijo", "none"), "sigma": "(0, 0.5)", "max_backtracks": "[1, inf)",
+              "refine": "[0, inf)", "factor": None}   # c = 0: automatic
+
     def validate(self) -> None:
         from_param(self)
-        positive(self, "max_iter", "tol", "sigma", "max_backtracks", "time_limit")
-        if self.params["refine"] < 0:
-            raise InputError(f"parameter 'refine' of solver 'pdas' must be >= 0, got {self.params['refine']!r}")
-        if self.params["c"] < 0 or not np.isfinite(self.params["c"]):
-            raise InputError(f"parameter 'c' of solver 'pdas' must be >= 0 (0 = automatic), "
-                             f"got {self.params['c']!r}")
-        if self.params["globalize"] not in ("armijo", "none"):
-            raise InputError(f"parameter 'globalize' of solver 'pdas' must be armijo or none, "
-                             f"got {self.params['globalize']!r}")
-        if not self.params["sigma"] < 0.5:
-            raise InputError(f"parameter 'sigma' of solver 'pdas' must be in (0, 0.5), "
-                             f"got {self.params['sigma']!r}")
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:

@@ -46,7 +46,6 @@ import scipy.linalg as sla
 
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import positive
 from dualfem.numerics.factor import from_param
 
 from .pdas import ReducedDualSolver
@@ -76,19 +75,11 @@ class PenaltySolver(ReducedDualSolver):
         "verbose": False,         # print one line per penalty stage to stderr
     }
     renamed = {"penetration_tol": "tol", "max_newton": "max_iter"}
+    ranges = {"rho0_factor": "(0, inf)", "rho_growth": "(1, inf)", "rho_max_factor": "(0, inf)",
+              "newton_tol": "(0, inf)", "sigma": "(0, 0.5)", "max_backtracks": "[1, inf)", "factor": None}
 
     def validate(self) -> None:
         from_param(self)
-        positive(self, "tol", "rho0_factor", "rho_growth", "rho_max_factor",
-                 "newton_tol", "max_iter", "sigma", "max_backtracks", "time_limit")
-        from dualfem.core.errors import InputError
-
-        if self.params["rho_growth"] <= 1:
-            raise InputError(f"parameter 'rho_growth' of solver 'penalty' must be > 1, "
-                             f"got {self.params['rho_growth']!r}")
-        if not self.params["sigma"] < 0.5:
-            raise InputError(f"parameter 'sigma' of solver 'penalty' must be in (0, 0.5), "
-                             f"got {self.params['sigma']!r}")
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:

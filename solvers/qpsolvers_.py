@@ -43,7 +43,7 @@ import numpy as np
 
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver, positive
+from dualfem.core.solver import Solver
 from dualfem.numerics.scaling import scale
 
 #: default size above which dense backends are skipped (a dense n x n Hessian: 8 n^2 bytes and
@@ -150,13 +150,7 @@ class QpsolversSolver(Solver):
     defaults = {"tol": 1e-9, "max_iter": 100000, "time_limit": 600.0, "verbose": False,
                 "scale": True, "max_n": 0}
 
-    def validate(self) -> None:
-        positive(self, "tol", "max_iter", "time_limit")
-        if self.params["max_n"] < 0:
-            from dualfem.core.errors import InputError
-
-            raise InputError(f"parameter 'max_n' of solver {self.name!r} must be >= 0 "
-                             f"(0 = the backend's default), got {self.params['max_n']!r}")
+    ranges = {"scale": bool, "max_n": "[0, inf)"}     # max_n = 0: the backend's default
 
     @classmethod
     def info(cls) -> Backend:

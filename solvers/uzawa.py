@@ -72,7 +72,7 @@ import scipy.sparse as sp
 from dualfem.core.errors import InputError
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver, positive
+from dualfem.core.solver import Solver
 from dualfem.numerics.factor import from_param
 from dualfem.numerics.linalg import sparse_factor
 
@@ -194,44 +194,24 @@ class Uzawa(Solver):
         "inner_norm": "energy",   # norm of the inner stop test
         "shortcut": True,         # return the unconstrained minimizer when it is admissible
         "stall_window": 1000,     # stop with 'stagnation' if the dual change has not improved for this many outer its
-        "time_limit": 600.0,      # seconds, 0 = none
+        "time_limit": 600.0,      # seconds
         "error_factor": 10.0,     # 'inaccurate' if the estimated dual error exceeds this x tol
         "verbose": False,         # print one line per outer iteration to stderr
     }
     renamed = {"tol_outer": "tol", "max_outer": "max_iter"}
+    ranges = {"r": "(0, inf)", "r_rule": ("fixed", "auto"), "r_factor": "(0, inf)",
+              "tol_mode": ("relative", "absolute"),
+              "tol_inner": "(0, inf)", "step_factor": "(1, inf)", "armijo_c": "(0, 1)", "max_inner": "[1, inf)",
+              "max_backtracks": "[1, inf)", "l0": "[0, inf)", "linalg": ("reduced", "full"),
+              "factor": None, "inner_norm": ("energy", "euclidean"), "shortcut": bool, "stall_window": "[1, inf)",
+              "error_factor": "(0, inf)"}
 
     def validate(self) -> None:
         from_param(self)
-        positive(self, "r", "r_factor", "error_factor", "tol", "tol_inner", "armijo_c", "max_iter", "max_inner",
-                 "max_backtracks", "stall_window")
         p = self.params
-        if not p["step_factor"] > 1 or not np.isfinite(p["step_factor"]):
-            raise InputError(f"parameter 'step_factor' of solver '{self.name}' must be a finite number > 1, "
-                             f"got {p['step_factor']!r}")
-        if not p["armijo_c"] < 1:
-            raise InputError(f"parameter 'armijo_c' of solver '{self.name}' must be in (0, 1), "
-                             f"got {p['armijo_c']!r}")
-        if not (np.isfinite(p["l0"]) and p["l0"] >= 0):
-            raise InputError(f"parameter 'l0' of solver '{self.name}' must be a finite number >= 0, "
-                             f"got {p['l0']!r}")
-        if p["tol_mode"] not in ("absolute", "relative"):
-            raise InputError(f"parameter 'tol_mode' of solver '{self.name}' must be 'absolute' or 'relative', "
-                             f"got {p['tol_mode']!r}")
-        if p["r_rule"] not in ("fixed", "auto"):
-            raise InputError(f"parameter 'r_rule' of solver '{self.name}' must be 'fixed' or 'auto', "
-                             f"got {p['r_rule']!r}")
-        if p["linalg"] not in ("reduced", "full"):
-            raise InputError(f"parameter 'linalg' of solver '{self.name}' must be 'reduced' or 'full', "
-                             f"got {p['linalg']!r}")
-        if p["inner_norm"] not in ("energy", "euclidean"):
-            raise InputError(f"parameter 'inner_norm' of solver '{self.name}' must be 'energy' or 'euclidean', "
-                             f"got {p['inner_norm']!r}")
         if p["inner_norm"] == "euclidean" and p["linalg"] != "full":
             raise InputError(f"parameter 'inner_norm' of solver '{self.name}' must be 'energy' with "
                              "linalg='reduced' ('euclidean' needs linalg='full')")
-        if not (np.isfinite(p["time_limit"]) and p["time_limit"] >= 0):
-            raise InputError(f"parameter 'time_limit' of solver '{self.name}' must be >= 0, "
-                             f"got {p['time_limit']!r}")
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -270,7 +250,7 @@ class Uzawa(Solver):
         p, qp, sp_ = self.params, self.qp, self.space
         r, w = self.r, qp.weights
         t_start = time.perf_counter()
-        deadline = t_start + p["time_limit"] if p["time_limit"] > 0 else np.inf
+        deadline = t_start + p["time_limit"]
         z = sp_.start()
         l = np.full(qp.m, float(p["l0"]))
         k = m_total = 0

@@ -96,10 +96,10 @@ def cmd_list(args) -> int:
     from dualfem.core.scene import describe, library, presets
 
     sol = {n: {"installed": c.missing() is None, "missing": c.missing(), "description": c.description,
-               "exact": c.exact, "parameters": c.defaults,
+               "exact": c.exact, "parameters": c.defaults, "allowed": c.allowed(),
                "renamed": dict(getattr(c, "renamed", {}))} for n, c in sorted(solvers().items())}
-    prb = {n: {"description": c.description, "parameters": {k: str(v) for k, v in c.defaults.items()}}
-           for n, c in sorted(problems().items())}
+    prb = {n: {"description": c.description, "installed": c.missing() is None, "missing": c.missing(),
+               "parameters": {k: str(v) for k, v in c.defaults.items()}} for n, c in sorted(problems().items())}
     scn = {n: {"problem": pn, **{k: str(v) for k, v in prm.items()}} for n, (pn, prm) in sorted(presets().items())}
     lib = {n: {"file": str(p), "description": describe(p)} for n, p in library().items()}
     if args.json:
@@ -108,7 +108,7 @@ def cmd_list(args) -> int:
         return 0
     print("problems:")
     for n, d in prb.items():
-        print(f"  {n:14s} {d['description']}")
+        print(f"  {n:14s} {d['description']}" + ("" if d["installed"] else f" NOT INSTALLED ({d['missing']})"))
     print("scenes:")
     for n, d in scn.items():
         print(f"  {n:14s} {d}")
@@ -280,19 +280,51 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.code or 0)
     run = _COMMANDS[args.command][2]
     try:
-        return run(args)
+        rc = run(args)
+        sys.stdout.flush()       # a full disk behind `> file` shows here, not at interpreter exit
+        return rc
     except (InputError, MissingDependency) as exc:
         print(f"dualfem {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except ImportError as exc:   # a module imported on the way is missing or broken (e.g. scikit-fem)
+        from dualfem.core.errors import install_hint
+
+        msg = (f"the Python module {exc.name!r} is missing or cannot be imported: {install_hint(exc.name)}"
+               if exc.name else f"an import failed: {exc}")
+        print(f"dualfem {args.command}: error: {msg}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"dualfem {args.command}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:      # the reader of our output went away (e.g. `| head`): stop quietly
-        import os
+        _drop_stdout()
+        return 141
+    except OSError as exc:       # the disk is full, a file vanished or became unreadable mid-run
+        what = exc.strerror or str(exc)
+        _drop_stdout()
+        msg = (f"cannot access {str(exc.filename)!r}: {what}" if exc.filename
+               else f"{what} (writing the standard output or an output file)")
+        print(f"dualfem {args.command}: error: {msg}", file=sys.stderr)
+        return 2
 
+
+def _drop_stdout() -> bool:
+    """Flush stdout; if that fails (its reader is gone or its disk is full) discard what is still
+    buffered, so that the interpreter's exit does not fail again. Returns whether the flush worked."""
+    import io
+    import os
+
+    try:
+        sys.stdout.flush()
+        return True
+    except OSError:
+        pass
+    try:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
-        return 141
+    except (OSError, ValueError, io.UnsupportedOperation):  # not a real file (e.g. captured by a test)
+        pass
+    return False
 
 
 if __name__ == "__main__":  # pragma: no cover

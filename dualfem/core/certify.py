@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
+from dualfem.core.evaluator import size_energy, size_max
 from dualfem.core.qp import QP
 
 
@@ -121,10 +122,6 @@ def _finite(x, mu) -> bool:
     return x is not None and mu is not None and bool(np.all(np.isfinite(x)) and np.all(np.isfinite(mu)))
 
 
-def _energy_norm(qp: QP, x: np.ndarray) -> float:
-    return float(np.sqrt(max(float(x @ (qp.K @ x)), 0.0)))
-
-
 def _residual_solve(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve) -> tuple[float, np.ndarray]:
     """(r'K^-1 r, B K^-1 r) for r = K x - F - B'mu; ``ksolve`` a :class:`KSolver` or a callable r -> K^-1 r."""
     r = qp.K @ x - qp.F - qp.B.T @ mu
@@ -142,12 +139,12 @@ def error_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve=None, _quad=None) 
     """
     if not _finite(x, mu):
         return float("nan")
-    if -(qp.B @ x).min(initial=0.0) > FEAS_RTOL * np.abs(x).max(initial=0.0):
+    if -(qp.B @ x).min(initial=0.0) > FEAS_RTOL * size_max(qp, x):
         return float("nan")
     mu = np.maximum(np.asarray(mu, float), 0.0)
     t1 = (_quad or _residual_solve(qp, x, mu, ksolve or solver_for(qp)))[0]
     t2 = 2.0 * max(0.0, float(mu @ (qp.B @ x)))
-    nx = _energy_norm(qp, x)
+    nx = size_energy(qp, x)           # |x|_K; for a shifted QP, of the user's unknowns x + x_shift
     if nx == 0.0:
         return float("nan")
     return float(np.sqrt(max(t1, 0.0) + t2) / nx)
@@ -189,7 +186,7 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
         return float("nan")
     if (~A).any() and gap1[~A].min() <= margin * step_gap:
         return float("nan")
-    nx = _energy_norm(qp, x)
+    nx = size_energy(qp, x)
     if nx == 0.0:
         return float("nan")
     return float(np.sqrt(max(dxKdx, 0.0)) / nx)

@@ -13,8 +13,41 @@ class InputError(ValueError):
     """Bad input: the message names the parameter and what is allowed."""
 
 
+class OutputError(InputError):
+    """An output file could not be written (disk full, file size limit, permission, ...).
+
+    Raised by the atomic writer, which has removed its temporary file: nothing half-written is
+    left. A subclass of InputError so that every command reports it as one line, exit 2.
+    """
+
+
 class MissingDependency(ImportError):
     """An optional dependency is missing; the message says what to install."""
+
+
+#: pip distributions whose import name differs from the distribution name
+DISTRIBUTIONS = {"skfem": "scikit-fem", "sksparse": "scikit-sparse", "yaml": "pyyaml", "sklearn": "scikit-learn"}
+
+
+def install_hint(module: str, extra: str | None = None) -> str:
+    """The pip command that provides the importable ``module`` (``dualfem[extra]`` when given)."""
+    if extra:
+        return f"pip install 'dualfem[{extra}]'"
+    return f"pip install {DISTRIBUTIONS.get(module.split('.')[0], module.split('.')[0])}"
+
+
+def missing_module(owner: str, requires: tuple[str, ...], extra: str | None = None) -> str | None:
+    """An install hint naming the first of ``requires`` that cannot be imported, else None."""
+    import importlib.util
+
+    for mod in requires:
+        try:
+            found = importlib.util.find_spec(mod) is not None
+        except (ImportError, ValueError):   # a parent package missing, or a module blocked in sys.modules
+            found = False
+        if not found:
+            return f"{owner} needs the Python module {mod!r}: {install_hint(mod, extra)}"
+    return None
 
 
 def check_positive(name: str, value, *, allow_zero: bool = False) -> float:

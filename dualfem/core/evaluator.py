@@ -4,7 +4,8 @@ Nothing here reads a solver's own residuals. All residuals are scale-free so tha
 works in MPa/mm and in Pa/m alike:
 
 * force scale  f_s = max(|F|_inf, |Kx|_inf, |B'mu|_inf)   (nodal forces)
-* length scale l_s = |x|_inf                               (displacements)
+* length scale l_s = |x|_inf                               (displacements; for a shifted QP,
+  whose user unknowns are ``x + maps["x_shift"]``, the larger of |x|_inf and |x + x_shift|_inf)
 
 ==================  =====================================================
 ``stationarity``    |Kx - F - B'mu|_inf / f_s
@@ -31,7 +32,9 @@ CONTACT_RTOL = 1e-6
 def _scales(qp: QP, x: np.ndarray, mu: np.ndarray) -> tuple[float, float]:
     fs = max(np.abs(qp.F).max(initial=0.0), np.abs(qp.K @ x).max(initial=0.0),
              np.abs(qp.B.T @ mu).max(initial=0.0), TINY)
-    ls = max(np.abs(x).max(initial=0.0), TINY)
+    # a shifted QP (a QP file with h != 0, signorini): the user's unknowns are x + x_shift, and
+    # their size is the length scale (x itself may be exactly 0 at the solution)
+    ls = max(size_max(qp, x), TINY)
     return fs, ls
 
 
@@ -80,23 +83,45 @@ def energy_norm(qp: QP, v: np.ndarray) -> float:
     return float(np.sqrt(max(v @ (qp.K @ v), 0.0)))
 
 
+def _shift(qp: QP, x: np.ndarray) -> np.ndarray | None:
+    shift = qp.maps.get("x_shift") if qp.maps else None
+    return None if shift is None or np.shape(shift) != np.shape(x) else np.asarray(shift, dtype=float)
+
+
+def size_energy(qp: QP, x: np.ndarray) -> float:
+    """The energy-norm size of a solution, the denominator of relative errors: |x|_K, or for a shifted
+    QP (user unknowns ``x + maps["x_shift"]``) the larger of |x|_K and |x + x_shift|_K, so that a
+    solution x = 0 of the shifted problem still has a size."""
+    shift = _shift(qp, x)
+    e = energy_norm(qp, x)
+    return e if shift is None else max(e, energy_norm(qp, x + shift))
+
+
+def size_max(qp: QP, x: np.ndarray) -> float:
+    """|x|_inf, or for a shifted QP the larger of |x|_inf and |x + x_shift|_inf (see :func:`size_energy`)."""
+    shift = _shift(qp, x)
+    e = float(np.abs(x).max(initial=0.0))
+    return e if shift is None else max(e, float(np.abs(x + shift).max(initial=0.0)))
+
+
 def compare(qp: QP, x: np.ndarray, mu: np.ndarray, x_ref: np.ndarray, mu_ref: np.ndarray,
             rtol: float = CONTACT_RTOL) -> dict:
     """Relative differences of (x, mu) against a reference (x_ref, mu_ref).
 
-    ``x_energy``: |x - x_ref|_K / |x_ref|_K; ``x_max``: |x - x_ref|_inf / |x_ref|_inf;
+    ``x_energy``: |x - x_ref|_K / |x_ref|_K; ``x_max``: |x - x_ref|_inf / |x_ref|_inf (for a shifted
+    QP the sizes of :func:`size_energy` and :func:`size_max`);
     ``multipliers``: |mu - mu_ref|_inf / max(|mu_ref|_inf, |F|_inf) (the load scale guards the
     all-open case where mu_ref = 0); ``energy``: |Pi(x) - Pi(x_ref)| / |Pi(x_ref)|;
     ``contact_mismatch``: number of defect nodes in one contact set and not the other.
     """
     dx = x - x_ref
-    ref_e = max(energy_norm(qp, x_ref), TINY)
+    ref_e = max(size_energy(qp, x_ref), TINY)
     e_ref = qp.energy(x_ref)
     mu_scale = max(np.abs(mu_ref).max(initial=0.0), np.abs(qp.F).max(initial=0.0), TINY)
     c1, c2 = contact_set(qp, x, rtol), contact_set(qp, x_ref, rtol)
     return {
         "x_energy": energy_norm(qp, dx) / ref_e,
-        "x_max": float(np.abs(dx).max(initial=0.0) / max(np.abs(x_ref).max(initial=0.0), TINY)),
+        "x_max": float(np.abs(dx).max(initial=0.0) / max(size_max(qp, x_ref), TINY)),
         "multipliers": float(np.abs(mu - mu_ref).max(initial=0.0) / mu_scale),
         "energy": float(abs(qp.energy(x) - e_ref) / max(abs(e_ref), TINY)),
         "contact_mismatch": int(np.count_nonzero(c1 != c2)),

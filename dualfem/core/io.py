@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from dualfem.core.errors import InputError
+from dualfem.core.errors import InputError, OutputError
 
 
 def jsonable(o: Any) -> Any:
@@ -43,14 +43,22 @@ def check_output_path(path: str | Path, flag: str) -> Path:
         raise InputError(f"{flag} {str(path)!r}: {str(parent)!r} is a file, not a folder")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise InputError(f"{flag} {str(path)!r}: no permission to write in {str(parent)!r}")
+    try:                    # os.access says yes to root and on read-only file systems: try for real
+        with tempfile.TemporaryFile(dir=parent):
+            pass
+    except OSError as exc:
+        raise InputError(f"{flag} {str(path)!r}: cannot write in {str(parent)!r}: {exc.strerror or exc}") from None
     return path
 
 
 def atomic_write(path: str | Path, write: Callable[[str], None]) -> Path:
     """Call ``write(tmp_path)`` on a temporary file next to ``path``, then rename it into place."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
+    except OSError as exc:              # read-only file system, no permission, a file in the way
+        raise OutputError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from exc
     os.close(fd)
     umask = os.umask(0)
     os.umask(umask)
@@ -58,9 +66,11 @@ def atomic_write(path: str | Path, write: Callable[[str], None]) -> Path:
     try:
         write(tmp)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         if os.path.exists(tmp):
             os.unlink(tmp)
+        if isinstance(exc, OSError):    # disk full, file size limit, permission: one clear line
+            raise OutputError(f"cannot write {str(path)!r}: {exc.strerror or exc} (nothing was written)") from exc
         raise
     return path
 

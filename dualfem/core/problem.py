@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any, ClassVar
 
-from dualfem.core.errors import InputError
+from dualfem.core.errors import InputError, MissingDependency, missing_module
 from dualfem.core.qp import QP
 from dualfem.core.solver import _coerce
 
@@ -21,8 +21,18 @@ class Problem:
     description: ClassVar[str] = ""
     defaults: ClassVar[dict[str, Any]] = {}
     presets: ClassVar[dict[str, dict[str, Any]]] = {}
+    requires: ClassVar[tuple[str, ...]] = ()     # importable modules build() needs
+    extra: ClassVar[str | None] = None           # the pyproject extra providing them
+
+    @classmethod
+    def missing(cls) -> str | None:
+        """Return an install hint if a module ``build()`` needs is missing, else None."""
+        return missing_module(f"problem {cls.name!r}", cls.requires, cls.extra)
 
     def __init__(self, **params: Any) -> None:
+        reason = self.missing()
+        if reason:
+            raise MissingDependency(reason)
         unknown = sorted(set(params) - set(self.defaults))
         if unknown:
             raise InputError(f"unknown scene key {unknown[0]!r} for problem {self.name!r}; "

@@ -44,6 +44,7 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
     tick = progress or (lambda stage, seconds: None)
     if isinstance(solver, str):
         solver = make_solver(solver, params)
+    solver.check_params()          # again: a plugin may override __init__ or change params after it
     reason = solver.missing() or solver.skip(qp)
     if reason:
         return Solution(solver=solver.name, status=Status.SKIPPED, message=reason, params=dict(solver.params))

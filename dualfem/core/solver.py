@@ -10,7 +10,13 @@ A solver plugin is a subclass of :class:`Solver` that declares
 * ``exact``: False for methods with an intrinsic error (e.g. penalty), whose answer is
   compared against the reference with ``tolerance`` only;
 * ``renamed``: old parameter names still accepted, ``{"old": "new"}`` (a DeprecationWarning
-  names the new one).
+  names the new one);
+* ``ranges``: the allowed values of each parameter (see :func:`check_value`): an interval string
+  such as ``"(0, inf)"``, ``"[1, inf)"`` or ``"(0, 2]"`` (integers when the default is an int),
+  a tuple of allowed strings, ``bool``, or None for a value only ``validate()`` can check (a
+  backend name). The shared vocabulary's ranges (:data:`COMMON_RANGES`) apply to every solver
+  that has the parameter; ``__init__`` and the runner check every declared range before
+  ``validate()`` and before any library sees the value.
 
 One parameter vocabulary for every solver: ``tol`` (the relative accuracy the solver aims for),
 ``max_iter`` (its main iteration cap), ``time_limit`` (seconds, finite default), ``verbose``;
@@ -22,12 +28,14 @@ string when the solver does not apply to ``qp`` (for example, too large), else N
 """
 from __future__ import annotations
 
-import importlib.util
 import math
+import re
 import warnings
 from typing import Any, ClassVar
 
-from dualfem.core.errors import InputError
+import numpy as np
+
+from dualfem.core.errors import InputError, missing_module
 from dualfem.core.qp import QP
 from dualfem.core.solution import Solution
 
@@ -54,6 +62,7 @@ class Solver:
     #: ``setup``; the runner's certification then reuses its factorization and dense blocks
     #: (accepted only if it is exactly that class and belongs to the QP being certified)
     reduction: Any = None
+    ranges: ClassVar[dict[str, Any]] = {}
 
     def __init__(self, **params: Any) -> None:
         params = _apply_renames(self.name, self.renamed, params)
@@ -63,11 +72,39 @@ class Solver:
             raise InputError(f"unknown parameter {unknown[0]!r} for solver {self.name!r}; "
                              f"allowed: {allowed}")
         merged = dict(self.defaults)
+        words = self.allowed()
         for k, v in params.items():
-            merged[k] = _coerce(k, v, self.defaults[k], self.name)
+            merged[k] = _coerce(k, v, self.defaults[k], self.name, expect=words.get(k))
         self.params: dict[str, Any] = merged
+        self.check_params()
         self.validate()
         self.qp: QP | None = None
+
+    @classmethod
+    def param_ranges(cls) -> dict[str, Any]:
+        """The declared allowed values of every parameter: ``ranges``, plus the shared vocabulary's
+        (:data:`COMMON_RANGES`) for a parameter whose default lies in it (a third-party plugin whose
+        ``time_limit = 0`` means 'none' keeps its own meaning, checked by its ``validate``)."""
+        table = {}
+        for k, d in cls.defaults.items():
+            if k in cls.ranges:
+                table[k] = cls.ranges[k]
+            elif k in COMMON_RANGES and _fits(k, d, COMMON_RANGES[k], cls.name):
+                table[k] = COMMON_RANGES[k]
+        return table
+
+    @classmethod
+    def allowed(cls) -> dict[str, str]:
+        """The declared allowed values in words, per parameter (for messages and ``dualfem list``)."""
+        return {k: describe_range(spec, isinstance(cls.defaults[k], int) and not isinstance(cls.defaults[k], bool))
+                for k, spec in cls.param_ranges().items() if spec is not None}
+
+    def check_params(self) -> None:
+        """Raise InputError for the first parameter outside its declared range (see :func:`check_value`)."""
+        params = getattr(self, "params", None) or {}      # a plugin may override __init__
+        for key, spec in self.param_ranges().items():
+            if key in params:
+                check_value(key, params[key], spec, self.defaults[key], self.name)
 
     # ----------------------------------------------------------- the contract
     def validate(self) -> None:
@@ -76,11 +113,7 @@ class Solver:
     @classmethod
     def missing(cls) -> str | None:
         """Return an install hint if a required module is missing, else None."""
-        for mod in cls.requires:
-            if importlib.util.find_spec(mod) is None:
-                hint = f"pip install 'dualfem[{cls.extra}]'" if cls.extra else f"pip install {mod}"
-                return f"solver {cls.name!r} needs the Python module {mod!r}: {hint}"
-        return None
+        return missing_module(f"solver {cls.name!r}", cls.requires, cls.extra)
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict[str, Any]:
@@ -104,6 +137,66 @@ class Solver:
         raise NotImplementedError
 
 
+COMMON_RANGES: dict[str, Any] = {"tol": "(0, inf)", "max_iter": "[1, inf)", "time_limit": "(0, inf)",
+                                 "verbose": bool}
+"""Ranges of the shared vocabulary: tol > 0, max_iter >= 1, a finite time_limit > 0 (seconds)."""
+
+_INTERVAL = re.compile(r"^\s*([\[(])\s*([^,\s]+)\s*,\s*([^\])\s]+)\s*([\])])\s*$")
+
+
+def interval(spec: str) -> tuple[float, float, bool, bool]:
+    """``"(0, inf)"`` -> (lo, hi, lo_closed, hi_closed); a bracket means the end is allowed."""
+    m = _INTERVAL.match(spec)
+    if not m:
+        raise ValueError(f"bad interval {spec!r}: write e.g. '(0, inf)' or '[1, 100]'")
+    return float(m.group(2)), float(m.group(3)), m.group(1) == "[", m.group(4) == "]"
+
+
+def describe_range(spec: Any, integer: bool = False) -> str:
+    """Words for an allowed range: 'a finite number > 0', 'an integer in [0, 100]', 'one of a, b'."""
+    if spec is bool:
+        return "true or false"
+    if isinstance(spec, tuple):
+        return "one of " + ", ".join(map(str, spec))
+    lo, hi, lo_c, hi_c = interval(spec)
+    kind = "an integer" if integer else "a finite number"
+    if hi == math.inf:
+        return f"{kind} {'>=' if lo_c else '>'} {lo:g}"
+    if lo == -math.inf:
+        return f"{kind} {'<=' if hi_c else '<'} {hi:g}"
+    return f"{kind} in {'[' if lo_c else '('}{lo:g}, {hi:g}{']' if hi_c else ')'}"
+
+
+def check_value(key: str, value: Any, spec: Any, default: Any, solver: str) -> None:
+    """Raise InputError unless ``value`` of parameter ``key`` lies in ``spec`` (see ``Solver.ranges``).
+
+    Numbers must be finite and not booleans; an int default asks for an integer.
+    """
+    if spec is None:
+        return
+    integer = isinstance(default, int) and not isinstance(default, bool)
+    if spec is bool:
+        ok = isinstance(value, (bool, np.bool_))
+    elif isinstance(spec, tuple):
+        ok = isinstance(value, str) and value in spec
+    else:
+        lo, hi, lo_c, hi_c = interval(spec)
+        ok = bool(isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+              and math.isfinite(value) and (not integer or float(value) == int(value))
+              and (lo <= value if lo_c else lo < value) and (value <= hi if hi_c else value < hi))
+    if not ok:
+        raise InputError(f"parameter {key!r} of solver {solver!r} must be {describe_range(spec, integer)}, "
+                         f"got {value!r}")
+
+
+def _fits(key: str, default: Any, spec: Any, solver: str) -> bool:
+    try:
+        check_value(key, default, spec, default, solver)
+    except InputError:
+        return False
+    return True
+
+
 def _apply_renames(solver: str, renamed: dict[str, str], params: dict[str, Any]) -> dict[str, Any]:
     """Map deprecated parameter names to the new ones, with a DeprecationWarning each."""
     if not renamed or not set(params) & set(renamed):
@@ -122,33 +215,42 @@ def _apply_renames(solver: str, renamed: dict[str, str], params: dict[str, Any])
     return out
 
 
-def _coerce(key: str, value: Any, default: Any, solver: str, owner: str = "solver") -> Any:
-    """Convert a (possibly string, from --set) value to the type of its default."""
+def _coerce(key: str, value: Any, default: Any, solver: str, owner: str = "solver", expect: str | None = None) -> Any:
+    """Convert a (possibly string, from --set) value to the type of its default.
+
+    ``expect``: the allowed values in words (a declared range), used in the error message.
+    """
     where = (f"parameter {key!r} of solver {solver!r}" if owner == "solver"
              else f"scene parameter {key!r} of problem {solver!r}")
+
+    def refuse(what: str) -> InputError:
+        return InputError(f"{where} must be {expect or what}, got {value!r}")
+
     if isinstance(default, bool):
         if isinstance(value, str):
             if value.lower() in ("1", "true", "yes", "on"):
                 return True
             if value.lower() in ("0", "false", "no", "off"):
                 return False
-            raise InputError(f"{where} must be true or false, got {value!r}")
-        return bool(value)
-    if isinstance(default, (int, float)) and not isinstance(default, bool) and isinstance(value, bool):
-        raise InputError(f"{where} must be a number, got {value!r}")
-    if isinstance(default, int) and not isinstance(default, bool):
+            raise refuse("true or false")
+        if isinstance(value, (bool, np.bool_)) or (isinstance(value, (int, np.integer)) and value in (0, 1)):
+            return bool(value)
+        raise refuse("true or false")
+    if isinstance(default, (int, float)) and isinstance(value, (bool, np.bool_)):
+        raise refuse("a number")
+    if isinstance(default, int):
         try:
             f = float(value)
         except (TypeError, ValueError):
-            raise InputError(f"{where} must be an integer, got {value!r}") from None
+            raise refuse("an integer") from None
         if not math.isfinite(f) or f != int(f):
-            raise InputError(f"{where} must be an integer, got {value!r}")
+            raise refuse("an integer")
         return int(f)
     if isinstance(default, float) or (default is None and _is_number(value)):
         try:
             return float(value)
         except (TypeError, ValueError):
-            raise InputError(f"{where} must be a number, got {value!r}") from None
+            raise refuse("a number") from None
     return value
 
 

@@ -10,6 +10,7 @@ import io
 import json
 import sys
 import time
+import zipfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -141,7 +142,7 @@ class ResultStore:
                 return {"x": d["x"], "multipliers": d["multipliers"], "qp_key": str(d["qp_key"]),
                         "solver": str(d["solver"]), "kkt": float(d["kkt"]),
                         "bound": float(d["bound"]) if "bound" in d else None}
-        except (OSError, ValueError, KeyError, EOFError):
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
             self._move_aside(p, "unreadable reference file; the reference is recomputed")
             return None
 

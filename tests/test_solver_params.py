@@ -1,0 +1,140 @@
+"""Every solver parameter is validated before the library sees it (issue 14, item 5).
+
+Each built-in solver declares the allowed values of every parameter (``Solver.ranges`` plus the
+shared vocabulary's ``COMMON_RANGES``); ``Solver.__init__`` and the runner check them. Here every
+registered built-in solver is given values just outside each declared range, non-finite numbers,
+booleans for numbers, numbers for booleans and unknown choices, in Python and on the command line:
+each is refused with an InputError naming the parameter and the allowed range.
+"""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from dualfem.cli.main import main
+from dualfem.core.errors import InputError
+from dualfem.core.registry import solvers
+from dualfem.core.solver import COMMON_RANGES, describe_range, interval
+
+BUILTIN = sorted(n for n, c in solvers().items() if c.__module__.startswith("dualfem.solvers."))
+
+#: parameters whose allowed values depend on what is installed (checked by validate()), with a bad value
+DYNAMIC = {"factor": "no_such_backend", "solver": "NO_SUCH_BACKEND", "direct_solve_method": "no_such_method"}
+
+
+def bad_values(spec, default) -> list:
+    """Values outside ``spec`` (see Solver.ranges) for a parameter whose default is ``default``."""
+    if spec is bool:
+        return [2, 0.5, "maybe", None]
+    if isinstance(spec, tuple):
+        return ["no_such_choice", 3, True]
+    integer = isinstance(default, int) and not isinstance(default, bool)
+    lo, hi, lo_closed, hi_closed = interval(spec)
+    out: list = [math.nan, -math.inf, math.inf, True, "abc", None]
+    step = 1 if integer else 1e-9 * max(1.0, abs(lo))
+    if math.isfinite(lo):
+        out.append(lo - step if lo_closed else lo)
+    if math.isfinite(hi):
+        out.append(hi + (1 if integer else 1e-9 * max(1.0, abs(hi))) if hi_closed else hi)
+    if integer:
+        out.append(default + 0.5)
+    return out
+
+
+def cases():
+    for name in BUILTIN:
+        cls = solvers()[name]
+        ranges = cls.param_ranges()
+        for key, default in cls.defaults.items():
+            spec = ranges.get(key)
+            if spec is None:
+                if key in DYNAMIC and cls.missing() is None:
+                    yield pytest.param(name, key, DYNAMIC[key], None, id=f"{name}-{key}-{DYNAMIC[key]}")
+                continue
+            for v in bad_values(spec, default):
+                yield pytest.param(name, key, v, spec, id=f"{name}-{key}-{v!r}")
+
+
+@pytest.mark.parametrize("name", BUILTIN)
+def test_every_parameter_declares_its_range(name):
+    cls = solvers()[name]
+    declared = cls.param_ranges()
+    assert set(declared) == set(cls.defaults), f"{name}: no declared range for {set(cls.defaults) - set(declared)}"
+    for key, spec in declared.items():
+        assert spec is not None or key in DYNAMIC, f"{name}.{key}: spec None but no bad value in DYNAMIC"
+        if isinstance(spec, str):
+            interval(spec)                                   # well formed
+
+
+@pytest.mark.parametrize("name", BUILTIN)
+def test_defaults_lie_in_their_ranges(name):
+    cls = solvers()[name]
+    s = cls()                                                # raises if a default is outside its range
+    assert s.params == cls.defaults
+
+
+@pytest.mark.parametrize("name, key, value, spec", list(cases()))
+def test_out_of_range_values_are_refused(name, key, value, spec):
+    cls = solvers()[name]
+    with pytest.raises(InputError) as exc:
+        cls(**{key: value})
+    msg = str(exc.value)
+    assert f"'{key}'" in msg and f"'{name}'" in msg, msg
+    if spec is not None and not isinstance(value, str) and value is not None:
+        integer = isinstance(cls.defaults[key], int) and not isinstance(cls.defaults[key], bool)
+        assert describe_range(spec, integer) in msg, msg
+
+
+def test_the_shared_vocabulary_is_checked_for_every_solver():
+    assert COMMON_RANGES == {"tol": "(0, inf)", "max_iter": "[1, inf)", "time_limit": "(0, inf)", "verbose": bool}
+    for name in BUILTIN:
+        assert set(COMMON_RANGES) <= set(solvers()[name].param_ranges()), name
+
+
+def test_the_runner_checks_parameters_changed_after_construction():
+    from dualfem.core.runner import run
+    from dualfem.core.scene import load_scene
+
+    s = solvers()["pdas"]()
+    s.params["tol"] = -1.0
+    with pytest.raises(InputError, match="'tol'"):
+        run(s, load_scene("f2", {"N": 8}).build())
+
+
+@pytest.mark.parametrize("name", BUILTIN)
+@pytest.mark.parametrize("param", ["tol=-1", "max_iter=0", "time_limit=0", "verbose=maybe", "tol=true"])
+def test_cli_refuses_bad_shared_parameters(name, param, capsys):
+    rc = main(["solve", "f2", "--set", "N=8", "--solver", name, "-p", param])
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert rc == 2 and len(lines) == 1, err
+    key = param.split("=")[0]
+    assert lines[0].startswith("dualfem solve: error: parameter ") and f"'{key}'" in lines[0], lines[0]
+
+
+def test_list_json_shows_the_allowed_values(capsys):
+    import json
+
+    assert main(["list", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)["solvers"]
+    assert d["uzawa"]["allowed"]["tol_mode"] == "one of relative, absolute"
+    assert d["osqp"]["allowed"]["scaling"] == "an integer in [0, 100]"
+    assert d["pdas"]["allowed"]["time_limit"] == "a finite number > 0"
+
+
+def test_a_third_party_plugin_keeps_its_own_meanings_and_gets_the_shared_checks():
+    """A plugin written before ``ranges`` (time_limit = 0 meaning 'none', verbose = 0) still loads;
+    the shared ranges apply to the parameters whose defaults lie in them."""
+    from dualfem.core.solver import Solver
+
+    class OldPlugin(Solver):
+        name = "test_old_plugin"
+        defaults = {"tol": 1e-6, "max_iter": 100, "time_limit": 0.0, "verbose": 0}
+
+    assert set(OldPlugin.param_ranges()) == {"tol", "max_iter"}
+    assert OldPlugin().params["time_limit"] == 0.0
+    with pytest.raises(InputError, match="'tol'.*> 0"):
+        OldPlugin(tol=-1)
+    with pytest.raises(InputError, match="'max_iter'.*integer >= 1"):
+        OldPlugin(max_iter=0)
