@@ -23,12 +23,12 @@ def _unmet(sc: tuple, s: str, srows: list[dict], err_target: float, flt: float, 
         qr = f"{qt / flt:.2f} x the floor" if math.isfinite(flt) and flt > 0 else "floor n/a"
         return (f"| {sc[0]} | {sc[1]:g} | {sc[2]:g} | {s} | status {q['status']}{tag(q)}: error "
                 f"{_f(q['err_x_energy']):.1e} in {qt:.3g} s ({qr}), not claimed by the solver "
-                f"| {_fmt(flt)} | MISSED | | |",
+                f"| | | {_fmt(flt)} | MISSED | | |",
                 f"{s} at {_scene_txt(sc)}: status {q['status']}, although its "
                 f"error against the reference is {_f(q['err_x_energy']):.1e} ({qr}): its own "
                 f"stopping test could not certify the answer ({str(q.get('message') or '')[:200]})")
     return (f"| {sc[0]} | {sc[1]:g} | {sc[2]:g} | {s} | no run reached {err_target:g} ({', '.join(st)}) "
-            f"| {_fmt(flt)} | MISSED | | |",
+            f"| | | {_fmt(flt)} | MISSED | | |",
             f"{s} at {_scene_txt(sc)}: no run reached error {err_target:g}")
 
 
@@ -94,8 +94,12 @@ def _scene_lines(sc: tuple, runs, present, fl: dict | None, err_target: float, f
         cmp_txt, sp_txt, miss = _versus(sc, s, t, comp, comp_ok, err_target, speed_target, tag)
         if miss:
             misses.append(miss)
+        e2e = t + _f(best.get("assembly_s")) if best.get("assembly_s") is not None else float("nan")
+        floor_name = f" ({str(fl['solver']).removeprefix('floor_')})" if fl else ""
         lines.append(f"| {sc[0]} | {sc[1]:g} | {sc[2]:g} | {s} | {t:.3g} ({_fmt(best.get('setup_s'))} + "
-                     f"{_fmt(best.get('solve_s'))}){tag(best)} | {_fmt(flt)}{tag(fl) if fl else ''} | "
+                     f"{_fmt(best.get('solve_s'))}){tag(best)} | {_fmt(e2e)} | "
+                     f"{_fmt(_f(best.get('peak_rss_mb')), '.0f')} "
+                     f"| {_fmt(flt)}{floor_name}{tag(fl) if fl else ''} | "
                      f"{_fmt(ratio, '.2f')}{fmark} | {cmp_txt} | {sp_txt} |")
     return lines, misses
 
@@ -115,11 +119,15 @@ def targets(runs, floors, ours: list[str], err_target: float, floor_target: floa
         return [f"No run of {', '.join(ours)} in these results: the targets cannot be checked."]
     lines = [f"Checked at N in {{{', '.join(f'{n:g}' for n in Ns)}}} (the largest sizes of this sweep), "
              f"for {', '.join(present)}. A run counts when its status is solved and its relative "
-             f"energy-norm error against the reference is <= {err_target:g}; its time is setup + solve.", "",
-             f"| scene | N | delta | solver | time [s] (setup + solve) | floor [s] | x floor (target <= "
+             f"energy-norm error against the reference is <= {err_target:g}; its time is setup + solve; end to "
+             "end adds the assembly of the QP from the scene (`assembly_s`); peak RSS is that of the worker "
+             "process of the run (`peak_rss_mb`: assembly, reference excluded, every repeat). The floor is "
+             "the fastest installed factorization + one solve of K at the same threads.", "",
+             f"| scene | N | delta | solver | time [s] (setup + solve) | end to end [s] (+ assembly) | peak RSS "
+             f"[MB] | floor [s] (backend) | x floor (target <= "
              f"{floor_target:g}) | fastest of {'/'.join(COMPETITORS)} at error <= {err_target:g} [s] | speed-up "
              f"(target >= {speed_target:g}) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     misses = []
     scenes = sorted({_scene_of(r) for r in runs if _f(r.get("scene_N")) in Ns}, key=lambda s: (s[1], s[0], -s[2]))
     for sc in scenes:
