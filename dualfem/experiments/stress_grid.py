@@ -13,6 +13,8 @@ import json
 from collections import OrderedDict
 from dataclasses import dataclass
 
+import numpy as np
+
 DELTAS = [1e-12, 1e-9, 1e-6, 1e-3, 1.0, 1e3]
 
 
@@ -69,12 +71,44 @@ def _sid(d: dict) -> str:
     return hashlib.sha1(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:10]
 
 
+def _scaled_expression(expr: str, length: float) -> str:
+    """A load expression in ``x``, ``y`` rewritten for coordinates ``length`` times larger."""
+    import ast
+
+    class _Sub(ast.NodeTransformer):
+        def visit_Name(self, node: ast.Name) -> ast.AST:
+            if node.id in ("x", "y"):
+                return ast.BinOp(left=ast.Name(id=node.id, ctx=ast.Load()), op=ast.Div(),
+                                 right=ast.Constant(float(length)))
+            return node
+
+    tree = ast.fix_missing_locations(_Sub().visit(ast.parse(expr, mode="eval")))
+    return ast.unparse(tree)
+
+
+def _scaled_defects(tables, length: float, stress: float) -> list[dict]:
+    """``[[defects]]`` tables with their points (lengths) and own delta (length / stress) converted."""
+    out = []
+    for tab in tables:
+        t = dict(tab)
+        if "points" in t:
+            t["points"] = [[float(c) * length for c in pt] for pt in t["points"]]
+        if "delta" in t:
+            t["delta"] = float(t["delta"]) * length / stress
+        out.append(t)
+    return out
+
+
 def scene_in_units(base: dict, stress: float, length: float) -> dict:
     """The same physics as ``base`` (paper units) in a unit system; see :data:`UNITS`.
 
-    E and tractions are stresses (x ``stress``); width, height and the defect are lengths
-    (x ``length``); delta is a length per stress (the interface pressure is [u]/delta).
+    E and tractions are stresses (x ``stress``); width, height, the defect, the points of every
+    ``[[defects]]`` table, ``mesh_size`` and ``tip_size`` are lengths (x ``length``); delta (the
+    scene's and each defect's own) is a length per stress (the interface pressure is [u]/delta).
+    A load expression in ``x``, ``y`` is rewritten so that it is evaluated at the unscaled
+    coordinates (the paper's f1/f2/f3 already scale with ``width``); a Python function is refused.
     """
+    from dualfem.core.errors import InputError
     from dualfem.core.registry import get_problem
 
     d = {**get_problem("thin_defect").defaults, **base}
@@ -82,9 +116,21 @@ def scene_in_units(base: dict, stress: float, length: float) -> dict:
     out["E"] = float(d["E"]) * stress
     out["width"] = float(d["width"]) * length
     out["height"] = float(d["height"]) * length
-    out["defect"] = [[float(c) * length for c in pt] for pt in d["defect"]]
     out["load_scale"] = float(d["load_scale"]) * stress
     out["delta"] = float(d["delta"]) * length / stress
+    for k in ("mesh_size", "tip_size"):
+        if k in base:
+            out[k] = float(base[k]) * length
+    if base.get("defects"):      # the tables replace the single segment ``defect`` (left at its default)
+        out["defects"] = _scaled_defects(base["defects"], length, stress)
+        out.pop("defect", None)
+    else:
+        out["defect"] = [[float(c) * length for c in pt] for pt in np.asarray(d["defect"], dtype=float)]
+    load = d["load"]
+    if callable(load):
+        raise InputError("scene_in_units: a load given as a Python function cannot be converted to other units")
+    if isinstance(load, str) and load.strip() not in ("f1", "f2", "f3") and length != 1:
+        out["load"] = _scaled_expression(load.strip(), length)
     return out
 
 
