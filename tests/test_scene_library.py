@@ -116,3 +116,28 @@ def test_bench_sweep_on_a_library_scene(tmp_path, capsys):
     bad.write_text(TINY.replace('scene = "two_defects"', 'scene = "no_such_library_scene"'), encoding="utf-8")
     assert main(["bench", str(bad), "--out", str(tmp_path / "bad_out")]) == 2
     assert "no_such_library_scene" in capsys.readouterr().err and not (tmp_path / "bad_out").exists()
+
+
+def test_stress_grid_on_a_library_scene(tmp_path):
+    """``dualfem stress --scene two_defects``: the units and load axes on the gmsh scene (own mesh,
+    coarsened here), graded against the base scene's reference mapped exactly; the N axis varies
+    the gmsh mesh size as 1/N."""
+    from dualfem.cli.main import main
+    from dualfem.experiments import stress
+    from dualfem.experiments.stress_grid import scene_base
+
+    base = {**scene_base("two_defects"), **COARSE}
+    grid = stress.build_grid(["pdas"], quick=True, axes=("units", "load", "N"), max_n=32, scene=base)
+    assert {t.axis for t in grid} == {"units", "load", "N"}
+    n_axis = [t for t in grid if t.axis == "N"]
+    assert [t.scene["mesh_size"] for t in n_axis] == [1 / 8, 1 / 16, 1 / 32]
+    assert all(t.scene["defects"] == base["defects"] for t in n_axis)
+    tasks = [t for t in grid if t.axis == "units" or (t.axis == "load" and t.coords["load_scale"] in (1e-6, 1e6))]
+    recs = stress.run_grid(tasks, tmp_path / "res", jobs=1)
+    assert len(recs) == 7
+    for r in recs:
+        assert r.status == "solved" and r.grade == "correct", (r.run_id, r.grade, r.message)
+        assert "mapped exactly" in r.ref_solver and r.err_x_energy < 1e-8
+    assert main(["stress", "--scene", "two_defects", "--solvers", "pdas", "--quick", "--dry-run",
+                 "--out", str(tmp_path / "dry")]) == 0
+    assert main(["stress", "--scene", "no_such_scene", "--solvers", "pdas", "--dry-run"]) == 2

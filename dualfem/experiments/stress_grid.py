@@ -134,15 +134,43 @@ def scene_in_units(base: dict, stress: float, length: float) -> dict:
     return out
 
 
+def scene_base(spec: str) -> dict:
+    """Every parameter of a thin_defect scene (a library name, a preset or a TOML file) as plain
+    JSON-able values, to replace :data:`BASE` in :func:`build_grid`; InputError otherwise."""
+    from dualfem.core.errors import InputError
+    from dualfem.core.scene import load_scene
+
+    prob = load_scene(spec)
+    if prob.name != "thin_defect":
+        raise InputError(f"--scene {spec!r} is a {prob.name} scene; the stress grid needs a thin_defect scene")
+    p = {k: v for k, v in prob.params.items() if not callable(v)}
+    if len(p) < len(prob.params):
+        raise InputError(f"--scene {spec!r}: a load given as a Python function cannot be converted to other units")
+    p["defect"] = np.asarray(p["defect"], dtype=float).tolist()
+    p["defects"] = [dict(t) for t in p.get("defects") or []]
+    return p
+
+
+def _at_n(base: dict, n: int) -> dict:
+    """The base scene at mesh size N: a gmsh scene gets mesh_size = min(width, height) / N."""
+    scene = {**base, "N": n}
+    if base.get("mesh") == "gmsh":
+        scene["mesh_size"] = min(float(base.get("width", 1.0)), float(base.get("height", 1.0))) / n
+    return scene
+
+
 def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = AXES,
-               time_limit: float | None = None, max_n: int | None = None) -> list[Task]:
-    """All tasks of the stress grid for ``solver_names`` (see the module docstring)."""
+               time_limit: float | None = None, max_n: int | None = None, scene: dict | None = None) -> list[Task]:
+    """All tasks of the stress grid for ``solver_names`` (see the module docstring); ``scene``: the
+    base scene's parameters (:func:`scene_base`) instead of the paper's f2 (:data:`BASE`): its own
+    mesh and load on every axis but N (there: N, and for a gmsh scene mesh_size = min(width, height) / N)."""
     from dualfem.core.registry import solvers
 
     reg = solvers()
     tl = float(time_limit if time_limit is not None else (20.0 if quick else 120.0))
     n_small = 16 if quick else 32
-    base = {**BASE, "N": n_small}
+    top_base = BASE if scene is None else scene
+    base = {**BASE, "N": n_small} if scene is None else dict(scene)   # a given scene keeps its own mesh
     tasks: list[Task] = []
 
     def add(axis, coords, scene, solver, params=None, ref=None, after=None):
@@ -156,7 +184,7 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = 
     r_solvers = [s for s in solver_names
                  if "r" in reg[s].defaults and reg[s].defaults.get("r_rule", "fixed") == "fixed"]
     if "delta" in axes:
-        for load in (["f2"] if quick else ["f1", "f2", "f3"]):
+        for load in ([base["load"]] if scene is not None else ["f2"] if quick else ["f1", "f2", "f3"]):
             for d in DELTAS:
                 for s in solver_names:
                     add("delta", {"load": load, "delta": d}, {**base, "load": load, "delta": d}, s)
@@ -188,6 +216,6 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = 
         prev: dict[str, str] = {}
         for n in [n for n in NS if n <= top]:
             for s in solver_names:
-                prev[s] = add("N", {"N": n}, {**BASE, "N": n}, s, after=prev.get(s))
+                prev[s] = add("N", {"N": n}, _at_n(top_base, n), s, after=prev.get(s))
     return tasks
 
