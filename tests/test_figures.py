@@ -274,3 +274,21 @@ def test_report_scene_library_section(tmp_path):
     assert two["defects"] == 2 and two["deltas"] == [1e-5, 1e-4] and sum(two["nodes_per_defect"]) == two["m"]
     assert "| two_defects |" in text and "(1e-05, 0.0001)" in text
     assert all(it["row"]["status"] == "solved" and it["row"]["kkt"] < 1e-8 for it in items)
+
+
+def test_defect_fields_and_pressure_per_defect(two_defects):
+    """defect_fields: each defect with its own tips and s from 0; forces and pressures on the right rows."""
+    qp, sol = two_defects
+    d = Post(qp, sol).defect
+    ids = qp.maps["defect_id"]
+    for k in range(2):
+        idx = np.flatnonzero(d["defect_id"] == k)
+        assert d["s"][idx][0] == 0 and np.all(np.diff(d["s"][idx]) > 0)
+        assert list(d["upper"][idx][[0, -1]]) == list(qp.maps["defect_tips"][2 * k: 2 * k + 2])
+        rows = d["row"][idx][1:-1]
+        assert np.array_equal(rows, np.flatnonzero(ids == k)) and np.all(d["row"][idx][[0, -1]] == -1)
+        np.testing.assert_allclose(d["force"][idx][1:-1], sol.multipliers[rows])
+        np.testing.assert_allclose(d["normal"][idx][1:-1], qp.maps["defect_normals"][:, rows].T)
+    ax = F.plot_pressure([("p", qp, sol)])
+    for k, ln in enumerate(ax.get_lines()[:2]):
+        np.testing.assert_allclose(ln.get_ydata()[1:-1], qp.pressure(sol.multipliers)[ids == k])
