@@ -388,11 +388,17 @@ def mesh_with_defects(width: float, height: float, defects: list[dict], mesh_siz
     """
     parsed = validate(width, height, defects, mesh_size, tip_size)
     gmsh = _import_gmsh()
+    # gmsh meshes the body scaled to max(width, height) = 1 (its tolerances are absolute), so a
+    # scene in other length units gets the same mesh, scaled; a unit-size body is meshed as given
+    L = float(max(width, height))
+    parsed = [(np.asarray(P, dtype=float) / L, curve) for P, curve in parsed]
     with _session(gmsh):
-        sides, surface, curves, tips = _build(gmsh, float(width), float(height), parsed)
-        _size_fields(gmsh, float(mesh_size), None if tip_size is None else float(tip_size), tips)
+        sides, surface, curves, tips = _build(gmsh, float(width) / L, float(height) / L, parsed)
+        _size_fields(gmsh, float(mesh_size) / L, None if tip_size is None else float(tip_size) / L, tips)
         try:
             gmsh.model.mesh.generate(2)
         except Exception as exc:  # gmsh raises a bare Exception with its last error message
             raise RuntimeError(f"gmsh could not mesh the body with its defects: {exc}") from exc
-        return _extract(gmsh, sides, surface, curves)
+        dm = _extract(gmsh, sides, surface, curves)
+    dm.points = dm.points * L
+    return dm

@@ -398,7 +398,9 @@ def test_shipped_specs_are_valid():
         assert tasks and len({t["run_id"] for t in tasks}) == len(tasks)
     spec = load_spec(root / "default.toml")
     scenes = expand_scenes(spec)
-    assert {s.scene for s in scenes} == {"f1", "f2", "f3"}
+    from dualfem.core.scene import library
+
+    assert {s.scene for s in scenes} == {"f1", "f2", "f3"} | set(library())   # the scene library too
     assert {1e-1, 1e-3, 1e-5, 1e-7, 1e-9} <= {s.params.get("delta") for s in scenes}
     assert max(s.params.get("N", 0) for s in scenes) >= 512
 

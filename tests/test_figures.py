@@ -66,7 +66,7 @@ def test_plot_jump_faces_pressure(cases):
     ax = F.plot_jump(cases, unit=1e-5)
     lines = [ln for ln in ax.get_lines() if ln.get_label().startswith("delta")]
     assert len(lines) == 2
-    for ln, (_, qp, sol) in zip(lines, cases):
+    for ln, (_, qp, sol) in zip(lines, cases, strict=True):
         d = Post(qp, sol).defect
         assert np.allclose(ln.get_xdata(), d["X"][0])
         assert np.allclose(ln.get_ydata(), d["jump_normal"] / 1e-5)
@@ -114,12 +114,14 @@ def test_plot_history_fake_solution():
 
 @pytest.mark.skipif("uzawa" not in solvers(), reason="the uzawa solver is not registered")
 def test_report_figures_small(tmp_path):
+    from dualfem.core.scene import library
     from dualfem.reports.figures import generate
 
     text = generate(tmp_path, N=8, sweep=(1e-1, 1e-5), dpi=40, history_solvers=["pdas"] if "pdas" in solvers() else [],
-                    progress=lambda m: None)
+                    progress=lambda m: None, scene_overrides={"mesh_size": 0.1})
     images = re.findall(r"\(figures/([^)]+\.png)\)", text)
-    assert len(images) == 5 + 3 + 3  # deformed bodies, jump/faces/pressure, three histories
+    # deformed bodies, jump/faces/pressure, the scene library, three histories
+    assert len(images) == 5 + 3 + len(library()) + 3 and sum(n.startswith("scene_") for n in images) == len(library())
     for name in images:
         assert (tmp_path / "figures" / name).stat().st_size > 1000
     assert "| f2 |" in text and "Agreement of the Uzawa solutions" in text
@@ -171,7 +173,7 @@ def test_convergence_rates_known_answer(p):
     # order falls from near 0.8 toward 0.5 as h decreases, as the singular part takes over
     hh = 1.0 / 2.0 ** np.arange(4, 12)
     tr = triple_rates(list(np.sqrt(hh ** 1.6 + 1e-2 * hh ** 1.0)), with_reference=False)
-    assert all(0.5 < b < a < 0.8 for a, b in zip(tr, tr[1:]))
+    assert all(0.5 < b < a < 0.8 for a, b in zip(tr, tr[1:], strict=False))
     assert triple_rates([1.0, 1.0, 0.5], with_reference=False) == [None]  # no decrease: undefined, not a number
 
 
@@ -208,3 +210,85 @@ def test_report_paper_small(tmp_path, monkeypatch):
     monkeypatch.setattr(runner, "run", no_solver)
     assert report_paper(["--render-only", "--out", str(md)]) == 0
     assert md.read_text() == text
+
+
+@pytest.fixture(scope="module")
+def two_defects():
+    pytest.importorskip("gmsh")
+    qp = load_scene("two_defects", {"mesh_size": 0.1, "tip_size": 0.05}).build()
+    return qp, run("pdas", qp)
+
+
+def test_plot_deformed_draws_every_defect(two_defects):
+    """Each defect on its own (both faces, tips included; no line joins two defects), its undeformed
+    line, its number, and the closed nodes (evaluator contact set) at their deformed positions."""
+    from dualfem.core import evaluator
+
+    qp, sol = two_defects
+    ax = F.plot_deformed(qp, sol, scale=300.0, reference=True, contact=True, labels=True)
+    xy = Post(qp, sol).deformed(300.0)
+    X = qp.maps["nodes"]
+    tips, ids = qp.maps["defect_tips"].reshape(-1, 2), qp.maps["defect_id"]
+    white = [ln for ln in ax.get_lines() if ln.get_color() == "w"]
+    dashed = [ln for ln in ax.get_lines() if ln.get_linestyle() == "--"]
+    assert len(white) == 4 and len(dashed) == 2
+    for k in range(2):
+        rows = np.flatnonzero(ids == k)
+        for ln, copies in zip(white[2 * k: 2 * k + 2], ("defect_upper", "defect_lower"), strict=True):
+            nodes = np.r_[tips[k, 0], qp.maps[copies][rows], tips[k, 1]]
+            np.testing.assert_allclose(np.vstack([ln.get_xdata(), ln.get_ydata()]), xy[:, nodes])
+        ref = np.r_[tips[k, 0], qp.maps["defect_lower"][rows], tips[k, 1]]
+        np.testing.assert_allclose(np.vstack([dashed[k].get_xdata(), dashed[k].get_ydata()]), X[:, ref])
+    closed = evaluator.contact_set(qp, sol.x)
+    assert 0 < closed.sum() < closed.size
+    (marks,) = [ln for ln in ax.get_lines() if ln.get_marker() == "o"]
+    np.testing.assert_allclose(np.vstack([marks.get_xdata(), marks.get_ydata()]),
+                               xy[:, qp.maps["defect_lower"][closed]])
+    assert sorted(t.get_text() for t in ax.texts) == ["0", "1"]
+    # the jump: one curve per defect, from 0 at its first tip to 0 at its last
+    ax = F.plot_jump([("j", qp, sol)], unit=1.0)
+    lines = [ln for ln in ax.get_lines() if ln.get_label().startswith("j, defect")]
+    assert [ln.get_label() for ln in lines] == ["j, defect 0", "j, defect 1"]
+    for k, ln in enumerate(lines):
+        y = ln.get_ydata()
+        assert y[0] == 0 and y[-1] == 0 and np.allclose(y[1:-1], (qp.B @ sol.x)[ids == k])
+        assert ln.get_xdata()[0] == 0 and np.all(np.diff(ln.get_xdata()) > 0)
+
+
+def test_report_scene_library_section(tmp_path):
+    """Every library scene solved (coarse), pictured and tabled by the figures report."""
+    pytest.importorskip("gmsh")
+    from dualfem.core.scene import library
+    from dualfem.experiments.figures import library_runs
+    from dualfem.reports.figures import _scenes_section
+
+    items = library_runs("pdas", lambda m: None, {"mesh_size": 0.1})
+    assert [it["name"] for it in items] == list(library())
+    (tmp_path / "figures").mkdir()
+    text = "\n".join(_scenes_section({"scenes": items, "exact": "pdas"}, tmp_path / "figures", 300.0, 40))
+    images = re.findall(r"\(figures/([^)]+\.png)\)", text)
+    assert images == [f"scene_{name}.png" for name in library()]
+    for name in images:
+        assert (tmp_path / "figures" / name).stat().st_size > 1000
+    two = next(it["row"] for it in items if it["name"] == "two_defects")
+    assert two["defects"] == 2 and two["deltas"] == [1e-5, 1e-4] and sum(two["nodes_per_defect"]) == two["m"]
+    assert "| two_defects |" in text and "(1e-05, 0.0001)" in text
+    assert all(it["row"]["status"] == "solved" and it["row"]["kkt"] < 1e-8 for it in items)
+
+
+def test_defect_fields_and_pressure_per_defect(two_defects):
+    """defect_fields: each defect with its own tips and s from 0; forces and pressures on the right rows."""
+    qp, sol = two_defects
+    d = Post(qp, sol).defect
+    ids = qp.maps["defect_id"]
+    for k in range(2):
+        idx = np.flatnonzero(d["defect_id"] == k)
+        assert d["s"][idx][0] == 0 and np.all(np.diff(d["s"][idx]) > 0)
+        assert list(d["upper"][idx][[0, -1]]) == list(qp.maps["defect_tips"][2 * k: 2 * k + 2])
+        rows = d["row"][idx][1:-1]
+        assert np.array_equal(rows, np.flatnonzero(ids == k)) and np.all(d["row"][idx][[0, -1]] == -1)
+        np.testing.assert_allclose(d["force"][idx][1:-1], sol.multipliers[rows])
+        np.testing.assert_allclose(d["normal"][idx][1:-1], qp.maps["defect_normals"][:, rows].T)
+    ax = F.plot_pressure([("p", qp, sol)])
+    for k, ln in enumerate(ax.get_lines()[:2]):
+        np.testing.assert_allclose(ln.get_ydata()[1:-1], qp.pressure(sol.multipliers)[ids == k])

@@ -112,3 +112,57 @@ def test_cli_rejects_bad_names_before_solving(tmp_path, capsys):
     assert not bad.exists()
     assert main(["solve", "f2", "--set", "N=16", "--xdmf", str(tmp_path / "a.h5")]) == 2
     assert "--xdmf" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def two_defects():
+    pytest.importorskip("gmsh")
+    qp = load_scene("two_defects", {"mesh_size": 0.1, "tip_size": 0.05}).build()
+    sol = run("pdas", qp)
+    assert sol.ok
+    return qp, sol
+
+
+@pytest.mark.parametrize("kind", ["vtu", "xdmf"])
+def test_two_defect_gmsh_scene(two_defects, tmp_path, kind):
+    """Line cells per defect (none joins two defects), defect ids and per-node normals, read back."""
+    if kind == "xdmf":
+        pytest.importorskip("h5py")
+    qp, sol = two_defects
+    write = write_vtu if kind == "vtu" else write_xdmf
+    mesh = meshio.read(write(tmp_path / f"two.{kind}", qp, sol))
+    mp = qp.maps
+    nn = mp["nodes"].shape[1]
+    ids, tips = mp["defect_id"], mp["defect_tips"]
+    sizes = np.bincount(ids)
+    assert sizes.size == 2 and tips.size == 4
+    tri, line = mesh.cells[0].data, mesh.cells[1].data
+    assert np.array_equal(tri, mp["triangles"].T)
+    assert line.shape == (2 * int(np.sum(sizes + 1)), 2)       # k + 1 edges per face of a defect with k nodes
+    # every line is an edge of a triangle, and joins two nodes of its own defect
+    tedges = {tuple(sorted(e)) for t in tri for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    assert all(tuple(sorted(e)) in tedges for e in line)
+    pid, cid = mesh.point_data["defect_id"], mesh.cell_data["defect_id"]
+    assert np.all(cid[0] == -1)
+    assert np.array_equal(pid[line[:, 0]], cid[1]) and np.array_equal(pid[line[:, 1]], cid[1])
+    assert np.bincount(cid[1]).tolist() == [2 * (sizes[0] + 1), 2 * (sizes[1] + 1)]
+    assert np.array_equal(pid[mp["defect_upper"]], ids) and np.array_equal(pid[mp["defect_lower"]], ids)
+    assert np.array_equal(pid[tips], [0, 0, 1, 1])
+    assert np.sum(pid >= 0) == 2 * qp.m + 4
+    # faces: +1 edges run over upper copies and tips only, -1 edges over lower copies and tips
+    face = mesh.cell_data["face"][1]
+    upper_or_tip = np.isin(line, np.r_[mp["defect_upper"], tips]).all(axis=1)
+    lower_or_tip = np.isin(line, np.r_[mp["defect_lower"], tips]).all(axis=1)
+    assert np.all(upper_or_tip[face == 1]) and np.all(lower_or_tip[face == -1])
+    # per-node normals: the QP's at both copies, unit length on the defects, zero elsewhere
+    nrm = mesh.point_data["normal"]
+    assert nrm.shape == (nn, 3) and np.all(nrm[:, 2] == 0)
+    for copies in (mp["defect_upper"], mp["defect_lower"]):
+        np.testing.assert_allclose(nrm[copies, :2], mp["defect_normals"].T, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(np.linalg.norm(nrm[pid >= 0], axis=1), 1.0, rtol=1e-12)
+    assert np.all(nrm[pid < 0] == 0)
+    # nodal jumps are B x on both copies, 0 at the tips
+    pj = mesh.point_data["jump_normal"]
+    np.testing.assert_allclose(pj[mp["defect_upper"]], qp.B @ sol.x, rtol=0, atol=1e-14 * np.abs(sol.x).max())
+    np.testing.assert_allclose(pj[mp["defect_lower"]], qp.B @ sol.x, rtol=0, atol=1e-14 * np.abs(sol.x).max())
+    assert np.all(pj[tips] == 0) and np.isnan(pj).sum() == nn - 2 * qp.m - 4

@@ -19,6 +19,10 @@ def _cfg(p):
     p.add_argument("--out", default=None, metavar="DIR",
                    help="results directory (runs.jsonl, meta.json); default dualfem-results/stress/quick or .../full "
                         "(the committed grid is regenerated only with an explicit --out benchmarks/results/stress)")
+    p.add_argument("--scene", default=None, metavar="SCENE",
+                   help="base scene: a scene of the library (e.g. two_defects), a preset or a .toml file "
+                        "(default: the paper's f2, N = 32, or 16 with --quick); it keeps its own mesh and load "
+                        "except on the N axis")
     p.add_argument("--solvers", default=None, metavar="A,B",
                    help="comma-separated solver names (default: every registered, installed solver)")
     p.add_argument("--axes", default=None, metavar="A,B",
@@ -55,7 +59,8 @@ def cmd_stress(args) -> int:
         raise InputError(f"--out {str(out)!r} already holds a stress grid (runs.jsonl): pass --resume to continue it "
                          f"or --force to start a new one beside it")
 
-    tasks = stress.build_grid(names, quick=args.quick, axes=axes, time_limit=tl, max_n=max_n)
+    base = None if args.scene is None else stress.scene_base(args.scene)
+    tasks = stress.build_grid(names, quick=args.quick, axes=axes, time_limit=tl, max_n=max_n, scene=base)
     if args.dry_run:
         from collections import Counter
 
@@ -112,7 +117,8 @@ def _meta(args, reg: dict, names: list[str], axes: tuple, tasks: list, refs: lis
     from dualfem.experiments import stress
     from dualfem.experiments.machine import environment
 
-    return {"quick": bool(args.quick), "solvers": names, "axes": list(axes),
+    return {"quick": bool(args.quick), "scene": getattr(args, "scene", None) or "f2 (paper)",
+            "solvers": names, "axes": list(axes),
             "grading": "dualfem.core.grade: error <= declared tolerance + the reference's certified bound",
             "ref_kkt": stress.REF_KKT, "references": refs,
             "tolerances": {n: reg[n]().tolerance for n in names if reg[n].missing() is None},

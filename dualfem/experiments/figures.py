@@ -3,10 +3,11 @@
 Runs only; :mod:`dualfem.reports.figures` draws and writes. The figures need whole fields, so
 :func:`collect` returns the scenes' QPs and the solvers' :class:`~dualfem.core.solution.Solution`
 objects (keyed by scene, delta and solver) together with the plain numbers of the report's
-tables. Solutions of the pictures come from the one reference policy's first installed exact
-candidate (:func:`dualfem.experiments.reference.candidates`: pdas, else Clarabel) unless a solver
-is named; the convergence histories come from ``uzawa`` (the paper's method) and from every
-other registered solver that records a per-iteration history.
+tables, and the scenes of the library (``scenes/*.toml``: gmsh meshes, inclined, curved, kinked
+and several defects) solved once each. Solutions of the pictures come from the one reference
+policy's first installed exact candidate (:func:`dualfem.experiments.reference.candidates`:
+pdas, else Clarabel) unless a solver is named; the convergence histories come from ``uzawa``
+(the paper's method) and from every other registered solver that records a per-iteration history.
 """
 from __future__ import annotations
 
@@ -127,6 +128,61 @@ def picture_row(qp, sol, scene: str, delta: float, caption: str) -> dict:
             "m": qp.m, "total_force": float(sol.multipliers.sum()), "kkt": evaluator.kkt_error(sol.residuals)}
 
 
+def scene_deltas(params: dict) -> list[float]:
+    """The fracture parameters of a scene's defects (the scene's delta unless a defect has its own)."""
+    tables = params.get("defects") or []
+    if not tables:
+        return [float(params["delta"])]
+    return [float(t.get("delta", params["delta"])) for t in tables]
+
+
+def scene_caption(path) -> str:
+    """The leading comment block of a scene file, as one line (its description)."""
+    lines = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if not line.startswith("#"):
+            break
+        lines.append(line.lstrip("# ").strip())
+    return " ".join(x for x in lines if x)
+
+
+def library_runs(solver: str, progress: Callable[[str], None], overrides: dict | None = None,
+                 names: list[str] | None = None) -> list[dict]:
+    """Each scene of the library (``scenes/*.toml``) solved by ``solver`` at its own mesh size (or
+    with ``overrides``, e.g. a coarser ``mesh_size`` for tests): QP, Solution and a picture row
+    with the number of defects, their deltas, the unknowns and the solve time."""
+    from dualfem.core import evaluator
+    from dualfem.core.runner import run
+    from dualfem.core.scene import library, load_scene
+
+    lib = library()
+    unknown = sorted(set(names or ()) - set(lib))
+    if unknown:
+        raise InputError(f"unknown library scene {unknown[0]!r}; the library has {', '.join(lib) or 'none'}")
+    out = []
+    for name in names or list(lib):
+        prob = load_scene(name, dict(overrides or {}))
+        t0 = time.perf_counter()
+        qp = prob.build()
+        t_build = time.perf_counter() - t0
+        sol = run(solver, qp)
+        t_solve = time.perf_counter() - t0 - t_build
+        progress(f"scene {name}: {qp.n} unknowns, {sol.status} ({t_build:.1f} s build, {t_solve:.1f} s solve)")
+        if sol.x is None:
+            raise RuntimeError(f"library scene {name}: solver {solver} returned no solution "
+                               f"({sol.status}: {sol.message})")
+        deltas = scene_deltas(prob.params)
+        row = picture_row(qp, sol, name, deltas[0], scene_caption(lib[name]))
+        row.update({"deltas": deltas, "defects": len(deltas), "n": qp.n, "status": str(sol.status),
+                    "mesh": prob.params.get("mesh"), "mesh_size": prob.params.get("mesh_size"),
+                    "tip_size": prob.params.get("tip_size"), "build_s": t_build, "solve_s": t_solve,
+                    "closed_per_defect": [int(c) for c in np.bincount(
+                        qp.maps["defect_id"], weights=evaluator.contact_set(qp, sol.x), minlength=len(deltas))],
+                    "nodes_per_defect": [int(c) for c in np.bincount(qp.maps["defect_id"], minlength=len(deltas))]})
+        out.append({"name": name, "qp": qp, "sol": sol, "row": row})
+    return out
+
+
 def uzawa_runs(cases: Cases, exact: str, sweep) -> dict:
     """``uzawa`` on f1/f2/f3 at every delta of ``sweep``: iteration counts and its agreement with ``exact``."""
     from dualfem.core import evaluator
@@ -161,8 +217,10 @@ def other_runs(cases: Cases, others: list[str]) -> dict:
 
 
 def collect(N: int = 64, solver: str | None = None, sweep=SWEEP, history_solvers: list[str] | None = None,
-            progress: Callable[[str], None] = print) -> dict:
-    """Every solve the figures report needs (see the module docstring)."""
+            progress: Callable[[str], None] = print, scenes: bool = True,
+            scene_overrides: dict | None = None) -> dict:
+    """Every solve the figures report needs (see the module docstring); ``scenes``: the scene
+    library too (:func:`library_runs`, with ``scene_overrides``)."""
     from dualfem.core.registry import solvers
 
     exact = picture_solver(solver)
@@ -170,7 +228,8 @@ def collect(N: int = 64, solver: str | None = None, sweep=SWEEP, history_solvers
     rows = [picture_row(cases.qp(sc, d), cases.solve(exact, sc, d, True), sc, d, cap) for sc, d, cap in DEFORMED]
     for d in sweep:
         cases.solve(exact, "f2", d, True)
-    data = {"N": N, "exact": exact, "sweep": list(sweep), "rows": rows, "cases": cases, "uzawa": None}
+    data = {"N": N, "exact": exact, "sweep": list(sweep), "rows": rows, "cases": cases, "uzawa": None,
+            "scenes": library_runs(exact, progress, scene_overrides) if scenes else []}
     reg = solvers()
     if "uzawa" in reg:
         others = history_solvers if history_solvers is not None else solvers_with_history(exclude=("uzawa",))

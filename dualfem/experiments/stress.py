@@ -39,6 +39,7 @@ from dualfem.experiments.stress_grid import (  # noqa: F401  (re-exported: the g
     Task,
     _sid,
     build_grid,
+    scene_base,
     scene_in_units,
 )
 

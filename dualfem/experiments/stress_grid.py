@@ -13,6 +13,8 @@ import json
 from collections import OrderedDict
 from dataclasses import dataclass
 
+import numpy as np
+
 DELTAS = [1e-12, 1e-9, 1e-6, 1e-3, 1.0, 1e3]
 
 
@@ -69,12 +71,44 @@ def _sid(d: dict) -> str:
     return hashlib.sha1(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:10]
 
 
+def _scaled_expression(expr: str, length: float) -> str:
+    """A load expression in ``x``, ``y`` rewritten for coordinates ``length`` times larger."""
+    import ast
+
+    class _Sub(ast.NodeTransformer):
+        def visit_Name(self, node: ast.Name) -> ast.AST:
+            if node.id in ("x", "y"):
+                return ast.BinOp(left=ast.Name(id=node.id, ctx=ast.Load()), op=ast.Div(),
+                                 right=ast.Constant(float(length)))
+            return node
+
+    tree = ast.fix_missing_locations(_Sub().visit(ast.parse(expr, mode="eval")))
+    return ast.unparse(tree)
+
+
+def _scaled_defects(tables, length: float, stress: float) -> list[dict]:
+    """``[[defects]]`` tables with their points (lengths) and own delta (length / stress) converted."""
+    out = []
+    for tab in tables:
+        t = dict(tab)
+        if "points" in t:
+            t["points"] = [[float(c) * length for c in pt] for pt in t["points"]]
+        if "delta" in t:
+            t["delta"] = float(t["delta"]) * length / stress
+        out.append(t)
+    return out
+
+
 def scene_in_units(base: dict, stress: float, length: float) -> dict:
     """The same physics as ``base`` (paper units) in a unit system; see :data:`UNITS`.
 
-    E and tractions are stresses (x ``stress``); width, height and the defect are lengths
-    (x ``length``); delta is a length per stress (the interface pressure is [u]/delta).
+    E and tractions are stresses (x ``stress``); width, height, the defect, the points of every
+    ``[[defects]]`` table, ``mesh_size`` and ``tip_size`` are lengths (x ``length``); delta (the
+    scene's and each defect's own) is a length per stress (the interface pressure is [u]/delta).
+    A load expression in ``x``, ``y`` is rewritten so that it is evaluated at the unscaled
+    coordinates (the paper's f1/f2/f3 already scale with ``width``); a Python function is refused.
     """
+    from dualfem.core.errors import InputError
     from dualfem.core.registry import get_problem
 
     d = {**get_problem("thin_defect").defaults, **base}
@@ -82,21 +116,61 @@ def scene_in_units(base: dict, stress: float, length: float) -> dict:
     out["E"] = float(d["E"]) * stress
     out["width"] = float(d["width"]) * length
     out["height"] = float(d["height"]) * length
-    out["defect"] = [[float(c) * length for c in pt] for pt in d["defect"]]
     out["load_scale"] = float(d["load_scale"]) * stress
     out["delta"] = float(d["delta"]) * length / stress
+    for k in ("mesh_size", "tip_size"):
+        if k in base:
+            out[k] = float(base[k]) * length
+    if base.get("defects"):      # the tables replace the single segment ``defect`` (left at its default)
+        out["defects"] = _scaled_defects(base["defects"], length, stress)
+        out.pop("defect", None)
+    else:
+        out["defect"] = [[float(c) * length for c in pt] for pt in np.asarray(d["defect"], dtype=float)]
+    load = d["load"]
+    if callable(load):
+        raise InputError("scene_in_units: a load given as a Python function cannot be converted to other units")
+    if isinstance(load, str) and load.strip() not in ("f1", "f2", "f3") and length != 1:
+        out["load"] = _scaled_expression(load.strip(), length)
     return out
 
 
+def scene_base(spec: str) -> dict:
+    """Every parameter of a thin_defect scene (a library name, a preset or a TOML file) as plain
+    JSON-able values, to replace :data:`BASE` in :func:`build_grid`; InputError otherwise."""
+    from dualfem.core.errors import InputError
+    from dualfem.core.scene import load_scene
+
+    prob = load_scene(spec)
+    if prob.name != "thin_defect":
+        raise InputError(f"--scene {spec!r} is a {prob.name} scene; the stress grid needs a thin_defect scene")
+    p = {k: v for k, v in prob.params.items() if not callable(v)}
+    if len(p) < len(prob.params):
+        raise InputError(f"--scene {spec!r}: a load given as a Python function cannot be converted to other units")
+    p["defect"] = np.asarray(p["defect"], dtype=float).tolist()
+    p["defects"] = [dict(t) for t in p.get("defects") or []]
+    return p
+
+
+def _at_n(base: dict, n: int) -> dict:
+    """The base scene at mesh size N: a gmsh scene gets mesh_size = min(width, height) / N."""
+    scene = {**base, "N": n}
+    if base.get("mesh") == "gmsh":
+        scene["mesh_size"] = min(float(base.get("width", 1.0)), float(base.get("height", 1.0))) / n
+    return scene
+
+
 def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = AXES,
-               time_limit: float | None = None, max_n: int | None = None) -> list[Task]:
-    """All tasks of the stress grid for ``solver_names`` (see the module docstring)."""
+               time_limit: float | None = None, max_n: int | None = None, scene: dict | None = None) -> list[Task]:
+    """All tasks of the stress grid for ``solver_names`` (see the module docstring); ``scene``: the
+    base scene's parameters (:func:`scene_base`) instead of the paper's f2 (:data:`BASE`): its own
+    mesh and load on every axis but N (there: N, and for a gmsh scene mesh_size = min(width, height) / N)."""
     from dualfem.core.registry import solvers
 
     reg = solvers()
     tl = float(time_limit if time_limit is not None else (20.0 if quick else 120.0))
     n_small = 16 if quick else 32
-    base = {**BASE, "N": n_small}
+    top_base = BASE if scene is None else scene
+    base = {**BASE, "N": n_small} if scene is None else dict(scene)   # a given scene keeps its own mesh
     tasks: list[Task] = []
 
     def add(axis, coords, scene, solver, params=None, ref=None, after=None):
@@ -110,7 +184,7 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = 
     r_solvers = [s for s in solver_names
                  if "r" in reg[s].defaults and reg[s].defaults.get("r_rule", "fixed") == "fixed"]
     if "delta" in axes:
-        for load in (["f2"] if quick else ["f1", "f2", "f3"]):
+        for load in ([base["load"]] if scene is not None else ["f2"] if quick else ["f1", "f2", "f3"]):
             for d in DELTAS:
                 for s in solver_names:
                     add("delta", {"load": load, "delta": d}, {**base, "load": load, "delta": d}, s)
@@ -142,6 +216,6 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = 
         prev: dict[str, str] = {}
         for n in [n for n in NS if n <= top]:
             for s in solver_names:
-                prev[s] = add("N", {"N": n}, {**BASE, "N": n}, s, after=prev.get(s))
+                prev[s] = add("N", {"N": n}, _at_n(top_base, n), s, after=prev.get(s))
     return tasks
 

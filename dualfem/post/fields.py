@@ -135,14 +135,39 @@ def deformed_nodes(qp, x: np.ndarray, scale: float = 1.0) -> np.ndarray:
     return np.asarray(_maps(qp)["nodes"]) + scale * nodal_displacement(qp, x).T
 
 
-def defect_fields(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """Fields along the defect, ordered by the defect coordinate ``s``.
+def _defect_pieces(m: dict, up: np.ndarray, lo: np.ndarray, s_in: np.ndarray):
+    """Per defect: (id, rows of B in order, first tip, last tip, its length) from the maps; the
+    tips are None when the maps do not give them (one entry for every defect then)."""
+    nodes = np.asarray(m["nodes"])
+    tips = np.asarray(m.get("defect_tips", []), dtype=np.int64)
+    ids = np.asarray(m.get("defect_id", np.zeros(up.size, dtype=np.int64)), dtype=np.int64)
+    ndef = int(ids.max()) + 1 if ids.size else 0
+    if tips.size != 2 * ndef:
+        return [(0, np.arange(up.size), None, None, None)]
+    out = []
+    for k in range(ndef):
+        rows = np.flatnonzero(ids == k)
+        t0, t1 = tips[2 * k], tips[2 * k + 1]
+        if "defect_normals" in m:       # arc length (kinked, curved): the last interior node's s + its last edge
+            L = float(s_in[rows[-1]] + np.linalg.norm(nodes[:, t1] - nodes[:, lo[rows[-1]]]))
+        else:                           # a single straight defect of an older QP file: along its tangent
+            nrm = np.asarray(m.get("normal", (0.0, 1.0)), dtype=float)
+            tau = np.asarray(m.get("tangent", (nrm[1], -nrm[0])), dtype=float)
+            L = float(tau @ (nodes[:, t1] - nodes[:, t0]))
+        out.append((k, rows, t0, t1, L))
+    return out
 
-    Node arrays with the two tips included (first and last entry): ``s``, ``X`` (2, k)
-    reference positions, ``upper``/``lower`` node ids (the tip id on both), ``u_upper``,
-    ``u_lower`` (k, 2), ``jump_normal``, ``jump_tangent`` (0 at the tips), ``pressure`` and
-    ``force`` (NaN at the tips, which carry no constraint; only when ``multipliers`` given).
-    ``interior`` is a boolean mask of the constrained (doubled) nodes.
+
+def defect_fields(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Fields along the defects, defect by defect, each ordered by its coordinate ``s``.
+
+    Node arrays with each defect's two tips included (first and last entry of its stretch):
+    ``s`` (from the defect's first tip), ``X`` (2, k) reference positions, ``upper``/``lower``
+    node ids (the tip id on both), ``defect_id``, ``row`` (row of B, -1 at a tip), ``u_upper``,
+    ``u_lower`` (k, 2), ``normal``/``tangent`` (k, 2; a tip takes its neighbour's),
+    ``jump_normal``, ``jump_tangent`` (0 at the tips), ``pressure`` and ``force`` (NaN at the
+    tips, which carry no constraint; only when ``multipliers`` given). ``interior`` is a boolean
+    mask of the constrained (doubled) nodes. :func:`defect_stretches` splits the arrays by defect.
     """
     m = _maps(qp)
     for k in ("defect_upper", "defect_lower", "defect_s"):
@@ -154,39 +179,50 @@ def defect_fields(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> d
     nodes = np.asarray(m["nodes"])
     nrm = np.asarray(m.get("normal", (0.0, 1.0)), dtype=float)
     tau = np.asarray(m.get("tangent", (nrm[1], -nrm[0])), dtype=float)
-    tips = np.asarray(m.get("defect_tips", []), dtype=np.int64)
     # per-node normals and tangents of general (kinked, curved, several) defects, else the single ones
     nrm_j = np.asarray(m["defect_normals"], dtype=float).T if "defect_normals" in m else np.tile(nrm, (up.size, 1))
     tau_j = np.asarray(m["defect_tangents"], dtype=float).T if "defect_tangents" in m else np.tile(tau, (up.size, 1))
-    if tips.size == 2:
-        # tips: the single nodes at s = 0 and s = L
-        t0, t1 = tips
-        L = float(s_in[-1] + np.linalg.norm(nodes[:, t1] - nodes[:, lo[-1]])) if "defect_normals" in m \
-            else float(tau @ (nodes[:, t1] - nodes[:, t0]))
-        s = np.r_[0.0, s_in, L]
-        upper = np.r_[t0, up, t1]
-        lower = np.r_[t0, lo, t1]
-        interior = np.r_[False, np.ones(up.size, bool), False]
-        nrm_j, tau_j = np.vstack([nrm_j[:1], nrm_j, nrm_j[-1:]]), np.vstack([tau_j[:1], tau_j, tau_j[-1:]])
-    else:
-        s, upper, lower, interior = s_in, up, lo, np.ones(up.size, bool)
+    parts: dict[str, list] = {k: [] for k in ("s", "upper", "lower", "row", "id", "nrm", "tau")}
+    for k, rows, t0, t1, L in _defect_pieces(m, up, lo, s_in):
+        if t0 is None:
+            row, near = rows, rows
+            parts["s"].append(s_in[rows])
+        else:                           # the tips: no row of B, the normal of their neighbour
+            row, near = np.r_[-1, rows, -1], np.r_[rows[0], rows, rows[-1]]
+            parts["s"].append(np.r_[0.0, s_in[rows], L])
+        parts["upper"].append(up[rows] if t0 is None else np.r_[t0, up[rows], t1])
+        parts["lower"].append(lo[rows] if t0 is None else np.r_[t0, lo[rows], t1])
+        parts["row"].append(row)
+        parts["id"].append(np.full(row.size, k, dtype=np.int64))
+        parts["nrm"].append(nrm_j[near])
+        parts["tau"].append(tau_j[near])
+    s, upper, lower, row, did = (np.concatenate(parts[k]) for k in ("s", "upper", "lower", "row", "id"))
+    nrm_n, tau_n = np.vstack(parts["nrm"]), np.vstack(parts["tau"])
+    interior = row >= 0
     u = nodal_displacement(qp, x)
     uu, ul = u[upper], u[lower]
     d = uu - ul
     out = {"s": s, "X": nodes[:, lower], "upper": upper, "lower": lower, "interior": interior,
-           "u_upper": uu, "u_lower": ul, "jump_normal": np.sum(d * nrm_j, axis=1),
-           "jump_tangent": np.sum(d * tau_j, axis=1)}
+           "defect_id": did, "row": row, "normal": nrm_n, "tangent": tau_n,
+           "u_upper": uu, "u_lower": ul, "jump_normal": np.sum(d * nrm_n, axis=1),
+           "jump_tangent": np.sum(d * tau_n, axis=1)}
     if multipliers is not None:
         mu = np.asarray(multipliers, dtype=float)
         if mu.shape != (qp.m,):
             raise InputError(f"multipliers must have length {qp.m}, got shape {mu.shape}")
         force = np.full(s.size, np.nan)
         press = np.full(s.size, np.nan)
-        force[interior] = mu
-        press[interior] = qp.pressure(mu)
+        force[interior] = mu[row[interior]]
+        press[interior] = qp.pressure(mu)[row[interior]]
         out["force"] = force
         out["pressure"] = press
     return out
+
+
+def defect_stretches(fields: dict[str, np.ndarray]) -> list[np.ndarray]:
+    """Index arrays into :func:`defect_fields` output, one per defect (tips included), in defect order."""
+    did = np.asarray(fields["defect_id"])
+    return [np.flatnonzero(did == k) for k in np.unique(did)]
 
 
 def contact_length(s: np.ndarray, jump: np.ndarray, tol: float) -> float:

@@ -65,15 +65,31 @@ def _along(post: Post) -> tuple[np.ndarray, str]:
     """Abscissa along the defect: x1 for a horizontal defect (as in the paper), else s."""
     d = post.defect
     tau = np.asarray(post.qp.maps.get("tangent", (1.0, 0.0)), dtype=float)
-    if abs(abs(tau[0]) - 1) < 1e-12:
-        return d["X"][0], "x1"
-    return d["s"], "s (distance from the first tip)"
+    if "tangent" in post.qp.maps or "defect_tangents" not in post.qp.maps:
+        if abs(abs(tau[0]) - 1) < 1e-12:
+            return d["X"][0], "x1"
+    return d["s"], "s (distance from the defect's first tip)"
+
+
+def _stretches(post: Post, label: str):
+    """(label, index array, abscissa) per defect: one curve per defect when there are several."""
+    from dualfem.post.fields import defect_stretches
+
+    x, xlabel = _along(post)
+    parts = defect_stretches(post.defect)
+    if len(parts) == 1:
+        return [(label, parts[0], x[parts[0]])], xlabel
+    return [(f"{label}, defect {int(post.defect['defect_id'][i[0]])}", i, x[i]) for i in parts], xlabel
 
 
 def plot_deformed(qp, sol, ax=None, *, scale: float = 300.0, title: str | None = None, vmax: float | None = None,
-                  cmap: str = "jet", colorbar: bool = True, edges: bool = False):
+                  cmap: str = "jet", colorbar: bool = True, edges: bool = False, reference: bool = False,
+                  contact: bool = False, labels: bool = False):
     """The deformed body X + scale u, triangles coloured by the von Mises stress (colour bar in
-    the units of E); the defect faces are drawn in white on top."""
+    the units of E); the faces of every defect are drawn in white on top, each defect on its own
+    (tips included). ``reference``: each defect's undeformed line too (black, dashed);
+    ``contact``: the closed nodes (evaluator contact set) marked on the deformed lower face;
+    ``labels``: each defect's number (``[[defects]]`` order, from 0) beside its first tip."""
     ax = _axes(ax)
     p = _post(qp, sol)
     xy = p.deformed(scale)
@@ -82,9 +98,7 @@ def plot_deformed(qp, sol, ax=None, *, scale: float = 300.0, title: str | None =
                         vmax=vmax if vmax is not None else float(vm.max()),
                         edgecolors="k" if edges else "none", linewidth=0.1 if edges else 0.0)
     if "defect_upper" in qp.maps:
-        d = p.defect
-        for ids in (d["upper"], d["lower"]):
-            ax.plot(xy[0, ids], xy[1, ids], "w-", lw=0.8)
+        _draw_defects(ax, qp, p, xy, reference=reference, contact=contact, labels=labels)
     if colorbar:
         ax.figure.colorbar(coll, ax=ax, label=f"von Mises stress [{_units(qp)}]")
     ax.set_aspect("equal")
@@ -93,6 +107,36 @@ def plot_deformed(qp, sol, ax=None, *, scale: float = 300.0, title: str | None =
     if title:
         ax.set_title(title, fontsize=10)
     return ax
+
+
+def _draw_defects(ax, qp, p: Post, xy: np.ndarray, *, reference: bool, contact: bool, labels: bool) -> None:
+    """Both faces of each defect (white), optionally its undeformed line, closed nodes and number."""
+    from dualfem.post.fields import defect_stretches
+
+    d = p.defect
+    closed = None
+    if contact:
+        from dualfem.core import evaluator
+
+        closed = np.zeros(d["s"].size, dtype=bool)
+        closed[d["interior"]] = evaluator.contact_set(qp, p.x)[d["row"][d["interior"]]]
+    for n, idx in enumerate(defect_stretches(d)):
+        for ids in (d["upper"][idx], d["lower"][idx]):
+            ax.plot(xy[0, ids], xy[1, ids], "w-", lw=0.8)
+        if reference:
+            ax.plot(d["X"][0, idx], d["X"][1, idx], "k--", lw=0.6, label="undeformed defect" if n == 0 else None)
+        if closed is not None and closed[idx].any():
+            c = d["lower"][idx][closed[idx]]
+            ax.plot(xy[0, c], xy[1, c], "o", ms=3, mfc="magenta", mec="k", mew=0.4, ls="none",
+                    label="closed nodes (contact)" if not any(ln.get_label().startswith("closed")
+                                                              for ln in ax.get_lines()) else None)
+        if labels:
+            k = int(d["defect_id"][idx[0]])
+            ax.annotate(str(k), xy[:, d["lower"][idx[0]]], xytext=(-4, 3), textcoords="offset points",
+                        ha="right", fontsize=8, color="k", fontweight="bold",
+                        bbox={"boxstyle": "round,pad=0.15", "fc": "w", "alpha": 0.75, "lw": 0})
+    if reference or contact:
+        ax.legend(fontsize=7, loc="lower left", framealpha=0.7)
 
 
 def plot_jump(cases: Iterable[tuple[str, object, object]], ax=None, *, unit: float = 1e-5, component: str = "normal",
@@ -108,11 +152,13 @@ def plot_jump(cases: Iterable[tuple[str, object, object]], ax=None, *, unit: flo
     xlabel = "s"
     for label, qp, sol in cases:
         p = _post(qp, sol)
-        x, xlabel = _along(p)
-        if log:
-            ax.semilogy(x, np.maximum(np.abs(p.defect[key]), floor), ".-", ms=3, lw=1, label=label)
-        else:
-            ax.plot(x, p.defect[key] / unit, ".-", ms=3, lw=1, label=label)
+        series, xlabel = _stretches(p, label)
+        for lab, idx, x in series:
+            y = p.defect[key][idx]
+            if log:
+                ax.semilogy(x, np.maximum(np.abs(y), floor), ".-", ms=3, lw=1, label=lab)
+            else:
+                ax.plot(x, y / unit, ".-", ms=3, lw=1, label=lab)
     sym = "[u_nu]" if component == "normal" else "[u_tau]"
     ax.set_xlabel(xlabel)
     if log:
@@ -130,11 +176,15 @@ def plot_faces(qp, sol, ax=None, *, scale: float = 300.0, title: str | None = No
     """Shapes of the upper and lower faces of the defect, X + scale u, with the undeformed defect."""
     ax = _axes(ax)
     p = _post(qp, sol)
+    from dualfem.post.fields import defect_stretches
+
     d = p.defect
-    X = d["X"]
-    for key, style, label in (("u_upper", "r.-", "upper face (+)"), ("u_lower", "b.-", "lower face (-)")):
-        ax.plot(X[0] + scale * d[key][:, 0], X[1] + scale * d[key][:, 1], style, ms=3, lw=1, label=label)
-    ax.plot(X[0], X[1], "k--", lw=0.7, label="undeformed")
+    for n, idx in enumerate(defect_stretches(d)):     # each defect on its own
+        X = d["X"][:, idx]
+        for key, style, label in (("u_upper", "r.-", "upper face (+)"), ("u_lower", "b.-", "lower face (-)")):
+            ax.plot(X[0] + scale * d[key][idx, 0], X[1] + scale * d[key][idx, 1], style, ms=3, lw=1,
+                    label=label if n == 0 else None)
+        ax.plot(X[0], X[1], "k--", lw=0.7, label="undeformed" if n == 0 else None)
     ax.set_xlabel(f"x1 + {scale:g} u1")
     ax.set_ylabel(f"x2 + {scale:g} u2")
     ax.grid(alpha=0.3)
@@ -152,9 +202,10 @@ def plot_pressure(cases: Iterable[tuple[str, object, object]], ax=None):
         p = _post(qp, sol)
         if p.multipliers is None:
             raise InputError(f"case {label!r} has no multipliers")
-        x, xlabel = _along(p)
+        series, xlabel = _stretches(p, label)
         units = _units(qp)
-        ax.plot(x, p.defect["pressure"], ".-", ms=3, lw=1, label=label)
+        for lab, idx, x in series:
+            ax.plot(x, p.defect["pressure"][idx], ".-", ms=3, lw=1, label=lab)
     ax.axhline(0, color="k", lw=0.5)
     ax.set_xlabel(xlabel)
     ax.set_ylabel(f"contact pressure mu/w [{units}]")

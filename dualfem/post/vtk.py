@@ -7,12 +7,17 @@ One unstructured grid holds
 * point data ``displacement`` (3 components, z = 0: use *Warp By Vector*), and the nodal
   defect fields ``jump_normal``, ``jump_tangent``, ``pressure`` (NaN away from the defect; at a
   defect node both copies carry the same value; the tips carry jump 0 and no pressure);
-* two cell blocks: the triangles, then the defect's ``line`` cells: the upper-face edges
-  followed by the lower-face edges (ordered along the defect from the first tip);
+* point data ``defect_id`` (the defect a node lies on, counted from 0 in the order of the
+  scene's ``[[defects]]``; -1 elsewhere) and ``normal`` (3 components: the defect's unit normal
+  nu at its nodes, pointing to the "+" face, the tips taking their neighbour's; 0 elsewhere:
+  use *Glyph* to draw them);
+* two cell blocks: the triangles, then the defects' ``line`` cells, defect by defect: its
+  upper-face edges followed by its lower-face edges (ordered along it from its first tip);
 * cell data ``von_mises``, ``s11``, ``s22``, ``s12``, ``s33`` (constant per P1 triangle, units
   of E; NaN on the line cells), ``jump_normal``, ``jump_tangent``, ``pressure`` on the line
   cells (mean of the edge's two end nodes, ignoring the tips' undefined pressure; NaN on the
-  triangles), and ``face`` (0 triangle, +1 upper face, -1 lower face) to threshold them.
+  triangles), ``defect_id`` (-1 on the triangles) and ``face`` (0 triangle, +1 upper face,
+  -1 lower face) to threshold them.
 
 Files are written atomically (:func:`dualfem.io.atomic_write`). XDMF needs h5py (the
 ``xdmf`` extra); its heavy data go to a ``.h5`` file next to the ``.xdmf``.
@@ -80,23 +85,42 @@ def to_meshio(qp, sol=None, *, post: Post | None = None):
             arr[d["lower"]] = v
             arr[d["upper"]] = v
             point_data[k] = arr
-        edge_vals = {}
-        for k, v in nodal.items():
-            pair = np.stack([v[:-1], v[1:]])
-            with np.errstate(invalid="ignore"):
-                cnt = np.sum(np.isfinite(pair), axis=0)
-                edge_vals[k] = np.where(cnt > 0, np.nansum(pair, axis=0) / np.maximum(cnt, 1), np.nan)
-        up, lo = d["upper"], d["lower"]
-        edges = np.vstack([np.stack([up[:-1], up[1:]], axis=1), np.stack([lo[:-1], lo[1:]], axis=1)])
-        ne = len(up) - 1
-        cells.append(("line", edges.astype(np.int64)))
+        point_data["defect_id"] = np.full(npts, -1, dtype=np.int32)
+        point_data["normal"] = np.zeros((npts, 3))
+        for ids in (d["lower"], d["upper"]):
+            point_data["defect_id"][ids] = d["defect_id"]
+            point_data["normal"][ids, :2] = d["normal"]
+        edges, edge_vals, edge_id, face_e = _defect_edges(d, nodal)
+        cells.append(("line", edges))
         for k in cell_data:
-            cell_data[k].append(np.full(2 * ne, np.nan))
-        face.append(np.r_[np.ones(ne, dtype=np.int32), -np.ones(ne, dtype=np.int32)])
+            cell_data[k].append(np.full(edges.shape[0], np.nan))
+        face.append(face_e)
         for k in defect_keys:
-            cell_data[k] = [np.full(ntri, np.nan), np.r_[edge_vals[k], edge_vals[k]]]
+            cell_data[k] = [np.full(ntri, np.nan), edge_vals[k]]
+        cell_data["defect_id"] = [np.full(ntri, -1, dtype=np.int32), edge_id]
     cell_data["face"] = face
     return meshio.Mesh(points, cells, point_data=point_data, cell_data=cell_data)
+
+
+def _defect_edges(d: dict, nodal: dict) -> tuple[np.ndarray, dict, np.ndarray, np.ndarray]:
+    """Line cells of every defect (its upper-face edges, then its lower-face edges, defect by
+    defect), the nodal values averaged per edge (ignoring NaN), the defect id and face per edge."""
+    from dualfem.post.fields import defect_stretches
+
+    edges, vals, ids, face = [], {k: [] for k in nodal}, [], []
+    for idx in defect_stretches(d):
+        k_def = int(d["defect_id"][idx[0]])
+        for ends, sign in ((d["upper"][idx], 1), (d["lower"][idx], -1)):
+            edges.append(np.stack([ends[:-1], ends[1:]], axis=1))
+            ids.append(np.full(idx.size - 1, k_def, dtype=np.int32))
+            face.append(np.full(idx.size - 1, sign, dtype=np.int32))
+            for k, v in nodal.items():
+                pair = np.stack([v[idx][:-1], v[idx][1:]])
+                with np.errstate(invalid="ignore"):
+                    cnt = np.sum(np.isfinite(pair), axis=0)
+                    vals[k].append(np.where(cnt > 0, np.nansum(pair, axis=0) / np.maximum(cnt, 1), np.nan))
+    return (np.vstack(edges).astype(np.int64), {k: np.concatenate(v) for k, v in vals.items()},
+            np.concatenate(ids), np.concatenate(face))
 
 
 def write_vtu(path: str | os.PathLike, qp, sol=None, *, post: Post | None = None) -> Path:

@@ -1,4 +1,4 @@
-"""``dualfem report figures``: the paper's figures (reports/figures.md + reports/figures/*.png).
+"""``dualfem report figures``: the paper's figures and the scene library's (reports/figures.md + figures/*.png).
 
 Render only: the solves are :mod:`dualfem.experiments.figures`. Every picture is drawn by
 :mod:`dualfem.post.figures` from a scene's QP and a registry solver's Solution, so the same calls
@@ -13,6 +13,8 @@ import argparse
 import sys
 import time
 from pathlib import Path
+
+import numpy as np
 
 from dualfem.cli.report import register_report
 from dualfem.core.errors import InputError
@@ -83,7 +85,7 @@ def _defect_sections(data: dict, figdir: Path, scale: float, dpi: int) -> list[s
           "with delta (the tips are not doubled, so the jump is 0 there).\n",
           f"![jump](figures/{_save(fig, figdir / 'jump_f2.png', dpi)})\n"]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.0))
-    for ax, d in zip(axes, (1e-1, 1e-5)):
+    for ax, d in zip(axes, (1e-1, 1e-5), strict=True):
         F.plot_faces(cases.qp("f2", d), cases.solve(exact, "f2", d), ax=ax, scale=scale,
                      title=f"f2, delta = {d:g}: faces X + {scale:g} u")
     fig.tight_layout()
@@ -99,6 +101,58 @@ def _defect_sections(data: dict, figdir: Path, scale: float, dpi: int) -> list[s
            "The multipliers as a pressure, l_j = mu_j / w_j (MPa; the paper's dual variable "
            "l = -sigma_nu + [u_nu]/delta), f2 at the same deltas; zero where the faces are open.\n",
            f"![pressure](figures/{_save(fig, figdir / 'pressure_f2.png', dpi)})\n"]
+    return md
+
+
+def _scene_figure(item: dict, figdir: Path, scale: float, dpi: int) -> str:
+    """scene_{name}.png: the deformed body with every defect (left), the jump along each defect (right)."""
+    import matplotlib.pyplot as plt
+
+    from dualfem.post import figures as F
+    from dualfem.post.fields import Post
+
+    name, qp, r = item["name"], item["qp"], item["row"]
+    post = Post(qp, item["sol"])
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.9), gridspec_kw={"width_ratios": [1.15, 1]})
+    F.plot_deformed(qp, post, ax=axes[0], scale=scale, reference=True, contact=True, labels=True,
+                    title=f"{name}: x + {scale:g} u, {qp.n} unknowns")
+    F.plot_jump([("[u_nu]", qp, post)], ax=axes[1], unit=1e-5)
+    if np.abs(post.defect["jump_normal"]).max() <= 1e-6 * np.abs(post.x).max():   # closed: do not zoom on rounding
+        axes[1].set_ylim(-0.1, 1.0)
+        axes[1].text(0.5, 0.5, "every defect closed along its whole length\n(|[u_nu]| at rounding level)",
+                     ha="center", transform=axes[1].transAxes, fontsize=9)
+    axes[1].set_title(f"{name}: normal jump along each defect (delta = "
+                      + ", ".join(f"{d:g}" for d in r["deltas"]) + ")", fontsize=10)
+    fig.tight_layout()
+    return _save(fig, figdir / f"scene_{name}.png", dpi)
+
+
+def _scenes_section(data: dict, figdir: Path, scale: float, dpi: int) -> list[str]:
+    """The scene library (scenes/*.toml): one picture per scene and a table of its numbers."""
+    items = data.get("scenes") or []
+    if not items:
+        return []
+    md = ["## Scenes of the library: inclined, curved, kinked and several defects (gmsh meshes)\n",
+          f"Every scene of `scenes/` (`dualfem list`; `dualfem solve NAME`), solved by `{data['exact']}` on its "
+          "own gmsh mesh (`mesh_size`, refined to `tip_size` at the tips). Left: the deformed body "
+          f"x + {scale:g} u coloured by the von Mises stress (MPa, own colour scale); both faces of every defect "
+          "in white, the undeformed defect dashed black, the closed nodes (the evaluator's contact set: normal "
+          "jump <= 1e-6 max|x|) as magenta dots on the deformed lower face, each defect's number (its place in "
+          "`[[defects]]`, from 0) beside its first tip. Right: the normal jump [u_nu] along each defect "
+          "(in units of 1e-5), s measured from its first tip; the normal is the tangent turned by +90 degrees.\n",
+          f"| scene | what | unknowns | defects (delta) | closed nodes per defect | max von Mises (MPa) | "
+          f"within {TIP_RADIUS:g} of a tip | max [u_nu] | KKT error | status |",
+          "|---|---|---|---|---|---|---|---|---|---|"]
+    for it in items:
+        r = it["row"]
+        closed = ", ".join(f"{c}/{n}" for c, n in zip(r["closed_per_defect"], r["nodes_per_defect"], strict=True))
+        md.append(f"| {r['scene']} | {r['caption']} | {r['n']} | {r['defects']} ("
+                  + ", ".join(f"{d:g}" for d in r["deltas"]) + f") | {closed} | {r['von_mises']:.3g} | "
+                  f"{r['von_mises_tips']:.3g} | {r['max_jump']:.3e} | {r['kkt']:.1e} | {r['status']} |")
+    md.append("")
+    for it in items:
+        name = _scene_figure(it, figdir, scale, dpi)
+        md.append(f"**{it['name']}** ({it['row']['caption']})\n\n![{it['name']}](figures/{name})\n")
     return md
 
 
@@ -167,7 +221,8 @@ def _history_section(data: dict, figdir: Path, dpi: int) -> list[str]:
                      "Uzawa history to show. `dualfem.figures.plot_history` draws it from `Solution.history` "
                      "(key `dual_change`) once the solver is available.\n"]
     md.append(f"Left: the Uzawa method (solver `uzawa`, default parameters: r = "
-              f"{uz['defaults'].get('r'):g}, tol_outer = {uz['defaults'].get('tol_outer')}) — "
+              f"{uz['defaults'].get('r'):g}, tol = {uz['defaults'].get('tol', uz['defaults'].get('tol_outer'))}"
+              f"{', tol_mode = ' + str(uz['defaults']['tol_mode']) if 'tol_mode' in uz['defaults'] else ''}) — "
               "the dual change max_j |l^{k+1}_j - l^k_j| (MPa) per outer iteration, for delta from 1e-1 to "
               "1e-9. Right: the other registered solvers that record a per-iteration history, at delta = "
               "1e-5 (solid) and 1e-9 (dashed), each with its own progress measure (named in the legend); "
@@ -204,20 +259,24 @@ def render(data: dict, outdir: Path, scale: float = 300.0, dpi: int = 110) -> st
     matplotlib.use("Agg")
     figdir = outdir / "figures"
     md = _deformed_section(data, figdir, scale, dpi) + _defect_sections(data, figdir, scale, dpi)
+    md += _scenes_section(data, figdir, scale, dpi)
     md += _history_section(data, figdir, dpi)
     return "\n".join(_head(data, scale) + md) + "\n"
 
 
 def generate(outdir: Path, N: int = 64, solver: str | None = None, scale: float = 300.0, dpi: int = 110,
-             sweep=SWEEP, history_solvers: list[str] | None = None, progress=print) -> str:
-    """Run the experiment, then render (the text of figures.md)."""
+             sweep=SWEEP, history_solvers: list[str] | None = None, progress=print, scenes: bool = True,
+             scene_overrides: dict | None = None) -> str:
+    """Run the experiment, then render (the text of figures.md); ``scenes``: the scene library too."""
     from dualfem.experiments.figures import collect
 
-    data = collect(N=N, solver=solver, sweep=sweep, history_solvers=history_solvers, progress=progress)
+    data = collect(N=N, solver=solver, sweep=sweep, history_solvers=history_solvers, progress=progress,
+                   scenes=scenes, scene_overrides=scene_overrides)
     return render(data, outdir, scale=scale, dpi=dpi)
 
 
-@register_report("figures", "the paper's figures: deformed bodies, jumps, faces, pressure, Uzawa histories")
+@register_report("figures", "the paper's figures (deformed bodies, jumps, faces, pressure, Uzawa histories) "
+                            "and the scene library's deformed bodies with every defect")
 def run(argv: list[str]) -> int:
     ap = argparse.ArgumentParser(prog="dualfem report figures", description=__doc__.splitlines()[0])
     ap.add_argument("--N", type=int, default=64, help="mesh size N (default 64)")
@@ -228,6 +287,8 @@ def run(argv: list[str]) -> int:
     ap.add_argument("--history-solvers", default=None, metavar="A,B",
                     help="solvers besides uzawa whose histories are drawn (default: every registered one "
                          "that records a history, found by a solve of a tiny scene)")
+    ap.add_argument("--scenes", action=argparse.BooleanOptionalAction, default=True,
+                    help="include the scene library (scenes/*.toml) section (default: yes)")
     ap.add_argument("--out", default="dualfem-results/reports",
                     help="output directory (default dualfem-results/reports; reports/ for the committed one)")
     argv = list(argv)
@@ -251,7 +312,7 @@ def run(argv: list[str]) -> int:
             get_solver(h)
     t0 = time.perf_counter()
     text = generate(out, N=N, solver=args.solver, scale=scale, dpi=dpi, history_solvers=hist,
-                    progress=lambda m: print(m, file=sys.stderr, flush=True))
+                    progress=lambda m: print(m, file=sys.stderr, flush=True), scenes=args.scenes)
     from dualfem.core.io import atomic_write_text
 
     atomic_write_text(out / "figures.md", text + f"\n_Wall time {time.perf_counter() - t0:.0f} s._\n")
