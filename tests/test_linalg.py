@@ -90,3 +90,27 @@ def test_every_unknown_local(scene):
     assert np.allclose(red.S, qp.K.toarray()[np.ix_(red.I, red.I)])
     x = sla.spsolve(qp.K.tocsc(), qp.F)
     assert np.abs(red.full(np.linalg.solve(red.S, red.g)) - x).max() <= 1e-10 * np.abs(x).max()
+
+
+def test_cache_key_follows_the_content_of_K_fixed(scene):
+    """A K_fixed changed in place gets a new factorization; frozen (read-only) memory is hashed once."""
+    import dataclasses
+
+    _, qp = scene("f2", 16, 1e-5)
+    Kf = qp.K_fixed.copy()                                    # writable: hashed on every call
+    q1 = dataclasses.replace(qp, K_fixed=Kf)
+    f1 = linalg.factor_fixed(q1)
+    Kf.data *= 2.0
+    f2 = linalg.factor_fixed(q1)
+    assert f2 is not f1 and np.allclose(f2.S_fixed, 2.0 * f1.S_fixed)
+    frozen = qp.K_fixed.copy()
+    linalg.freeze(frozen.data, frozen.indices, frozen.indptr)
+    with pytest.raises(ValueError):
+        frozen.data[0] = 1.0
+    q2 = dataclasses.replace(qp, K_fixed=frozen)
+    linalg._FROZEN_HASHES.clear()
+    a = linalg.factor_fixed(q2)
+    assert len(linalg._FROZEN_HASHES) == 1
+    view = sp.csc_matrix((frozen.data, frozen.indices, frozen.indptr), shape=frozen.shape)
+    again = dataclasses.replace(qp, K_fixed=view)
+    assert linalg.factor_fixed(again) is a and len(linalg._FROZEN_HASHES) == 1

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import hashlib
 import time
+import weakref
 from collections import OrderedDict
 from dataclasses import dataclass, field
 
@@ -44,6 +45,60 @@ def _hash(*arrays: np.ndarray) -> str:
     return h.hexdigest()
 
 
+#: hashes of frozen arrays (read-only, and so are the arrays they view: their content cannot change):
+#: id tuple -> (weak references to the arrays, hash); e.g. the shared delta-free K_fixed of a sweep
+_FROZEN_HASHES: dict[tuple, tuple[list, str]] = {}
+
+
+def _frozen(a) -> bool:
+    """True if ``a`` and every array it is a view of are read-only (its content cannot change)."""
+    if not isinstance(a, np.ndarray):
+        return False
+    while isinstance(a, np.ndarray):
+        if a.flags.writeable:
+            return False
+        a = a.base
+    return a is None
+
+
+def freeze(*arrays: np.ndarray) -> None:
+    """Make arrays (and the arrays they are views of) read-only, so that their hashes can be remembered."""
+    for a in arrays:
+        chain = []
+        while isinstance(a, np.ndarray):
+            chain.append(a)
+            a = a.base
+        for b in reversed(chain):               # the base first: a view of a read-only base stays read-only
+            b.flags.writeable = False
+
+
+def _root(a: np.ndarray) -> np.ndarray:
+    while isinstance(a.base, np.ndarray):
+        a = a.base
+    return a
+
+
+def _hash_cached(*arrays: np.ndarray) -> str:
+    """:func:`_hash`, remembered for arrays that are frozen (see _FROZEN_HASHES), recomputed otherwise.
+
+    Keyed by the memory the arrays view (their root array, address, shape and strides), so another
+    view of the same frozen memory (a QP wraps K_fixed in a new matrix object) finds the hash too.
+    """
+    if not all(_frozen(a) for a in arrays):
+        return _hash(*arrays)
+    roots = [_root(a) for a in arrays]
+    key = tuple((id(r), a.__array_interface__["data"][0], a.shape, a.strides, a.dtype.str)
+                for r, a in zip(roots, arrays))
+    hit = _FROZEN_HASHES.get(key)
+    if hit is not None and all(ref() is r for ref, r in zip(hit[0], roots)):
+        return hit[1]
+    h = _hash(*arrays)
+    for k in [k for k, (refs, _) in _FROZEN_HASHES.items() if any(ref() is None for ref in refs)]:
+        del _FROZEN_HASHES[k]                                       # forget memory that is gone
+    _FROZEN_HASHES[key] = ([weakref.ref(r) for r in roots], h)
+    return h
+
+
 # --------------------------------------------------------------------------- factor
 @dataclass
 class FixedFactor:
@@ -54,6 +109,19 @@ class FixedFactor:
     fact: Factorization
     S_fixed: np.ndarray
     time_s: dict = field(default_factory=dict)
+    #: K_fixed^-1 F by a hash of F (delta-free: shared by every delta of a sweep), the last two loads
+    loads: OrderedDict = field(default_factory=OrderedDict)
+
+    def solve_load(self, F: np.ndarray) -> np.ndarray:
+        """K_fixed^-1 F, remembered for the last two load vectors (a copy is returned)."""
+        key = _hash(F)
+        u = self.loads.get(key)
+        if u is None:
+            u = self.solve(F)
+            self.loads[key] = u
+            while len(self.loads) > 2:
+                self.loads.popitem(last=False)
+        return u.copy()
 
     @property
     def backend(self) -> str:
@@ -109,7 +177,7 @@ def factor_fixed(qp: QP, factor: str | Backend | None = None, cache: FactorCache
     cache = DEFAULT_CACHE if cache is None else cache
     local = np.asarray(qp.local_dofs, np.int64)
     Kf = qp.K_fixed if qp.K_fixed.format in ("csr", "csc") else qp.K_fixed.tocsr()
-    key = _hash(Kf.indptr, Kf.indices, Kf.data, local) + f":{Kf.format}:{backend.name}"
+    key = _hash_cached(Kf.indptr, Kf.indices, Kf.data, local) + f":{Kf.format}:{backend.name}"
     ff = cache.get(key)
     if ff is not None:
         return ff
@@ -173,7 +241,7 @@ class LocalReduction:
         """(u_fixed = K_fixed^-1 F, g, c0), computed on first use (one solve)."""
         if self._load is None:
             ff = self.factor
-            u_fixed = ff.solve(self.qp.F)
+            u_fixed = ff.solve_load(self.qp.F)
             g = ff.S_fixed @ u_fixed[self.I]
             self._load = (u_fixed, g, float(-0.5 * self.qp.F @ u_fixed + 0.5 * g @ u_fixed[self.I]))
         return self._load

@@ -42,6 +42,7 @@ from dualfem.core.errors import InputError, check_int, check_open_interval, chec
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
 from dualfem.core.registry import register_problem
+from dualfem.numerics.linalg import freeze
 
 from ..loads import resolve_load
 from .assemble import boundary_edges_on, free_dofs, interface, stiffness, traction_vector
@@ -248,8 +249,7 @@ class ThinDefect(Problem):
             "defect_id": c.defect_id, "defect_normals": R @ c.normals, "defect_tangents": R @ c.tangents,
         }
         out = {"cut": c, "cut_rotated": self._cut, "n": n, "K_el": K_el, "F": F, "local": local, "maps": maps}
-        for a in (K_el.data, K_el.indices, K_el.indptr, F, local, *maps.values()):
-            a.flags.writeable = False
+        freeze(K_el.data, K_el.indices, K_el.indptr, F, local, *maps.values())
         _ASSEMBLY.clear()
         if key is not None:
             _ASSEMBLY[key] = out
