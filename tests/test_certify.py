@@ -137,3 +137,35 @@ def test_runner_certifies_with_the_solvers_own_reduction_only_if_it_is_of_this_q
     runner.certify_status(qp, sol, solver.tolerance, True, reduction=linalg.LocalReduction(other))
     assert len(built) == 2                                       # the foreign one, then a fresh one of qp
     assert sol.status == "solved" and sol.info["certificate"]["value"] < 1e-9
+
+
+@pytest.mark.parametrize("solver", ["clarabel", "osqp"])
+@pytest.mark.parametrize("name, delta", [("f1", 1e-5), ("f2", 1e-5), ("f3", 1e-1)])
+def test_active_set_certificate_measures_the_error_of_interior_point_and_admm_answers(scene, solver, name, delta):
+    """The primal-dual rule guesses the active set of an answer with mu > 0 everywhere (an IPM's):
+    the verified estimate is the true error (to 10 %), where the duality bound is orders above it."""
+    from dualfem.core.runner import run
+
+    _, qp = scene(name, 16, delta)
+    x, _ = _exact(qp)
+    sol = run(solver, qp, {"polish": False} if solver == "clarabel" else {})
+    err = np.sqrt((sol.x - x) @ (qp.K @ (sol.x - x)) / (x @ (qp.K @ x)))
+    cert = certified_error(qp, sol.x, sol.multipliers)
+    assert cert["active_set"] == pytest.approx(err, rel=0.1, abs=1e-13)
+    assert cert["bound"] >= err * (1 - 1e-6) - 1e-13         # (the reference itself is exact to ~1e-14)
+
+
+def test_active_set_certificate_never_vouches_for_a_wrong_contact_set(scene):
+    """Open a closed node (or close an open one) by a visible amount: the estimate is either nan or the
+    true error (to 10 %), never a small number for a far-off answer."""
+    _, qp = scene("f2", 16, 1e-5)
+    x, mu = _exact(qp)
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        j = rng.integers(qp.m)
+        mup = mu.copy()
+        mup[j] = 0.0 if mu[j] > 0 else np.abs(mu).max()
+        xp = x + 1e-3 * np.abs(x).max() * rng.standard_normal(qp.n)
+        err = np.sqrt((xp - x) @ (qp.K @ (xp - x)) / (x @ (qp.K @ x)))
+        a = certified_error(qp, xp, mup)["active_set"]
+        assert np.isnan(a) or a == pytest.approx(err, rel=0.1)

@@ -152,24 +152,36 @@ def error_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve=None, _quad=None) 
 
 def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None,
                      margin: float = 10.0, _quad=None) -> float:
-    """First-order error |dx|_K / |x|_K on the verified active set {mu > 0}; nan if not verified.
+    """Error |x - x*|_K / |x|_K through a verified active set; nan if the set is not verified.
 
-    The refinement step of :func:`refinement_step` without forming dx: with z = K^-1 r
-    (r = Kx - F - B'mu), dx = -z + K^-1 B'dmu, so B dx = -Bz + D dmu and
-    |dx|_K^2 = r'K^-1 r - 2 (Bz)'dmu + dmu'D dmu: one solve in all (shared with :func:`error_bound`).
+    The active set is guessed by the primal-dual rule ``A = {mu_j - c gap_j > 0}`` (c = 1 / mean
+    diag of the Delassus matrix D = B K^-1 B'; for an answer of an active-set method this is
+    {mu > 0}, for an interior-point answer it separates the contact nodes from the open ones).
+    With mu set to 0 off A, one exact step (:func:`refinement_step`, without forming dx) gives the
+    solution (x + dx, mu + dmu) of the equality-constrained KKT system on A. If it keeps strict
+    complementarity with margins larger than the step (mu_A > margin |step of mu|, gaps off A >
+    margin |B dx|), it satisfies every KKT condition, so it IS the solution x*, and
+    |dx|_K = |x - x*|_K (up to rounding). With z = K^-1 r (r = Kx - F - B'mu_A): B dx = -Bz + D dmu,
+    |dx|_K^2 = r'K^-1 r - 2 (Bz)'dmu + dmu'D dmu: one solve (shared with :func:`error_bound`
+    when mu is already 0 off A).
     """
     if not _finite(x, mu):
         return float("nan")
     ksolve = ksolve or solver_for(qp)
     mu = np.asarray(mu, float)
-    if np.any(mu < 0):
-        return float("nan")
-    A = mu > 0
-    D = ksolve.delassus() if A.any() else np.zeros((0, 0))
-    if D is None:
-        return float("nan")
-    rKr, Bz = _quad or _residual_solve(qp, x, mu, ksolve)
+    D = ksolve.delassus() if qp.m else np.zeros((0, 0))
     gap = qp.B @ x
+    if D is None:                              # no Delassus matrix (large m, no reduction): the set {mu > 0}
+        if np.any(mu < 0) or np.any(mu > 0):
+            return float("nan")
+        A = mu > 0
+    else:
+        dD = np.diag(D)
+        c = 1.0 / dD.mean() if dD.size and dD.mean() > 0 else 1.0
+        A = (mu - c * gap) > 0
+    mu_A = np.where(A, mu, 0.0)
+    same = np.array_equal(mu_A, np.maximum(mu, 0.0))
+    rKr, Bz = (_quad if (_quad is not None and same) else None) or _residual_solve(qp, x, mu_A, ksolve)
     dmu = np.zeros_like(mu)
     if A.any():
         try:
@@ -179,8 +191,8 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     Bdx = -Bz + (D @ dmu if A.any() else 0.0)
     dxKdx = rKr - 2.0 * float(Bz @ dmu) + float(dmu @ (D @ dmu) if A.any() else 0.0)
     gap1 = gap + Bdx
-    mu1 = mu + dmu
-    step_mu = np.abs(dmu).max(initial=0.0)
+    mu1 = mu_A + dmu
+    step_mu = max(np.abs(dmu).max(initial=0.0), np.abs(mu - mu_A).max(initial=0.0))
     step_gap = np.abs(Bdx).max(initial=0.0)
     if A.any() and mu1[A].min() <= margin * step_mu:
         return float("nan")
@@ -203,6 +215,6 @@ def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | Non
         mu = np.asarray(mu, float)
         quad = _residual_solve(qp, x, np.maximum(mu, 0.0), ksolve)
     b = error_bound(qp, x, mu, ksolve, _quad=quad)
-    a = active_set_error(qp, x, mu, ksolve, _quad=quad if quad is not None and np.all(mu >= 0) else None)
+    a = active_set_error(qp, x, mu, ksolve, _quad=quad)
     vals = [v for v in (b, a) if np.isfinite(v)]
     return {"bound": b, "active_set": a, "value": min(vals) if vals else float("nan")}
