@@ -185,7 +185,7 @@ def test_tier_statistics_by_hand():
 
     def row(var, scene, status, kkt, t):
         return {"variant": var, "scene_key": scene, "tier": "x", "status": status, "kkt_error": kkt,
-                "total_s": t, "time_limit": 100.0}
+                "total_s": t, "time_limit": 100.0, "err_x_energy": 1e-9}
 
     runs = [row("a", "s1", "solved", 1e-9, 1.0), row("a", "s2", "solved", 1e-3, 2.0),     # 2nd: claims, wrong
             row("b", "s1", "solved", 1e-9, 4.0), row("b", "s2", "max_iter", 1e-3, 3.0),    # honest failure

@@ -20,7 +20,8 @@ def _cfg(p):
                    help="results directory (runs.jsonl, meta.json); default dualfem-results/stress/quick or .../full "
                         "(the committed grid is regenerated only with an explicit --out benchmarks/results/stress)")
     p.add_argument("--solvers", default=None, metavar="A,B",
-                   help="comma-separated solver names (default: every registered, installed solver)")
+                   help="comma-separated solver names, or 'all' (the default): every registered solver; one that "
+                        "is not installed gives skipped runs with its install hint")
     p.add_argument("--axes", default=None, metavar="A,B",
                    help="which axes: delta, r, units, load, nu, N (default all)")
     p.add_argument("--time-limit", type=str, default=None, metavar="SECONDS",
@@ -97,8 +98,8 @@ def cmd_stress(args) -> int:
 
 
 def _choice(flag: str, value: str | None, allowed: list[str], what: str, word: str) -> list[str]:
-    """The comma-separated names of ``flag`` (default: all of ``allowed``), each checked."""
-    if not value:
+    """The comma-separated names of ``flag`` (default or ``all``: all of ``allowed``), each checked."""
+    if not value or value.strip() == "all":
         return list(allowed)
     names = [s.strip() for s in value.split(",") if s.strip()]
     bad = [s for s in names if s not in allowed]
