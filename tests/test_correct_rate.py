@@ -84,14 +84,17 @@ def test_stability_correct_rate_table():
             stress_row("a", "load", "solved", "silent_wrong"), stress_row("a", "nu", "max_iter", "failed"),
             stress_row("b", "delta", "inaccurate", "failed", claimed="solved"),
             stress_row("b", "load", "solved", "correct"),
+            stress_row("b", "nu", "solved", "unverified"),          # no reference: not in the correct rate
             stress_row("c", "delta", "skipped", "skipped")]
     stats = {s["solver"]: s for s in solver_stats(recs)}
     assert math.isclose(stats["a"]["correct_rate"], 2 / 3) and stats["a"]["silent_wrong"] == 1
-    assert (stats["b"]["claims"], stats["b"]["demoted"], stats["b"]["correct_rate"]) == (2, 1, 0.5)
+    assert (stats["b"]["claims"], stats["b"]["demoted"], stats["b"]["unverified"]) == (3, 1, 1)
+    assert stats["b"]["correct_rate"] == 0.5 and math.isclose(stats["b"]["agree"], 2 / 3)
     assert stats["c"]["runs"] == 0
     text = "\n".join(correct_rate_section(recs))
     assert "| 1 | a | 4 | 3 | 2 | 67 % | 75 % | 0 | 0 | 1 | 0 |" in text
-    assert "| 2 | b | 2 | 2 | 1 | 50 % | 50 % | 1 | 0 | 0 | 0 |" in text
+    assert "| 2 | b | 3 | 3 | 1 | 50 % | 67 % | 1 | 0 | 0 | 1 |" in text
+    assert "| b | 0/1 (0 %) | 1/1 (100 %) | 0/0 |" in text
     assert "| a | 2/2 (100 %) | 0/1 (0 %) | 0/0 |" in text                     # per axis: delta, load, nu
     assert "Every run skipped" in text and "`c`" in text
 

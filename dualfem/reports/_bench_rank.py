@@ -64,8 +64,8 @@ def rank_table(runs: list[dict], tier: str, tol: float, shift: float,
 
 
 def _wrong(s: dict) -> str:
-    parts = [f"{s[k]} {k.replace('_', ' ')}" for k in ("demoted", "flagged", "silent_wrong", "unverified") if s[k]]
-    return ", ".join(parts) or "0"
+    parts = [f"{s[k]} {k.replace('_', ' ')}" for k in ("demoted", "flagged", "silent_wrong") if s[k]]
+    return (", ".join(parts) or "0") + (f" (+{s['unverified']} unverified)" if s["unverified"] else "")
 
 
 def _tier_section(runs: list[dict], tier: str, tol: float, shift: float, deltas: list[float]) -> list[str]:
@@ -106,11 +106,12 @@ def ranking(runs: list[dict], shift: float) -> list[str]:
     deltas = sorted({_delta(r) for r in runs if math.isfinite(_delta(r))}, reverse=True)
     L = ["## Per tolerance tier and delta", "", DEFINITION + " " + SUCCESS, "",
          f"Solvers are ranked by success rate, then by the shifted geometric mean of time (shift {shift:g} s; a run "
-         "that is not a success counts at its time limit), then by correct rate. *wrong claims* splits the solved "
-         "claims that are not certified correct: *demoted* (dualfem's certification turned the claim into "
+         "that is not a success counts at its time limit), then by correct rate. *wrong claims* splits the checkable "
+         "solved claims that are not certified correct: *demoted* (dualfem's certification turned the claim into "
          "`inaccurate`, or the run ended otherwise), *flagged* (status solved to the solver's declared tolerance, "
-         "KKT residual above the tier's), *silent wrong* (residuals within tol, answer off the reference), "
-         "*unverified* (no certified reference). A solver without tolerance options (tier `any`) is scored in every "
+         "KKT residual above the tier's), *silent wrong* (residuals within tol, answer off the reference); "
+         "*unverified* claims (no certified reference) are not wrong claims and not in the correct rate. A "
+         "solver without tolerance options (tier `any`) is scored in every "
          "tier with its one run.", ""]
     skipped = defaultdict(set)
     for r in runs:

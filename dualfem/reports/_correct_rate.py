@@ -11,10 +11,13 @@ Definitions (printed in the reports by :data:`DEFINITION`):
   largest KKT residual is <= tol and the relative energy-norm error against the certified
   reference is <= tol + the reference's own certified bound. In a bench, tol is the tier's
   tolerance; in a stress run, the tolerance the solver instance declares;
-* **correct rate** = certified correct / solved claims (undefined, shown as ``-``, without claims);
+* **correct rate** = certified correct / checkable solved claims, a claim being checkable unless
+  there is no certified reference to measure its error (grade ``unverified``: counted apart);
+  undefined, shown as ``-``, without checkable claims;
 * **success rate** = certified correct claims within the time limit / runs;
 * qpbenchmark computes its "correct rate" over every run, as the share whose ``found`` flag
-  agrees with the tolerance check, i.e. ``1 - wrong claims / runs``; it is reported beside ours as
+  agrees with the tolerance check, i.e. ``1 - wrong claims / runs`` (wrong = checkable claims not
+  certified correct); it is reported beside ours as
   **claims agree** (an honest failure counts as agreeing there).
 
 A bench run that claimed ``solved`` and was certified, but whose median time exceeded the time
@@ -32,11 +35,12 @@ from dualfem.core.grade import grade
 #: the correct rate in words (both reports print it)
 DEFINITION = (
     "**Correct rate** (qpbenchmark's metric of how far a `solved` return code can be trusted) = certified "
-    "correct / solved claims, where a *solved claim* is a run whose `claimed_status` (the solver's own word, "
+    "correct / checkable solved claims, where a *solved claim* is a run whose `claimed_status` (the solver's own word, "
     "before dualfem certifies it) is `solved`, and *certified correct* means `dualfem.core.grade` grades it "
     "`correct`: dualfem's certification kept the claim (status still `solved`), the evaluator's largest KKT "
     "residual is <= tol, and the relative energy-norm error against the certified reference is <= tol + the "
-    "reference's certified bound. qpbenchmark's code averages `found == (found and within tolerances)` over "
+    "reference's certified bound; a claim is checkable unless no certified reference exists to measure its error "
+    "(*unverified*, counted apart). qpbenchmark's code averages `found == (found and within tolerances)` over "
     "every run; that number, 1 - wrong claims / runs, is the column *claims agree* (an honest failure agrees).")
 #: the success rate in words (bench report)
 SUCCESS = ("**Success rate** = certified correct claims within the time limit / runs (a run over the time limit "
@@ -106,9 +110,10 @@ def claim_stats(rows: Iterable[Any], tol: float | None = None) -> dict[str, Any]
         key = {"flagged": "flagged", "silent_wrong": "silent_wrong", "unverified": "unverified"}.get(str(g), "demoted")
         out[key] += 1
     n, c = out["runs"], out["claims"]
-    out["correct_rate"] = out["certified"] / c if c else float("nan")
+    checked = c - out["unverified"]
+    out["correct_rate"] = out["certified"] / checked if checked else float("nan")
     out["success_rate"] = (out["certified"] - out["over_time"]) / n if n else float("nan")
-    out["agree"] = (n - (c - out["certified"])) / n if n else float("nan")
+    out["agree"] = (n - (checked - out["certified"])) / n if n else float("nan")
     return out
 
 

@@ -54,16 +54,16 @@ def correct_rate_section(recs: list) -> list[str]:
     axes = [a for a in AXES_ORDER if any(r["axis"] == a for r in recs)]
     axes += sorted({str(r["axis"]) for r in recs} - set(axes))
     if len(axes) > 1 and ran:
-        L += ["Per axis: certified correct / solved claims (correct rate); empty: no run on that axis, `0/0`: no "
-              "solved claim.", "",
+        L += ["Per axis: certified correct / checkable solved claims (correct rate); empty: no run on that axis, "
+              "`0/0`: no checkable solved claim.", "",
               "| solver | " + " | ".join(axes) + " |", "|---" * (len(axes) + 1) + "|"]
         for s in ran:
             cells = []
             for a in axes:
                 st = claim_stats([r for r in recs if r["solver"] == s["solver"] and r["axis"] == a])
+                checked = st["claims"] - st["unverified"]
                 cells.append("" if not st["runs"] else
-                             f"{st['certified']}/{st['claims']}" + (f" ({pct(st['correct_rate'])})" if st["claims"]
-                                                                   else ""))
+                             f"{st['certified']}/{checked}" + (f" ({pct(st['correct_rate'])})" if checked else ""))
             L.append(f"| {s['solver']} | " + " | ".join(cells) + " |")
         L.append("")
     return L

@@ -133,12 +133,30 @@ def _machine(rows: list[dict], sources: list[dict]) -> list[str]:
     return L + [""]
 
 
-def _method(runs: list[dict], shift: float) -> list[str]:
+def _warmups(sources: list[dict]) -> set[bool]:
+    """The warm-up settings of the sweeps (their spec.toml copies: top level and scene blocks)."""
+    import tomllib
+
+    out = set()
+    for src in sources:
+        try:
+            data = tomllib.loads((src["dir"] / "spec.toml").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        top = bool(data.get("warmup", True))
+        out |= {bool(b.get("warmup", top)) for b in data.get("scenes", [])} or {top}
+    return out
+
+
+def _method(runs: list[dict], shift: float, sources: list[dict] | None = None) -> list[str]:
     cold = {str(r.get("cold_setup")) for r in runs}
     reps = sorted({str(r.get("repeats")) for r in runs})
+    warm = _warmups(sources or [])
+    warm_txt = ("no warm-up run" if warm == {False} else
+                "one untimed warm-up run" + (" (in some scene blocks)" if warm == {True, False} else ""))
     return ["## How it was measured", "",
             f"- Time of a run = setup (assembly of solver data, scaling, factorizations) + solve, median of "
-            f"{'/'.join(reps)} timed repeats after one untimed warm-up run (per scene block of the spec). "
+            f"{'/'.join(reps)} timed repeats after {warm_txt} (per scene block of the spec). "
             f"Assembly of the QP itself (scikit-fem) is excluded and recorded separately (`assembly_s`).",
             f"- Cold setup: {'yes' if cold == {'True'} else 'no' if cold == {'False'} else 'mixed'} - "
             "`dualfem.linalg.clear_cache()` is called before every timed repeat, so a solver that factorizes "
@@ -264,7 +282,7 @@ def build_report(results: str | Path | list[str | Path], md: str | Path, figdir:
         figrel = figdir.resolve().relative_to(md.parent.resolve())
     except ValueError:
         figrel = figdir.resolve()
-    L = _header(results, sources, rows, command) + _machine(rows, sources) + _method(runs, shift)
+    L = _header(results, sources, rows, command) + _machine(rows, sources) + _method(runs, shift, sources)
     L += _references(refs, sources) + ranking(runs, shift) + ["## Performance targets", ""]
     L += targets(runs, floors, ours, err_target, floor_target, speed_target, tag_sources=len(sources) > 1)
     L.append("")
