@@ -526,3 +526,18 @@ def test_stress_results_load_as_a_dataframe(tmp_path):
                                          '"status": "solved", "err": 1e-12, "tolerance": 1e-9, "kkt": 1e-13}\n')
     df = results.load(tmp_path)
     assert df.loc[0, "grade"] == "correct" and df.loc[0, "err_x_energy"] == 1e-12
+
+
+def test_method_text_follows_the_specs_warmup(tmp_path):
+    from dualfem.reports.bench import _method
+
+    def text(spec: str) -> str:
+        d = tmp_path / str(abs(hash(spec)))
+        d.mkdir()
+        (d / "spec.toml").write_text(spec, encoding="utf-8")
+        return " ".join(_method([], 10.0, [{"dir": d}]))
+
+    assert "after no warm-up run" in text('warmup = false\n[[scenes]]\nscene = "f1"\n')
+    assert "after one untimed warm-up run." in text('[[scenes]]\nscene = "f1"\n')
+    assert "in some scene blocks, none in others" in text(
+        '[[scenes]]\nscene = "f1"\n[[scenes]]\nscene = "f2"\nwarmup = false\n')

@@ -153,10 +153,10 @@ def _method(runs: list[dict], shift: float, sources: list[dict] | None = None) -
     reps = sorted({str(r.get("repeats")) for r in runs})
     warm = _warmups(sources or [])
     warm_txt = ("no warm-up run" if warm == {False} else
-                "one untimed warm-up run" + (" (in some scene blocks)" if warm == {True, False} else ""))
+                "one untimed warm-up run" + (" in some scene blocks, none in others" if warm == {True, False} else ""))
     return ["## How it was measured", "",
             f"- Time of a run = setup (assembly of solver data, scaling, factorizations) + solve, median of "
-            f"{'/'.join(reps)} timed repeats after {warm_txt} (per scene block of the spec). "
+            f"{'/'.join(reps)} timed repeats (per scene block of the spec) after {warm_txt}. "
             f"Assembly of the QP itself (scikit-fem) is excluded and recorded separately (`assembly_s`).",
             f"- Cold setup: {'yes' if cold == {'True'} else 'no' if cold == {'False'} else 'mixed'} - "
             "`dualfem.linalg.clear_cache()` is called before every timed repeat, so a solver that factorizes "
