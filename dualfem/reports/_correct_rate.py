@@ -91,8 +91,8 @@ def claim_stats(rows: Iterable[Any], tol: float | None = None) -> dict[str, Any]
     ``tol``), correct_rate, success_rate, agree (qpbenchmark's formula); rates are fractions in
     [0, 1], NaN when their denominator is 0.
     """
-    out = {"runs": 0, "claims": 0, "certified": 0, "over_time": 0, "demoted": 0, "flagged": 0, "silent_wrong": 0,
-           "unverified": 0}
+    out: dict[str, Any] = {"runs": 0, "claims": 0, "certified": 0, "over_time": 0, "demoted": 0, "flagged": 0,
+                           "silent_wrong": 0, "unverified": 0}
     for r in rows:
         if str(_get(r, "status")) == "skipped":
             continue
