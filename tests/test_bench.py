@@ -185,7 +185,7 @@ def test_tier_statistics_by_hand():
 
     def row(var, scene, status, kkt, t):
         return {"variant": var, "scene_key": scene, "tier": "x", "status": status, "kkt_error": kkt,
-                "total_s": t, "time_limit": 100.0}
+                "total_s": t, "time_limit": 100.0, "err_x_energy": 1e-9}
 
     runs = [row("a", "s1", "solved", 1e-9, 1.0), row("a", "s2", "solved", 1e-3, 2.0),     # 2nd: claims, wrong
             row("b", "s1", "solved", 1e-9, 4.0), row("b", "s2", "max_iter", 1e-3, 3.0),    # honest failure
@@ -529,3 +529,18 @@ def test_stress_results_load_as_a_dataframe(tmp_path):
                                          '"status": "solved", "err": 1e-12, "tolerance": 1e-9, "kkt": 1e-13}\n')
     df = results.load(tmp_path)
     assert df.loc[0, "grade"] == "correct" and df.loc[0, "err_x_energy"] == 1e-12
+
+
+def test_method_text_follows_the_specs_warmup(tmp_path):
+    from dualfem.reports.bench import _method
+
+    def text(spec: str) -> str:
+        d = tmp_path / str(abs(hash(spec)))
+        d.mkdir()
+        (d / "spec.toml").write_text(spec, encoding="utf-8")
+        return " ".join(_method([], 10.0, [{"dir": d}]))
+
+    assert "after no warm-up run" in text('warmup = false\n[[scenes]]\nscene = "f1"\n')
+    assert "after one untimed warm-up run." in text('[[scenes]]\nscene = "f1"\n')
+    assert "in some scene blocks, none in others" in text(
+        '[[scenes]]\nscene = "f1"\n[[scenes]]\nscene = "f2"\nwarmup = false\n')

@@ -24,7 +24,8 @@ def _cfg(p):
                         "(default: the paper's f2, N = 32, or 16 with --quick); it keeps its own mesh and load "
                         "except on the N axis")
     p.add_argument("--solvers", default=None, metavar="A,B",
-                   help="comma-separated solver names (default: every registered, installed solver)")
+                   help="comma-separated solver names, or 'all' (the default): every registered solver; one that "
+                        "is not installed gives skipped runs with its install hint")
     p.add_argument("--axes", default=None, metavar="A,B",
                    help="which axes: delta, r, units, load, nu, N (default all)")
     p.add_argument("--time-limit", type=str, default=None, metavar="SECONDS",
@@ -102,8 +103,8 @@ def cmd_stress(args) -> int:
 
 
 def _choice(flag: str, value: str | None, allowed: list[str], what: str, word: str) -> list[str]:
-    """The comma-separated names of ``flag`` (default: all of ``allowed``), each checked."""
-    if not value:
+    """The comma-separated names of ``flag`` (default or ``all``: all of ``allowed``), each checked."""
+    if not value or value.strip() == "all":
         return list(allowed)
     names = [s.strip() for s in value.split(",") if s.strip()]
     bad = [s for s in names if s not in allowed]

@@ -8,12 +8,9 @@ in the report (also printed in it):
 
 * time of a run = setup + solve (median over the timed repeats; the factorization cache of
   :mod:`dualfem.linalg` is cleared before every repeat when the sweep had ``cold_setup``);
-* success at a tier of tolerance tol = the solver's status is ``solved`` AND the evaluator's
-  largest KKT residual is <= tol;
-* correct = the solver's claim agrees with the evaluator: (status == solved) == (KKT <= tol);
-* shifted geometric mean of time (qpbenchmark): exp(mean(log(t + 10))) - 10 with t in seconds,
-  failures counted at the time limit, over the scenes that every solver of the tier ran;
-  normalised to the best solver of the tier (1.00 = best).
+* per tolerance tier and per delta, every solver is ranked by success rate, qpbenchmark's correct
+  rate of ``solved`` claims and the shifted geometric mean of time (definitions in
+  :mod:`dualfem.reports._correct_rate` and :mod:`dualfem.reports._bench_rank`, printed in the report).
 """
 from __future__ import annotations
 
@@ -26,50 +23,14 @@ from pathlib import Path
 from dualfem.cli.report import register_report
 from dualfem.core.errors import InputError
 from dualfem.reports._bench_plots import plots
+from dualfem.reports._bench_rank import rank_table, ranking
 from dualfem.reports._bench_targets import targets
 from dualfem.reports._bench_util import _f, _fmt
 
 
-def _sgm(times: list[float], shift: float) -> float:
-    if not times:
-        return float("nan")
-    return math.exp(sum(math.log(t + shift) for t in times) / len(times)) - shift
-
-
 def tier_table(runs: list[dict], tier: str, tol: float, shift: float) -> tuple[list[dict], int]:
-    """Per-variant statistics at one tier (rows of tier ``tier`` plus tolerance-free 'any' rows)."""
-    rows = [r for r in runs if r["tier"] in (tier, "any") and r["status"] != "skipped"]
-    by_var: dict[str, dict[str, dict]] = defaultdict(dict)
-    for r in rows:
-        by_var[r["variant"]][r["scene_key"]] = r
-    if not by_var:
-        return [], 0
-    common = set.intersection(*(set(d) for d in by_var.values()))
-    stats = []
-    for var, d in sorted(by_var.items()):
-        n = len(d)
-        succ = corr = 0
-        times = []
-        for key, r in d.items():
-            k = _f(r.get("kkt_error"))
-            within = math.isfinite(k) and k <= tol
-            claims = r["status"] == "solved"
-            ok = claims and within
-            succ += ok
-            corr += claims == within
-            if key in common:
-                tl = _f(r.get("time_limit"))
-                t = _f(r.get("total_s"))
-                times.append(t if ok and math.isfinite(t) else (tl if math.isfinite(tl) else t))
-        stats.append({"variant": var, "n": n, "success": succ / n, "correct": corr / n,
-                      "sgm": _sgm([t for t in times if math.isfinite(t)], shift),
-                      "gm": _sgm([max(t, 1e-6) for t in times if math.isfinite(t)], 0.0)})
-    for key in ("sgm", "gm"):
-        best = min((s[key] for s in stats if math.isfinite(s[key])), default=float("nan"))
-        for s in stats:
-            s[key + "_rel"] = s[key] / best if best and math.isfinite(best) and best > 0 else float("nan")
-    return stats, len(common)
-
+    """Per-variant statistics at one tier over every delta (see :func:`dualfem.reports._bench_rank.rank_table`)."""
+    return rank_table(runs, tier, tol, shift)
 
 
 def _slot(r: dict) -> tuple:
@@ -172,12 +133,30 @@ def _machine(rows: list[dict], sources: list[dict]) -> list[str]:
     return L + [""]
 
 
-def _method(runs: list[dict], shift: float) -> list[str]:
+def _warmups(sources: list[dict]) -> set[bool]:
+    """The warm-up settings of the sweeps (their spec.toml copies: top level and scene blocks)."""
+    import tomllib
+
+    out = set()
+    for src in sources:
+        try:
+            data = tomllib.loads((src["dir"] / "spec.toml").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        top = bool(data.get("warmup", True))
+        out |= {bool(b.get("warmup", top)) for b in data.get("scenes", [])} or {top}
+    return out
+
+
+def _method(runs: list[dict], shift: float, sources: list[dict] | None = None) -> list[str]:
     cold = {str(r.get("cold_setup")) for r in runs}
     reps = sorted({str(r.get("repeats")) for r in runs})
+    warm = _warmups(sources or [])
+    warm_txt = ("no warm-up run" if warm == {False} else
+                "one untimed warm-up run" + (" in some scene blocks, none in others" if warm == {True, False} else ""))
     return ["## How it was measured", "",
             f"- Time of a run = setup (assembly of solver data, scaling, factorizations) + solve, median of "
-            f"{'/'.join(reps)} timed repeats after one untimed warm-up run (per scene block of the spec). "
+            f"{'/'.join(reps)} timed repeats (per scene block of the spec) after {warm_txt}. "
             f"Assembly of the QP itself (scikit-fem) is excluded and recorded separately (`assembly_s`).",
             f"- Cold setup: {'yes' if cold == {'True'} else 'no' if cold == {'False'} else 'mixed'} - "
             "`dualfem.linalg.clear_cache()` is called before every timed repeat, so a solver that factorizes "
@@ -190,10 +169,10 @@ def _method(runs: list[dict], shift: float) -> list[str]:
             "the evaluator (KKT error below the spec's `reference.certify`); relative energy-norm error of x, "
             "relative max error of the multipliers, relative objective gap. A run of the reference's own solver "
             "is compared against itself (error 0 or near): its accuracy is certified by the KKT residuals only.",
-            f"- Success at a tier: status solved and the evaluator's KKT error <= the tier's tolerance. Correct: "
-            f"(status == solved) == (KKT error <= tolerance). Shifted geometric mean of time: shift {shift:g} s, "
-            "failures counted at the time limit, over the scenes every solver of the tier ran, normalised to the "
-            "best (1.00). Solvers without tolerance options (tier `any`) are scored in every tier with one run.",
+            f"- Success and correct rate per tier and delta: see the section of that name. Shifted geometric mean of "
+            f"time: shift {shift:g} s, failures counted at the time limit, over the scenes every ranked solver ran, "
+            "normalised to the best (1.00). Solvers without tolerance options (tier `any`) are scored in every tier "
+            "with one run.",
             "- Failed runs (error, time_limit, max_iter, ...) are rows with their status and message, never "
             "results: they have no error columns unless the solver returned an iterate.", ""]
 
@@ -233,22 +212,6 @@ def _references(refs: list[dict], sources: list[dict]) -> list[str]:
                  f"median {ks[len(ks) // 2]:.1e}.")
     L += [f"- NO certified reference for {r['label']}: {r.get('message')}" for r in refs if r["status"] != "solved"]
     return L + [""]
-
-
-def _tiers(runs: list[dict], shift: float) -> list[str]:
-    tiers = sorted({(r["tier"], _f(r.get("tol"))) for r in runs if r["tier"] not in ("any", "")},
-                   key=lambda t: -t[1])
-    L = ["## Per tolerance tier", ""]
-    for tier, tol in tiers:
-        stats, ncommon = tier_table(runs, tier, tol, shift)
-        L += [f"### tier {tier} (tol {tol:g})", "",
-              f"Shifted geometric means over {ncommon} scenes that every solver of this tier ran.", "",
-              "| solver | runs | success rate | correct rate | shifted GM of time (rel.) | plain GM of time (rel.) |",
-              "|---|---|---|---|---|---|"]
-        L += [f"| {s['variant']} | {s['n']} | {100 * s['success']:.0f} % | {100 * s['correct']:.0f} % "
-              f"| {_fmt(s['sgm_rel'], '.2f')} ({_fmt(s['sgm'])} s) | {_fmt(s['gm_rel'], '.2f')} |" for s in stats]
-        L.append("")
-    return L
 
 
 def _figures(wp: list[str], sc: list[str], figrel, ok_solvers: list[str]) -> list[str]:
@@ -319,8 +282,8 @@ def build_report(results: str | Path | list[str | Path], md: str | Path, figdir:
         figrel = figdir.resolve().relative_to(md.parent.resolve())
     except ValueError:
         figrel = figdir.resolve()
-    L = _header(results, sources, rows, command) + _machine(rows, sources) + _method(runs, shift)
-    L += _references(refs, sources) + _tiers(runs, shift) + ["## Performance targets", ""]
+    L = _header(results, sources, rows, command) + _machine(rows, sources) + _method(runs, shift, sources)
+    L += _references(refs, sources) + ranking(runs, shift) + ["## Performance targets", ""]
     L += targets(runs, floors, ours, err_target, floor_target, speed_target, tag_sources=len(sources) > 1)
     L.append("")
     L += _figures(wp, sc, figrel, sorted({r["solver"] for r in refs if r["status"] == "solved"}))

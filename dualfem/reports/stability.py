@@ -2,7 +2,8 @@
 
 Colour maps (outcome, error, iterations, time) per axis of the grid, the boundaries where each
 solver stops being correct (with the solver's own message), the list of silent wrong answers
-(ours and third-party, with their scenes), and Uzawa's r x delta map beside its default setting.
+(ours and third-party, with their scenes), qpbenchmark's correct rate of ``solved`` claims per
+solver and axis, and Uzawa's r x delta map beside its default setting.
 Figures go to ``reports/stability/`` next to the Markdown file; every file is written atomically.
 """
 from __future__ import annotations
@@ -15,6 +16,7 @@ from pathlib import Path
 
 from dualfem.cli.report import register_report
 from dualfem.core.errors import InputError
+from dualfem.reports._stability_correct import correct_rate_section
 from dualfem.reports._stability_findings import _findings
 
 COLORS = {"correct": "#2e9d4f", "failed": "#f0a030", "flagged": "#f5d040", "timeout": "#c77c2a",
@@ -413,7 +415,7 @@ def _other_axes(recs: list, fig_dir: Path) -> list[str]:
 def render(meta: dict, recs: list, md_path: Path) -> str:
     """Write the figures next to ``md_path`` (folder ``stability/``) and return the Markdown text."""
     fig_dir = md_path.parent / "stability"
-    L = _head(meta, recs) + _summary(recs)
+    L = _head(meta, recs) + _summary(recs) + correct_rate_section(recs)
     fig_dir.mkdir(parents=True, exist_ok=True)
     L += ["## The grid", "",
           f"Base scene: the paper's f2 (E = 69000, nu = 0.3, plane strain, delta = 1e-5) at N = "

@@ -1,0 +1,126 @@
+"""Ranking of every solver of a sweep per tolerance tier and per delta (``dualfem report bench``).
+
+For each tier (and each delta within it): success rate, qpbenchmark's correct rate of ``solved``
+claims (:mod:`dualfem.reports._correct_rate`), and the shifted geometric mean of time. Render
+only: everything comes from the rows of ``results.csv``.
+
+Time of a run = setup + solve (s). Shifted geometric mean (qpbenchmark): exp(mean(log(t + shift))) -
+shift over the scenes that every ranked solver of the table ran, a run that is not a success counted
+at its time limit; normalised to the best solver of the table (1.00 = best).
+"""
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+
+from dualfem.reports._bench_util import _f, _fmt
+from dualfem.reports._correct_rate import DEFINITION, SUCCESS, certified_correct, claim_stats, pct
+
+
+def _sgm(times: list[float], shift: float) -> float:
+    if not times:
+        return float("nan")
+    return math.exp(sum(math.log(t + shift) for t in times) / len(times)) - shift
+
+
+def _delta(r: dict) -> float:
+    return _f(r.get("scene_delta"))
+
+
+def rank_table(runs: list[dict], tier: str, tol: float, shift: float,
+               delta: float | None = None) -> tuple[list[dict], int]:
+    """Per-variant statistics at one tier (rows of ``tier`` plus tolerance-free ``any`` rows), optionally
+    only the scenes with ``scene_delta == delta``; sorted best first (success, then time, then correct
+    rate). Returns (stats, number of scenes every variant ran)."""
+    rows = [r for r in runs if r["tier"] in (tier, "any") and r["status"] != "skipped"
+            and (delta is None or math.isclose(_delta(r), delta, rel_tol=1e-9))]
+    by_var: dict[str, dict[str, dict]] = defaultdict(dict)
+    for r in rows:
+        by_var[r["variant"]][str(r["scene_key"])] = r
+    if not by_var:
+        return [], 0
+    common = set.intersection(*(set(d) for d in by_var.values()))
+    stats = []
+    for var, d in by_var.items():
+        st = claim_stats(d.values(), tol)
+        times = []
+        for key in sorted(common):
+            r = d[key]
+            ok = certified_correct(r, tol) and r["status"] != "time_limit"
+            t, tl = _f(r.get("total_s")), _f(r.get("time_limit"))
+            times.append(t if ok and math.isfinite(t) else (tl if math.isfinite(tl) else t))
+        times = [t for t in times if math.isfinite(t)]
+        st.update(variant=var, n=st["runs"], success=st["success_rate"], correct=st["correct_rate"],
+                  sgm=_sgm(times, shift), gm=_sgm([max(t, 1e-6) for t in times], 0.0))
+        stats.append(st)
+    for key in ("sgm", "gm"):
+        best = min((s[key] for s in stats if math.isfinite(s[key])), default=float("nan"))
+        for s in stats:
+            s[key + "_rel"] = s[key] / best if best and math.isfinite(best) and best > 0 else float("nan")
+    stats.sort(key=lambda s: (-(s["success"] if math.isfinite(s["success"]) else -1),
+                              s["sgm"] if math.isfinite(s["sgm"]) else math.inf,
+                              -(s["correct"] if math.isfinite(s["correct"]) else -1), s["variant"]))
+    return stats, len(common)
+
+
+def _wrong(s: dict) -> str:
+    parts = [f"{s[k]} {k.replace('_', ' ')}" for k in ("demoted", "flagged", "silent_wrong") if s[k]]
+    return (", ".join(parts) or "0") + (f" (+{s['unverified']} unverified)" if s["unverified"] else "")
+
+
+def _tier_section(runs: list[dict], tier: str, tol: float, shift: float, deltas: list[float]) -> list[str]:
+    stats, ncommon = rank_table(runs, tier, tol, shift)
+    if not stats:
+        return []
+    L = [f"### tier {tier} (tol {tol:g})", "",
+         f"All deltas. Shifted geometric mean of time over the {ncommon} scenes every solver of this tier ran.", "",
+         "| rank | solver | runs | success rate | solved claims | certified correct | correct rate | claims agree "
+         "| wrong claims | shifted GM of time (rel.) | plain GM of time (rel.) |",
+         "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for i, s in enumerate(stats, 1):
+        over = f" ({s['over_time']} over time)" if s["over_time"] else ""
+        L.append(f"| {i} | {s['variant']} | {s['runs']} | {pct(s['success'])} | {s['claims']} | {s['certified']}{over} "
+                 f"| {pct(s['correct'])} | {pct(s['agree'])} | {_wrong(s)} | {_fmt(s['sgm_rel'], '.2f')} "
+                 f"({_fmt(s['sgm'])} s) | {_fmt(s['gm_rel'], '.2f')} |")
+    L.append("")
+    if len(deltas) > 1:
+        per = {d: {s["variant"]: s for s in rank_table(runs, tier, tol, shift, d)[0]} for d in deltas}
+        L += [f"Per delta (tier {tier}): success rate / correct rate / shifted GM of time relative to the best "
+              "solver at that delta; rows in the order of the table above.", "",
+              "| solver | " + " | ".join(f"delta = {d:g}" for d in deltas) + " |", "|---" * (len(deltas) + 1) + "|"]
+        for s in stats:
+            cells = []
+            for d in deltas:
+                x = per[d].get(s["variant"])
+                cells.append("" if x is None else f"{pct(x['success'])} / {pct(x['correct'])} / "
+                                                  f"{_fmt(x['sgm_rel'], '.2f')}")
+            L.append(f"| {s['variant']} | " + " | ".join(cells) + " |")
+        L.append("")
+    return L
+
+
+def ranking(runs: list[dict], shift: float) -> list[str]:
+    """The section ``Per tolerance tier``: a ranked table per tier, then per delta within it."""
+    tiers = sorted({(r["tier"], _f(r.get("tol"))) for r in runs if r["tier"] not in ("any", "")},
+                   key=lambda t: -t[1])
+    deltas = sorted({_delta(r) for r in runs if math.isfinite(_delta(r))}, reverse=True)
+    L = ["## Per tolerance tier and delta", "", DEFINITION + " " + SUCCESS, "",
+         f"Solvers are ranked by success rate, then by the shifted geometric mean of time (shift {shift:g} s; a run "
+         "that is not a success counts at its time limit), then by correct rate. *wrong claims* splits the checkable "
+         "solved claims that are not certified correct: *demoted* (dualfem's certification turned the claim into "
+         "`inaccurate`, or the run ended otherwise), *flagged* (status solved to the solver's declared tolerance, "
+         "KKT residual above the tier's), *silent wrong* (residuals within tol, answer off the reference); "
+         "*unverified* claims (no certified reference) are not wrong claims and not in the correct rate. A "
+         "solver without tolerance options (tier `any`) is scored in every "
+         "tier with its one run.", ""]
+    skipped = defaultdict(set)
+    for r in runs:
+        if r["status"] == "skipped":
+            skipped[r["variant"]].add(str(r.get("message") or "")[:150])
+    ran = {r["variant"] for r in runs if r["status"] != "skipped"}
+    if set(skipped) - ran:
+        L += ["Not run (skipped, so not ranked): " + "; ".join(
+            f"`{v}` ({'; '.join(sorted(m))})" for v, m in sorted(skipped.items()) if v not in ran) + ".", ""]
+    for tier, tol in tiers:
+        L += _tier_section(runs, tier, tol, shift, deltas)
+    return L
