@@ -11,7 +11,7 @@ must give the same status and the same relative answer as the unscaled scene. Ex
 Covered: uzawa_auto, pdas, penalty, mprgp, dual_gradient, osqp, clarabel, cvxpy and every installed
 qpsolvers backend (``qp_*``) except the two JAX ones (qp_qpax, qp_jaxopt_osqp: about a second
 per solve, compiled per shape; they are normalised by the same dualfem.numerics.scaling as the
-others). ``uzawa`` (the paper's method, the default solver) is scale-free in the load only: its
+others). ``uzawa`` (the paper's method with its r = 1e7) is scale-free in the load only: its
 r = 1e7 is an absolute number (stress / length), so changing E or the length unit changes the
 method, not only the units. There it must fail honestly (status not 'solved'), which is checked;
 ``uzawa_auto`` (r from the QP) is its scale-free form.

@@ -157,14 +157,16 @@ def _method(runs: list[dict], shift: float, sources: list[dict] | None = None) -
     return ["## How it was measured", "",
             f"- Time of a run = setup (assembly of solver data, scaling, factorizations) + solve, median of "
             f"{'/'.join(reps)} timed repeats (per scene block of the spec) after {warm_txt}. "
-            f"Assembly of the QP itself (scikit-fem) is excluded and recorded separately (`assembly_s`).",
+            f"Assembly of the QP itself (scene -> QP) is excluded and recorded separately (`assembly_s`; the "
+            "targets table adds it as *end to end*).",
             f"- Cold setup: {'yes' if cold == {'True'} else 'no' if cold == {'False'} else 'mixed'} - "
             "`dualfem.linalg.clear_cache()` is called before every timed repeat, so a solver that factorizes "
             "K_fixed pays for it in every repeat (the cache that shares it across delta and loads is not "
             "allowed to hide it).",
-            "- Floor: one sparse factorization + one solve of the unconstrained K of the same size (scipy "
-            "`splu` with `permc_spec=\"MMD_AT_PLUS_A\"`, symmetric mode; CHOLMOD too when scikit-sparse is "
-            "installed, the faster one is the floor).",
+            "- Floor: one sparse factorization + one solve of the unconstrained K of the same size by every "
+            "installed library (scipy `splu` with `permc_spec=\"MMD_AT_PLUS_A\"`; MKL PARDISO when pypardiso is "
+            "installed; CHOLMOD when scikit-sparse is), same threads: the fastest is the floor (named in the "
+            "tables; results of sweeps older than the PARDISO backend have only splu/CHOLMOD floors).",
             "- Errors: against a reference per scene, solved once by a certified exact solver and checked by "
             "the evaluator (KKT error below the spec's `reference.certify`); relative energy-norm error of x, "
             "relative max error of the multipliers, relative objective gap. A run of the reference's own solver "
