@@ -15,7 +15,8 @@ from typing import Any
 from dualfem.cli.stages import Stages
 from dualfem.core.errors import InputError, MissingDependency
 
-DEFAULT_SOLVER = "uzawa_auto"        # the paper's method with r from the QP: scale-free (uzawa's r = 1e7 is in MPa per unit length)
+#: the paper's method with r taken from the QP: scale-free (uzawa's r = 1e7 is in MPa per unit length)
+DEFAULT_SOLVER = "uzawa_auto"
 _COMMANDS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {}
 
 
