@@ -171,10 +171,10 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     mu = np.asarray(mu, float)
     D = ksolve.delassus() if qp.m else np.zeros((0, 0))
     gap = qp.B @ x
-    if D is None:                              # no Delassus matrix (large m, no reduction): the set {mu > 0}
-        if np.any(mu < 0) or np.any(mu > 0):
+    if D is None:                  # no Delassus matrix (large m, no reduction): only mu = 0 can be checked
+        if np.any(mu != 0):
             return float("nan")
-        A = mu > 0
+        D, A = np.zeros((0, 0)), np.zeros(mu.size, bool)
     else:
         dD = np.diag(D)
         c = 1.0 / dD.mean() if dD.size and dD.mean() > 0 else 1.0
