@@ -118,6 +118,14 @@ def solver_for(qp: QP) -> KSolver:
 FEAS_RTOL = 1e-12
 
 
+def guess_active_set(D: np.ndarray, mu: np.ndarray, gap: np.ndarray) -> np.ndarray:
+    """The primal-dual active-set guess ``{mu_j - c gap_j > 0}``, c = 1 / mean diag of the Delassus
+    matrix D (so that c gap is a force); for an active-set answer this is {mu > 0}."""
+    dD = np.diag(D)
+    c = 1.0 / dD.mean() if dD.size and dD.mean() > 0 else 1.0
+    return (np.asarray(mu, float) - c * gap) > 0
+
+
 def _finite(x, mu) -> bool:
     return x is not None and mu is not None and bool(np.all(np.isfinite(x)) and np.all(np.isfinite(mu)))
 
@@ -176,9 +184,7 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
             return float("nan")
         D, A = np.zeros((0, 0)), np.zeros(mu.size, bool)
     else:
-        dD = np.diag(D)
-        c = 1.0 / dD.mean() if dD.size and dD.mean() > 0 else 1.0
-        A = (mu - c * gap) > 0
+        A = guess_active_set(D, mu, gap)
     mu_A = np.where(A, mu, 0.0)
     same = np.array_equal(mu_A, np.maximum(mu, 0.0))
     rKr, Bz = (_quad if (_quad is not None and same) else None) or _residual_solve(qp, x, mu_A, ksolve)
@@ -188,8 +194,9 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
             dmu[A] = sla.solve(D[np.ix_(A, A)], -(gap[A] - Bz[A]), assume_a="pos")
         except (np.linalg.LinAlgError, ValueError):
             return float("nan")
-    Bdx = -Bz + (D @ dmu if A.any() else 0.0)
-    dxKdx = rKr - 2.0 * float(Bz @ dmu) + float(dmu @ (D @ dmu) if A.any() else 0.0)
+    Ddmu = D @ dmu if A.any() else np.zeros_like(dmu)
+    Bdx = -Bz + Ddmu
+    dxKdx = rKr - 2.0 * float(Bz @ dmu) + float(dmu @ Ddmu)
     gap1 = gap + Bdx
     mu1 = mu_A + dmu
     step_mu = max(np.abs(dmu).max(initial=0.0), np.abs(mu - mu_A).max(initial=0.0))

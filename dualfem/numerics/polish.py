@@ -21,16 +21,15 @@ from dualfem.core.qp import QP
 
 def active_set_polish(qp: QP, x: np.ndarray, mu: np.ndarray, red=None):
     """(x, mu, info) polished on the guessed active set, or None if the guess is inconsistent."""
+    from dualfem.core.certify import guess_active_set
     from dualfem.numerics.linalg import LocalReduction
 
     if x is None or mu is None or not (np.all(np.isfinite(x)) and np.all(np.isfinite(mu))):
         return None
     red = red or LocalReduction(qp)
     D, b0 = red.dual()
-    m = qp.m
-    c = 1.0 / np.diag(D).mean() if m else 1.0
-    A = (np.asarray(mu) - c * (qp.B @ x)) > 0
-    mu1 = np.zeros(m)
+    A = guess_active_set(D, mu, qp.B @ x)
+    mu1 = np.zeros(qp.m)
     try:
         if A.any():
             mu1[A] = sla.solve(D[np.ix_(A, A)], -b0[A], assume_a="pos")
