@@ -342,13 +342,10 @@ class LocalReduction:
         With K = K_fixed + K_param (K_param on I x I): u = K_fixed^-1 r, the local part solves
         ``S x_I = S_fixed u_I``, and x = K_fixed^-1 (r + e) with e_I = S_fixed x_I - S_fixed u_I.
         """
-        ff = self.factor
-        u = ff.solve(r)
-        gI = ff.S_fixed @ u[self.I]
-        xI = dla.cho_solve(self.S_cho, gI)
+        _, gI, xI = self._k_parts(r)
         e = np.zeros_like(r)
-        e[self.I] = ff.S_fixed @ xI - gI
-        return ff.solve(r + e)
+        e[self.I] = self.factor.S_fixed @ xI - gI
+        return self.factor.solve(r + e)
 
 
 def _local_param_block(qp: QP, I: np.ndarray) -> np.ndarray:
