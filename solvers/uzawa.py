@@ -52,6 +52,14 @@ paper's fixed r = 1e7 gives r mu ~ 1e-2 at delta = 1e-9: the ~900 iterations of 
 same r mu in MPa/mm and Pa/m), so every mode contracts by 1 / (1 + r_factor). The solver
 ``uzawa_auto`` is this method with ``r_rule="auto"``; ``uzawa`` keeps the paper's r = 1e7.
 
+The paper's r is a dimensional number (stress / length): 1e7 MPa per unit length for its body of
+E = 69000 MPa and width 1. ``r_rule="scaled"`` (the default of ``uzawa``) reads ``r`` in those
+units and converts it to the scene's: r_used = r * (E / 69000) / width, with E and width from the
+QP's scene parameters. In the paper's units r_used = r exactly (the same iterates as the paper's
+method); with E or the length unit scaled by any factor, the iterates scale with them and the
+status stays the same. A QP without scene units (a QP file) uses r as given, and says so in
+``info["r_units"]``. ``r_rule="fixed"`` uses r as given always (``report paper`` asks for it).
+
 Linear algebra (``linalg``): ``"reduced"`` (default) works on the local unknowns only via the
 exact Schur reduction of :class:`dualfem.linalg.LocalReduction` (K_fixed factorized once,
 reused across delta, loads and solvers); each generalized Hessian is a small dense SPD matrix
@@ -75,6 +83,24 @@ from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
 from dualfem.numerics.factor import from_param
 from dualfem.numerics.linalg import sparse_factor
+
+#: the paper's unit system (Zhiltsov & Maksimova 2023, section 5): E in MPa, the unit square
+PAPER_E = 69000.0
+PAPER_WIDTH = 1.0
+
+
+def paper_r_in_scene_units(r: float, scene: dict) -> tuple[float, str]:
+    """(r converted from the paper's units to the scene's, how): r * (E / 69000) / (width / 1).
+
+    r is a stress per length; a scene in other units (E and width from its parameters) gets the
+    same r relative to its own stiffness and size. Without both parameters r is used as given."""
+    try:
+        E, width = float(scene["E"]), float(scene["width"])
+    except (KeyError, TypeError, ValueError):
+        return r, "as given (the QP has no scene E and width)"
+    if not (np.isfinite(E) and np.isfinite(width) and E > 0 and width > 0):
+        return r, "as given (the QP has no scene E and width)"
+    return r * (E / PAPER_E) * (PAPER_WIDTH / width), f"scaled: r * (E / {PAPER_E:g}) / width"
 
 
 def _contraction(history: list[dict], last: int = 5) -> float:
@@ -177,8 +203,9 @@ class Uzawa(Solver):
     description = "Uzawa / modified Lagrangian + generalized Newton-Armijo (Zhiltsov & Maksimova 2023)"
     tolerance = 1e-6
     defaults = {
-        "r": 1e7,                 # augmentation parameter (stress / length), used with r_rule="fixed"
-        "r_rule": "fixed",        # "fixed": r as given (paper); "auto": r = r_factor / mu_min(B K^-1 B' W)
+        "r": 1e7,                 # augmentation parameter (stress / length, the paper's units with r_rule="scaled")
+        "r_rule": "scaled",       # "scaled": r * (E / 69000 MPa) / width (scene units); "fixed": r as given;
+                                  # "auto": r = r_factor / mu_min(B K^-1 B' W)
         "r_factor": 100.0,        # with r_rule="auto": slowest dual mode contracts by 1/(1 + r_factor) per outer it
         "tol": 1e-6,              # on max_j |l^{k+1}_j - l^k_j| / max_j l^{k+1}_j (unit-free; see tol_mode)
         "tol_mode": "relative",   # "absolute": tol in stress units, the paper's test (1e-5 MPa; report paper)
@@ -199,7 +226,7 @@ class Uzawa(Solver):
         "verbose": False,         # print one line per outer iteration to stderr
     }
     renamed = {"tol_outer": "tol", "max_outer": "max_iter"}
-    ranges = {"r": "(0, inf)", "r_rule": ("fixed", "auto"), "r_factor": "(0, inf)",
+    ranges = {"r": "(0, inf)", "r_rule": ("scaled", "fixed", "auto"), "r_factor": "(0, inf)",
               "tol_mode": ("relative", "absolute"),
               "tol_inner": "(0, inf)", "step_factor": "(1, inf)", "armijo_c": "(0, 1)", "max_inner": "[1, inf)",
               "max_backtracks": "[1, inf)", "l0": "[0, inf)", "linalg": ("reduced", "full"),
@@ -229,10 +256,12 @@ class Uzawa(Solver):
         space = _ReducedSpace if self.params["linalg"] == "reduced" else _FullSpace
         self.space = space(qp, self.params["inner_norm"], from_param(self))
         self.reduction = getattr(self.space, "red", None)
-        self.r = float(self.params["r"])
+        self.r, self.r_units = paper_r_in_scene_units(float(self.params["r"]), qp.params) \
+            if self.params["r_rule"] == "scaled" else (float(self.params["r"]), "as given")
         self._mu = None
         if self.params["r_rule"] == "auto" and qp.m:
             self.r = float(self.params["r_factor"] / self._mu_min())
+            self.r_units = "r_factor / min dual compliance"
 
     def _mu_min(self) -> float:
         """Smallest eigenvalue of the dual compliance G W (computed once, when first needed)."""
@@ -260,7 +289,8 @@ class Uzawa(Solver):
             x = sp_.full(z)
             return Solution(solver=self.name, status=status, x=x, multipliers=w * l,
                             iterations={"outer": k, "inner": m_total}, history=history, message=msg,
-                            info={"factorizations": sp_.factorizations, "r": r, "linalg": p["linalg"]})
+                            info={"factorizations": sp_.factorizations, "r": r, "r_units": self.r_units,
+                                  "linalg": p["linalg"]})
 
         if p["shortcut"] and p["l0"] == 0.0 and np.all(sp_.B @ z >= 0):
             k, m_total = 1, 1

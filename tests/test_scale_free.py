@@ -11,10 +11,10 @@ must give the same status and the same relative answer as the unscaled scene. Ex
 Covered: uzawa_auto, pdas, penalty, mprgp, dual_gradient, osqp, clarabel, cvxpy and every installed
 qpsolvers backend (``qp_*``) except the two JAX ones (qp_qpax, qp_jaxopt_osqp: about a second
 per solve, compiled per shape; they are normalised by the same dualfem.numerics.scaling as the
-others). ``uzawa`` (the paper's method with its r = 1e7) is scale-free in the load only: its
-r = 1e7 is an absolute number (stress / length), so changing E or the length unit changes the
-method, not only the units. There it must fail honestly (status not 'solved'), which is checked;
-``uzawa_auto`` (r from the QP) is its scale-free form.
+others), and ``uzawa`` with its default r_rule="scaled" (the paper's r = 1e7 read in the paper's
+units and converted to the scene's). With ``r_rule="fixed"`` r = 1e7 is an absolute number (stress
+/ length), so changing E or the length unit changes the method, not only the units: there it must
+fail honestly (status not 'solved' or the answer within tolerance), which is checked.
 """
 from __future__ import annotations
 
@@ -36,8 +36,8 @@ AXES = ("load", "stress", "length")
 #: <= 1e-13 for all but qp_ecos, 4e-9: a scale-free method repeats the same iterates)
 SAME = 1e-7
 SLOW_JAX = {"qp_qpax", "qp_jaxopt_osqp"}
-#: built-in solvers whose parameters are absolute by design: scale-free along these axes only
-ABSOLUTE = {"uzawa": ("load",)}
+#: explicit absolute parameters: scale-free along the given axes only
+ABSOLUTE = {("uzawa", "r_rule=fixed"): ({"r_rule": "fixed"}, ("load",))}
 
 BUILTIN = sorted(n for n, c in solvers().items()
                  if c.__module__.startswith("dualfem.solvers.") and c.missing() is None and n not in SLOW_JAX)
@@ -56,6 +56,15 @@ def scene(axis: str, s: float):
 @functools.cache
 def base_run(name: str):
     return run(name, scene("load", 1.0)[0])
+
+
+def test_scaled_r_is_the_papers_r_in_paper_units():
+    """r_rule='scaled' changes nothing in the paper's units and follows E / width elsewhere."""
+    assert base_run("uzawa").info["r"] == 1e7
+    for axis, expect in (("stress", lambda s: 1e7 * s), ("length", lambda s: 1e7 / s)):
+        for s in SCALES:
+            r = run("uzawa", scene(axis, s)[0]).info["r"]
+            assert r == pytest.approx(expect(s), rel=1e-12), (axis, s)
 
 
 def test_the_scenes_scale_as_stated():
@@ -78,8 +87,6 @@ def test_every_builtin_solver_is_covered():
 @pytest.mark.parametrize("axis", AXES)
 @pytest.mark.parametrize("name", BUILTIN)
 def test_same_status_and_relative_answer(name, axis):
-    if axis not in ABSOLUTE.get(name, AXES):
-        pytest.skip(f"{name}: absolute parameters by design (see test_absolute_r_fails_honestly)")
     b = base_run(name)
     assert b.status == Status.SOLVED, f"{name} unscaled: {b.status} {b.message}"
     qp0 = scene("load", 1.0)[0]
@@ -91,14 +98,16 @@ def test_same_status_and_relative_answer(name, axis):
         assert d["x_energy"] <= SAME and d["contact_mismatch"] == 0, (name, axis, s, d)
 
 
-@pytest.mark.parametrize("name, axis", [(n, a) for n, ok in ABSOLUTE.items() for a in AXES if a not in ok])
-def test_absolute_r_fails_honestly(name, axis):
-    """uzawa's r = 1e7 (stress / length) in other units: never a silent 'solved' with a wrong answer."""
+@pytest.mark.parametrize("key, axis", [(k, a) for k, (_, ok) in ABSOLUTE.items() for a in AXES if a not in ok])
+def test_absolute_r_fails_honestly(key, axis):
+    """uzawa's r = 1e7 (stress / length) used as given in other units: never a silent 'solved' with
+    a wrong answer."""
+    name, params = key[0], ABSOLUTE[key][0]
     b = base_run(name)
     qp0 = scene("load", 1.0)[0]
     for s in SCALES:
         qp, fx, fm = scene(axis, s)
-        sol = run(name, qp, {"max_iter": 2000})
+        sol = run(name, qp, {"max_iter": 2000, **params})
         d = evaluator.compare(qp0, sol.x / fx, sol.multipliers / fm, b.x, b.multipliers)
         assert sol.status != Status.SOLVED or d["x_energy"] <= 10 * solvers()[name].tolerance, (axis, s, d)
         assert sol.message

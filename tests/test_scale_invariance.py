@@ -69,11 +69,11 @@ def _reference(N=16, delta=1e-5):
     return sol
 
 
-def _converted_error(name: str, system: str, delta: float = 1e-5):
+def _converted_error(name: str, system: str, delta: float = 1e-5, params: dict | None = None):
     """(solution, relative energy-norm error after converting to MPa/mm) of solver ``name``."""
     fs, fl = {"MPa/mm": (1.0, 1.0), "Pa/m": PA_M}[system]
     qp = _qp(system, 16, delta)
-    sol = run(name, qp)
+    sol = run(name, qp, params)
     ref = _reference(16, delta)
     if sol.x is None or not np.all(np.isfinite(sol.x)):
         return sol, float("inf")
@@ -96,14 +96,14 @@ def test_no_silent_wrong_answer_in_either_unit_system(name, system):
 OWN = [n for n in EXACT if not REG[n].requires]
 
 
-#: solvers whose parameters are absolute numbers BY DESIGN, so they are not unit-free: `uzawa` is
-#: the paper's setting (r = 1e7 stress/length, tol_outer = 1e-5 stress units); in Pa/m it stops at
-#: max_outer. That must be an honest failure, which test_no_silent_wrong_answer_in_either_unit_system
-#: and test_paper_uzawa_fails_honestly_in_other_units check; uzawa_auto is its unit-free variant.
-ABSOLUTE_PARAMETERS = {"uzawa"}
+#: absolute parameters asked for explicitly: `uzawa` with r_rule="fixed" uses r = 1e7 stress/length
+#: as given (its default, r_rule="scaled", reads r in the paper's units and converts it); in Pa/m it
+#: stops at max_iter or inaccurate. That must be an honest failure, which
+#: test_no_silent_wrong_answer_in_either_unit_system and test_paper_r_as_given_fails_honestly_in_other_units check.
+ABSOLUTE_PARAMETERS: dict[str, dict] = {"uzawa": {"r_rule": "fixed"}}
 
 
-@pytest.mark.parametrize("name", sorted((set(OWN) | {REF_NAME}) - ABSOLUTE_PARAMETERS))
+@pytest.mark.parametrize("name", sorted(set(OWN) | {REF_NAME}))
 def test_displacements_agree_after_unit_conversion(name):
     """Our own solvers and the reference: solved in both systems, and the same displacements."""
     bound = SAFETY * REG[name].tolerance
@@ -113,10 +113,10 @@ def test_displacements_agree_after_unit_conversion(name):
         assert err <= bound, f"{name} in {system}: error {err:.2e} after unit conversion > {bound:.0e}"
 
 
-@pytest.mark.parametrize("name", sorted(ABSOLUTE_PARAMETERS & set(EXACT)))
-def test_paper_uzawa_fails_honestly_in_other_units(name):
-    """The paper's absolute r and tolerance in Pa/m: not 'solved', and it says why."""
-    sol, err = _converted_error(name, "Pa/m")
+@pytest.mark.parametrize("name", sorted(set(ABSOLUTE_PARAMETERS) & set(EXACT)))
+def test_paper_r_as_given_fails_honestly_in_other_units(name):
+    """The paper's r used as given (absolute) in Pa/m: not 'solved', and it says why."""
+    sol, err = _converted_error(name, "Pa/m", params=ABSOLUTE_PARAMETERS[name])
     assert sol.status != Status.SOLVED and sol.message
 
 

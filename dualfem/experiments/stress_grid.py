@@ -180,9 +180,9 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = 
                           ref=ref or {"mode": "solve"}, time_limit=tl, after=after))
         return tid
 
-    # the r axis: solvers with a parameter r that is used as given (not chosen by an r_rule)
+    # the r axis: solvers with a parameter r that the user sets (as given, or in the paper's units)
     r_solvers = [s for s in solver_names
-                 if "r" in reg[s].defaults and reg[s].defaults.get("r_rule", "fixed") == "fixed"]
+                 if "r" in reg[s].defaults and reg[s].defaults.get("r_rule", "fixed") in ("fixed", "scaled")]
     if "delta" in axes:
         for load in ([base["load"]] if scene is not None else ["f2"] if quick else ["f1", "f2", "f3"]):
             for d in DELTAS:

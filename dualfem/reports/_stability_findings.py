@@ -34,7 +34,7 @@ def _findings(recs) -> list[str]:
     rr = [r for r in recs if r["axis"] == "r" and r.get("status") in ("solved", "inaccurate")
           and (r.get("main_iterations") or 0) > 1
           and r["coords"]["r"] * r["coords"]["delta"] <= 1.0 and r["coords"]["delta"] <= 1e-6
-          and (r.get("params_used") or {}).get("r_rule", "fixed") == "fixed"]
+          and (r.get("params_used") or {}).get("r_rule", "fixed") in ("fixed", "scaled")]
     if len(rr) >= 3:
         x = np.log10([r["coords"]["r"] * r["coords"]["delta"] for r in rr])
         y = np.log10([r["main_iterations"] for r in rr])
