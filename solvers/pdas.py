@@ -78,14 +78,16 @@ class PDASSolver(ReducedDualSolver):
         "globalize": "armijo",
         "sigma": 1e-4,
         "max_backtracks": 30,
-        "refine": 1,
+        "refine": 1,              # at most this many refinement steps on the final active set
+        "refine_tol": 1e-10,      # ... each taken only if its exact size |dx|_K / |x|_K exceeds this
+                                  # (1e-16: always, to the rounding floor; the reference does so)
         "factor": "auto",         # K factorization: auto (--factor/DUALFEM_FACTOR/fastest) or a backend
         "time_limit": 600.0,      # seconds of solve time (checked once per Newton step)
         "verbose": False,         # print one line per Newton step to stderr
     }
 
     ranges = {"c": "[0, inf)", "globalize": ("armijo", "none"), "sigma": "(0, 0.5)", "max_backtracks": "[1, inf)",
-              "refine": "[0, inf)", "factor": None}   # c = 0: automatic
+              "refine": "[0, inf)", "refine_tol": "(0, inf)", "factor": None}   # c = 0: automatic
 
     def validate(self) -> None:
         from_param(self)
@@ -94,7 +96,9 @@ class PDASSolver(ReducedDualSolver):
     def tolerance_params(cls, tol: float) -> dict:
         # Newton converges quadratically to the exact Newton point: the stopping test only
         # needs to be below the requested accuracy; keep it at least as strict as the default.
-        return {"tol": min(float(tol) * 1e-3, cls.defaults["tol"])}
+        # refinement: taken when the step exceeds a tenth of the requested accuracy
+        return {"tol": min(float(tol) * 1e-3, cls.defaults["tol"]),
+                "refine_tol": min(float(tol) * 0.1, cls.defaults["refine_tol"])}
 
     def _projected_newton_step(self, mu, gap, c):
         """One step of Bertsekas' projected Newton method on q(mu) = 1/2 mu'D mu + b0'mu, mu >= 0.
@@ -128,7 +132,7 @@ class PDASSolver(ReducedDualSolver):
         """Iterative refinement on the final active set (:func:`dualfem.numerics.polish.refine_on_active_set`)."""
         from dualfem.numerics.polish import refine_on_active_set
 
-        return refine_on_active_set(self.qp, self.red, x, mu, steps)
+        return refine_on_active_set(self.qp, self.red, x, mu, steps, float(self.params["refine_tol"]))
 
     # ------------------------------------------------------------------ solve
     def _stop(self, res: float, k: int, deadline: float, projected: bool) -> tuple[Status, str] | None:

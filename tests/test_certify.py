@@ -113,6 +113,32 @@ def test_reduced_refinement_step_equals_the_full_space_step(scene, name, delta, 
     assert np.abs(mu1 - (mup + dmu)).max() <= 1e-6 * np.abs(dmu).max() + 1e-12 * np.abs(mup).max()
 
 
+@pytest.mark.parametrize("name, delta", [("f2", 1e-5), ("f1", 1e-9)])
+def test_refine_skips_a_step_smaller_than_asked_and_the_certificate_reuses_its_solve(scene, name, delta,
+                                                                                   monkeypatch):
+    """refine(skip_below=) computes the exact step size after one solve; a step below it is not taken
+    (None), and certifying the unchanged x costs no further solve (the residual solve is remembered)."""
+    _, qp = scene(name, 16, delta)
+    x, mu = _exact(qp)
+    rng = np.random.default_rng(5)
+    xp = x + 1e-9 * np.abs(x).max() * rng.standard_normal(qp.n)
+    A = mu > 0
+    step = linalg.LocalReduction(qp).refine(xp, mu, A)      # the full step, for its size
+    assert step is not None
+    dx = step[0] - xp
+    size = np.sqrt(dx @ (qp.K @ dx)) / np.sqrt(xp @ (qp.K @ xp))
+    red = linalg.LocalReduction(qp)
+    calls = []
+    orig = red.factor.solve
+    monkeypatch.setattr(red.factor, "solve", lambda b: calls.append(1) or orig(b))
+    assert red.refine(xp, mu, A, skip_below=2.0 * size) is None and len(calls) == 1
+    cert = certify.certified_error(qp, xp, mu, certify.KSolver(qp, reduction=red))
+    assert len(calls) == 1                                # the certificate's solve was the skipped step's
+    assert cert["value"] == pytest.approx(size, rel=1e-3)
+    x1, _ = red.refine(xp, mu, A, skip_below=0.5 * size)   # taken: only its second solve is new
+    assert len(calls) == 2 and np.array_equal(x1, step[0])
+
+
 def test_runner_certifies_with_the_solvers_own_reduction_only_if_it_is_of_this_qp(scene, monkeypatch):
     """Certification reuses ``Solver.reduction`` (no second reduction) but never one of another QP."""
     from dualfem.core import runner

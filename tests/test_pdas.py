@@ -30,11 +30,13 @@ def cycling_qp() -> QP:
 @pytest.mark.parametrize("delta", [1e-1, 1e-3, 1e-5, 1e-7, 1e-9])
 def test_exact_and_fast_on_the_paper_scenes(load, delta):
     qp = load_scene(load, {"N": 32, "delta": delta}).build()
-    sol = run("pdas", qp)
+    sol = run("pdas", qp, {"refine_tol": 1e-16})           # refined to the rounding floor
     assert sol.status == Status.SOLVED, sol.message
     assert sol.iterations["newton"] <= 15
     x_ref, mu_ref, _ = enumerate_lcp(qp.K, qp.F, qp.B) if qp.m <= 12 else (None, None, None)
     assert evaluator.kkt_error(sol.residuals) < 1e-11, sol.residuals
+    default = run("pdas", qp)                              # refined only when the step exceeds 1e-10
+    assert default.status == Status.SOLVED and default.info["certificate"]["value"] <= 1e-10
     assert np.all(sol.multipliers >= 0)
     if x_ref is not None:
         d = evaluator.compare(qp, sol.x, sol.multipliers, x_ref, mu_ref)
@@ -72,7 +74,7 @@ def test_globalized_pdas_solves_the_cycling_case():
 def test_refinement_keeps_small_delta_accurate():
     qp = load_scene("f1", {"N": 32, "delta": 1e-9}).build()
     raw = run("pdas", qp, {"refine": 0})
-    ref = run("pdas", qp)
+    ref = run("pdas", qp, {"refine_tol": 1e-16})
     assert ref.info["refinement_steps"] >= 1
     assert evaluator.kkt_error(ref.residuals) <= evaluator.kkt_error(raw.residuals)
     assert evaluator.kkt_error(ref.residuals) < 1e-11
@@ -86,7 +88,7 @@ def test_history_and_counters():
 
 
 @pytest.mark.parametrize("bad", [{"tol": 0}, {"max_iter": -1}, {"globalize": "wolfe"}, {"sigma": 0.7},
-                                 {"c": -1.0}, {"refine": -1}])
+                                 {"c": -1.0}, {"refine": -1}, {"refine_tol": 0}])
 def test_bad_parameters(bad):
     with pytest.raises(InputError):
         make_solver("pdas", bad)

@@ -26,7 +26,8 @@ import numpy as np
 
 #: preferred reference solvers and their parameters (Clarabel at dualfem's default tolerances:
 #: asking it for 1e-12 made it stop 'inaccurate' at delta <= 1e-6 on the stress grid)
-PREFERRED: tuple[tuple[str, dict], ...] = (("pdas", {}), ("clarabel", {"max_iter": 500}))
+#: pdas refines whenever the step is above rounding (refine_tol = 1e-16): a reference is driven to the floor
+PREFERRED: tuple[tuple[str, dict], ...] = (("pdas", {"refine_tol": 1e-16}), ("clarabel", {"max_iter": 500}))
 #: default bound on a reference's own evaluator KKT error
 KKT_MAX = 1e-8
 #: default bound on a reference's certified relative energy-norm error (a looser reference only widens the

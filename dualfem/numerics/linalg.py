@@ -236,6 +236,7 @@ class LocalReduction:
         self._dual = None
         self._D: np.ndarray | None = None
         self._load: tuple[np.ndarray, np.ndarray, float] | None = None
+        self._last_solve: tuple[np.ndarray, np.ndarray] | None = None
 
     def _reduced_load(self) -> tuple[np.ndarray, np.ndarray, float]:
         """(u_fixed = K_fixed^-1 F, g, c0), computed on first use (one solve)."""
@@ -297,8 +298,17 @@ class LocalReduction:
         return self._dual
 
     def _k_parts(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(u = K_fixed^-1 r, g_I = S_fixed u_I, z_I = (K^-1 r)_I = S^-1 g_I): one solve."""
-        u = self.factor.solve(r)
+        """(u = K_fixed^-1 r, g_I = S_fixed u_I, z_I = (K^-1 r)_I = S^-1 g_I): one solve.
+
+        The last (r, u) pair is remembered: a refinement step that is not taken (see :meth:`refine`)
+        leaves x unchanged, and the certificate then asks for the solve with the very same r.
+        """
+        last = self._last_solve
+        if last is not None and last[0].shape == r.shape and np.array_equal(last[0], r):
+            u = last[1]
+        else:
+            u = self.factor.solve(r)
+            self._last_solve = (np.array(r), u)
         gI = self.factor.S_fixed @ u[self.I]
         return u, gI, dla.cho_solve(self.S_cho, gI)
 
@@ -312,7 +322,8 @@ class LocalReduction:
         u, gI, zI = self._k_parts(r)
         return float(r @ u + u[self.I] @ (self.factor.S_fixed @ zI - gI)), zI
 
-    def refine(self, x: np.ndarray, mu: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def refine(self, x: np.ndarray, mu: np.ndarray, A: np.ndarray,
+               skip_below: float = 0.0) -> tuple[np.ndarray, np.ndarray] | None:
         """One exact refinement step of the KKT system on the active set A, in two solves.
 
         The step of :func:`dualfem.core.certify.refinement_step`: ``K dx - B_A' dmu_A = -r``,
@@ -321,15 +332,25 @@ class LocalReduction:
         dx_I = -z_I + S^-1 B_I' dmu (since (K^-1)_II = S^-1), and the whole
         ``dx = K_fixed^-1 (v + e)``, v = -r + B'dmu, e_I = S_fixed (dx_I + u_I) - (B'dmu)_I (one
         more solve; the step is solved from the residual, as iterative refinement must be).
-        Returns (x + dx, mu + dmu).
+        Before the second solve the size of the step is known exactly,
+        |dx|_K^2 = r'K^-1 r - 2 (B K^-1 r)'dmu + dmu'D dmu; when |dx|_K <= skip_below |x|_K the
+        step is not taken and None is returned (x is then accurate to that size, and its residual
+        solve is remembered for the certificate). Returns (x + dx, mu + dmu).
         """
         qp, I, Sf = self.qp, self.I, self.factor.S_fixed
-        r = qp.K @ x - qp.F - qp.B.T @ mu
-        u, _, zI = self._k_parts(r)
+        Kx = qp.K @ x
+        r = Kx - qp.F - qp.B.T @ mu
+        u, gI, zI = self._k_parts(r)
         dmu = np.zeros_like(mu, dtype=float)
-        if A.any():
-            D = self.delassus()
+        D = self.delassus() if A.any() else None
+        if D is not None:
             dmu[A] = dla.solve(D[np.ix_(A, A)], -(qp.B[A] @ x - self.BI[A] @ zI), assume_a="pos")
+        if skip_below > 0:
+            rKr = float(r @ u + u[I] @ (Sf @ zI - gI))
+            Bz = self.BI @ zI
+            dx2 = rKr - 2.0 * float(Bz @ dmu) + (float(dmu @ (D @ dmu)) if D is not None else 0.0)
+            if np.sqrt(max(dx2, 0.0)) <= skip_below * np.sqrt(max(float(x @ Kx), 0.0)):
+                return None
         Bt_dmu = self.BI.T @ dmu
         dxI = -zI + dla.cho_solve(self.S_cho, Bt_dmu)
         v = -r + qp.B.T @ dmu

@@ -53,14 +53,17 @@ def active_set_polish(qp: QP, x: np.ndarray, mu: np.ndarray, red=None):
     return x1, mu1, {"n_active": int(A.sum()), "x_change_energy": change}
 
 
-def refine_on_active_set(qp: QP, red, x: np.ndarray, mu: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray, int]:
+def refine_on_active_set(qp: QP, red, x: np.ndarray, mu: np.ndarray, steps: int,
+                         skip_below: float = 0.0) -> tuple[np.ndarray, np.ndarray, int]:
     """Iterative refinement of (x, mu) on the active set {mu > 0} with full-space residuals.
 
     The reduced solve loses accuracy as 1/delta and N grow (at N = 256, delta = 1e-9 the
     full-space stationarity residual was 7e-10, 250x the rounding floor |K||x| eps). Each step
     (:meth:`dualfem.numerics.linalg.LocalReduction.refine`, two solves) is kept only if it lowers
     the residual ``max(|Kx - F - B'mu|_inf, |B_A x|_inf |K|)`` and keeps mu_A >= 0; none is taken
-    when that residual is already <= 1e-13 of the load. Returns (x, mu, steps kept).
+    when that residual is already <= 1e-13 of the load, and a step whose exact size |dx|_K is
+    <= ``skip_below`` |x|_K is not taken (one solve instead of two: x is already that accurate).
+    Returns (x, mu, steps kept).
     """
     A = mu > 0
     kd = np.abs(qp.K.diagonal()).max(initial=0.0)
@@ -75,9 +78,12 @@ def refine_on_active_set(qp: QP, red, x: np.ndarray, mu: np.ndarray, steps: int)
     kept = 0
     for _ in range(steps):
         try:
-            x1, mu1 = red.refine(x, mu, A)
+            step = red.refine(x, mu, A, skip_below=skip_below)
         except (np.linalg.LinAlgError, ValueError):
             break
+        if step is None:
+            break
+        x1, mu1 = step
         r1 = resid(x1, mu1)
         if not (r1 < r0) or np.any(mu1[A] < 0):
             break
