@@ -250,13 +250,17 @@ class PDASSolver(ReducedDualSolver):
             if p["verbose"]:
                 print(f"pdas: step {k} {how} t={t:g} active {nA} residual {history[-1]['residual']:.2e}",
                       file=sys.stderr)
+        return self._finish(status, mu, message, k, history, c)
+
+    def _finish(self, status: Status, mu: np.ndarray, message: str, k: int, history: list[dict],
+                c: float) -> Solution:
+        """x from the contact forces (polished and refined when solved) and the Solution."""
         if status == Status.SOLVED:
             mu = self._polish(mu)
-        xI = sla.cho_solve(self.cho, self.red.g + self.red.BI.T @ mu)
-        x = self.red.full(xI)
+        x = self.red.full(sla.cho_solve(self.cho, self.red.g + self.red.BI.T @ mu))
         refined = 0
         if status == Status.SOLVED:
-            x, mu, refined = self._refine(x, mu, int(p["refine"]))
+            x, mu, refined = self._refine(x, mu, int(self.params["refine"]))
         return Solution(solver=self.name, status=status, x=x, multipliers=mu,
                         iterations={"newton": k}, history=history, message=message,
                         info={"c": c, "refinement_steps": refined, "n_active": int((mu > 0).sum()),
