@@ -97,7 +97,7 @@ def paper_r_in_scene_units(r: float, scene: dict) -> tuple[float, str]:
     try:
         E, width = float(scene["E"]), float(scene["width"])
     except (KeyError, TypeError, ValueError):
-        return r, "as given (the QP has no scene E and width)"
+        E = width = float("nan")
     if not (np.isfinite(E) and np.isfinite(width) and E > 0 and width > 0):
         return r, "as given (the QP has no scene E and width)"
     return r * (E / PAPER_E) * (PAPER_WIDTH / width), f"scaled: r * (E / {PAPER_E:g}) / width"

@@ -304,7 +304,7 @@ class LocalReduction:
         leaves x unchanged, and the certificate then asks for the solve with the very same r.
         """
         last = self._last_solve
-        if last is not None and last[0].shape == r.shape and np.array_equal(last[0], r):
+        if last is not None and np.array_equal(last[0], r):
             u = last[1]
         else:
             u = self.factor.solve(r)
@@ -320,7 +320,11 @@ class LocalReduction:
         r'z = r'u + u_I' e_I. Used by the a-posteriori certificate, which needs only these.
         """
         u, gI, zI = self._k_parts(r)
-        return float(r @ u + u[self.I] @ (self.factor.S_fixed @ zI - gI)), zI
+        return self._rKr(r, u, gI, zI), zI
+
+    def _rKr(self, r: np.ndarray, u: np.ndarray, gI: np.ndarray, zI: np.ndarray) -> float:
+        """r'K^-1 r from the parts of :meth:`_k_parts` (see :meth:`k_quad`)."""
+        return float(r @ u + u[self.I] @ (self.factor.S_fixed @ zI - gI))
 
     def refine(self, x: np.ndarray, mu: np.ndarray, A: np.ndarray,
                skip_below: float = 0.0) -> tuple[np.ndarray, np.ndarray] | None:
@@ -346,9 +350,8 @@ class LocalReduction:
         if D is not None:
             dmu[A] = dla.solve(D[np.ix_(A, A)], -(qp.B[A] @ x - self.BI[A] @ zI), assume_a="pos")
         if skip_below > 0:
-            rKr = float(r @ u + u[I] @ (Sf @ zI - gI))
             Bz = self.BI @ zI
-            dx2 = rKr - 2.0 * float(Bz @ dmu) + (float(dmu @ (D @ dmu)) if D is not None else 0.0)
+            dx2 = self._rKr(r, u, gI, zI) - 2.0 * float(Bz @ dmu) + (float(dmu @ (D @ dmu)) if D is not None else 0.0)
             if np.sqrt(max(dx2, 0.0)) <= skip_below * np.sqrt(max(float(x @ Kx), 0.0)):
                 return None
         Bt_dmu = self.BI.T @ dmu
