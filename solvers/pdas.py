@@ -79,8 +79,10 @@ class PDASSolver(ReducedDualSolver):
         "sigma": 1e-4,
         "max_backtracks": 30,
         "refine": 1,              # at most this many refinement steps on the final active set
-        "refine_tol": 1e-10,      # ... each taken only if its exact size |dx|_K / |x|_K exceeds this
-                                  # (1e-16: always, to the rounding floor; the reference does so)
+        "refine_tol": 2.5e-10,    # ... each taken only if its exact size |dx|_K / |x|_K exceeds this
+                                  # (a quarter of the declared 1e-9: that size IS the certified error
+                                  # of the unrefined x; 1e-16: always, to the rounding floor, as the
+                                  # reference does)
         "factor": "auto",         # K factorization: auto (--factor/DUALFEM_FACTOR/fastest) or a backend
         "time_limit": 600.0,      # seconds of solve time (checked once per Newton step)
         "verbose": False,         # print one line per Newton step to stderr
@@ -96,9 +98,10 @@ class PDASSolver(ReducedDualSolver):
     def tolerance_params(cls, tol: float) -> dict:
         # Newton converges quadratically to the exact Newton point: the stopping test only
         # needs to be below the requested accuracy; keep it at least as strict as the default.
-        # refinement: taken when the step exceeds a tenth of the requested accuracy
+        # refinement: taken when the step (= the certified error of the unrefined x) exceeds a
+        # quarter of the requested accuracy
         return {"tol": min(float(tol) * 1e-3, cls.defaults["tol"]),
-                "refine_tol": min(float(tol) * 0.1, cls.defaults["refine_tol"])}
+                "refine_tol": min(float(tol) * 0.25, cls.defaults["refine_tol"])}
 
     def _projected_newton_step(self, mu, gap, c):
         """One step of Bertsekas' projected Newton method on q(mu) = 1/2 mu'D mu + b0'mu, mu >= 0.

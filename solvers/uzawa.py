@@ -112,7 +112,16 @@ def _contraction(history: list[dict], last: int = 5) -> float:
 
 
 class _ReducedSpace:
-    """Dense linear algebra on the local unknowns I (exact reduction)."""
+    """Dense linear algebra on the local unknowns I (exact reduction).
+
+    A Newton matrix is Q + B_A' C_A B_A (C_A = diag(coef) on the active set A). It is never formed:
+    by the Sherman-Morrison-Woodbury identity its solve is
+    ``(Q + B_A' C_A B_A)^-1 g = y - W_A (C_A^-1 + D_AA)^-1 (B y)_A``,  y = Q^-1 g,  W = Q^-1 B',
+    with the Cholesky factor of Q, W and the Delassus matrix D = B Q^-1 B' shared with the
+    reduction (and with the certificate). Per active set one |A| x |A| Cholesky factorization
+    (|A| <= m = |I| / 4) instead of one of |I| x |I|: 1/64 of the work or less. C_A^-1 + D_AA is
+    symmetric positive definite and its conditioning is D's, however large the penalty C_A.
+    """
 
     def __init__(self, qp, norm: str, factor: str | None = None):
         from dualfem.numerics.linalg import LocalReduction
@@ -123,7 +132,7 @@ class _ReducedSpace:
         self.red = red = LocalReduction(qp, factor=factor)
         self.Q, self.q, self.B = red.S, red.g, red.BI
         self.c0 = red.c0
-        self._chol_S = la.cho_factor(self.Q, lower=True, check_finite=False)
+        self._chol_S = red.S_cho
         self._cache: dict[bytes, tuple] = {}
         self.factorizations = 0
 
@@ -132,7 +141,7 @@ class _ReducedSpace:
 
     def dual_compliance(self, w: np.ndarray) -> np.ndarray:
         """G W with G = B K^-1 B' (jump per nodal force): the Hessian of the dual in l."""
-        return (self.B @ la.cho_solve(self._chol_S, self.B.T, check_finite=False)) * w[None, :]
+        return self.red.delassus() * w[None, :]
 
     def qgrad(self, z):
         return self.Q @ z - self.q
@@ -145,18 +154,23 @@ class _ReducedSpace:
 
     def newton(self, coef: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         """Solve (Q + B' diag(coef) B) d = rhs; coef = r*w on the active set, 0 elsewhere."""
+        y = la.cho_solve(self._chol_S, rhs, check_finite=False)
+        A = np.flatnonzero(coef)
+        if A.size == 0:
+            return y
         key = coef.tobytes()
         fac = self._cache.get(key)
         if fac is None:
-            A = np.flatnonzero(coef)
-            BA = self.B[A]
-            H = self.Q + BA.T @ (coef[A, None] * BA)
-            fac = la.cho_factor(H, lower=True, check_finite=False)
+            D = self.red.delassus()
+            cap = D[np.ix_(A, A)]
+            cap[np.diag_indices_from(cap)] += 1.0 / coef[A]
+            fac = la.cho_factor(cap, lower=True, check_finite=False)
             self.factorizations += 1
             if len(self._cache) >= 64:
                 self._cache.pop(next(iter(self._cache)))
             self._cache[key] = fac
-        return la.cho_solve(fac, rhs, check_finite=False)
+        t = la.cho_solve(fac, self.B[A] @ y, check_finite=False)
+        return y - self.red.compliance_basis()[:, A] @ t
 
     def full(self, z):
         return self.red.full(z)

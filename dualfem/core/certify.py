@@ -130,16 +130,18 @@ def _finite(x, mu) -> bool:
     return x is not None and mu is not None and bool(np.all(np.isfinite(x)) and np.all(np.isfinite(mu)))
 
 
-def _residual_solve(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve) -> tuple[float, np.ndarray]:
-    """(r'K^-1 r, B K^-1 r) for r = K x - F - B'mu; ``ksolve`` a :class:`KSolver` or a callable r -> K^-1 r."""
-    r = qp.K @ x - qp.F - qp.B.T @ mu
+def _residual_solve(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve,
+                    Kx: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+    """(r'K^-1 r, B K^-1 r) for r = K x - F - B'mu; ``ksolve`` a :class:`KSolver` or a callable r -> K^-1 r;
+    ``Kx`` the product K x, if known."""
+    r = (qp.K @ x if Kx is None else Kx) - qp.F - qp.B.T @ mu
     if isinstance(ksolve, KSolver):
         return ksolve.quad(r)
     z = ksolve(r)
     return float(r @ z), qp.B @ z
 
 
-def error_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve=None, _quad=None) -> float:
+def error_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve=None, _quad=None, _Kx=None) -> float:
     """Relative energy-norm error bound |x - x*|_K / |x|_K (see module docstring).
 
     nan when it does not apply: non-finite data, x = 0, or x infeasible beyond rounding
@@ -150,16 +152,16 @@ def error_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve=None, _quad=None) 
     if -(qp.B @ x).min(initial=0.0) > FEAS_RTOL * size_max(qp, x):
         return float("nan")
     mu = np.maximum(np.asarray(mu, float), 0.0)
-    t1 = (_quad or _residual_solve(qp, x, mu, ksolve or solver_for(qp)))[0]
+    t1 = (_quad or _residual_solve(qp, x, mu, ksolve or solver_for(qp), _Kx))[0]
     t2 = 2.0 * max(0.0, float(mu @ (qp.B @ x)))
-    nx = size_energy(qp, x)           # |x|_K; for a shifted QP, of the user's unknowns x + x_shift
+    nx = size_energy(qp, x, _Kx)      # |x|_K; for a shifted QP, of the user's unknowns x + x_shift
     if nx == 0.0:
         return float("nan")
     return float(np.sqrt(max(t1, 0.0) + t2) / nx)
 
 
 def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None,
-                     margin: float = 10.0, _quad=None) -> float:
+                     margin: float = 10.0, _quad=None, _Kx=None) -> float:
     """Error |x - x*|_K / |x|_K through a verified active set; nan if the set is not verified.
 
     The active set is guessed by the primal-dual rule ``A = {mu_j - c gap_j > 0}`` (c = 1 / mean
@@ -187,7 +189,7 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
         A = guess_active_set(D, mu, gap)
     mu_A = np.where(A, mu, 0.0)
     same = np.array_equal(mu_A, np.maximum(mu, 0.0))
-    rKr, Bz = (_quad if (_quad is not None and same) else None) or _residual_solve(qp, x, mu_A, ksolve)
+    rKr, Bz = (_quad if (_quad is not None and same) else None) or _residual_solve(qp, x, mu_A, ksolve, _Kx)
     dmu = np.zeros_like(mu)
     if A.any():
         try:
@@ -205,7 +207,7 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
         return float("nan")
     if (~A).any() and gap1[~A].min() <= margin * step_gap:
         return float("nan")
-    nx = size_energy(qp, x)
+    nx = size_energy(qp, x, _Kx)
     if nx == 0.0:
         return float("nan")
     return float(np.sqrt(max(dxKdx, 0.0)) / nx)
@@ -214,14 +216,16 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
 def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None) -> dict:
     """{"bound": duality-gap bound, "active_set": first-order estimate, "value": the smaller}.
 
-    One solve with K in all: both parts share z = K^-1 r (through :meth:`KSolver.quad`).
+    One solve with K in all: both parts share z = K^-1 r (through :meth:`KSolver.quad`), and one
+    product K x.
     """
     ksolve = ksolve or solver_for(qp)
-    quad = None
+    quad = Kx = None
     if _finite(x, mu):
         mu = np.asarray(mu, float)
-        quad = _residual_solve(qp, x, np.maximum(mu, 0.0), ksolve)
-    b = error_bound(qp, x, mu, ksolve, _quad=quad)
-    a = active_set_error(qp, x, mu, ksolve, _quad=quad)
+        Kx = qp.K @ x
+        quad = _residual_solve(qp, x, np.maximum(mu, 0.0), ksolve, Kx)
+    b = error_bound(qp, x, mu, ksolve, _quad=quad, _Kx=Kx)
+    a = active_set_error(qp, x, mu, ksolve, _quad=quad, _Kx=Kx)
     vals = [v for v in (b, a) if np.isfinite(v)]
     return {"bound": b, "active_set": a, "value": min(vals) if vals else float("nan")}

@@ -29,8 +29,8 @@ RESIDUALS = ("stationarity", "primal", "dual", "complementarity")
 CONTACT_RTOL = 1e-6
 
 
-def _scales(qp: QP, x: np.ndarray, mu: np.ndarray) -> tuple[float, float]:
-    fs = max(np.abs(qp.F).max(initial=0.0), np.abs(qp.K @ x).max(initial=0.0),
+def _scales(qp: QP, x: np.ndarray, mu: np.ndarray, Kx: np.ndarray) -> tuple[float, float]:
+    fs = max(np.abs(qp.F).max(initial=0.0), np.abs(Kx).max(initial=0.0),
              np.abs(qp.B.T @ mu).max(initial=0.0), TINY)
     # a shifted QP (a QP file with h != 0, signorini): the user's unknowns are x + x_shift, and
     # their size is the length scale (x itself may be exactly 0 at the solution)
@@ -48,15 +48,16 @@ def residuals(qp: QP, x: np.ndarray, multipliers: np.ndarray) -> dict:
         nan = float("nan")
         return {"stationarity": nan, "primal": nan, "dual": nan, "complementarity": nan,
                 "energy": nan, "finite": False}
-    fs, ls = _scales(qp, x, mu)
+    Kx = qp.K @ x                        # the one product with K
+    fs, ls = _scales(qp, x, mu, Kx)
     gap = qp.B @ x
-    r = qp.K @ x - qp.F - qp.B.T @ mu
+    r = Kx - qp.F - qp.B.T @ mu
     return {
         "stationarity": float(np.abs(r).max(initial=0.0) / fs),
         "primal": float(max(0.0, -gap.min(initial=0.0)) / ls),
         "dual": float(max(0.0, -mu.min(initial=0.0)) / fs),
         "complementarity": float(np.abs((mu / fs) * (gap / ls)).max(initial=0.0)),
-        "energy": qp.energy(x),
+        "energy": qp.energy(x, Kx),
         "finite": True,
     }
 
@@ -78,9 +79,9 @@ def contact_set(qp: QP, x: np.ndarray, rtol: float = CONTACT_RTOL) -> np.ndarray
     return gap <= rtol * max(np.abs(x).max(initial=0.0), TINY)
 
 
-def energy_norm(qp: QP, v: np.ndarray) -> float:
-    """sqrt(v' K v)."""
-    return float(np.sqrt(max(v @ (qp.K @ v), 0.0)))
+def energy_norm(qp: QP, v: np.ndarray, Kv: np.ndarray | None = None) -> float:
+    """sqrt(v' K v) (``Kv``: the product K v, if known)."""
+    return float(np.sqrt(max(v @ (qp.K @ v if Kv is None else Kv), 0.0)))
 
 
 def _shift(qp: QP, x: np.ndarray) -> np.ndarray | None:
@@ -88,12 +89,12 @@ def _shift(qp: QP, x: np.ndarray) -> np.ndarray | None:
     return None if shift is None or np.shape(shift) != np.shape(x) else np.asarray(shift, dtype=float)
 
 
-def size_energy(qp: QP, x: np.ndarray) -> float:
+def size_energy(qp: QP, x: np.ndarray, Kx: np.ndarray | None = None) -> float:
     """The energy-norm size of a solution, the denominator of relative errors: |x|_K, or for a shifted
     QP (user unknowns ``x + maps["x_shift"]``) the larger of |x|_K and |x + x_shift|_K, so that a
-    solution x = 0 of the shifted problem still has a size."""
+    solution x = 0 of the shifted problem still has a size. ``Kx``: the product K x, if known."""
     shift = _shift(qp, x)
-    e = energy_norm(qp, x)
+    e = energy_norm(qp, x, Kx)
     return e if shift is None else max(e, energy_norm(qp, x + shift))
 
 

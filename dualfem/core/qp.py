@@ -143,9 +143,9 @@ class QP:
         return self.B.shape[0]
 
     # -------------------------------------------------------------- helpers
-    def energy(self, x: np.ndarray) -> float:
-        """Discrete potential energy Pi(x) = 1/2 x'Kx - F'x."""
-        return float(0.5 * x @ (self.K @ x) - self.F @ x)
+    def energy(self, x: np.ndarray, Kx: np.ndarray | None = None) -> float:
+        """Discrete potential energy Pi(x) = 1/2 x'Kx - F'x (``Kx``: the product K x, if known)."""
+        return float(0.5 * x @ (self.K @ x if Kx is None else Kx) - self.F @ x)
 
     def pressure(self, multipliers: np.ndarray) -> np.ndarray:
         """Contact pressure l_j = mu_j / w_j (units of stress) from nodal multipliers."""

@@ -235,6 +235,8 @@ class LocalReduction:
         self._S_cho = None
         self._dual = None
         self._D: np.ndarray | None = None
+        self._V: np.ndarray | None = None
+        self._W: np.ndarray | None = None
         self._load: tuple[np.ndarray, np.ndarray, float] | None = None
         self._last_solve: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -283,12 +285,26 @@ class LocalReduction:
             self._S_cho = dla.cho_factor(self.S, lower=True, check_finite=True)
         return self._S_cho
 
+    def _half_compliance(self) -> np.ndarray:
+        """V = L^-1 B_I' (|I| x m, S = L L'), computed once: D = V'V, S^-1 B_I' = L'^-1 V."""
+        if self._V is None:
+            self._V = dla.solve_triangular(self.S_cho[0], self.BI.T, lower=True, check_finite=False)
+        return self._V
+
     def delassus(self) -> np.ndarray:
-        """The Delassus matrix D = B K^-1 B' (dense m x m, symmetric positive definite), computed once."""
+        """The Delassus matrix D = B K^-1 B' = V'V (dense m x m, symmetric positive definite;
+        one triangular solve with m right-hand sides and a symmetric product), computed once."""
         if self._D is None:
-            D = self.BI @ dla.cho_solve(self.S_cho, self.BI.T)
-            self._D = 0.5 * (D + D.T)
+            V = self._half_compliance()
+            self._D = V.T @ V
         return self._D
+
+    def compliance_basis(self) -> np.ndarray:
+        """W = S^-1 B_I' (|I| x m): the local displacements of unit contact forces, computed once."""
+        if self._W is None:
+            self._W = dla.solve_triangular(self.S_cho[0], self._half_compliance(), lower=True, trans="T",
+                                           check_finite=False)
+        return self._W
 
     def dual(self) -> tuple[np.ndarray, np.ndarray]:
         """(D, b0) of the reduced dual LCP: :meth:`delassus` and b0 = B K^-1 F, the gaps B x at
@@ -326,8 +342,8 @@ class LocalReduction:
         """r'K^-1 r from the parts of :meth:`_k_parts` (see :meth:`k_quad`)."""
         return float(r @ u + u[self.I] @ (self.factor.S_fixed @ zI - gI))
 
-    def refine(self, x: np.ndarray, mu: np.ndarray, A: np.ndarray,
-               skip_below: float = 0.0) -> tuple[np.ndarray, np.ndarray] | None:
+    def refine(self, x: np.ndarray, mu: np.ndarray, A: np.ndarray, skip_below: float = 0.0,
+               Kx: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
         """One exact refinement step of the KKT system on the active set A, in two solves.
 
         The step of :func:`dualfem.core.certify.refinement_step`: ``K dx - B_A' dmu_A = -r``,
@@ -339,10 +355,11 @@ class LocalReduction:
         Before the second solve the size of the step is known exactly,
         |dx|_K^2 = r'K^-1 r - 2 (B K^-1 r)'dmu + dmu'D dmu; when |dx|_K <= skip_below |x|_K the
         step is not taken and None is returned (x is then accurate to that size, and its residual
-        solve is remembered for the certificate). Returns (x + dx, mu + dmu).
+        solve is remembered for the certificate). Returns (x + dx, mu + dmu). ``Kx``: the product
+        K x, if known.
         """
         qp, I, Sf = self.qp, self.I, self.factor.S_fixed
-        Kx = qp.K @ x
+        Kx = qp.K @ x if Kx is None else Kx
         r = Kx - qp.F - qp.B.T @ mu
         u, gI, zI = self._k_parts(r)
         dmu = np.zeros_like(mu, dtype=float)

@@ -68,25 +68,27 @@ def refine_on_active_set(qp: QP, red, x: np.ndarray, mu: np.ndarray, steps: int,
     A = mu > 0
     kd = np.abs(qp.K.diagonal()).max(initial=0.0)
 
-    def resid(x_, mu_):
-        return max(np.abs(qp.K @ x_ - qp.F - qp.B.T @ mu_).max(initial=0.0), np.abs(qp.B[A] @ x_).max(initial=0.0) * kd)
+    def resid(x_, Kx_, mu_):
+        return max(np.abs(Kx_ - qp.F - qp.B.T @ mu_).max(initial=0.0), np.abs(qp.B[A] @ x_).max(initial=0.0) * kd)
 
-    r0 = resid(x, mu)
-    fs = max(np.abs(qp.F).max(initial=0.0), np.abs(qp.K @ x).max(initial=0.0), 1e-300)
+    Kx = qp.K @ x
+    r0 = resid(x, Kx, mu)
+    fs = max(np.abs(qp.F).max(initial=0.0), np.abs(Kx).max(initial=0.0), 1e-300)
     if r0 <= 1e-13 * fs:
         return x, mu, 0
     kept = 0
     for _ in range(steps):
         try:
-            step = red.refine(x, mu, A, skip_below=skip_below)
+            step = red.refine(x, mu, A, skip_below=skip_below, Kx=Kx)
         except (np.linalg.LinAlgError, ValueError):
             break
         if step is None:
             break
         x1, mu1 = step
-        r1 = resid(x1, mu1)
+        Kx1 = qp.K @ x1
+        r1 = resid(x1, Kx1, mu1)
         if not (r1 < r0) or np.any(mu1[A] < 0):
             break
-        x, mu, r0 = x1, mu1, r1
+        x, Kx, mu, r0 = x1, Kx1, mu1, r1
         kept += 1
     return x, mu, kept
