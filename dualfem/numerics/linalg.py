@@ -236,7 +236,6 @@ class LocalReduction:
         self._dual = None
         self._D: np.ndarray | None = None
         self._V: np.ndarray | None = None
-        self._W: np.ndarray | None = None
         self._load: tuple[np.ndarray, np.ndarray, float] | None = None
         self._last_solve: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -285,8 +284,8 @@ class LocalReduction:
             self._S_cho = dla.cho_factor(self.S, lower=True, check_finite=True)
         return self._S_cho
 
-    def _half_compliance(self) -> np.ndarray:
-        """V = L^-1 B_I' (|I| x m, S = L L'), computed once: D = V'V, S^-1 B_I' = L'^-1 V."""
+    def half_delassus(self) -> np.ndarray:
+        """V = L^-1 B_I' (|I| x m; S = L L', L = ``S_cho[0]``), computed once: D = V'V."""
         if self._V is None:
             self._V = dla.solve_triangular(self.S_cho[0], self.BI.T, lower=True, check_finite=False)
         return self._V
@@ -295,16 +294,9 @@ class LocalReduction:
         """The Delassus matrix D = B K^-1 B' = V'V (dense m x m, symmetric positive definite;
         one triangular solve with m right-hand sides and a symmetric product), computed once."""
         if self._D is None:
-            V = self._half_compliance()
+            V = self.half_delassus()
             self._D = V.T @ V
         return self._D
-
-    def compliance_basis(self) -> np.ndarray:
-        """W = S^-1 B_I' (|I| x m): the local displacements of unit contact forces, computed once."""
-        if self._W is None:
-            self._W = dla.solve_triangular(self.S_cho[0], self._half_compliance(), lower=True, trans="T",
-                                           check_finite=False)
-        return self._W
 
     def dual(self) -> tuple[np.ndarray, np.ndarray]:
         """(D, b0) of the reduced dual LCP: :meth:`delassus` and b0 = B K^-1 F, the gaps B x at
