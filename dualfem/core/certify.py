@@ -34,6 +34,7 @@ import scipy.linalg as sla
 
 from dualfem.core.evaluator import size_energy, size_max
 from dualfem.core.qp import QP
+from dualfem.numerics.linalg import step_size
 
 
 def refinement_step(qp: QP, ksolve, D: np.ndarray, x: np.ndarray, mu: np.ndarray,
@@ -198,7 +199,6 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
             return float("nan")
     Ddmu = D @ dmu if A.any() else np.zeros_like(dmu)
     Bdx = -Bz + Ddmu
-    dxKdx = rKr - 2.0 * float(Bz @ dmu) + float(dmu @ Ddmu)
     gap1 = gap + Bdx
     mu1 = mu_A + dmu
     step_mu = max(np.abs(dmu).max(initial=0.0), np.abs(mu - mu_A).max(initial=0.0))
@@ -210,7 +210,7 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     nx = size_energy(qp, x, _Kx)
     if nx == 0.0:
         return float("nan")
-    return float(np.sqrt(max(dxKdx, 0.0)) / nx)
+    return step_size(rKr, Bz, dmu, Ddmu) / nx
 
 
 def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None) -> dict:

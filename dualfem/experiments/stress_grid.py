@@ -159,6 +159,12 @@ def _at_n(base: dict, n: int) -> dict:
     return scene
 
 
+def r_set_by_user(params: dict) -> bool:
+    """True if a solver's r is the user's (``r_rule`` "fixed": as given, "scaled": in the paper's units),
+    not derived from the problem (``r_rule="auto"``); solvers without ``r_rule`` take r as given."""
+    return params.get("r_rule", "fixed") in ("fixed", "scaled")
+
+
 def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = AXES,
                time_limit: float | None = None, max_n: int | None = None, scene: dict | None = None) -> list[Task]:
     """All tasks of the stress grid for ``solver_names`` (see the module docstring); ``scene``: the
@@ -181,8 +187,7 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = 
         return tid
 
     # the r axis: solvers with a parameter r that the user sets (as given, or in the paper's units)
-    r_solvers = [s for s in solver_names
-                 if "r" in reg[s].defaults and reg[s].defaults.get("r_rule", "fixed") in ("fixed", "scaled")]
+    r_solvers = [s for s in solver_names if "r" in reg[s].defaults and r_set_by_user(reg[s].defaults)]
     if "delta" in axes:
         for load in ([base["load"]] if scene is not None else ["f2"] if quick else ["f1", "f2", "f3"]):
             for d in DELTAS:

@@ -360,8 +360,8 @@ class LocalReduction:
             dmu[A] = dla.solve(D[np.ix_(A, A)], -(qp.B[A] @ x - self.BI[A] @ zI), assume_a="pos")
         if skip_below > 0:
             Bz = self.BI @ zI
-            dx2 = self._rKr(r, u, gI, zI) - 2.0 * float(Bz @ dmu) + (float(dmu @ (D @ dmu)) if D is not None else 0.0)
-            if np.sqrt(max(dx2, 0.0)) <= skip_below * np.sqrt(max(float(x @ Kx), 0.0)):
+            size = step_size(self._rKr(r, u, gI, zI), Bz, dmu, D @ dmu if D is not None else np.zeros_like(dmu))
+            if size <= skip_below * np.sqrt(max(float(x @ Kx), 0.0)):
                 return None
         Bt_dmu = self.BI.T @ dmu
         dxI = -zI + dla.cho_solve(self.S_cho, Bt_dmu)
@@ -379,6 +379,13 @@ class LocalReduction:
         e = np.zeros_like(r)
         e[self.I] = self.factor.S_fixed @ xI - gI
         return self.factor.solve(r + e)
+
+
+def step_size(rKr: float, Bz: np.ndarray, dmu: np.ndarray, Ddmu: np.ndarray) -> float:
+    """|dx|_K of the exact refinement step on an active set, without forming dx: with z = K^-1 r
+    (r = Kx - F - B'mu) and the multiplier step dmu, dx = -z + K^-1 B'dmu, so
+    |dx|_K^2 = r'K^-1 r - 2 (Bz)'dmu + dmu'D dmu (``Ddmu`` = D dmu; rounding can make it < 0: 0)."""
+    return float(np.sqrt(max(rKr - 2.0 * float(Bz @ dmu) + float(dmu @ Ddmu), 0.0)))
 
 
 def _local_param_block(qp: QP, I: np.ndarray) -> np.ndarray:

@@ -13,6 +13,8 @@ def _findings(recs) -> list[str]:
     """Explanations of the boundaries, each stated only when the data show the effect."""
     import numpy as np
 
+    from dualfem.experiments.stress_grid import r_set_by_user
+
     out = []
     # the explanation below is about an outer (dual) stopping test: only runs that have one
     wrong1 = [r for r in recs if r["grade"] == "silent_wrong" and r.get("main_iterations") == 1
@@ -34,7 +36,7 @@ def _findings(recs) -> list[str]:
     rr = [r for r in recs if r["axis"] == "r" and r.get("status") in ("solved", "inaccurate")
           and (r.get("main_iterations") or 0) > 1
           and r["coords"]["r"] * r["coords"]["delta"] <= 1.0 and r["coords"]["delta"] <= 1e-6
-          and (r.get("params_used") or {}).get("r_rule", "fixed") in ("fixed", "scaled")]
+          and r_set_by_user(r.get("params_used") or {})]
     if len(rr) >= 3:
         x = np.log10([r["coords"]["r"] * r["coords"]["delta"] for r in rr])
         y = np.log10([r["main_iterations"] for r in rr])
