@@ -1,6 +1,6 @@
 """A sweep over delta on one mesh against one solve (issue 17's targets on delta).
 
-    python benchmarks/delta_sweep.py --N 512 --solvers pdas uzawa_auto --out benchmarks/results/delta_sweep
+    python benchmarks/delta_sweep.py --N 512 --solvers pdas uzawa_auto --out benchmarks/results/delta_sweep [--force]
 
 For each solver, in fresh worker processes (f2, plane strain, the process-wide factorization backend):
 * **cold**: one process per delta in 1e-1 ... 1e-9 that builds the scene and solves it once
@@ -97,8 +97,16 @@ def main() -> None:
     p.add_argument("--N", type=int, nargs="+", default=[512])
     p.add_argument("--solvers", nargs="+", default=["pdas", "uzawa_auto"])
     p.add_argument("--out", required=True, help="folder for delta_sweep.json and delta_sweep.md")
+    p.add_argument("--force", action="store_true", help="replace the results already in --out")
     a = p.parse_args()
     out = Path(a.out)
+    from dualfem.core.errors import InputError
+    from dualfem.core.io import refuse_overwrite
+
+    try:
+        refuse_overwrite([out / "delta_sweep.json", out / "delta_sweep.md"], a.force)
+    except InputError as exc:
+        p.error(str(exc))
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.time()
     load0 = os.getloadavg()[0]

@@ -59,10 +59,19 @@ def main() -> int:
     ap.add_argument("--render-only", action="store_true", help="re-render the table and figure of --out")
     ap.add_argument("--report", default=None, metavar="DIR",
                     help="with --render-only: write end_to_end.md and end_to_end/scaling.png into DIR (e.g. reports)")
+    ap.add_argument("--force", action="store_true", help="replace the results already in --out")
     a = ap.parse_args()
     if a.render_only:
         rerender(Path(a.out), Path(a.report) if a.report else None)
         return 0
+    from dualfem.core.errors import InputError
+    from dualfem.core.io import refuse_overwrite
+
+    try:
+        refuse_overwrite([Path(a.out) / f for f in ("end_to_end.json", "end_to_end.md", "scaling_end_to_end.png")],
+                         a.force)
+    except InputError as exc:
+        ap.error(str(exc))
     load0 = os.getloadavg()
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     rows = []

@@ -1,6 +1,6 @@
 """Performance of the primary solver against the floor and third-party QP solvers (issue 3).
 
-    python benchmarks/primary_perf.py                 # N = 64, 128, 256, 512 (about 25 min)
+    python benchmarks/primary_perf.py --force         # N = 64, 128, 256, 512 (about 25 min; replaces the report)
     python benchmarks/primary_perf.py --N 32,64 --repeats 2 --out /tmp/perf.md   # quick
 
 On f2 for every delta, in one run on one machine, one worker process per N (its peak RSS is reported):
@@ -34,7 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from dualfem.core import evaluator
-from dualfem.core.io import atomic_write, atomic_write_text
+from dualfem.core.errors import InputError
+from dualfem.core.io import atomic_write, atomic_write_text, refuse_overwrite
 from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
 from dualfem.numerics import linalg
@@ -147,11 +148,16 @@ def main(argv=None) -> int:
     ap.add_argument("--third-party-max-N", type=int, default=256,
                     help="above this N, Clarabel/OSQP run only at delta=1e-5")
     ap.add_argument("--out", default="reports/primary_performance.md")
+    ap.add_argument("--force", action="store_true", help="replace the report (and its .csv) already at --out")
     ap.add_argument("--worker", type=int, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
         print(json.dumps(measure(args.worker, args), default=str))
         return 0
+    try:
+        refuse_overwrite([Path(args.out), Path(args.out).with_suffix(".csv")], args.force)
+    except InputError as exc:
+        ap.error(str(exc))
     Ns = [int(n) for n in args.N.split(",")]
     rows = []
     load0 = os.getloadavg()

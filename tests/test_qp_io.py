@@ -1,6 +1,8 @@
 """QP export/import (.npz, .mat) and validation."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -47,3 +49,23 @@ def test_atomic_write_gives_usual_permissions(tmp_path):
     finally:
         os.umask(umask)
     assert stat.S_IMODE(p.stat().st_mode) == 0o644
+
+
+def test_benchmark_outputs_are_not_replaced_without_force(tmp_path):
+    """A benchmark script refuses, before any work, to replace results already there (exit 2, one
+    line naming the file and --force); with --force it may."""
+    import subprocess
+    import sys
+
+    from dualfem.core.io import refuse_overwrite
+
+    (tmp_path / "delta_sweep.json").write_text("{}")
+    with pytest.raises(InputError, match="delta_sweep.json.*--force"):
+        refuse_overwrite([tmp_path / "delta_sweep.md", tmp_path / "delta_sweep.json"], force=False)
+    refuse_overwrite([tmp_path / "delta_sweep.json"], force=True)
+    refuse_overwrite([tmp_path / "absent.json"], force=False)
+    script = Path(__file__).resolve().parents[1] / "benchmarks" / "delta_sweep.py"
+    r = subprocess.run([sys.executable, str(script), "--N", "8", "--out", str(tmp_path)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "delta_sweep.json" in r.stderr and "--force" in r.stderr
+    assert (tmp_path / "delta_sweep.json").read_text() == "{}"

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 import os
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +49,17 @@ def check_output_path(path: str | Path, flag: str) -> Path:
     except OSError as exc:
         raise InputError(f"{flag} {str(path)!r}: cannot write in {str(parent)!r}: {exc.strerror or exc}") from None
     return path
+
+
+def refuse_overwrite(paths: Iterable[str | Path], force: bool, flag: str = "--force") -> None:
+    """Before any work: InputError naming the first of ``paths`` that exists, unless ``force``
+    (results of another run, or committed ones, are replaced only when asked explicitly)."""
+    if force:
+        return
+    for path in map(Path, paths):
+        if path.exists():
+            raise InputError(f"{str(path)!r} exists (results of another run); give another --out, or "
+                             f"{flag} to replace it")
 
 
 def atomic_write(path: str | Path, write: Callable[[str], None]) -> Path:
