@@ -80,21 +80,28 @@ def test_certificate_without_local_structure_agrees(scene, monkeypatch):
         assert a[k] == pytest.approx(b[k], rel=1e-6)
 
 
+def _count_solves(monkeypatch, ff) -> list[str]:
+    """Record every solve with the cached factorization ``ff``: "solve", "forward", "backward" (halves)."""
+    calls: list[str] = []
+    for kind in ("solve", "forward", "backward"):
+        orig = getattr(ff, kind)
+        monkeypatch.setattr(ff, kind, lambda *a, _o=orig, _k=kind: calls.append(_k) or _o(*a))
+    return calls
+
+
 def test_certificate_counts_one_solve(scene, monkeypatch):
-    """The certificate costs one solve with the cached factorization, not seven."""
+    """The certificate costs the forward half of one solve with the cached factorization, not seven solves."""
     _, qp = scene("f2", 16, 1e-5)
     x, mu = _exact(qp)
     ks = KSolver(qp)
-    calls = []
-    orig = ks.red.factor.solve
-    monkeypatch.setattr(ks.red.factor, "solve", lambda b: calls.append(1) or orig(b))
+    calls = _count_solves(monkeypatch, ks.red.factor)
     certify.certified_error(qp, x, mu, ks)
-    assert len(calls) == 1
+    assert calls == ["forward"]
 
 
 @pytest.mark.parametrize("name, delta", [("f2", 1e-5), ("f1", 1e-9)])
 def test_reduced_refinement_step_equals_the_full_space_step(scene, name, delta, monkeypatch):
-    """LocalReduction.refine (two solves) takes the same step as refinement_step (four solves)."""
+    """LocalReduction.refine (the two halves of one solve) takes the same step as refinement_step (four solves)."""
     _, qp = scene(name, 16, delta)
     x, mu = _exact(qp)
     rng = np.random.default_rng(3)
@@ -103,11 +110,9 @@ def test_reduced_refinement_step_equals_the_full_space_step(scene, name, delta, 
     red = linalg.LocalReduction(qp)
     A = mup > 0
     dx, dmu = refinement_step(qp, red.k_solve, red.delassus(), xp, mup, A)
-    calls = []
-    orig = red.factor.solve
-    monkeypatch.setattr(red.factor, "solve", lambda b: calls.append(1) or orig(b))
+    calls = _count_solves(monkeypatch, red.factor)
     x1, mu1 = red.refine(xp, mup, A)
-    assert len(calls) == 2
+    assert calls == ["forward", "backward"]
     # the same step to six digits (rounding of the ill-conditioned D at delta = 1e-9 is ~1e-12 of mu)
     assert np.abs(x1 - (xp + dx)).max() <= 1e-6 * np.abs(dx).max() + 1e-12 * np.abs(xp).max()
     assert np.abs(mu1 - (mup + dmu)).max() <= 1e-6 * np.abs(dmu).max() + 1e-12 * np.abs(mup).max()
@@ -116,8 +121,8 @@ def test_reduced_refinement_step_equals_the_full_space_step(scene, name, delta, 
 @pytest.mark.parametrize("name, delta", [("f2", 1e-5), ("f1", 1e-9)])
 def test_refine_skips_a_step_smaller_than_asked_and_the_certificate_reuses_its_solve(scene, name, delta,
                                                                                    monkeypatch):
-    """refine(skip_below=) computes the exact step size after one solve; a step below it is not taken
-    (None), and certifying the unchanged x costs no further solve (the residual solve is remembered)."""
+    """refine(skip_below=) computes the exact step size after the forward half of a solve; a step below
+    it is not taken (None), and certifying the unchanged x costs no further solve (remembered)."""
     _, qp = scene(name, 16, delta)
     x, mu = _exact(qp)
     rng = np.random.default_rng(5)
@@ -128,15 +133,13 @@ def test_refine_skips_a_step_smaller_than_asked_and_the_certificate_reuses_its_s
     dx = step[0] - xp
     size = np.sqrt(dx @ (qp.K @ dx)) / np.sqrt(xp @ (qp.K @ xp))
     red = linalg.LocalReduction(qp)
-    calls = []
-    orig = red.factor.solve
-    monkeypatch.setattr(red.factor, "solve", lambda b: calls.append(1) or orig(b))
-    assert red.refine(xp, mu, A, skip_below=2.0 * size) is None and len(calls) == 1
+    calls = _count_solves(monkeypatch, red.factor)
+    assert red.refine(xp, mu, A, skip_below=2.0 * size) is None and calls == ["forward"]
     cert = certify.certified_error(qp, xp, mu, certify.KSolver(qp, reduction=red))
-    assert len(calls) == 1                                # the certificate's solve was the skipped step's
+    assert calls == ["forward"]                           # the certificate's half was the skipped step's
     assert cert["value"] == pytest.approx(size, rel=1e-3)
-    x1, _ = red.refine(xp, mu, A, skip_below=0.5 * size)   # taken: only its second solve is new
-    assert len(calls) == 2 and np.array_equal(x1, step[0])
+    x1, _ = red.refine(xp, mu, A, skip_below=0.5 * size)   # taken: only its backward half is new
+    assert calls == ["forward", "backward"] and np.array_equal(x1, step[0])
 
 
 def test_runner_certifies_with_the_solvers_own_reduction_only_if_it_is_of_this_qp(scene, monkeypatch):

@@ -47,6 +47,48 @@ def test_backend_solves_and_schur(scene, name, scene_name, delta):
 
 
 @pytest.mark.parametrize("name", BACKENDS)
+@pytest.mark.parametrize("scene_name, delta", [("f2", 1e-5), ("f1", 1e-9)])
+def test_forward_and_backward_halves_of_a_solve(scene, name, scene_name, delta):
+    """forward(b) gives q = b_R'A_RR^-1 b_R and g = b_I - A_IR A_RR^-1 b_R (in the order of local);
+    backward(fwd, x_I) gives x_R = A_RR^-1 (b_R - A_RI x_I) with x_I kept exactly; both linear in b,
+    the state independent of b_I; together they are the whole solve. PARDISO's halves are its own
+    substitutions; the generic ones (SuperLU, CHOLMOD) go through S u_I, which loses what the
+    condition of K (delta = 1e-9) costs."""
+    tol = 1e-12 if name == "pardiso" else 1e-10
+    _, qp = scene(scene_name, 16, delta)
+    K = qp.K.toarray()
+    loc = np.asarray(qp.local_dofs)[::-1].copy()
+    R = np.setdiff1d(np.arange(qp.n), loc)
+    f = fb.choose(name).factor(qp.K, local=loc)
+    rng = np.random.default_rng(7)
+    b = rng.standard_normal(qp.n)
+    KRR_b = np.linalg.solve(K[np.ix_(R, R)], b[R])
+    fwd = f.forward(b)
+    assert fwd.q == pytest.approx(b[R] @ KRR_b, rel=tol)
+    g_ref = b[loc] - K[np.ix_(loc, R)] @ KRR_b
+    assert np.abs(fwd.g - g_ref).max() <= tol * np.abs(g_ref).max()
+    xI = rng.standard_normal(loc.size)
+    x = f.backward(fwd, xI)
+    xR_ref = np.linalg.solve(K[np.ix_(R, R)], b[R] - K[np.ix_(R, loc)] @ xI)
+    assert np.array_equal(x[loc], xI)
+    assert np.abs(x[R] - xR_ref).max() <= 10 * tol * np.abs(xR_ref).max()
+    # the whole solve, and b' A^-1 b = q + g' S^-1 g
+    S = f.schur()
+    ref = np.linalg.solve(K, b)
+    zI = np.linalg.solve(S, fwd.g)
+    assert np.abs(f.backward(fwd, zI) - ref).max() <= 10 * tol * np.abs(ref).max()
+    assert fwd.q + fwd.g @ zI == pytest.approx(b @ ref, rel=tol)
+    # the state: linear in b and independent of b_I (what LocalReduction.refine relies on)
+    w = np.zeros(qp.n)
+    w[loc] = rng.standard_normal(loc.size)
+    other = f.forward(-b + w)
+    assert np.abs(other.state + fwd.state).max() <= tol * np.abs(fwd.state).max()
+    with pytest.raises(ValueError):
+        f.backward(fwd, xI[:-1])
+    f.free()
+
+
+@pytest.mark.parametrize("name", BACKENDS)
 def test_analysis_reused_across_deltas(scene, name):
     """One analysis (same pattern), two numeric factorizations == a fresh factorization each."""
     _, a = scene("f2", 16, 1e-1)

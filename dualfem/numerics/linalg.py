@@ -16,8 +16,11 @@ hash of ``K_fixed``, I and the backend, so every delta, load case and solver tha
 reuses it.
 
 :class:`LocalReduction` is what solvers use: ``S``, ``g``, ``B_I`` (dense), ``full(x_I)`` to
-recover all of x with one more solve, ``c0`` (energy constant), ``k_solve`` (K^-1 r for the whole
-K) and ``dual()`` (the Delassus matrix D = B K^-1 B' and the gaps b0 at zero contact force).
+recover all of x, ``c0`` (energy constant), ``k_solve`` (K^-1 r for the whole K), ``k_quad``
+(r'K^-1 r and (K^-1 r)_I, for the certificate) and ``dual()`` (the Delassus matrix
+D = B K^-1 B' and the gaps b0 at zero contact force). Solves are split at I (the backends'
+``forward`` / ``backward`` halves, each half a solve with PARDISO): ``full`` is a backward half
+(the forward half of F is delta-free and remembered), ``k_quad`` a forward half.
 """
 from __future__ import annotations
 
@@ -32,7 +35,7 @@ import scipy.linalg as dla
 import scipy.sparse as sp
 
 from dualfem.core.qp import QP
-from dualfem.numerics.factor import Backend, Factorization
+from dualfem.numerics.factor import Backend, Factorization, Forward
 from dualfem.numerics.factor import choose as choose_backend
 from dualfem.numerics.factor.ordering import geometric_nested_dissection, nested_dissection, ordering  # noqa: F401
 from dualfem.numerics.threads import ensure_threads
@@ -109,19 +112,20 @@ class FixedFactor:
     fact: Factorization
     S_fixed: np.ndarray
     time_s: dict = field(default_factory=dict)
-    #: K_fixed^-1 F by a hash of F (delta-free: shared by every delta of a sweep), the last two loads
+    #: the forward half of K_fixed^-1 F by a hash of F (delta-free: shared by every delta of a sweep),
+    #: the last two loads
     loads: OrderedDict = field(default_factory=OrderedDict)
 
-    def solve_load(self, F: np.ndarray) -> np.ndarray:
-        """K_fixed^-1 F, remembered for the last two load vectors (a copy is returned)."""
+    def forward_load(self, F: np.ndarray) -> Forward:
+        """``forward(F)``, remembered for the last two load vectors."""
         key = _hash(F)
-        u = self.loads.get(key)
-        if u is None:
-            u = self.solve(F)
-            self.loads[key] = u
+        fwd = self.loads.get(key)
+        if fwd is None:
+            fwd = self.forward(F)
+            self.loads[key] = fwd
             while len(self.loads) > 2:
                 self.loads.popitem(last=False)
-        return u.copy()
+        return fwd
 
     @property
     def backend(self) -> str:
@@ -131,6 +135,15 @@ class FixedFactor:
     def solve(self, b: np.ndarray) -> np.ndarray:
         """K_fixed^-1 b (b of shape (n,) or (n, k))."""
         return self.fact.solve(b)
+
+    def forward(self, b: np.ndarray) -> Forward:
+        """The forward half of K_fixed^-1 b, split at the local unknowns (see
+        :class:`dualfem.numerics.factor.Forward`): half a solve with PARDISO."""
+        return self.fact.forward(b)
+
+    def backward(self, fwd: Forward, xI: np.ndarray) -> np.ndarray:
+        """x with x_I = xI and x_R = K_RR^-1 (b_R - K_RI xI), b the vector of ``fwd``: the other half."""
+        return self.fact.backward(fwd, xI)
 
 
 class FactorCache:
@@ -236,38 +249,31 @@ class LocalReduction:
         self._dual = None
         self._D: np.ndarray | None = None
         self._V: np.ndarray | None = None
-        self._load: tuple[np.ndarray, np.ndarray, float] | None = None
-        self._last_solve: tuple[np.ndarray, np.ndarray] | None = None
+        self._load: tuple[Forward, float] | None = None
+        self._last_forward: tuple[np.ndarray, Forward] | None = None
 
-    def _reduced_load(self) -> tuple[np.ndarray, np.ndarray, float]:
-        """(u_fixed = K_fixed^-1 F, g, c0), computed on first use (one solve)."""
+    def _reduced_load(self) -> tuple[Forward, float]:
+        """(forward half of K_fixed^-1 F, c0), computed on first use (half a solve with PARDISO, shared
+        by every delta of a sweep)."""
         if self._load is None:
-            ff = self.factor
-            u_fixed = ff.solve_load(self.qp.F)
-            g = ff.S_fixed @ u_fixed[self.I]
-            self._load = (u_fixed, g, float(-0.5 * self.qp.F @ u_fixed + 0.5 * g @ u_fixed[self.I]))
+            fwd = self.factor.forward_load(self.qp.F)
+            self._load = (fwd, -0.5 * fwd.q)          # Pi(full(0)) = -1/2 F_R' K_RR^-1 F_R
         return self._load
 
     @property
-    def u_fixed(self) -> np.ndarray:
-        """K_fixed^-1 F."""
-        return self._reduced_load()[0]
-
-    @property
     def g(self) -> np.ndarray:
-        """Reduced load on the local unknowns."""
-        return self._reduced_load()[1]
+        """Reduced load on the local unknowns: F_I - K_IR K_RR^-1 F_R."""
+        return self._reduced_load()[0].g
 
     @property
     def c0(self) -> float:
         """Energy constant: Pi(full(xI)) = 1/2 xI'S xI - g'xI + c0."""
-        return self._reduced_load()[2]
+        return self._reduced_load()[1]
 
     def full(self, xI: np.ndarray) -> np.ndarray:
-        """All unknowns x from the local ones (one solve with the cached factor)."""
-        e = np.zeros(self.qp.n)
-        e[self.I] = self.factor.S_fixed @ xI - self.g
-        return self.factor.solve(self.qp.F + e)
+        """All unknowns x from the local ones: x_R = K_RR^-1 (F_R - K_RI xI), the backward half of a
+        solve (the forward half of F is remembered)."""
+        return self.factor.backward(self._reduced_load()[0], xI)
 
     def energy(self, xI: np.ndarray) -> float:
         """Pi of the full vector determined by xI."""
@@ -305,80 +311,67 @@ class LocalReduction:
             self._dual = (self.delassus(), self.BI @ dla.cho_solve(self.S_cho, self.g))
         return self._dual
 
-    def _k_parts(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(u = K_fixed^-1 r, g_I = S_fixed u_I, z_I = (K^-1 r)_I = S^-1 g_I): one solve.
+    def _k_parts(self, r: np.ndarray) -> tuple[Forward, np.ndarray]:
+        """(forward half of K_fixed^-1 r, z_I = (K^-1 r)_I = S^-1 g): half a solve with PARDISO.
 
-        The last (r, u) pair is remembered: a refinement step that is not taken (see :meth:`refine`)
-        leaves x unchanged, and the certificate then asks for the solve with the very same r.
+        Since K and K_fixed differ on I x I only, the forward half of K_fixed serves K: the reduced
+        right-hand side g of r is the same, and S replaces S_fixed. The last (r, forward) pair is
+        remembered: a refinement step that is not taken (see :meth:`refine`) leaves x unchanged,
+        and the certificate then asks for the very same r.
         """
-        last = self._last_solve
+        last = self._last_forward
         if last is not None and np.array_equal(last[0], r):
-            u = last[1]
+            fwd = last[1]
         else:
-            u = self.factor.solve(r)
-            self._last_solve = (np.array(r), u)
-        gI = self.factor.S_fixed @ u[self.I]
-        return u, gI, dla.cho_solve(self.S_cho, gI)
+            fwd = self.factor.forward(r)
+            self._last_forward = (np.array(r), fwd)
+        return fwd, dla.cho_solve(self.S_cho, fwd.g)
 
     def k_quad(self, r: np.ndarray) -> tuple[float, np.ndarray]:
-        """(r'K^-1 r, (K^-1 r)[I]) with ONE solve of K_fixed (no full K^-1 r is formed).
-
-        With u = K_fixed^-1 r and z = K^-1 r (see :meth:`k_solve`): z_I = S^-1 S_fixed u_I and
-        z = u + K_fixed^-1 e with e on I, e_I = S_fixed (z_I - u_I); since (K_fixed^-1)_II = S_fixed^-1,
-        r'z = r'u + u_I' e_I. Used by the a-posteriori certificate, which needs only these.
-        """
-        u, gI, zI = self._k_parts(r)
-        return self._rKr(r, u, gI, zI), zI
-
-    def _rKr(self, r: np.ndarray, u: np.ndarray, gI: np.ndarray, zI: np.ndarray) -> float:
-        """r'K^-1 r from the parts of :meth:`_k_parts` (see :meth:`k_quad`)."""
-        return float(r @ u + u[self.I] @ (self.factor.S_fixed @ zI - gI))
+        """(r'K^-1 r, (K^-1 r)[I]) from the forward half of one solve (no K^-1 r is formed):
+        r'K^-1 r = r_R' K_RR^-1 r_R + g' S^-1 g, a sum of two non-negative terms. Used by the
+        a-posteriori certificate, which needs only these."""
+        fwd, zI = self._k_parts(r)
+        return fwd.q + float(fwd.g @ zI), zI
 
     def refine(self, x: np.ndarray, mu: np.ndarray, A: np.ndarray, skip_below: float = 0.0,
                Kx: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
-        """One exact refinement step of the KKT system on the active set A, in two solves.
+        """One exact refinement step of the KKT system on the active set A, in one solve.
 
         The step of :func:`dualfem.core.certify.refinement_step`: ``K dx - B_A' dmu_A = -r``,
-        ``B_A dx = -B_A x``, r = Kx - F - B'mu from the full-space K. With u = K_fixed^-1 r and
-        z_I = (K^-1 r)_I (:meth:`_k_parts`, one solve): dmu_A from the Delassus block,
-        dx_I = -z_I + S^-1 B_I' dmu (since (K^-1)_II = S^-1), and the whole
-        ``dx = K_fixed^-1 (v + e)``, v = -r + B'dmu, e_I = S_fixed (dx_I + u_I) - (B'dmu)_I (one
-        more solve; the step is solved from the residual, as iterative refinement must be).
-        Before the second solve the size of the step is known exactly,
+        ``B_A dx = -B_A x``, r = Kx - F - B'mu from the full-space K. The forward half of the solve
+        with r gives z_I = (K^-1 r)_I (:meth:`_k_parts`); dmu_A from the Delassus block;
+        dx_I = -z_I + S^-1 B_I' dmu (since (K^-1)_II = S^-1); the backward half completes
+        dx = K^-1 (-r + B'dmu) from dx_I (B'dmu lives on I, so the forward half of -r serves; the
+        step is solved from the residual, as iterative refinement must be). Before the backward
+        half the size of the step is known exactly,
         |dx|_K^2 = r'K^-1 r - 2 (B K^-1 r)'dmu + dmu'D dmu; when |dx|_K <= skip_below |x|_K the
-        step is not taken and None is returned (x is then accurate to that size, and its residual
-        solve is remembered for the certificate). Returns (x + dx, mu + dmu). ``Kx``: the product
+        step is not taken and None is returned (x is then accurate to that size, and its forward
+        half is remembered for the certificate). Returns (x + dx, mu + dmu). ``Kx``: the product
         K x, if known.
         """
-        qp, I, Sf = self.qp, self.I, self.factor.S_fixed
+        qp = self.qp
         Kx = qp.K @ x if Kx is None else Kx
         r = Kx - qp.F - qp.B.T @ mu
-        u, gI, zI = self._k_parts(r)
+        fwd, zI = self._k_parts(r)
         dmu = np.zeros_like(mu, dtype=float)
         D = self.delassus() if A.any() else None
         if D is not None:
             dmu[A] = dla.solve(D[np.ix_(A, A)], -(qp.B[A] @ x - self.BI[A] @ zI), assume_a="pos")
         if skip_below > 0:
             Bz = self.BI @ zI
-            size = step_size(self._rKr(r, u, gI, zI), Bz, dmu, D @ dmu if D is not None else np.zeros_like(dmu))
+            size = step_size(fwd.q + float(fwd.g @ zI), Bz, dmu, D @ dmu if D is not None else np.zeros_like(dmu))
             if size <= skip_below * np.sqrt(max(float(x @ Kx), 0.0)):
                 return None
-        Bt_dmu = self.BI.T @ dmu
-        dxI = -zI + dla.cho_solve(self.S_cho, Bt_dmu)
-        v = -r + qp.B.T @ dmu
-        v[I] += Sf @ (dxI + u[I]) - Bt_dmu
-        return x + self.factor.solve(v), mu + dmu
+        dxI = -zI + dla.cho_solve(self.S_cho, self.BI.T @ dmu)
+        dx = self.factor.backward(Forward(fwd.q, -fwd.g, -fwd.state), dxI)
+        return x + dx, mu + dmu
 
     def k_solve(self, r: np.ndarray) -> np.ndarray:
-        """K^-1 r for the whole K (two solves with the cached factor of K_fixed).
-
-        With K = K_fixed + K_param (K_param on I x I): u = K_fixed^-1 r, the local part solves
-        ``S x_I = S_fixed u_I``, and x = K_fixed^-1 (r + e) with e_I = S_fixed x_I - S_fixed u_I.
-        """
-        _, gI, xI = self._k_parts(r)
-        e = np.zeros_like(r)
-        e[self.I] = self.factor.S_fixed @ xI - gI
-        return self.factor.solve(r + e)
+        """K^-1 r for the whole K: the forward half with K_fixed, z_I = S^-1 g, the backward half
+        (one solve with PARDISO, two with the generic split)."""
+        fwd, zI = self._k_parts(r)
+        return self.factor.backward(fwd, zI)
 
 
 def step_size(rKr: float, Bz: np.ndarray, dmu: np.ndarray, Ddmu: np.ndarray) -> float:

@@ -17,12 +17,12 @@ import os
 
 from dualfem.core.errors import InputError
 
-from .base import Backend, Factorization, schur_by_solves
+from .base import Backend, Factorization, Forward, schur_by_solves
 from .cholmod import CholmodBackend
 from .pardiso import PardisoBackend
 from .superlu import SuperLUBackend
 
-__all__ = ["Backend", "Factorization", "available", "choose", "names", "set_default", "get_default",
+__all__ = ["Backend", "Factorization", "Forward", "available", "choose", "names", "set_default", "get_default",
            "missing_fast_backend_hint", "schur_by_solves", "ENV"]
 
 #: environment variable naming the backend

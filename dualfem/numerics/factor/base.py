@@ -11,6 +11,11 @@ expensive, pattern-only part is reused:
   ``local`` (rows and columns in the order given). Fast when ``local`` is the set declared at
   analysis (the backend orders it last / lets the library compute it); otherwise it is computed
   from |I| solves (``S = ((A^-1)_II)^-1``, exact for SPD ``A``).
+* ``forward(b)`` / ``backward(fwd, x_local)``: a solve split at the Schur set I = ``local``
+  (R = the rest). ``forward`` gives what a reduction onto I needs of b: ``q = b_R' A_RR^-1 b_R``
+  and the reduced right-hand side ``g = b_I - A_IR A_RR^-1 b_R``; ``backward`` completes a given
+  x_I to ``x_R = A_RR^-1 (b_R - A_RI x_I)``. With PARDISO each is one half of a solve (its
+  forward and backward substitutions); the generic version costs one whole solve each.
 * ``info``: backend name, factor size / memory where the backend reports it, seconds per phase.
 * ``free()``: release the factor.
 
@@ -22,6 +27,7 @@ from __future__ import annotations
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 import scipy.linalg as dla
@@ -29,6 +35,20 @@ import scipy.sparse as sp
 
 #: an order of all unknowns (a permutation, local unknowns last) or a function computing it lazily
 OrderHint = np.ndarray | Callable[[], np.ndarray] | None
+
+
+class Forward(NamedTuple):
+    """The forward half of a solve with b, split at the Schur set I (R = the other unknowns).
+
+    ``q = b_R' A_RR^-1 b_R`` (>= 0), ``g = b_I - A_IR A_RR^-1 b_R`` (in the order of ``local``), and
+    ``state``: the backend's intermediate vector (n,) that :meth:`Factorization.backward` completes.
+    ``state`` is linear in b and does not depend on b_I (the forward half of -b is ``-state``).
+    So ``b' A^-1 b = q + g' S^-1 g`` and ``(A^-1 b)_I = S^-1 g`` with S the Schur complement.
+    """
+
+    q: float
+    g: np.ndarray
+    state: np.ndarray
 
 
 class Factorization(ABC):
@@ -111,6 +131,45 @@ class Factorization(ABC):
     def _own_schur(self) -> np.ndarray:
         """Schur complement onto ``self.local`` in that order; backends override with their fast path."""
         return schur_by_solves(self.solve, self.n, self.local)
+
+    def forward(self, b: np.ndarray) -> Forward:
+        """The forward half of a solve with the 1-D ``b``, split at ``local`` (see :class:`Forward`)."""
+        b = self._check_vector(b)
+        return self._forward(b)
+
+    def backward(self, fwd: Forward, x_local: np.ndarray) -> np.ndarray:
+        """x with ``x[local] = x_local`` and ``x_R = A_RR^-1 (b_R - A_RI x_local)`` for the b of ``fwd``
+        (so x = A^-1 b when x_local = S^-1 fwd.g)."""
+        x_local = np.asarray(x_local, float)
+        if x_local.shape != (self.local.size,) or np.shape(fwd.state) != (self.n,):
+            raise ValueError(f"backward: x_local of shape {x_local.shape} for {self.local.size} local unknowns")
+        return self._backward(fwd, x_local)
+
+    def _forward(self, b: np.ndarray) -> Forward:
+        """Generic: one whole solve u = A^-1 b; g = S u_I, q = b'u - u_I'g; state = b with g taken off b_I."""
+        u = self.solve(b)
+        uI = u[self.local]
+        g = self.schur() @ uI if self.local.size else np.zeros(0)
+        state = b.copy()
+        state[self.local] -= g
+        return Forward(max(float(b @ u - uI @ g), 0.0), g, state)
+
+    def _backward(self, fwd: Forward, x_local: np.ndarray) -> np.ndarray:
+        """Generic: one whole solve with ``state + S x_local`` on I (its b_I that makes x_I = x_local)."""
+        v = np.array(fwd.state, float)
+        if self.local.size:
+            v[self.local] += self.schur() @ x_local
+        x = self.solve(v)
+        x[self.local] = x_local
+        return x
+
+    def _check_vector(self, b: np.ndarray) -> np.ndarray:
+        if not self.factorized:
+            raise RuntimeError("solve before factorize")
+        b = np.asarray(b, float)
+        if b.shape != (self.n,):
+            raise ValueError(f"right-hand side of shape {b.shape}: expected ({self.n},)")
+        return b
 
     def free(self) -> None:
         """Release the factor (the object can be factorized again after :meth:`analyze`)."""

@@ -5,6 +5,13 @@ analysis apart from the numeric phase, so this module calls the library function
 its own buffers: the upper triangle of A in zero-based CSR (``iparm[34] = 1``), analysis =
 phase 11 (it reports the factor's size and the peak memory, ``iparm[14..17]``), numeric
 factorization = phase 22, solve = phase 33 (iterative refinement as PARDISO decides).
+The halves of a solve split at the Schur set (:meth:`Factorization.forward` / ``backward``) are
+phases 331 and 333: with the Schur unknowns I eliminated last and A = L L', phase 331 returns
+y = L^-1 b whose R part gives ``q = |y_R|^2 = b_R' A_RR^-1 b_R`` and whose I part is the reduced
+right-hand side ``g = b_I - A_IR A_RR^-1 b_R`` (PARDISO leaves the Schur block to the caller);
+phase 333 on y with y_I replaced by x_I returns x_R = A_RR^-1 (b_R - A_RI x_I) and x_I unchanged.
+Each is half of phase 33 (N = 512 f2, 2 threads: 0.023 + 0.024 s against 0.045 s); checked
+against dense solves in tests/test_factor.py.
 
 Schur complement: with ``iparm[35] = 2`` and the local unknowns marked 1 in ``perm`` (set before
 phase 11), phase 22 writes the dense Schur block (unknowns in increasing index order) into the
@@ -21,7 +28,7 @@ import ctypes
 import numpy as np
 import scipy.sparse as sp
 
-from .base import Backend, Factorization, OrderHint
+from .base import Backend, Factorization, Forward, OrderHint
 
 _LIB = None
 _ERRORS = {-1: "input inconsistent", -2: "not enough memory", -3: "reordering problem",
@@ -128,6 +135,29 @@ class PardisoFactorization(Factorization):
 
     def _own_schur(self) -> np.ndarray:
         return self._schur_buf
+
+    def _split(self) -> bool:
+        """True when the factorization is split at the Schur set (phases 331/333 apply)."""
+        return int(self._iparm[35]) != 0
+
+    def _forward(self, b: np.ndarray) -> Forward:
+        if not self._split():
+            return super()._forward(b)
+        y = np.zeros(self.n)
+        self._call(331, np.array(b, float), y)
+        g = y[self.local]
+        y[self.local] = 0.0                      # the state does not depend on b_I (and q is |y_R|^2)
+        return Forward(float(y @ y), g, y)
+
+    def _backward(self, fwd: Forward, x_local: np.ndarray) -> np.ndarray:
+        if not self._split():
+            return super()._backward(fwd, x_local)
+        z = np.array(fwd.state, float)
+        z[self.local] = x_local
+        x = np.zeros(self.n)
+        self._call(333, z, x)
+        x[self.local] = x_local                  # PARDISO leaves it unchanged; made exact regardless
+        return x
 
     def free(self) -> None:
         if self._alive:
