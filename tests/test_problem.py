@@ -187,3 +187,58 @@ def test_delta_free_assembly_is_reused_only_when_only_delta_changes():
     assert load_scene("f2", {"N": 12, "delta": 1e-7}).build().F[0] == fresh.F[0]
     other = load_scene("f2", {"N": 12, "delta": 1e-3, "E": 1000.0}).build()
     assert not np.shares_memory(other.K_fixed.data, fresh.K_fixed.data)  # anything but delta: new assembly
+
+
+@pytest.mark.parametrize("scene_name", ["f2", "f1", "f3"])
+def test_planned_stiffness_sum_equals_scipys_sum_bit_for_bit(scene_name):
+    """From the second delta on a mesh, K = K_el + interface term comes from a plan (a copy of the
+    values and 8 m additions): the same pattern and the same bits as scipy's sum, for every delta."""
+    import numpy as np
+
+    from dualfem.core.scene import load_scene
+    from dualfem.numerics.linalg import clear_cache
+    from problems.thin_defect import _ASSEMBLY
+    from problems.thin_defect.assemble import interface
+
+    clear_cache()
+    for delta in (1e-1, 1e-5, 3e-9, 1e-5):
+        sc = load_scene(scene_name, {"N": 12, "delta": delta})
+        qp = sc.build()
+        a = next(iter(_ASSEMBLY.values()))
+        c, maps = a["cut"], a["maps"]
+        coef = c.weights / np.array([d["delta"] for d in sc._defects])[c.defect_id]
+        K_par, B_ref, _ = interface(maps["node_dofs"], c.lower, c.upper, maps["defect_normals"], coef, a["n"])
+        ref = (a["K_el"] + K_par).tocsc()
+        assert qp.K.format == "csc" and qp.K.has_canonical_format
+        assert np.array_equal(qp.K.indptr, ref.indptr) and np.array_equal(qp.K.indices, ref.indices)
+        assert np.array_equal(qp.K.data, ref.data)
+        assert abs(qp.B - B_ref).max() == 0.0
+        assert "B" not in a or not np.shares_memory(qp.B.data, a["B"].data)      # each QP's own B
+    assert a["interface_sum"]                                         # planned (builds 2, 3, 4 used it)
+    qp.K.data[0] += 1.0                                               # each QP's values are its own
+    assert load_scene(scene_name, {"N": 12, "delta": 1e-5}).build().K.data[0] == ref.data[0]
+
+
+def test_planned_stiffness_sum_falls_back_on_an_exact_cancellation():
+    """A coefficient that cancels a stiffness entry exactly: scipy drops the entry, and so does the plan
+    (it hands the sum back to scipy)."""
+    import numpy as np
+
+    from dualfem.core.scene import load_scene
+    from dualfem.numerics.linalg import clear_cache
+    from problems.thin_defect import _ASSEMBLY, ThinDefect
+    from problems.thin_defect.assemble import interface
+
+    clear_cache()
+    load_scene("f2", {"N": 12, "delta": 1e-1}).build()
+    load_scene("f2", {"N": 12, "delta": 1e-2}).build()
+    a = next(iter(_ASSEMBLY.values()))
+    plan, c, maps = a["interface_sum"], a["cut"], a["maps"]
+    coef = np.ones(c.lower.size)
+    j = 0                          # coefficient of node j chosen to cancel K_el's (up, up) entry
+    up = maps["node_dofs"][0, c.upper[j]]
+    coef[j] = -a["K_el"][up, up]
+    K, _, _ = ThinDefect._stiffness(a, coef)
+    ref = (a["K_el"] + interface(maps["node_dofs"], c.lower, c.upper, maps["defect_normals"], coef,
+                                 a["n"])[0]).tocsc()
+    assert plan and K.nnz == ref.nnz and abs(K - ref).max() == 0.0 and K[up, up] == 0.0

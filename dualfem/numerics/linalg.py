@@ -392,8 +392,8 @@ def _local_param_block(qp: QP, I: np.ndarray) -> np.ndarray:
         K, Kf = K.tocsr(), Kf.tocsr()
     is_local = np.zeros(qp.n, bool)
     is_local[I] = True
-    if K.has_canonical_format and Kf.has_canonical_format and K.nnz == Kf.nnz \
-            and np.array_equal(K.indptr, Kf.indptr) and np.array_equal(K.indices, Kf.indices):
+    if K.nnz == Kf.nnz and np.array_equal(K.indptr, Kf.indptr) and np.array_equal(K.indices, Kf.indices) \
+            and K.has_canonical_format and Kf.has_canonical_format:      # cheap tests first
         nz = np.flatnonzero(K.data != Kf.data)
         major = np.searchsorted(K.indptr, nz, side="right") - 1      # rows of CSR, columns of CSC
         ij = (major, K.indices[nz]) if K.format == "csr" else (K.indices[nz], major)

@@ -48,6 +48,7 @@ from ..loads import resolve_load
 from .assemble import boundary_edges_on, free_dofs, interface, stiffness, traction_vector
 from .cut import Cut, cut
 from .geometry import defects_label, parse_defect, parse_defects
+from .interface_sum import InterfaceSum
 from .mesh import rotate, rotation, structured_defect_nodes, structured_mesh
 
 MESHES = ("structured", "gmsh")
@@ -255,6 +256,28 @@ class ThinDefect(Problem):
             _ASSEMBLY[key] = out
         return out
 
+    @staticmethod
+    def _stiffness(a: dict, coef: np.ndarray) -> tuple:
+        """(K = K_el + interface term with coefficients coef, B, J).
+
+        By scipy's sum the first time on a delta-free assembly; the second time (a sweep) that sum
+        also plans every later one (:class:`.interface_sum.InterfaceSum`: a copy of the values and
+        8 m additions; it keeps a copy of K's pattern and values, so a single solve does not make
+        it). B and J do not depend on coef (copies are returned).
+        """
+        plan = a.get("interface_sum")
+        if plan:
+            return plan.matrix(coef), a["B"].copy(), [j.copy() for j in a["J"]]
+        maps, c = a["maps"], a["cut"]
+        K_par, B, J = interface(maps["node_dofs"], c.lower, c.upper, maps["defect_normals"], coef, a["n"])
+        K = (a["K_el"] + K_par).tocsc()
+        sums = a["stiffness_sums"] = a.get("stiffness_sums", 0) + 1
+        if plan is None and sums >= 2:      # plan False: none can be made (an exact cancellation)
+            a["interface_sum"] = InterfaceSum.from_sum(K, a["K_el"], maps["node_dofs"], c.lower, c.upper,
+                                                       maps["defect_normals"]) or False
+            a["B"], a["J"] = B.copy(), [j.copy() for j in J]
+        return K, B, J
+
     def build(self) -> QP:
         """Assemble K (elastic + interface/delta), F (top traction), B (normal jumps).
 
@@ -263,10 +286,9 @@ class ThinDefect(Problem):
         """
         p = self.params
         a = self._delta_free()
-        c, n, maps = a["cut"], a["n"], dict(a["maps"])
+        c, maps = a["cut"], dict(a["maps"])
         delta = np.array([d["delta"] for d in self._defects])[c.defect_id]
-        K_par, B, J = interface(maps["node_dofs"], c.lower, c.upper, maps["defect_normals"], c.weights / delta, n)
-        K = (a["K_el"] + K_par).tocsc()
+        K, B, J = self._stiffness(a, c.weights / delta)
         R = rotation(float(p["rotate_deg"]))
         if len(self._defects) == 1 and len(self._defects[0]["points"]) == 2:
             pa, pb = self._defects[0]["points"]
