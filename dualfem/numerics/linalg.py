@@ -122,6 +122,7 @@ class FixedFactor:
         fwd = self.loads.get(key)
         if fwd is None:
             fwd = self.forward(F)
+            freeze(fwd.g, fwd.state)          # shared by every reduction of this load: read-only
             self.loads[key] = fwd
             while len(self.loads) > 2:
                 self.loads.popitem(last=False)
@@ -332,7 +333,7 @@ class LocalReduction:
         r'K^-1 r = r_R' K_RR^-1 r_R + g' S^-1 g, a sum of two non-negative terms. Used by the
         a-posteriori certificate, which needs only these."""
         fwd, zI = self._k_parts(r)
-        return fwd.q + float(fwd.g @ zI), zI
+        return _quad(fwd, zI), zI
 
     def refine(self, x: np.ndarray, mu: np.ndarray, A: np.ndarray, skip_below: float = 0.0,
                Kx: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
@@ -360,7 +361,7 @@ class LocalReduction:
             dmu[A] = dla.solve(D[np.ix_(A, A)], -(qp.B[A] @ x - self.BI[A] @ zI), assume_a="pos")
         if skip_below > 0:
             Bz = self.BI @ zI
-            size = step_size(fwd.q + float(fwd.g @ zI), Bz, dmu, D @ dmu if D is not None else np.zeros_like(dmu))
+            size = step_size(_quad(fwd, zI), Bz, dmu, D @ dmu if D is not None else np.zeros_like(dmu))
             if size <= skip_below * np.sqrt(max(float(x @ Kx), 0.0)):
                 return None
         dxI = -zI + dla.cho_solve(self.S_cho, self.BI.T @ dmu)
@@ -372,6 +373,11 @@ class LocalReduction:
         (one solve with PARDISO, two with the generic split)."""
         fwd, zI = self._k_parts(r)
         return self.factor.backward(fwd, zI)
+
+
+def _quad(fwd: Forward, zI: np.ndarray) -> float:
+    """r'K^-1 r = r_R' K_RR^-1 r_R + g' S^-1 g from the forward half of r and z_I = S^-1 g."""
+    return fwd.q + float(fwd.g @ zI)
 
 
 def step_size(rKr: float, Bz: np.ndarray, dmu: np.ndarray, Ddmu: np.ndarray) -> float:
