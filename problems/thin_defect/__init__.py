@@ -266,15 +266,15 @@ class ThinDefect(Problem):
         it). B and J do not depend on coef (copies are returned).
         """
         plan = a.get("interface_sum")
-        if plan:
-            return plan.matrix(coef), a["B"].copy(), [j.copy() for j in a["J"]]
-        maps, c = a["maps"], a["cut"]
+        K = plan.matrix(coef) if plan else None
+        if K is not None:
+            return K, a["B"].copy(), [j.copy() for j in a["J"]]
+        maps, c = a["maps"], a["cut"]            # scipy's sum (also on an exact cancellation)
         K_par, B, J = interface(maps["node_dofs"], c.lower, c.upper, maps["defect_normals"], coef, a["n"])
         K = (a["K_el"] + K_par).tocsc()
         sums = a["stiffness_sums"] = a.get("stiffness_sums", 0) + 1
         if plan is None and sums >= 2:      # plan False: none can be made (an exact cancellation)
-            a["interface_sum"] = InterfaceSum.from_sum(K, a["K_el"], maps["node_dofs"], c.lower, c.upper,
-                                                       maps["defect_normals"]) or False
+            a["interface_sum"] = InterfaceSum.from_sum(K, a["K_el"], maps["node_dofs"], c.lower, c.upper) or False
             a["B"], a["J"] = B.copy(), [j.copy() for j in J]
         return K, B, J
 

@@ -7,37 +7,35 @@ sum has been formed by scipy (the first delta on a mesh), :class:`InterfaceSum` 
 pattern, its values with the interface part taken out (K_el's values there), and the place of
 each interface entry; every further delta costs one copy of the values and a few thousand
 additions. The result equals scipy's ``K_el + interface(...)[0]`` entry for entry and pattern for
-pattern (tests/test_assembly.py): the same single floating-point addition per entry; an exact
-cancellation (an entry scipy would drop) falls back to scipy's sum.
+pattern (tests/test_problem.py): the same single floating-point addition per entry; for an exact
+cancellation (an entry scipy would drop) :meth:`InterfaceSum.matrix` returns None and the caller
+forms scipy's sum.
 """
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
 
-from .assemble import interface
-
 
 class InterfaceSum:
     """Delta-free plan of ``K_el + sum_j coef_j |u_j^+ - u_j^-|^2`` (CSC), made from one such sum.
 
     Use :meth:`from_sum` (None when the sum does not have the expected pattern); ``matrix(coef)``
-    returns the sum for coefficients ``coef`` (m,) > 0; its index arrays are shared, read-only, by
-    every matrix it returns.
+    returns the sum for coefficients ``coef`` (m,) > 0 (None on an exact cancellation); its index
+    arrays are shared, read-only, by every matrix it returns.
     """
 
-    def __init__(self, K_el: sp.csc_matrix, K: sp.csc_matrix, slot: np.ndarray, sign: np.ndarray,
-                 node: np.ndarray, args: tuple):
+    def __init__(self, K_el: sp.csc_matrix, K: sp.csc_matrix, slot: np.ndarray, sign: np.ndarray, node: np.ndarray):
         base = np.array(K.data)
         base[slot] = _values_at(K_el, K.indices[slot], _columns(K, slot))   # K_el's values (0 if none)
-        self.K_el, self._base, self._slot, self._sign, self._node, self._args = K_el, base, slot, sign, node, args
+        self._base, self._slot, self._sign, self._node = base, slot, sign, node
         self.indices, self.indptr, self.shape = np.array(K.indices), np.array(K.indptr), K.shape
         for a in (self._base, self.indices, self.indptr):
             a.flags.writeable = False
 
     @classmethod
     def from_sum(cls, K: sp.csc_matrix, K_el: sp.csc_matrix, node_dofs: np.ndarray, lower: np.ndarray,
-                 upper: np.ndarray, normals: np.ndarray) -> InterfaceSum | None:
+                 upper: np.ndarray) -> InterfaceSum | None:
         """The plan from a sum ``K`` formed by scipy (canonical CSC), or None if an interface entry is
         missing from its pattern (an exact cancellation) or appears twice."""
         if K.format != "csc" or K_el.format != "csc" or not (K.has_canonical_format and K_el.has_canonical_format):
@@ -46,15 +44,15 @@ class InterfaceSum:
         slot = _positions(K, rows, cols)
         if np.any(slot < 0) or np.unique(slot).size != slot.size:
             return None
-        return cls(K_el, K, slot, sign, node, (node_dofs, lower, upper, normals, K.shape[0]))
+        return cls(K_el, K, slot, sign, node)
 
-    def matrix(self, coef: np.ndarray) -> sp.csc_matrix:
-        """K_el + sum_j coef_j |u_j^+ - u_j^-|^2 as a new CSC matrix (values of its own)."""
+    def matrix(self, coef: np.ndarray) -> sp.csc_matrix | None:
+        """K_el + sum_j coef_j |u_j^+ - u_j^-|^2 as a new CSC matrix (values of its own), or None on an
+        exact cancellation (an entry scipy's sum would drop: the caller forms that sum)."""
         data = self._base.copy()
         data[self._slot] += self._sign * np.asarray(coef, float)[self._node]
-        if np.any(data[self._slot] == 0.0):           # an exact cancellation: scipy would drop the entry
-            node_dofs, lower, upper, normals, n = self._args
-            return (self.K_el + interface(node_dofs, lower, upper, normals, coef, n)[0]).tocsc()
+        if np.any(data[self._slot] == 0.0):
+            return None
         K = sp.csc_matrix((data, self.indices, self.indptr), shape=self.shape)
         K.has_canonical_format = True
         return K
