@@ -32,7 +32,7 @@ DELTAS = [10.0 ** -k for k in range(1, 10)]
 WORKER = """
 import json, sys, time
 from dualfem.core.scene import load_scene
-from dualfem.core.runner import run
+from dualfem.experiments.runner import run
 from dualfem.numerics.factor import get_default
 N, solver, deltas = int(sys.argv[1]), sys.argv[2], [float(d) for d in sys.argv[3].split(",")]
 run(solver, load_scene("f2", {"N": 8}).build())

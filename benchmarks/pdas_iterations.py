@@ -23,8 +23,8 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     from dualfem.core import evaluator
-    from dualfem.core.runner import run
     from dualfem.core.scene import load_scene
+    from dualfem.experiments.runner import run
 
     recs = []
     print(f"{'scene':5s} {'N':>4s} {'delta':>7s} {'status':8s} {'newton':>6s} {'active':>6s} {'kkt':>8s} "

@@ -36,8 +36,8 @@ import numpy as np
 from dualfem.core import evaluator
 from dualfem.core.errors import InputError
 from dualfem.core.io import atomic_write, atomic_write_text, refuse_overwrite
-from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
+from dualfem.experiments.runner import run
 from dualfem.numerics import linalg
 
 DELTAS = [1e-1, 1e-3, 1e-5, 1e-7, 1e-9]

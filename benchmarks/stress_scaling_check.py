@@ -20,8 +20,8 @@ import dualfem.scaling as S
 import solvers.clarabel_ as C
 import solvers.osqp_ as O
 from dualfem.core import evaluator
-from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
+from dualfem.experiments.runner import run
 from dualfem.experiments.stress import BASE, LOAD_SCALES, UNITS, scene_in_units
 
 

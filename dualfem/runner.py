@@ -1,2 +1,2 @@
-"""Stable import path of the plugin API (docs/plugins.md); the code lives in :mod:`dualfem.core.runner`."""
-from dualfem.core.runner import *  # noqa: F401,F403
+"""Stable import path of the plugin API (docs/plugins.md); the code lives in :mod:`dualfem.experiments.runner`."""
+from dualfem.experiments.runner import *  # noqa: F401,F403

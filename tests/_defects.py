@@ -53,7 +53,7 @@ def patch_check(problem, qp) -> None:
 
 
 def _solve(over):
-    from dualfem.core.runner import run
+    from dualfem.experiments.runner import run
 
     qp = load_scene("f2", over).build()
     sol = run("pdas", qp)

@@ -22,11 +22,11 @@ import pytest
 
 from dualfem.cli.main import main
 from dualfem.core import evaluator, registry
-from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
 from dualfem.experiments import reference
+from dualfem.experiments.runner import run
 
 ROOT = Path(__file__).resolve().parents[1]
 

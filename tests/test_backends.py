@@ -6,7 +6,7 @@ import pytest
 import scipy.sparse as sp
 
 from dualfem.core import evaluator
-from dualfem.core.runner import run
+from dualfem.experiments.runner import run
 
 
 @pytest.mark.parametrize("name", ["f1", "f2", "f3"])
@@ -63,7 +63,7 @@ def test_unscaled_option_still_maps_signs(scene, solver):
 
 def test_solver_parameter_errors():
     from dualfem.core.errors import InputError
-    from dualfem.core.runner import make_solver
+    from dualfem.experiments.runner import make_solver
 
     with pytest.raises(InputError, match="unknown parameter 'eps'"):
         make_solver("osqp", {"eps": 1})

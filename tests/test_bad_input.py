@@ -304,8 +304,8 @@ def test_missing_dependency_one_stderr_line(fake_missing_solver, extra, capsys):
 
 
 def test_missing_dependency_in_the_grid_is_a_skip_with_the_reason(fake_missing_solver):
-    from dualfem.core.runner import run
     from dualfem.core.scene import load_scene
+    from dualfem.experiments.runner import run
 
     sol = run(fake_missing_solver, load_scene("f2", {"N": 8}).build())
     assert str(sol.status) == "skipped" and "pip install 'dualfem[fake]'" in sol.message

@@ -5,14 +5,13 @@ import numpy as np
 import pytest
 import scipy.sparse.linalg as sla
 
-from dualfem.core import certify
-from dualfem.core.certify import KSolver, certified_error, refinement_step
-from dualfem.numerics import linalg
+from dualfem.numerics import certify, linalg
+from dualfem.numerics.certify import KSolver, certified_error, refinement_step
 
 
 def _exact(qp):
     """The exact (x, mu) by the active-set solver pdas at its tightest tolerance."""
-    from dualfem.core.runner import run
+    from dualfem.experiments.runner import run
 
     sol = run("pdas", qp, {"tol": 1e-13})
     return sol.x, sol.multipliers
@@ -144,7 +143,7 @@ def test_refine_skips_a_step_smaller_than_asked_and_the_certificate_reuses_its_s
 
 def test_runner_certifies_with_the_solvers_own_reduction_only_if_it_is_of_this_qp(scene, monkeypatch):
     """Certification reuses ``Solver.reduction`` (no second reduction) but never one of another QP."""
-    from dualfem.core import runner
+    from dualfem.experiments import runner
 
     _, qp = scene("f2", 16, 1e-5)
     _, other = scene("f2", 16, 1e-3)
@@ -173,7 +172,7 @@ def test_runner_certifies_with_the_solvers_own_reduction_only_if_it_is_of_this_q
 def test_active_set_certificate_measures_the_error_of_interior_point_and_admm_answers(scene, solver, name, delta):
     """The primal-dual rule guesses the active set of an answer with mu > 0 everywhere (an IPM's):
     the verified estimate is the true error (to 10 %), where the duality bound is orders above it."""
-    from dualfem.core.runner import run
+    from dualfem.experiments.runner import run
 
     _, qp = scene(name, 16, delta)
     x, _ = _exact(qp)

@@ -127,7 +127,7 @@ def test_cli_exit_0_when_the_runner_demotes_a_wrong_claim(doubles, capsys):
 
 def test_cli_exit_1_on_silent_wrong_answer(doubles, capsys, monkeypatch):
     """compare's own check behind the runner's: with certification bypassed, the verdict is 'wrong'."""
-    import dualfem.core.runner as runner
+    import dualfem.experiments.runner as runner
 
     monkeypatch.setattr(runner, "certify_status", lambda qp, sol, tol, exact, **kw: sol)
     rc = main(["compare", "f2", "--set", "N=16", "--solvers", "pdas,test_wrong,test_honest"])

@@ -23,12 +23,12 @@ import pytest
 from _lcp import enumerate_lcp
 
 from dualfem.core import evaluator
-from dualfem.core.certify import certified_error
 from dualfem.core.errors import InputError
 from dualfem.core.registry import solvers
-from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Solution, Status
+from dualfem.experiments.runner import run
+from dualfem.numerics.certify import certified_error
 
 N = 16
 LOADS = ("f1", "f2", "f3")

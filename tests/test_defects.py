@@ -93,7 +93,7 @@ def test_mirror_symmetric_scene_gives_symmetric_contact(vee, load):
     """A body, mesh, load and defect symmetric about x = 1/2 (a straight defect, or a V kinked at the
     axis): the contact set is its own mirror image and so is the solution."""
     from dualfem.core import evaluator
-    from dualfem.core.runner import run
+    from dualfem.experiments.runner import run
     from dualfem.post.fields import nodal_displacement
     from dualfem.problems.thin_defect import ThinDefect
 
@@ -123,7 +123,7 @@ def test_mirror_symmetric_scene_gives_symmetric_contact(vee, load):
 
 
 def test_post_defect_fields_use_the_per_node_normals():
-    from dualfem.core.runner import run
+    from dualfem.experiments.runner import run
     from dualfem.post.fields import defect_fields
 
     qp = load_scene("f2", {"N": 16, "defects": KINKED, "rotate_deg": 20}).build()

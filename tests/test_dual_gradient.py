@@ -4,9 +4,9 @@ import pytest
 from dualfem.core import evaluator
 from dualfem.core.errors import InputError
 from dualfem.core.registry import solvers
-from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Status
+from dualfem.experiments.runner import run
 
 
 def reference_name():

@@ -93,7 +93,7 @@ def test_third_party_answers_are_right(plugin_env):
     code = r"""
 import numpy as np
 from dualfem.core import evaluator
-from dualfem.core.runner import run
+from dualfem.experiments.runner import run
 from dualfem.core.scene import load_scene
 qp = load_scene("string", {"N": 64, "q": 1.0, "tension": 1.0, "lift": 0.05}).build()
 s = run("example_nnls", qp)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from dualfem.core import evaluator
-from dualfem.core.runner import run
+from dualfem.experiments.runner import run
 
 
 @pytest.fixture

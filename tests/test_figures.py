@@ -15,9 +15,9 @@ import pytest  # noqa: E402
 
 from dualfem.core.errors import InputError  # noqa: E402
 from dualfem.core.registry import solvers  # noqa: E402
-from dualfem.core.runner import run  # noqa: E402
 from dualfem.core.scene import load_scene  # noqa: E402
 from dualfem.core.solution import Solution, Status  # noqa: E402
+from dualfem.experiments.runner import run  # noqa: E402
 from dualfem.post import figures as F  # noqa: E402
 from dualfem.post.fields import Post  # noqa: E402
 
@@ -180,7 +180,7 @@ def test_convergence_rates_known_answer(p):
 @pytest.mark.skipif("uzawa" not in solvers(), reason="the uzawa solver is not registered")
 def test_report_paper_small(tmp_path, monkeypatch):
     """Run, store the data, re-render from it without solving; the inner stop test study is consistent."""
-    import dualfem.core.runner as runner
+    import dualfem.experiments.runner as runner
     from dualfem.experiments.paper import INNER_VARIANTS
     from dualfem.reports.paper import report_paper
 

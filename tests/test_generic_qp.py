@@ -10,9 +10,9 @@ from dualfem.cli.main import main
 from dualfem.core import evaluator
 from dualfem.core.errors import InputError
 from dualfem.core.registry import solvers
-from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Status
+from dualfem.experiments.runner import run
 from dualfem.problems.generic_qp import original_objective, original_x
 
 

@@ -12,8 +12,8 @@ pytest.importorskip("problems.gmsh_mesh")
 from _defects import patch_check, rotation_check  # noqa: E402
 
 from dualfem import evaluator  # noqa: E402
-from dualfem.core.runner import run  # noqa: E402
 from dualfem.core.scene import load_scene  # noqa: E402
+from dualfem.experiments.runner import run  # noqa: E402
 
 GEOMETRIES = {
     "inclined": [{"points": [[0.2, 0.3], [0.8, 0.6]]}],

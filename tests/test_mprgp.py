@@ -12,9 +12,9 @@ import pytest
 
 from dualfem.core import evaluator
 from dualfem.core.errors import InputError
-from dualfem.core.runner import make_solver, run
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Status
+from dualfem.experiments.runner import make_solver, run
 
 _QP: dict = {}
 

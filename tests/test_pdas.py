@@ -9,9 +9,9 @@ from _lcp import enumerate_lcp
 from dualfem.core import evaluator
 from dualfem.core.errors import InputError
 from dualfem.core.qp import QP
-from dualfem.core.runner import make_solver, run
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Status
+from dualfem.experiments.runner import make_solver, run
 
 # A 3-constraint QP (K = D^-1, B = I, so D is the Delassus matrix) on which plain PDAS cycles
 # from the cold start: found by a random search over SPD matrices (not an M-matrix).

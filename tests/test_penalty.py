@@ -9,9 +9,9 @@ from dualfem.core import evaluator
 from dualfem.core.errors import InputError
 from dualfem.core.qp import QP
 from dualfem.core.registry import get_solver
-from dualfem.core.runner import make_solver, run
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Status
+from dualfem.experiments.runner import make_solver, run
 
 
 @pytest.fixture(scope="module")

@@ -173,8 +173,8 @@ def test_mass_norm_matches_skfem(qp8):
 
 def test_transfer_errors_decrease():
     """Coarse exact solutions approach a finer one (energy-norm and L2 errors shrink with h)."""
-    from dualfem.core.runner import run
     from dualfem.experiments.convergence import errors
+    from dualfem.experiments.runner import run
     from dualfem.post.figures import pick_solver
 
     solver = pick_solver()

@@ -114,7 +114,7 @@ def test_diagonal_defect_normal_not_x2():
 
 @pytest.mark.parametrize("solver", ["clarabel"])
 def test_f3_opens_and_f1_closes(solver):
-    from dualfem.core.runner import run
+    from dualfem.experiments.runner import run
 
     qp3 = load_scene("f3", {"N": 16, "delta": 0.1}).build()
     s3 = run(solver, qp3)
@@ -140,7 +140,7 @@ def test_load_cases_resultant():
 
 
 def test_plane_stress_softer_than_plane_strain():
-    from dualfem.core.runner import run
+    from dualfem.experiments.runner import run
 
     e = {}
     for plane in ("strain", "stress"):

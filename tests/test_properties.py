@@ -21,10 +21,10 @@ from hypothesis import strategies as st
 from dualfem.core import evaluator
 from dualfem.core.errors import InputError
 from dualfem.core.registry import solvers
-from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Status
 from dualfem.experiments.reference import candidates
+from dualfem.experiments.runner import run
 
 REG = solvers()
 EXACT = sorted(n for n, c in REG.items() if c.exact and c.missing() is None)

@@ -8,9 +8,9 @@ import pytest
 
 from dualfem.core import evaluator
 from dualfem.core.registry import solvers
-from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Status
+from dualfem.experiments.runner import run
 from dualfem.solvers.qpsolvers_ import _BACKENDS, DENSE_MAX_N, QpsolversSolver, known_backends
 
 QP_SOLVERS = sorted(n for n in solvers() if n.startswith("qp_"))

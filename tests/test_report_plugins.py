@@ -29,7 +29,7 @@ def test_report_plugins_renders_without_solving(tmp_path, monkeypatch):
     """The experiment's data is plain JSON; the renderer draws and writes from it without running a solver."""
     import json
 
-    import dualfem.core.runner as runner
+    import dualfem.experiments.runner as runner
     from dualfem.experiments.plugins import collect
     from dualfem.reports.plugins import render
 

@@ -24,9 +24,9 @@ import pytest
 
 from dualfem.core import evaluator
 from dualfem.core.registry import solvers
-from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Status
+from dualfem.experiments.runner import run
 from dualfem.experiments.stress_grid import scene_in_units
 
 BASE = {"load": "f2", "N": 16, "delta": 1e-5}

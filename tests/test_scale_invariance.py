@@ -20,10 +20,10 @@ import pytest
 
 from dualfem.core import evaluator
 from dualfem.core.registry import solvers
-from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Status
 from dualfem.experiments.reference import candidates
+from dualfem.experiments.runner import run
 from dualfem.experiments.stress import UNITS, scene_in_units
 
 REG = solvers()

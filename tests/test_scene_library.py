@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from dualfem.core import evaluator
-from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
+from dualfem.experiments.runner import run
 from dualfem.experiments.stress_grid import scene_in_units
 
 pytest.importorskip("gmsh")

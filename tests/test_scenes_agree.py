@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dualfem.core.runner import run
 from dualfem.core.scene import load_scene
+from dualfem.experiments.runner import run
 
 SCENES = sorted((Path(__file__).resolve().parents[1] / "scenes").glob("*.toml"))
 MIN_SIZE = 0.04

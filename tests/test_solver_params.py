@@ -93,8 +93,8 @@ def test_the_shared_vocabulary_is_checked_for_every_solver():
 
 
 def test_the_runner_checks_parameters_changed_after_construction():
-    from dualfem.core.runner import run
     from dualfem.core.scene import load_scene
+    from dualfem.experiments.runner import run
 
     s = solvers()["pdas"]()
     s.params["tol"] = -1.0

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from dualfem.core import evaluator, registry
-from dualfem.core.runner import run
+from dualfem.experiments.runner import run
 
 REPO = Path(__file__).resolve().parents[1]
 TEMPLATES = REPO / "docs" / "templates"

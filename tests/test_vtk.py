@@ -9,8 +9,8 @@ import pytest
 meshio = pytest.importorskip("meshio")
 
 from dualfem.cli.main import main  # noqa: E402
-from dualfem.core.runner import run  # noqa: E402
 from dualfem.core.scene import load_scene  # noqa: E402
+from dualfem.experiments.runner import run  # noqa: E402
 from dualfem.post.fields import Post  # noqa: E402
 from dualfem.post.figures import pick_solver  # noqa: E402
 from dualfem.post.vtk import to_meshio, write_vtu, write_xdmf  # noqa: E402

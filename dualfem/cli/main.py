@@ -163,9 +163,9 @@ def _cfg_solve(p):
 
 @command("solve", "solve one scene with one solver")(_cfg_solve)
 def cmd_solve(args) -> int:
-    from dualfem.core.runner import make_solver, run, summary
     from dualfem.core.scene import parse_set
     from dualfem.core.solution import Status
+    from dualfem.experiments.runner import make_solver, run, summary
 
     solver = make_solver(args.solver, parse_set(args.param, "-p"))  # validate before the (slow) assembly
     missing = solver.missing()

@@ -135,8 +135,8 @@ def _median(v: list[float]) -> float:
 
 def _timed_runs(task: dict, qp, name: str, params: dict, tick, warmup: bool, repeats: int):
     """Warm-up (untimed) then ``repeats`` timed runs; returns (last solution, setup list, solve list, note)."""
-    from dualfem.core.runner import run
     from dualfem.core.solution import Status
+    from dualfem.experiments.runner import run
     from dualfem.numerics import linalg
 
     setups, solves, statuses = [], [], []

@@ -7,7 +7,7 @@ residuals are the same as for ``dualfem solve``), picks the reference, and judge
 Reference: chosen by the one reference policy (:mod:`dualfem.experiments.reference`): among the
 runs of *exact* solvers that claim success with an evaluator KKT error within their own declared
 tolerance, the one with the smallest a-posteriori energy-norm error certificate
-(:func:`dualfem.core.certify.certified_error`, computed from the QP alone: the smaller of the
+(:func:`dualfem.numerics.certify.certified_error`, computed from the QP alone: the smaller of the
 rigorous duality-gap bound on |x - x*|_K / |x|_K and, when the active set is verified with
 margins, the first-order size of an exact refinement step on it), ties broken by the KKT error,
 then time. The record's ``error_bound`` is that value, ``certificate`` holds both parts. It is
@@ -38,14 +38,14 @@ from typing import Any
 import numpy as np
 
 from dualfem.core import evaluator
-from dualfem.core.certify import certified_error, solver_for
 from dualfem.core.qp import QP
 from dualfem.core.registry import get_solver
 from dualfem.core.registry import solvers as registered
-from dualfem.core.runner import jsonable_params
 from dualfem.core.solution import Solution, Status
 from dualfem.experiments import reference
 from dualfem.experiments.row import Row
+from dualfem.experiments.runner import jsonable_params
+from dualfem.numerics.certify import certified_error, solver_for
 
 #: fields of each run record (stable JSON interface of ``dualfem compare --json``)
 RUN_FIELDS = ("solver", "status", "verdict", "exact", "tolerance", "iterations", "energy", "time_s",
@@ -64,7 +64,7 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     ``params`` maps a solver name to its parameters. ``progress`` receives one line per finished
     solver.
     """
-    from dualfem.core.runner import make_solver
+    from dualfem.experiments.runner import make_solver
 
     names = list(names) if names is not None else default_solvers()
     params = params or {}
@@ -91,7 +91,7 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
 
 def _run_one(qp: QP, nm: str, inst, ksolve) -> tuple[dict[str, Any], Solution]:
     """Solve with one solver; its record (without diff and verdict) and its solution."""
-    from dualfem.core.runner import run
+    from dualfem.experiments.runner import run
 
     sol = run(inst, qp)
     finite = sol.residuals is not None and sol.residuals.get("finite", False)

@@ -136,9 +136,9 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = "f2", progress=print) -> 
     N = 1024 holding three of them was killed for lack of memory on a 24 GB machine).
     """
     from dualfem.core.evaluator import kkt_residuals
-    from dualfem.core.runner import run
     from dualfem.core.scene import load_scene
     from dualfem.experiments.reference import trust
+    from dualfem.experiments.runner import run
     from dualfem.numerics.linalg import clear_cache
 
     res = {"scene": scene, "solver": solver, "ref_N": ref_N, "Ns": list(Ns), "deltas": {},

@@ -49,8 +49,8 @@ def solvers_with_history(exclude=(), probe_N: int = 8) -> list[str]:
     :data:`HISTORY_KEYS`), found by one solve of a tiny f2 scene (N = ``probe_N``): libraries
     without a history are not run at full size just to find that out."""
     from dualfem.core.registry import solvers
-    from dualfem.core.runner import run
     from dualfem.core.scene import load_scene
+    from dualfem.experiments.runner import run
 
     qp = load_scene("f2", {"N": probe_N, "delta": 1e-5}).build()
     out = []
@@ -97,7 +97,7 @@ class Cases:
 
     def solve(self, solver: str, scene: str, delta: float, require_x: bool = False):
         """The Solution of ``solver`` (cached); ``require_x``: raise if it has no x (a pictured solve)."""
-        from dualfem.core.runner import run
+        from dualfem.experiments.runner import run
 
         key = (solver, scene, delta)
         if key not in self.sols:
@@ -152,8 +152,8 @@ def library_runs(solver: str, progress: Callable[[str], None], overrides: dict |
     with ``overrides``, e.g. a coarser ``mesh_size`` for tests): QP, Solution and a picture row
     with the number of defects, their deltas, the unknowns and the solve time."""
     from dualfem.core import evaluator
-    from dualfem.core.runner import run
     from dualfem.core.scene import library, load_scene
+    from dualfem.experiments.runner import run
 
     lib = library()
     unknown = sorted(set(names or ()) - set(lib))

@@ -62,8 +62,8 @@ def cells() -> list[tuple[str, str, float, float]]:
 
 
 def _run(load: str, N: int, delta: float, plane: str, solver: str, params: dict) -> dict:
-    from dualfem.core.runner import run
     from dualfem.core.scene import load_scene
+    from dualfem.experiments.runner import run
 
     qp = load_scene(load, {"N": N, "delta": delta, "plane": plane}).build()
     t0 = time.perf_counter()

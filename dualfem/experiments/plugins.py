@@ -49,8 +49,8 @@ def _kkt(sol) -> float:
 def every_solver(prob, qp, ref, avail, progress: Callable[[str], None]) -> list[dict]:
     """One record per installed solver on the Signorini QP (see the module docstring)."""
     from dualfem.core import evaluator
-    from dualfem.core.runner import run
     from dualfem.core.solution import Status
+    from dualfem.experiments.runner import run
 
     out = []
     for name in avail:
@@ -72,8 +72,8 @@ def every_solver(prob, qp, ref, avail, progress: Callable[[str], None]) -> list[
 def flat(ref_name: str, Ns) -> list[dict]:
     """The flat foundation: max relative error of the pressure mu / w against the exact one."""
     from dualfem.core import evaluator
-    from dualfem.core.runner import run
     from dualfem.core.scene import load_scene
+    from dualfem.experiments.runner import run
 
     out = []
     for n_ in Ns:
@@ -90,8 +90,8 @@ def flat(ref_name: str, Ns) -> list[dict]:
 def figure_data(prob, qp, ref, ref_name: str, exact: list[str]) -> dict:
     """Deformed mesh (displacements in the foundation's frame), obstacle and pressures per indentation."""
     from dualfem.core import evaluator
-    from dualfem.core.runner import run
     from dualfem.core.scene import load_scene
+    from dualfem.experiments.runner import run
 
     p = prob.params
     X, nd = qp.maps["nodes"], qp.maps["node_dofs"]
@@ -120,8 +120,8 @@ def figure_data(prob, qp, ref, ref_name: str, exact: list[str]) -> dict:
 def cost(fast: str, sizes, progress: Callable[[str], None]) -> list[dict]:
     """dual_gradient (plain, accelerated) and ``fast`` on f2 (delta = 1e-5) for each N of ``sizes``."""
     from dualfem.core import evaluator
-    from dualfem.core.runner import run
     from dualfem.core.scene import load_scene
+    from dualfem.experiments.runner import run
 
     out = []
     for n_ in sizes:
@@ -142,8 +142,8 @@ def cost(fast: str, sizes, progress: Callable[[str], None]) -> list[dict]:
 def collect(N: int = 32, sizes=(16, 32, 64, 128), progress: Callable[[str], None] = _progress) -> dict:
     """Everything :mod:`dualfem.reports.plugins` shows (see the module docstring)."""
     from dualfem.core.registry import solvers
-    from dualfem.core.runner import run
     from dualfem.core.scene import load_scene
+    from dualfem.experiments.runner import run
 
     avail = {n: c for n, c in sorted(solvers().items()) if c.missing() is None}
     ref_name = reference_solver()

@@ -5,7 +5,7 @@ A run is a **trusted reference** when (:func:`trust`)
 1. its solver is exact (``Solver.exact``) and it claims ``solved``;
 2. the evaluator's largest KKT residual, recomputed from (x, mu) and the QP, is at most
    ``kkt_max`` (never a run that fails its own residuals);
-3. its a-posteriori energy-norm error certificate (:func:`dualfem.core.certify.certified_error`,
+3. its a-posteriori energy-norm error certificate (:func:`dualfem.numerics.certify.certified_error`,
    computed from the QP alone) is finite and at most ``bound_max``. A zero solution of a zero
    load is exact (certificate 0).
 
@@ -64,7 +64,7 @@ def candidates(exclude: tuple[str, ...] = (), only: tuple[str, ...] | None = Non
 
 def certificate(qp, x: np.ndarray | None, mu: np.ndarray | None, ksolve=None) -> float:
     """Certified relative energy-norm error of (x, mu); 0 for the exact zero answer of a zero load."""
-    from dualfem.core.certify import certified_error
+    from dualfem.numerics.certify import certified_error
 
     if x is None or mu is None:
         return float("nan")
@@ -120,7 +120,7 @@ def compute(qp, *, exclude: tuple[str, ...] = (), kkt_max: float = KKT_MAX, boun
     per-solver parameters, ``time_limit`` goes to solvers that take one.
     """
     from dualfem.core.registry import get_solver
-    from dualfem.core.runner import run
+    from dualfem.experiments.runner import run
 
     tried: list[str] = []
     for name, base in candidates(exclude, only):

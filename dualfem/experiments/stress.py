@@ -140,7 +140,7 @@ def _row(task: Task) -> Row:
 def execute(task: Task, cache: _Cache) -> Row:
     """Run one task in this process; its graded row."""
     from dualfem.core.registry import get_solver
-    from dualfem.core.runner import run
+    from dualfem.experiments.runner import run
     cls = get_solver(task.solver)
     params = dict(task.params)
     if "time_limit" in cls.defaults:

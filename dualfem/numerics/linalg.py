@@ -339,7 +339,7 @@ class LocalReduction:
                Kx: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
         """One exact refinement step of the KKT system on the active set A, in one solve.
 
-        The step of :func:`dualfem.core.certify.refinement_step`: ``K dx - B_A' dmu_A = -r``,
+        The step of :func:`dualfem.numerics.certify.refinement_step`: ``K dx - B_A' dmu_A = -r``,
         ``B_A dx = -B_A x``, r = Kx - F - B'mu from the full-space K. The forward half of the solve
         with r gives z_I = (K^-1 r)_I (:meth:`_k_parts`); dmu_A from the Delassus block;
         dx_I = -z_I + S^-1 B_I' dmu (since (K^-1)_II = S^-1); the backward half completes

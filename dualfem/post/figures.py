@@ -6,7 +6,7 @@ maps and the material) and a :class:`~dualfem.solution.Solution`, on a matplotli
 notebook::
 
     from dualfem.core.scene import load_scene
-    from dualfem.core.runner import run
+    from dualfem.experiments.runner import run
     from dualfem.post import figures
     qp = load_scene("f2", {"N": 64, "delta": 1e-1}).build()
     sol = run(figures.pick_solver(), qp)

@@ -7,7 +7,7 @@ its message, and the residuals always come from :mod:`dualfem.core.evaluator`.
 **Certification** (:func:`certify_status`), for every plugin: a ``solved`` claim stands only if
 the evaluator's scale-free KKT residuals, recomputed from (x, mu) and the QP, are within the
 tolerance the solver instance declares, and, for exact solvers, the a-posteriori energy-norm
-error certificate (:func:`dualfem.core.certify.certified_error`) is too where it applies.
+error certificate (:func:`dualfem.numerics.certify.certified_error`) is too where it applies.
 Otherwise the status becomes ``inaccurate`` with a message naming the residual and by how much;
 the plugin's own claim stays in ``Solution.info["claimed_status"]``.
 """
@@ -92,7 +92,7 @@ def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: An
     if res[worst] > tol:
         why = f"evaluator residual {worst} = {res[worst]:.1e} exceeds the declared tolerance {tol:g}"
     elif exact:
-        from dualfem.core.certify import KSolver, certified_error
+        from dualfem.numerics.certify import KSolver, certified_error
 
         try:
             sol.info["certificate"] = certified_error(qp, sol.x, sol.multipliers, KSolver(qp, reduction=reduction))
