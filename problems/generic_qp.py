@@ -27,8 +27,8 @@ of G, which holds whenever G has full row rank, e.g. gap functions with m <= n) 
     min 1/2 z'Pz + (q + P x0)'z   s.t.  Gz >= 0.
 
 The multipliers are unchanged (``Pz + q + P x0 = G'mu``, i.e. ``Px + q = G'mu``), the solvers'
-``x`` is ``z``; the original unknowns are ``x = z + qp.maps["x_shift"]`` and the original
-objective is ``qp.energy(z) + qp.maps["objective_offset"]``. If ``G x0 = h`` has no solution (for
+``x`` is ``z``; the original unknowns are ``x = z + qp.shift.x`` and the original
+objective is ``qp.energy(z) + qp.shift.objective``. If ``G x0 = h`` has no solution (for
 example box constraints ``[I; -I] x >= [l; -u]``, m > n) the file is refused with a message
 saying so: such feasible sets are not cones after any shift and need an extension of the QP type.
 P must be positive definite (every solver's contract); a singular P is refused.
@@ -42,6 +42,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
 from dualfem.core.errors import InputError, check_positive
+from dualfem.core.parts import ShiftPart
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP, coo_from_arrays
 from dualfem.core.registry import register_problem
@@ -235,16 +236,15 @@ class QPFile(Problem):
         offset = float(0.5 * x0 @ (P @ x0) + q @ x0)
         qp = QP(K=P, F=F, B=G, name=f"qp_file[{path.stem}]",
                 params={k: str(v) for k, v in p.items()},
-                maps={"x_shift": x0, "objective_offset": np.array(offset)})
+                shift=ShiftPart.make(x0, offset))
         return qp
 
 
 def original_x(qp: QP, x: np.ndarray) -> np.ndarray:
     """The unknowns of the file's QP from a solver's ``x`` (undo the h-shift)."""
-    shift = qp.maps.get("x_shift")
-    return np.asarray(x) if shift is None else np.asarray(x) + np.asarray(shift)
+    return np.asarray(x) if qp.shift is None else np.asarray(x) + qp.shift.x
 
 
 def original_objective(qp: QP, x: np.ndarray) -> float:
     """``1/2 x'Px + q'x`` of the file's QP at ``original_x(qp, x)``."""
-    return qp.energy(x) + float(np.asarray(qp.maps.get("objective_offset", 0.0)))
+    return qp.energy(x) + (0.0 if qp.shift is None else qp.shift.objective)

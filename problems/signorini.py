@@ -10,7 +10,7 @@ differ from those in the frame of the foundation by the rigid translation ``(0, 
 which changes neither strains, stresses nor contact forces): ``u2 = 0`` on every top node,
 ``u1`` free there (frictionless punch) except at the top node nearest to ``width / 2``, where
 ``u1 = 0`` removes the horizontal rigid motion. So every eliminated (Dirichlet) component is
-zero, as in the thin-defect scene, and tools that read ``maps["node_dofs"]`` need nothing new.
+zero, as in the thin-defect scene, and tools that read ``qp.geometry`` need nothing new.
 
 Foundation: ``obstacle`` is the initial gap ``g(x)`` >= 0 between the bottom point ``(x, 0)``
 of the undeformed body and the foundation, measured along ``-x2`` (a numpy expression in ``x``;
@@ -22,7 +22,7 @@ QP (see :mod:`dualfem.qp`): the unknowns are the free dofs; B row j picks ``u2``
 and ``Bx`` is the current gap to the foundation. Because the QP type has no constraint offset,
 the offset is removed by the shift ``u = x + x_shift``, ``x_shift = B'(indent - g)``
 (``B x_shift = indent - g``): the solvers' ``x`` is that shifted vector and
-``K x - F = B'mu`` with ``F = -K x_shift``. ``maps["x_shift"]`` and ``maps["objective_offset"]``
+``K x - F = B'mu`` with ``F = -K x_shift``. ``qp.shift.x`` and ``qp.shift.objective``
 recover the displacement ``u = x + x_shift`` and the potential energy
 ``Pi(u) = 1/2 u'Ku = qp.energy(x) + objective_offset``. The multipliers are the nodal contact
 forces (>= 0, force per unit thickness); the contact pressure is ``mu / weights`` with trapezoid
@@ -46,6 +46,7 @@ import scipy.sparse as sp
 
 from dualfem.core.elasticity import PLANES, lame
 from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
+from dualfem.core.parts import GeometryPart, MaterialPart, ShiftPart, UnitsPart
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
 from dualfem.core.registry import register_problem
@@ -172,14 +173,15 @@ class Signorini(Problem):
         self._n_top = top.size
         self._shift = shift
         maps = {
-            "nodes": X, "triangles": mesh.t, "node_dofs": node_dofs,
             "contact_nodes": bottom, "contact_x": xb, "gap": gap, "normal": np.array([0.0, -1.0]),
             "top_nodes": top, "pin_node": np.array(pin),
-            "x_shift": shift, "objective_offset": np.array(offset),
         }
         params = {k: (v if isinstance(v, (int, float, str)) else str(v)) for k, v in p.items()}
         return QP(K=K, F=F, B=B, weights=weights, K_fixed=K, local_dofs=local,
-                  name=f"signorini[{'flat' if not np.any(gap) else 'obstacle'}]", params=params, maps=maps)
+                  name=f"signorini[{'flat' if not np.any(gap) else 'obstacle'}]", params=params, maps=maps,
+                  shift=ShiftPart.make(shift, offset), geometry=GeometryPart.make(X, mesh.t, node_dofs),
+                  units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
+                  material=MaterialPart(float(p["E"]), float(p["nu"]), str(p["plane"])))
 
     def displacement(self, x: np.ndarray) -> np.ndarray:
         """The displacement of the free dofs, ``u = x + x_shift`` (call :meth:`build` first)."""

@@ -55,7 +55,7 @@ same r mu in MPa/mm and Pa/m), so every mode contracts by 1 / (1 + r_factor). Th
 The paper's r is a dimensional number (stress / length): 1e7 MPa per unit length for its body of
 E = 69000 MPa and width 1. ``r_rule="scaled"`` (the default of ``uzawa``) reads ``r`` in those
 units and converts it to the scene's: r_used = r * (E / 69000) / width, with E and width from the
-QP's scene parameters. In the paper's units r_used = r exactly (the same iterates as the paper's
+QP's units (``QP.units``). In the paper's units r_used = r exactly (the same iterates as the paper's
 method); with E or the length unit scaled by any factor, the iterates scale with them and the
 status stays the same. A QP without scene units (a QP file) uses r as given, and says so in
 ``info["r_units"]``. ``r_rule="fixed"`` uses r as given always (``report paper`` asks for it).
@@ -78,6 +78,7 @@ import scipy.linalg as la
 import scipy.sparse as sp
 
 from dualfem.core.errors import InputError
+from dualfem.core.parts import UnitsPart
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
@@ -89,18 +90,15 @@ PAPER_E = 69000.0
 PAPER_WIDTH = 1.0
 
 
-def paper_r_in_scene_units(r: float, scene: dict) -> tuple[float, str]:
+def paper_r_in_scene_units(r: float, units: UnitsPart | None) -> tuple[float, str]:
     """(r converted from the paper's units to the scene's, how): r * (E / 69000) / (width / 1).
 
-    r is a stress per length; a scene in other units (E and width from its parameters) gets the
-    same r relative to its own stiffness and size. Without both parameters r is used as given."""
-    try:
-        E, width = float(scene["E"]), float(scene["width"])
-    except (KeyError, TypeError, ValueError):
-        E = width = float("nan")
-    if not (np.isfinite(E) and np.isfinite(width) and E > 0 and width > 0):
-        return r, "as given (the QP has no scene E and width)"
-    return r * (E / PAPER_E) * (PAPER_WIDTH / width), f"scaled: r * (E / {PAPER_E:g}) / width"
+    r is a stress per length; a scene in other units (``QP.units``: its E and length scale, the
+    body's width) gets the same r relative to its own stiffness and size. A QP without units (a
+    QP file) uses r as given."""
+    if units is None:
+        return r, "as given (the QP has no units: E and width)"
+    return r * (units.E / PAPER_E) * (PAPER_WIDTH / units.length), f"scaled: r * (E / {PAPER_E:g}) / width"
 
 
 def _contraction(history: list[dict], last: int = 5) -> float:
@@ -271,7 +269,7 @@ class Uzawa(Solver):
         space = _ReducedSpace if self.params["linalg"] == "reduced" else _FullSpace
         self.space = space(qp, self.params["inner_norm"], from_param(self))
         self.reduction = getattr(self.space, "red", None)
-        self.r, self.r_units = paper_r_in_scene_units(float(self.params["r"]), qp.params) \
+        self.r, self.r_units = paper_r_in_scene_units(float(self.params["r"]), qp.units) \
             if self.params["r_rule"] == "scaled" else (float(self.params["r"]), "as given")
         self._mu = None
         if self.params["r_rule"] == "auto" and qp.m:

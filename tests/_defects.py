@@ -18,7 +18,7 @@ def defect_polylines(qp) -> list[np.ndarray]:
 
 def face_forces(qp, sigma: np.ndarray) -> np.ndarray:
     """Per constrained node j, sum over its two defect edges e of sigma nu_e |e| / 2, shape (m, 2)."""
-    X = np.asarray(qp.maps["nodes"])
+    X = np.asarray(qp.geometry.nodes)
     out = []
     for nodes in defect_polylines(qp):
         d = np.diff(X[:, nodes], axis=1)
@@ -35,7 +35,7 @@ def patch_check(problem, qp) -> None:
     eps = np.array([[2e-3, 0.7e-3], [0.7e-3, -1e-3]])
     sigma = lam * np.trace(eps) * np.eye(2) + 2 * mu * eps
     K_all, _, _ = problem.assemble()
-    X = np.asarray(qp.maps["nodes"])
+    X = np.asarray(qp.geometry.nodes)
     u = (eps @ X).T.ravel() + np.tile([0.3, -0.1], X.shape[1])  # DOF 2 i + c
     f = (K_all @ u).reshape(-1, 2)
     ref = face_forces(qp, sigma)
@@ -71,7 +71,7 @@ def rotation_check(over: dict, deg: float) -> None:
     R = np.array([[np.cos(np.deg2rad(deg)), -np.sin(np.deg2rad(deg))],
                   [np.sin(np.deg2rad(deg)), np.cos(np.deg2rad(deg))]])
     c = np.array([qp0.params["width"], qp0.params["height"]]) / 2
-    assert np.allclose(qp1.maps["nodes"], R @ (qp0.maps["nodes"] - c[:, None]) + c[:, None], atol=1e-14)
+    assert np.allclose(qp1.geometry.nodes, R @ (qp0.geometry.nodes - c[:, None]) + c[:, None], atol=1e-14)
     assert qp1.energy(s1.x) == pytest.approx(qp0.energy(s0.x), rel=1e-9)
     assert np.array_equal(evaluator.contact_set(qp0, s0.x), evaluator.contact_set(qp1, s1.x))
     j0, j1 = qp0.B @ s0.x, qp1.B @ s1.x

@@ -19,7 +19,7 @@ def test_kinked_polyline_on_the_grid():
     qp = problem.build()
     assert qp.m == 7 and "normal" not in qp.maps  # 3 + kink + 3 doubled nodes; no single normal
     j = 3  # the kink at (0.5, 0.5)
-    assert np.allclose(qp.maps["nodes"][:, qp.maps["defect_lower"][j]], [0.5, 0.5])
+    assert np.allclose(qp.geometry.nodes[:, qp.maps["defect_lower"][j]], [0.5, 0.5])
     n = np.array([0, 1]) + np.array([-1, 1]) / np.sqrt(2)
     assert np.allclose(qp.maps["defect_normals"][:, j], n / np.linalg.norm(n), atol=1e-15)
     assert qp.weights[j] == pytest.approx((1 + np.sqrt(2)) / 32, rel=1e-14)
@@ -43,7 +43,7 @@ def test_defects_table_equals_defect_key_and_deltas_add_up():
     patch_check(problem, qp)
     # interface term: sum_j w_j / delta_j |jump_j|^2 with each defect's delta
     x = np.random.default_rng(1).standard_normal(qp.n)
-    nd, up, lo = qp.maps["node_dofs"], qp.maps["defect_upper"], qp.maps["defect_lower"]
+    nd, up, lo = qp.geometry.node_dofs, qp.maps["defect_upper"], qp.maps["defect_lower"]
     jump2 = (x[nd[0, up]] - x[nd[0, lo]]) ** 2 + (x[nd[1, up]] - x[nd[1, lo]]) ** 2
     delta = np.where(qp.maps["defect_id"] == 0, 1e-3, 1e-2)
     assert x @ ((qp.K - qp.K_fixed) @ x) == pytest.approx(np.sum(qp.weights / delta * jump2), rel=1e-12)
@@ -113,7 +113,7 @@ def test_mirror_symmetric_scene_gives_symmetric_contact(vee, load):
     assert np.array_equal(c, c[::-1])
     assert 0 < c.sum() < c.size if not vee else c.all()
     # the solution: u1(1 - x, y) = -u1(x, y), u2(1 - x, y) = u2(x, y) at mirrored nodes (same face)
-    X = qp.maps["nodes"]
+    X = qp.geometry.nodes
     u = nodal_displacement(qp, sol.x)
     key = {(round(a, 9), round(b, 9), k >= (N + 1) ** 2): k for k, (a, b) in enumerate(X.T)}
     mirror = np.array([key[(round(1 - a, 9), round(b, 9), k >= (N + 1) ** 2)] for k, (a, b) in enumerate(X.T)])

@@ -56,7 +56,7 @@ def test_plot_deformed(cases):
     # the drawn triangles sit at X + 300 u
     xy = p.deformed(300.0)
     tri0 = coll.get_paths()[0].vertices[:3]
-    assert np.allclose(tri0, xy[:, qp.maps["triangles"][:, 0]].T)
+    assert np.allclose(tri0, xy[:, qp.geometry.cells[:, 0]].T)
     cbar_ax = [a for a in ax.figure.axes if a is not ax]
     assert cbar_ax and "MPa" in cbar_ax[0].get_ylabel() and "von Mises" in cbar_ax[0].get_ylabel()
     assert coll.get_clim() == (0.0, pytest.approx(p.von_mises.max()))
@@ -227,7 +227,7 @@ def test_plot_deformed_draws_every_defect(two_defects):
     qp, sol = two_defects
     ax = F.plot_deformed(qp, sol, scale=300.0, reference=True, contact=True, labels=True)
     xy = Post(qp, sol).deformed(300.0)
-    X = qp.maps["nodes"]
+    X = qp.geometry.nodes
     tips, ids = qp.maps["defect_tips"].reshape(-1, 2), qp.maps["defect_id"]
     white = [ln for ln in ax.get_lines() if ln.get_color() == "w"]
     dashed = [ln for ln in ax.get_lines() if ln.get_linestyle() == "--"]

@@ -57,7 +57,7 @@ def test_formats_load_the_same_qp(tmp_path, fmt):
     assert qp.n == 25 and qp.m == 8
     np.testing.assert_allclose(qp.K.toarray(), P, rtol=1e-15)
     np.testing.assert_allclose(qp.B.toarray(), G, rtol=1e-15)
-    np.testing.assert_allclose(G @ qp.maps["x_shift"], h, atol=1e-12)
+    np.testing.assert_allclose(G @ qp.shift.x, h, atol=1e-12)
 
 
 def test_nonzero_h_shift_solves_the_original_qp(tmp_path):

@@ -28,15 +28,15 @@ def qp8():
 
 def _field(qp, fn):
     """Free vector of the nodal field fn(X) -> (nnodes, 2) (zero on the clamped bottom if fn is)."""
-    return free_vector(qp, fn(np.asarray(qp.maps["nodes"])))
+    return free_vector(qp, fn(np.asarray(qp.geometry.nodes)))
 
 
 def test_nodal_roundtrip(qp8):
     x = np.random.default_rng(1).standard_normal(qp8.n)
     u = nodal_displacement(qp8, x)
-    assert u.shape == (qp8.maps["nodes"].shape[1], 2)
+    assert u.shape == (qp8.geometry.nodes.shape[1], 2)
     assert np.array_equal(free_vector(qp8, u), x)
-    bottom = np.isclose(qp8.maps["nodes"][1], 0.0)
+    bottom = np.isclose(qp8.geometry.nodes[1], 0.0)
     assert bottom.any() and np.all(u[bottom] == 0.0)
 
 
@@ -75,7 +75,7 @@ def test_von_mises_uniaxial():
 
 def test_defect_fields_opening(qp8):
     m = qp8.maps
-    X = np.asarray(m["nodes"])
+    X = qp8.geometry.nodes
     U = np.stack([1e-3 * X[1], 2e-3 * X[1]], axis=1)
     U[m["defect_upper"], 1] += 5e-4        # open the faces by 5e-4 in the normal direction
     U[m["defect_upper"], 0] += -1e-4       # and slide them by -1e-4
@@ -99,21 +99,21 @@ def test_post_is_lazy_and_needs_material(qp8):
     x = np.zeros(qp8.n)
     p = Post(qp8, x=x, multipliers=np.zeros(qp8.m))
     assert "stress" not in p.__dict__ and "defect" not in p.__dict__
-    assert p.von_mises.shape == (qp8.maps["triangles"].shape[1],)
+    assert p.von_mises.shape == (qp8.geometry.cells.shape[1],)
     assert "stress" in p.__dict__ and "defect" not in p.__dict__
     bare = type(qp8)(K=qp8.K, F=qp8.F, B=qp8.B, weights=qp8.weights, maps=qp8.maps)
     with pytest.raises(InputError, match="E and nu"):
         _ = Post(bare, x=x).stress
     assert Post(bare, x=x, E=1.0, nu=0.25).von_mises.max() == 0.0
     nomaps = type(qp8)(K=qp8.K, F=qp8.F, B=qp8.B)
-    with pytest.raises(InputError, match="mesh maps"):
+    with pytest.raises(InputError, match="mesh of the QP"):
         Post(nomaps, x=x)
 
 
 def test_deformed(qp8):
     x = np.random.default_rng(2).standard_normal(qp8.n) * 1e-4
     p = Post(qp8, x=x)
-    assert np.allclose(p.deformed(300.0), qp8.maps["nodes"] + 300.0 * nodal_displacement(qp8, x).T)
+    assert np.allclose(p.deformed(300.0), qp8.geometry.nodes + 300.0 * nodal_displacement(qp8, x).T)
 
 
 def test_contact_length():
@@ -130,7 +130,7 @@ def test_prolongate_reproduces_coarse_p1(qp8):
     xf = prolongate(qp8, xc, fine)
     Uc, Uf = nodal_displacement(qp8, xc), nodal_displacement(fine, xf)
     # every fine node that coincides with a single coarse node carries its value
-    Pc, Pf = np.round(qp8.maps["nodes"].T, 9), np.round(fine.maps["nodes"].T, 9)
+    Pc, Pf = np.round(qp8.geometry.nodes.T, 9), np.round(fine.geometry.nodes.T, 9)
     index = {}
     for i, p in enumerate(map(tuple, Pc)):
         index.setdefault(p, []).append(i)
@@ -164,7 +164,7 @@ def test_mass_norm_matches_skfem(qp8):
 
     M = asm(mass, basis)
     x = np.random.default_rng(4).standard_normal(qp.n)
-    nd = qp.maps["node_dofs"]
+    nd = qp.geometry.node_dofs
     full = np.zeros(basis.N)
     mask = nd >= 0
     full[basis.nodal_dofs[mask]] = x[nd[mask]]
@@ -199,8 +199,8 @@ def test_nodal_displacement_applies_x_shift():
     qp = problem.build()
     x = np.zeros(qp.n)
     u = nodal_displacement(qp, x)
-    nd = np.asarray(qp.maps["node_dofs"])
-    shift = np.asarray(qp.maps["x_shift"])
+    nd = np.asarray(qp.geometry.node_dofs)
+    shift = np.asarray(qp.shift.x)
     assert np.abs(shift).max() > 0
     mask = nd >= 0
     assert np.allclose(u.T[mask], shift[nd[mask]])

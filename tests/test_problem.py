@@ -66,7 +66,7 @@ def test_interface_term_is_trapezoid_rule_of_jump_squared():
     delta = 1e-3
     problem = load_scene("f2", {"N": 8, "delta": delta})
     qp = problem.build()
-    nd = qp.maps["node_dofs"]
+    nd = qp.geometry.node_dofs
     up, lo = qp.maps["defect_upper"], qp.maps["defect_lower"]
     s = qp.maps["defect_s"]
     rng = np.random.default_rng(0)
@@ -86,7 +86,7 @@ def test_interface_term_is_trapezoid_rule_of_jump_squared():
 
 def test_defect_doubling_structure(scene):
     _, qp = scene("f2", 16, 1e-5)
-    p, t = qp.maps["nodes"], qp.maps["triangles"]
+    p, t = qp.geometry.nodes, qp.geometry.cells
     up, lo = qp.maps["defect_upper"], qp.maps["defect_lower"]
     assert np.allclose(p[:, up], p[:, lo])                 # same place
     assert np.allclose(p[1, up], 0.5)
@@ -98,7 +98,7 @@ def test_defect_doubling_structure(scene):
     tips = qp.maps["defect_tips"]
     assert np.allclose(p[:, tips].T, [[0.25, 0.5], [0.75, 0.5]])
     # B is the normal (x2) jump: +1 on the upper y-DOF, -1 on the lower one
-    nd = qp.maps["node_dofs"]
+    nd = qp.geometry.node_dofs
     B = qp.B.toarray()
     for j in range(qp.m):
         assert B[j, nd[1, up[j]]] == 1 and B[j, nd[1, lo[j]]] == -1 and np.count_nonzero(B[j]) == 2
@@ -180,7 +180,7 @@ def test_delta_free_assembly_is_reused_only_when_only_delta_changes():
     assert not np.shares_memory(fresh.K_fixed.data, a.K_fixed.data)
     for M in ("K", "K_fixed", "B"):
         assert abs(getattr(b, M) - getattr(fresh, M)).max() == 0.0
-    assert np.array_equal(b.F, fresh.F) and np.array_equal(b.maps["node_dofs"], fresh.maps["node_dofs"])
+    assert np.array_equal(b.F, fresh.F) and np.array_equal(b.geometry.node_dofs, fresh.geometry.node_dofs)
     with pytest.raises(ValueError):
         b.K_fixed.data[0] = 1.0                                     # shared, so read-only
     b.F[0] = 1.0                                                    # F is each QP's own

@@ -18,7 +18,7 @@ def test_round_trip(scene, tmp_path, ext):
     back = QP.load(path)
     assert abs(back.K - qp.K).max() == 0 and abs(back.B - qp.B).max() == 0
     assert np.array_equal(back.F, qp.F) and np.array_equal(back.weights, qp.weights)
-    assert np.array_equal(back.maps["node_dofs"], qp.maps["node_dofs"])
+    assert np.array_equal(back.geometry.node_dofs, qp.geometry.node_dofs)
     assert not list(tmp_path.glob(".*"))  # no temporary file left behind
 
 

@@ -39,7 +39,7 @@ def test_scene_in_units_scales_defect_tables_and_mesh_lengths():
 def _node_order(qp, length: float) -> np.ndarray:
     """Node ids sorted by (position / length, face): gmsh numbers the nodes of a scaled copy of a
     geometry differently, so two QPs are compared node by node through this order."""
-    X = np.round(qp.maps["nodes"] / length, 9)
+    X = np.round(qp.geometry.nodes / length, 9)
     face = np.isin(np.arange(X.shape[1]), qp.maps["defect_upper"])
     return np.lexsort((face, X[1], X[0]))
 
@@ -56,7 +56,7 @@ def test_gmsh_scene_in_other_units_gives_the_same_relative_answer(name):
     b = load_scene("f2", scene_in_units(base, fs, fl)).build()
     assert (a.n, a.m) == (b.n, b.m)
     ia, ib = _node_order(a, 1.0), _node_order(b, fl)
-    np.testing.assert_allclose(b.maps["nodes"][:, ib], fl * a.maps["nodes"][:, ia], rtol=0, atol=1e-9 * fl)
+    np.testing.assert_allclose(b.geometry.nodes[:, ib], fl * a.geometry.nodes[:, ia], rtol=0, atol=1e-9 * fl)
     sa, sb = run("pdas", a), run("pdas", b)
     assert sa.status == sb.status == "solved"
     ua, ub = nodal_displacement(a, sa.x)[ia], nodal_displacement(b, sb.x)[ib]

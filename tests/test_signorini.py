@@ -37,7 +37,7 @@ def test_flat_foundation_uniform_pressure_is_exact(plane):
     np.testing.assert_allclose(qp.pressure(sol.multipliers), expected, rtol=1e-7)
     assert evaluator.contact_set(qp, sol.x).all()
     # in the punch's frame u2 varies linearly from indent (bottom) to 0 (top)
-    nodes, nd = qp.maps["nodes"], qp.maps["node_dofs"]
+    nodes, nd = qp.geometry.nodes, qp.geometry.node_dofs
     u = pr.displacement(sol.x)
     has = nd[1] >= 0
     np.testing.assert_allclose(u[nd[1, has]], 0.01 * (1 - nodes[1, has] / 0.5), atol=1e-9 * 0.01)
@@ -64,14 +64,14 @@ def test_curved_obstacle_equilibrium_and_partial_contact():
     assert 0 < c.sum() < qp.m                        # partial contact
     assert c[qp.m // 2] and not c[0] and not c[-1]   # in contact under the bump's top only
     # in contact <=> the bottom node lies on the foundation surface x2 = indent - g(x) (punch frame)
-    u2_bottom = pr.displacement(sol.x)[qp.maps["node_dofs"][1, qp.maps["contact_nodes"]]]
+    u2_bottom = pr.displacement(sol.x)[qp.geometry.node_dofs[1, qp.maps["contact_nodes"]]]
     np.testing.assert_allclose((u2_bottom + qp.maps["gap"] - 0.005)[c], 0.0, atol=1e-9 * 0.005)
     assert np.all((u2_bottom + qp.maps["gap"] - 0.005)[~c] > 0)
     assert np.all(mu[~c] <= 1e-8 * mu.max())
     # the QP energy plus the stored offset is the potential energy of the displacement
-    K, F = qp.K, qp.F + qp.K @ qp.maps["x_shift"]
+    K, F = qp.K, qp.F + qp.K @ qp.shift.x
     u = pr.displacement(sol.x)
-    assert qp.energy(sol.x) + float(qp.maps["objective_offset"]) == pytest.approx(0.5 * u @ (K @ u) - F @ u, rel=1e-10)
+    assert qp.energy(sol.x) + float(qp.shift.objective) == pytest.approx(0.5 * u @ (K @ u) - F @ u, rel=1e-10)
 
 
 def test_exact_solvers_agree():

@@ -94,7 +94,7 @@ def test_membrane_touches_the_floor_only_above_the_threshold(templates):
     assert not evaluator.contact_set(light, s_light.x).any() and s_light.multipliers.max() == 0
     c = evaluator.contact_set(heavy, s_heavy.x)
     assert 0 < c.sum() < heavy.m
-    nodes = heavy.maps["nodes"][:, heavy.maps["node_dofs"][0] >= 0]
+    nodes = heavy.geometry.nodes[:, heavy.geometry.node_dofs[0] >= 0]
     centre = np.argmin(np.linalg.norm(nodes - 0.5, axis=0))
     assert c[centre]                                   # touches first in the middle
 
@@ -103,8 +103,8 @@ def test_membrane_point_symmetry(templates):
     """The (1,1)-diagonal mesh is symmetric under (x, y) -> (1 - x, 1 - y): so is the solution."""
     qp = templates["problem_template"].MembraneOverFloor(N=12, q=2.0).build()
     s = run("my_pg", qp)
-    nd = qp.maps["node_dofs"][0]
-    X = qp.maps["nodes"]
+    nd = qp.geometry.node_dofs[0]
+    X = qp.geometry.nodes
     free = np.flatnonzero(nd >= 0)
     key = {tuple(np.round(X[:, i], 12)): nd[i] for i in free}
     partner = np.array([key[tuple(np.round(1.0 - X[:, i], 12))] for i in free])

@@ -26,15 +26,15 @@ def case():
 
 def _check(mesh, qp, sol):
     p = Post(qp, sol)
-    nn = qp.maps["nodes"].shape[1]
-    ntri = qp.maps["triangles"].shape[1]
+    nn = qp.geometry.nodes.shape[1]
+    ntri = qp.geometry.cells.shape[1]
     m = qp.m
     assert mesh.points.shape == (nn, 3)
-    assert np.allclose(mesh.points[:, :2], qp.maps["nodes"].T)
+    assert np.allclose(mesh.points[:, :2], qp.geometry.nodes.T)
     types = [c.type for c in mesh.cells]
     assert types == ["triangle", "line"]
     tri, line = mesh.cells[0].data, mesh.cells[1].data
-    assert tri.shape == (ntri, 3) and np.array_equal(tri, qp.maps["triangles"].T)
+    assert tri.shape == (ntri, 3) and np.array_equal(tri, qp.geometry.cells.T)
     assert line.shape == (2 * (m + 1), 2)  # m + 1 edges per face, two faces
     # displacement: 3 components, z = 0, equal to the solution
     d = mesh.point_data["displacement"]
@@ -81,7 +81,8 @@ def test_xdmf_roundtrip(case, tmp_path):
 def test_to_meshio_without_defect_maps(case):
     qp, sol = case
     maps = {k: v for k, v in qp.maps.items() if not k.startswith("defect")}
-    bare = type(qp)(K=qp.K, F=qp.F, B=qp.B, weights=qp.weights, maps=maps, params=qp.params)
+    bare = type(qp)(K=qp.K, F=qp.F, B=qp.B, weights=qp.weights, maps=maps, params=qp.params,
+                    geometry=qp.geometry, material=qp.material)
     mesh = to_meshio(bare, sol)
     assert [c.type for c in mesh.cells] == ["triangle"]
     assert "jump_normal" not in mesh.cell_data
@@ -132,7 +133,7 @@ def test_two_defect_gmsh_scene(two_defects, tmp_path, kind):
     write = write_vtu if kind == "vtu" else write_xdmf
     mesh = meshio.read(write(tmp_path / f"two.{kind}", qp, sol))
     mp = qp.maps
-    nn = mp["nodes"].shape[1]
+    nn = qp.geometry.nodes.shape[1]
     ids, tips = mp["defect_id"], mp["defect_tips"]
     sizes = np.bincount(ids)
     assert sizes.size == 2 and tips.size == 4

@@ -21,7 +21,7 @@ import scipy.sparse as sp
 
 from dualfem.errors import check_int, check_positive
 from dualfem.problem import Problem
-from dualfem.qp import QP
+from dualfem.qp import QP, GeometryPart
 from dualfem.registry import register_problem
 
 
@@ -58,4 +58,4 @@ class MembraneOverFloor(Problem):
         node_dofs[0, free] = np.arange(free.size)
         return QP(K=K, F=F, B=sp.identity(free.size, format="csr"), weights=hat[free],
                   name=f"membrane[q={p['q']:g}]", params=dict(p),
-                  maps={"nodes": mesh.p, "triangles": mesh.t, "node_dofs": node_dofs})
+                  geometry=GeometryPart.make(mesh.p, mesh.t, node_dofs))

@@ -5,7 +5,7 @@ works in MPa/mm and in Pa/m alike:
 
 * force scale  f_s = max(|F|_inf, |Kx|_inf, |B'mu|_inf)   (nodal forces)
 * length scale l_s = |x|_inf                               (displacements; for a shifted QP,
-  whose user unknowns are ``x + maps["x_shift"]``, the larger of |x|_inf and |x + x_shift|_inf)
+  whose user unknowns are ``x + qp.shift.x``, the larger of |x|_inf and |x + x_shift|_inf)
 
 ==================  =====================================================
 ``stationarity``    |Kx - F - B'mu|_inf / f_s
@@ -85,13 +85,12 @@ def energy_norm(qp: QP, v: np.ndarray, Kv: np.ndarray | None = None) -> float:
 
 
 def _shift(qp: QP, x: np.ndarray) -> np.ndarray | None:
-    shift = qp.maps.get("x_shift") if qp.maps else None
-    return None if shift is None or np.shape(shift) != np.shape(x) else np.asarray(shift, dtype=float)
+    return None if qp.shift is None or qp.shift.x.shape != np.shape(x) else qp.shift.x
 
 
 def size_energy(qp: QP, x: np.ndarray, Kx: np.ndarray | None = None) -> float:
     """The energy-norm size of a solution, the denominator of relative errors: |x|_K, or for a shifted
-    QP (user unknowns ``x + maps["x_shift"]``) the larger of |x|_K and |x + x_shift|_K, so that a
+    QP (user unknowns ``x + qp.shift.x``) the larger of |x|_K and |x + x_shift|_K, so that a
     solution x = 0 of the shifted problem still has a size. ``Kx``: the product K x, if known."""
     shift = _shift(qp, x)
     e = energy_norm(qp, x, Kx)

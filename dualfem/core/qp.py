@@ -24,13 +24,15 @@ across all of them.
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass, field
+import warnings
+from dataclasses import InitVar, dataclass, field
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
 from dualfem.core.errors import InputError
+from dualfem.core.parts import GeometryPart, LocalPart, MaterialPart, ShiftPart, UnitsPart
 
 
 def coo_from_arrays(d: dict, name: str, where: str, rows: int | None = None,
@@ -87,22 +89,84 @@ def check_params(params: dict, where: str) -> None:
         raise InputError(f"param_plane in {where} must be one of {', '.join(PLANES)}, got {params['plane']!r}")
 
 
+#: ``maps`` keys that became typed parts (read through ``maps`` with a DeprecationWarning for one release)
+PROMOTED_MAPS = {"x_shift": ("shift", "x"), "objective_offset": ("shift", "objective"),
+                 "nodes": ("geometry", "nodes"), "triangles": ("geometry", "cells"),
+                 "node_dofs": ("geometry", "node_dofs")}
+
+
+class Maps(dict):
+    """``QP.maps``: problem-specific extra arrays (post-processing, export).
+
+    The keys that became typed parts (:data:`PROMOTED_MAPS`) are still answered, from the part, with a
+    DeprecationWarning (they will be removed from ``maps`` in the next release: read ``qp.shift``,
+    ``qp.geometry`` instead); they are not stored twice and are not listed by iteration.
+    """
+
+    def __init__(self, data=(), promoted: dict | None = None):
+        super().__init__(data)
+        self._promoted = dict(promoted or {})
+
+    def _old(self, key):
+        part, fld = PROMOTED_MAPS[key]
+        warnings.warn(f"qp.maps[{key!r}] is deprecated: read qp.{part}.{fld}", DeprecationWarning, stacklevel=3)
+        return self._promoted[key]
+
+    def __getitem__(self, key):
+        if key in self._promoted and not dict.__contains__(self, key):
+            return self._old(key)
+        return super().__getitem__(key)
+
+    def get(self, key, default=None):
+        if key in self._promoted and not dict.__contains__(self, key):
+            return self._old(key)
+        return super().get(key, default)
+
+    def __contains__(self, key) -> bool:
+        return dict.__contains__(self, key) or key in self._promoted
+
+
+def _parts_from_maps(maps: dict, n: int) -> tuple[dict, dict]:
+    """Split an old-style ``maps`` into (remaining extras, typed parts found in it)."""
+    rest = {k: v for k, v in maps.items() if k not in PROMOTED_MAPS}
+    parts: dict = {}
+    if "x_shift" in maps and np.shape(maps["x_shift"]) == (n,):
+        parts["shift"] = ShiftPart.make(maps["x_shift"], maps.get("objective_offset", 0.0))
+    if all(k in maps for k in ("nodes", "triangles", "node_dofs")):
+        X = np.asarray(maps["nodes"])
+        if X.ndim == 2 and X.shape[0] in (2, 3):
+            parts["geometry"] = GeometryPart.make(X, maps["triangles"], maps["node_dofs"])
+    return rest, parts
+
+
 @dataclass
 class QP:
-    """A convex QP ``min 1/2 x'Kx - F'x  s.t.  Bx >= 0`` in plain scipy.sparse / numpy data."""
+    """A convex QP ``min 1/2 x'Kx - F'x  s.t.  Bx >= 0`` in plain scipy.sparse / numpy data.
+
+    Optional typed parts (:mod:`dualfem.core.parts`), validated here: ``local`` (``K_fixed`` and the
+    local unknowns: ``K_fixed=``/``local_dofs=`` are a shorthand for it), ``shift``, ``geometry``,
+    ``units``, ``material``. ``params``: write-only provenance (the scene's parameters; no algorithm reads it).
+    ``maps``: problem-specific extras (defect node maps for post-processing and export).
+    """
 
     K: sp.csc_matrix
     F: np.ndarray
     B: sp.csr_matrix
     weights: np.ndarray | None = None
-    K_fixed: sp.csc_matrix | None = None
-    local_dofs: np.ndarray | None = None
+    K_fixed: InitVar[sp.spmatrix | None] = None
+    local_dofs: InitVar[np.ndarray | None] = None
     name: str = "qp"
     params: dict = field(default_factory=dict)
     maps: dict = field(default_factory=dict)
+    local: LocalPart | None = None
+    shift: ShiftPart | None = None
+    geometry: GeometryPart | None = None
+    units: UnitsPart | None = None
+    material: MaterialPart | None = None
 
-    def __post_init__(self) -> None:
-        self.K = sp.csc_matrix(self.K, dtype=float)
+    def __post_init__(self, K_fixed, local_dofs) -> None:
+        self.K = self.K if sp.issparse(self.K) and self.K.format == "csc" and self.K.dtype == float \
+            else sp.csc_matrix(self.K, dtype=float)
         self.F = np.asarray(self.F, dtype=float).ravel()
         self.B = sp.csr_matrix(self.B, dtype=float)
         n = self.K.shape[0]
@@ -123,13 +187,44 @@ class QP:
                 raise InputError(f"{nm} contains NaN or infinite entries")
         if np.any(self.weights <= 0):
             raise InputError("weights must be > 0")
-        if self.K_fixed is None:
-            self.K_fixed = self.K
-        else:
-            self.K_fixed = sp.csc_matrix(self.K_fixed, dtype=float)
-        if self.local_dofs is None:
-            self.local_dofs = np.unique(self.B.indices)
-        self.local_dofs = np.asarray(self.local_dofs, dtype=np.int64)
+        self._init_parts(K_fixed, local_dofs)
+
+    def _init_parts(self, K_fixed, local_dofs) -> None:
+        n = self.K.shape[0]
+        maps = dict(self.maps or {})
+        if isinstance(self.maps, Maps):
+            maps.update({k: v for k, v in self.maps._promoted.items() if k not in maps})
+        rest, found = _parts_from_maps(maps, n)
+        if "shift" in found and self.shift is None:
+            if not isinstance(self.maps, Maps):
+                warnings.warn("QP(maps={'x_shift': ...}) is deprecated: pass shift=ShiftPart.make(x, objective)",
+                              DeprecationWarning, stacklevel=4)
+            self.shift = found["shift"]
+        if "geometry" in found and self.geometry is None:
+            if not isinstance(self.maps, Maps):
+                warnings.warn("QP(maps={'nodes', 'triangles', 'node_dofs'}) is deprecated: pass "
+                              "geometry=GeometryPart.make(nodes, cells, node_dofs)", DeprecationWarning, stacklevel=4)
+            self.geometry = found["geometry"]
+        if K_fixed is not None or local_dofs is not None or self.local is None:
+            Kf = K_fixed if K_fixed is not None else (self.local.K_fixed if self.local is not None else self.K)
+            dofs = local_dofs if local_dofs is not None else (
+                self.local.dofs if self.local is not None else np.unique(self.B.indices))
+            self.local = LocalPart.make(Kf, dofs)
+        self.local.validate(self.K, self.B)
+        if self.shift is not None:
+            self.shift.validate(n)
+        if self.geometry is not None:
+            self.geometry.validate(n)
+        for part in (self.units, self.material):
+            if part is not None:
+                part.validate()
+        promoted: dict[str, np.ndarray] = {}
+        if self.shift is not None:
+            promoted.update(x_shift=self.shift.x, objective_offset=np.array(self.shift.objective))
+        if self.geometry is not None:
+            g = self.geometry
+            promoted.update(nodes=g.nodes, triangles=g.cells, node_dofs=g.node_dofs)
+        self.maps = Maps(rest, promoted)
 
     # ---------------------------------------------------------------- sizes
     @property
@@ -175,13 +270,15 @@ class QP:
         out = {
             "K_row": K.row, "K_col": K.col, "K_data": K.data, "K_shape": np.array(K.shape),
             "B_row": B.row, "B_col": B.col, "B_data": B.data, "B_shape": np.array(B.shape),
-            "F": self.F, "weights": self.weights, "local_dofs": self.local_dofs,
+            "F": self.F, "weights": self.weights,
+            "local_dofs": self.local.dofs if self.local is not None else np.zeros(0, np.int64),
             "name": np.array(self.name),
         }
         for k, v in self.params.items():
             if isinstance(v, (int, float, str)):
                 out[f"param_{k}"] = np.array(v)
-        for k, v in self.maps.items():
+        maps = {**(self.maps._promoted if isinstance(self.maps, Maps) else {}), **self.maps}
+        for k, v in maps.items():            # the typed parts are written as the documented map_ arrays
             out[f"map_{k}"] = np.asarray(v)
         return out
 
@@ -248,6 +345,26 @@ class QP:
         maps = {k[4:]: v for k, v in d.items() if k.startswith("map_")}
         params = {k[6:]: v.item() if np.size(v) == 1 else v for k, v in d.items() if k.startswith("param_")}
         check_params(params, where)
-        qp = cls(K=K, F=F, B=B, weights=w, name=path.stem, maps=maps, params=params)
+        rest, parts = _parts_from_maps(maps, n)     # map_x_shift, map_nodes, ...: the documented file arrays
+        if "E" in params and "nu" in params:        # validated by check_params: for post-processing only
+            parts["material"] = MaterialPart(float(params["E"]), float(params["nu"]),
+                                             str(params.get("plane", "strain")))
+        qp = cls(K=K, F=F, B=B, weights=w, name=path.stem, maps=rest, params=params, **parts)
         qp.check()
         return qp
+
+
+# ``K_fixed`` and ``local_dofs`` are init-only keywords of the dataclass (a shorthand for ``local``) and,
+# once constructed, read-only views of ``local`` (set after the decorator, which would take them for defaults)
+def _k_fixed(self: QP) -> sp.csc_matrix:
+    """``local.K_fixed``: the delta-free part of K (K itself when the QP has no local structure)."""
+    return self.local.K_fixed  # type: ignore[union-attr]
+
+
+def _local_dofs(self: QP) -> np.ndarray:
+    """``local.dofs``: the unknowns on which K - K_fixed and B act."""
+    return self.local.dofs  # type: ignore[union-attr]
+
+
+setattr(QP, "K_fixed", property(_k_fixed))  # noqa: B010 - mypy must not see a second K_fixed
+setattr(QP, "local_dofs", property(_local_dofs))  # noqa: B010

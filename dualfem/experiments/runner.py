@@ -140,7 +140,7 @@ def summary(qp: QP, sol: Solution) -> dict:
     if sol.x is not None and sol.multipliers is not None and sol.residuals is not None and sol.residuals["finite"]:
         jump = qp.B @ sol.x
         out.update({
-            "energy": sol.residuals["energy"] + float(np.asarray(qp.maps.get("objective_offset", 0.0))),
+            "energy": sol.residuals["energy"] + (0.0 if qp.shift is None else qp.shift.objective),
             "max_jump": float(jump.max(initial=0.0)),
             "n_contact": int(evaluator.contact_set(qp, sol.x).sum()),
             "contact_rtol": evaluator.CONTACT_RTOL,

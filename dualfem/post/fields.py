@@ -1,10 +1,10 @@
 """Post-processing of a thin-defect solution: nodal displacements, strains and stresses per
 triangle, von Mises stress, fields along the defect, deformed coordinates.
 
-Everything is computed from the QP's mesh maps (``qp.maps``: ``nodes``, ``triangles``,
-``node_dofs``, ``defect_upper``/``defect_lower``/``defect_tips``/``defect_s``, ``normal``,
-``tangent``) and the material in ``qp.params`` (``E``, ``nu``, ``plane``), so a QP built by a
-scene is enough; a QP read back from a file may pass ``E``, ``nu``, ``plane`` explicitly.
+Everything is computed from the QP's mesh (``qp.geometry``: ``nodes``, ``cells``, ``node_dofs``),
+its defect maps (``qp.maps``: ``defect_upper``/``defect_lower``/``defect_tips``/``defect_s``,
+``normal``, ``tangent``) and its material (``qp.material``: ``E``, ``nu``, ``plane``), so a QP
+built by a scene is enough; a QP read back from a file may pass ``E``, ``nu``, ``plane`` explicitly.
 Nothing is computed until asked for: :class:`Post` evaluates each field on first access and
 caches it.
 
@@ -30,26 +30,25 @@ import numpy as np
 
 from dualfem.core.elasticity import lame
 from dualfem.core.errors import InputError
+from dualfem.core.parts import GeometryPart
 
-_REQUIRED_MAPS = ("nodes", "triangles", "node_dofs")
 
-
-def _maps(qp) -> dict:
-    missing = [k for k in _REQUIRED_MAPS if k not in qp.maps]
-    if missing:
-        raise InputError(f"post-processing needs the mesh maps of the QP ({', '.join(missing)} missing): "
-                         f"build the QP from a scene (or export it with its maps)")
-    return qp.maps
+def _geometry(qp) -> GeometryPart:
+    """The QP's mesh (``qp.geometry``); InputError if it has none."""
+    if getattr(qp, "geometry", None) is None:
+        raise InputError("post-processing needs the mesh of the QP (qp.geometry: nodes, cells, node_dofs): "
+                         "build the QP from a scene (or export it with its map_ arrays)")
+    return qp.geometry
 
 
 def material(qp, E: float | None = None, nu: float | None = None, plane: str | None = None) -> tuple[float, float, str]:
-    """(E, nu, plane) from the arguments, else from ``qp.params``; InputError if unknown."""
-    p = getattr(qp, "params", {}) or {}
-    E = p.get("E") if E is None else E
-    nu = p.get("nu") if nu is None else nu
-    plane = p.get("plane", "strain") if plane is None else plane
+    """(E, nu, plane) from the arguments, else from ``qp.material``; InputError if unknown."""
+    mat = getattr(qp, "material", None)
+    E = (mat.E if mat else None) if E is None else E
+    nu = (mat.nu if mat else None) if nu is None else nu
+    plane = (mat.plane if mat else "strain") if plane is None else plane
     if E is None or nu is None:
-        raise InputError("post-processing needs the material: pass E and nu (the QP has no params 'E', 'nu')")
+        raise InputError("post-processing needs the material: pass E and nu (the QP has no material part)")
     if plane not in ("strain", "stress"):
         raise InputError(f"plane must be 'strain' or 'stress', got {plane!r}")
     return float(E), float(nu), str(plane)
@@ -58,17 +57,15 @@ def material(qp, E: float | None = None, nu: float | None = None, plane: str | N
 def nodal_displacement(qp, x: np.ndarray) -> np.ndarray:
     """Displacement of every mesh node, shape (nnodes, 2); clamped components are 0.
 
-    A QP whose unknowns are shifted (``maps["x_shift"]``: the displacement is ``x + x_shift``,
-    e.g. the Signorini problem) is shifted back here.
+    A QP whose unknowns are shifted (``qp.shift``: the displacement is ``x + shift.x``, e.g. the
+    Signorini problem) is shifted back here.
     """
-    maps = _maps(qp)
-    nd = np.asarray(maps["node_dofs"])
+    nd = _geometry(qp).node_dofs
     x = np.asarray(x, dtype=float)
     if x.shape != (qp.n,):
         raise InputError(f"x must have length {qp.n}, got shape {x.shape}")
-    shift = maps.get("x_shift")
-    if shift is not None:
-        x = x + np.asarray(shift, dtype=float)
+    if qp.shift is not None:
+        x = x + qp.shift.x
     u = np.zeros(nd.shape[::-1])
     mask = nd >= 0
     u.T[mask] = x[nd[mask]]
@@ -77,13 +74,11 @@ def nodal_displacement(qp, x: np.ndarray) -> np.ndarray:
 
 def free_vector(qp, u: np.ndarray) -> np.ndarray:
     """Inverse of :func:`nodal_displacement`: the vector x of free unknowns from nodal values."""
-    maps = _maps(qp)
-    nd = np.asarray(maps["node_dofs"])
+    nd = _geometry(qp).node_dofs
     x = np.zeros(qp.n)
     mask = nd >= 0
     x[nd[mask]] = np.asarray(u).T[mask]
-    shift = maps.get("x_shift")
-    return x if shift is None else x - np.asarray(shift, dtype=float)
+    return x if qp.shift is None else x - qp.shift.x
 
 
 def shape_gradients(nodes: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -102,9 +97,9 @@ def shape_gradients(nodes: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.
 
 def strains(qp, x: np.ndarray) -> np.ndarray:
     """Strain per triangle, shape (ntri, 3): eps11, eps22, eps12 (tensor shear)."""
-    m = _maps(qp)
-    tri = np.asarray(m["triangles"])
-    grad, _ = shape_gradients(m["nodes"], tri)
+    g = _geometry(qp)
+    tri = g.cells
+    grad, _ = shape_gradients(g.nodes, tri)
     u = nodal_displacement(qp, x)[tri.T]  # (ntri, 3, 2)
     du = np.einsum("tic,tid->tcd", u, grad)  # du[t, c, d] = d u_c / d x_d
     return np.stack([du[:, 0, 0], du[:, 1, 1], 0.5 * (du[:, 0, 1] + du[:, 1, 0])], axis=1)
@@ -132,13 +127,12 @@ def von_mises(s11, s22, s12, s33=0.0) -> np.ndarray:
 
 def deformed_nodes(qp, x: np.ndarray, scale: float = 1.0) -> np.ndarray:
     """Node coordinates of the deformed body, ``X + scale * u``, shape (2, nnodes)."""
-    return np.asarray(_maps(qp)["nodes"]) + scale * nodal_displacement(qp, x).T
+    return _geometry(qp).nodes + scale * nodal_displacement(qp, x).T
 
 
-def _defect_pieces(m: dict, up: np.ndarray, lo: np.ndarray, s_in: np.ndarray):
+def _defect_pieces(m: dict, nodes: np.ndarray, up: np.ndarray, lo: np.ndarray, s_in: np.ndarray):
     """Per defect: (id, rows of B in order, first tip, last tip, its length) from the maps; the
     tips are None when the maps do not give them (one entry for every defect then)."""
-    nodes = np.asarray(m["nodes"])
     tips = np.asarray(m.get("defect_tips", []), dtype=np.int64)
     ids = np.asarray(m.get("defect_id", np.zeros(up.size, dtype=np.int64)), dtype=np.int64)
     ndef = int(ids.max()) + 1 if ids.size else 0
@@ -169,21 +163,21 @@ def defect_fields(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> d
     tips, which carry no constraint; only when ``multipliers`` given). ``interior`` is a boolean
     mask of the constrained (doubled) nodes. :func:`defect_stretches` splits the arrays by defect.
     """
-    m = _maps(qp)
+    m = qp.maps
+    nodes = _geometry(qp).nodes
     for k in ("defect_upper", "defect_lower", "defect_s"):
         if k not in m:
             raise InputError(f"post-processing of the defect needs qp.maps[{k!r}]")
     up = np.asarray(m["defect_upper"], dtype=np.int64)
     lo = np.asarray(m["defect_lower"], dtype=np.int64)
     s_in = np.asarray(m["defect_s"], dtype=float)
-    nodes = np.asarray(m["nodes"])
     nrm = np.asarray(m.get("normal", (0.0, 1.0)), dtype=float)
     tau = np.asarray(m.get("tangent", (nrm[1], -nrm[0])), dtype=float)
     # per-node normals and tangents of general (kinked, curved, several) defects, else the single ones
     nrm_j = np.asarray(m["defect_normals"], dtype=float).T if "defect_normals" in m else np.tile(nrm, (up.size, 1))
     tau_j = np.asarray(m["defect_tangents"], dtype=float).T if "defect_tangents" in m else np.tile(tau, (up.size, 1))
     parts: dict[str, list] = {k: [] for k in ("s", "upper", "lower", "row", "id", "nrm", "tau")}
-    for k, rows, t0, t1, L in _defect_pieces(m, up, lo, s_in):
+    for k, rows, t0, t1, L in _defect_pieces(m, nodes, up, lo, s_in):
         if t0 is None:
             row, near = rows, rows
             parts["s"].append(s_in[rows])
@@ -250,7 +244,7 @@ class Post:
             multipliers = sol.multipliers if multipliers is None else multipliers
         if x is None:
             raise InputError("post-processing needs a solution with displacements (x is None: the solve failed?)")
-        _maps(qp)
+        _geometry(qp)
         self.qp = qp
         self.x = np.asarray(x, dtype=float)
         self.multipliers = None if multipliers is None else np.asarray(multipliers, dtype=float)
@@ -264,12 +258,12 @@ class Post:
     @property
     def nodes(self) -> np.ndarray:
         """Reference node coordinates (2, nnodes)."""
-        return np.asarray(self.qp.maps["nodes"])
+        return _geometry(self.qp).nodes
 
     @property
     def triangles(self) -> np.ndarray:
         """Triangles (3, ntri) as node ids."""
-        return np.asarray(self.qp.maps["triangles"])
+        return _geometry(self.qp).cells
 
     @cached_property
     def displacement(self) -> np.ndarray:
@@ -315,9 +309,8 @@ def locate(qp_coarse, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     against the triangles of its cell. A point on the defect would be ambiguous (two coincident
     copies), so pass points that are strictly inside triangles (e.g. fine-triangle centroids).
     """
-    m = _maps(qp_coarse)
-    P = np.asarray(m["nodes"], dtype=float)
-    T = np.asarray(m["triangles"], dtype=np.int64)
+    g = _geometry(qp_coarse)
+    P, T = g.nodes, g.cells
     x0, hx = _grid_spacing(P[0])
     y0, hy = _grid_spacing(P[1])
     ny = int(round((P[1].max() - y0) / hy)) + 2
@@ -368,12 +361,11 @@ def prolongate(qp_coarse, x_coarse: np.ndarray, qp_fine) -> np.ndarray:
     of the fine QP's free unknowns (clamped values are zero on both meshes).
     """
     uc = nodal_displacement(qp_coarse, x_coarse)
-    mf = _maps(qp_fine)
-    Pf = np.asarray(mf["nodes"], dtype=float)
-    Tf = np.asarray(mf["triangles"], dtype=np.int64)
+    gf = _geometry(qp_fine)
+    Pf, Tf = gf.nodes, gf.cells
     tc, _ = locate(qp_coarse, Pf[:, Tf].mean(axis=1))
-    Tc = np.asarray(_maps(qp_coarse)["triangles"], dtype=np.int64)
-    Pc = np.asarray(qp_coarse.maps["nodes"], dtype=float)
+    gc = _geometry(qp_coarse)
+    Tc, Pc = gc.cells, gc.nodes
     tri_xy = Pc[:, Tc[:, tc]]
     U = np.zeros((Pf.shape[1], 2))
     for i in range(3):
@@ -385,9 +377,9 @@ def prolongate(qp_coarse, x_coarse: np.ndarray, qp_fine) -> np.ndarray:
 
 def mass_norm2(qp, x: np.ndarray) -> float:
     """Squared L2 norm of the P1 displacement field, sum over triangles of A/12 (sum e_i^2 + (sum e_i)^2)."""
-    m = _maps(qp)
-    T = np.asarray(m["triangles"], dtype=np.int64)
-    _, area = shape_gradients(m["nodes"], T)
+    g = _geometry(qp)
+    T = g.cells
+    _, area = shape_gradients(g.nodes, T)
     u = nodal_displacement(qp, x)[T]  # (3, ntri, 2)
     per = (u ** 2).sum(axis=0) + u.sum(axis=0) ** 2
     return float(np.sum(area[:, None] / 12.0 * per))

@@ -39,6 +39,7 @@ import numpy as np
 from dualfem.core import caches
 from dualfem.core.elasticity import PLANES, lame  # noqa: F401  (re-exported)
 from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
+from dualfem.core.parts import GeometryPart, MaterialPart, UnitsPart
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
 from dualfem.core.registry import register_problem
@@ -299,9 +300,12 @@ class ThinDefect(Problem):
         if isinstance(p["defects"], (list, tuple)) and len(p["defects"]):
             params["defects"] = defects_label(self._defects)
         self.jump_operators = J
+        geometry = GeometryPart(2, maps.pop("nodes"), maps.pop("triangles"), maps.pop("node_dofs"))
         return QP(K=K, F=a["F"].copy(), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],
                   name=f"thin_defect[{p['load'] if isinstance(p['load'], str) else 'custom'}]",
-                  params=params, maps=maps)
+                  params=params, maps=maps, geometry=geometry,
+                  units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
+                  material=MaterialPart(float(p["E"]), float(p["nu"]), str(p["plane"])))
 
 
 #: the delta-free assembly of the last scene built in this process (see ThinDefect._delta_free)

@@ -148,11 +148,10 @@ def _levels(g: sp.csr_matrix, src: int) -> np.ndarray:
 
 
 def _node_groups(qp: QP) -> np.ndarray | None:
-    """(k, n_nodes) array of the unknowns of each mesh node, if the QP carries ``node_dofs``."""
-    nd = qp.maps.get("node_dofs")
-    if nd is None:
+    """(k, n_nodes) array of the unknowns of each mesh node, if the QP carries a geometry."""
+    if qp.geometry is None:
         return None
-    nd = np.asarray(nd)
+    nd = qp.geometry.node_dofs
     keep = np.all(nd >= 0, axis=0)
     return nd[:, keep]
 
@@ -174,9 +173,9 @@ def ordering(qp: QP, local: np.ndarray) -> np.ndarray:
         G = (P @ (pattern != 0).astype(float) @ P.T).tocsr()
         rest_nodes = np.flatnonzero(~is_local[groups[0]])
         Gr = G[rest_nodes][:, rest_nodes]
-        coords = qp.maps.get("nodes")
-        if coords is not None and np.asarray(qp.maps.get("node_dofs")).shape[1] == np.asarray(coords).shape[1]:
-            xy = np.asarray(coords, float)[:, np.all(np.asarray(qp.maps["node_dofs"]) >= 0, axis=0)][:, rest_nodes]
+        geo = qp.geometry
+        if geo is not None:
+            xy = geo.nodes[:, np.all(geo.node_dofs >= 0, axis=0)][:, rest_nodes]
             order_nodes = rest_nodes[geometric_nested_dissection(xy, Gr)]
         else:
             order_nodes = rest_nodes[nested_dissection(Gr)]
