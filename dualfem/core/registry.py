@@ -1,16 +1,21 @@
 """Registries of solver and problem plugins.
 
-Built-in plugins are the modules of ``dualfem.solvers`` and ``dualfem.problems`` (the repository's
-top-level folders ``solvers/`` and ``problems/``, mapped into the package by pyproject.toml) (every
-module not starting with ``_`` is imported); third-party
-packages add theirs through the entry-point groups ``dualfem.solvers`` and ``dualfem.problems``
-(each entry point names a plugin class). Registration happens on first use, so importing
-dualfem stays cheap and a plugin whose optional dependency is missing is still listed.
+Every plugin, built-in or third-party, is found through the entry-point groups ``dualfem.solvers``
+and ``dualfem.problems``. An entry point names a plugin class, a module whose import registers its
+plugins (``@register_solver``), or a package of such modules (every module not starting with ``_``
+is imported): dualfem's own ``pyproject.toml`` declares its packages ``dualfem.solvers`` and
+``dualfem.problems`` (the repository's folders ``solvers/`` and ``problems/``) that way, so the
+core imports no plugin by name. Built-in plugins (those of the ``dualfem`` distribution) are
+loaded first and their names are reserved: a third-party plugin registering an existing built-in
+name is refused (listed by :func:`entry_point_errors`, naming both), never silently replacing it.
+Registration happens on first use, so importing dualfem stays cheap and a plugin whose optional
+dependency is missing is still listed.
 """
 from __future__ import annotations
 
 import importlib
 import pkgutil
+import types
 from importlib.metadata import entry_points
 from typing import TYPE_CHECKING
 
@@ -22,44 +27,73 @@ if TYPE_CHECKING:  # pragma: no cover
 
 _SOLVERS: dict[str, type[Solver]] = {}
 _PROBLEMS: dict[str, type[Problem]] = {}
+#: names registered by dualfem's own plugins (reserved once the built-ins are loaded)
+_BUILTIN: dict[str, set[str]] = {"solver": set(), "problem": set()}
 _LOADED = False
+_LOADING_BUILTIN = False
 _ENTRY_POINT_ERRORS: list[str] = []
+#: the distribution whose plugins are the built-ins
+DISTRIBUTION = "dualfem"
+
+
+def _register(kind: str, reg: dict, cls):
+    if not cls.name:
+        raise ValueError(f"{kind} class {cls.__name__} has no name")
+    old = reg.get(cls.name)
+    if _LOADING_BUILTIN:
+        _BUILTIN[kind].add(cls.name)
+    elif cls.name in _BUILTIN[kind] and old is not None and old is not cls:
+        raise InputError(f"{kind} plugin {cls.__module__}.{cls.__qualname__} may not take the name {cls.name!r} "
+                         f"of the built-in {old.__module__}.{old.__qualname__}: choose another name")
+    reg[cls.name] = cls
+    return cls
 
 
 def register_solver(cls: type[Solver]) -> type[Solver]:
-    """Class decorator: add a solver plugin to the registry under ``cls.name``."""
-    if not cls.name:
-        raise ValueError(f"solver class {cls.__name__} has no name")
-    _SOLVERS[cls.name] = cls
-    return cls
+    """Class decorator: add a solver plugin to the registry under ``cls.name`` (a built-in name is refused)."""
+    return _register("solver", _SOLVERS, cls)
 
 
 def register_problem(cls: type[Problem]) -> type[Problem]:
-    """Class decorator: add a problem plugin to the registry under ``cls.name``."""
-    if not cls.name:
-        raise ValueError(f"problem class {cls.__name__} has no name")
-    _PROBLEMS[cls.name] = cls
-    return cls
+    """Class decorator: add a problem plugin to the registry under ``cls.name`` (a built-in name is refused)."""
+    return _register("problem", _PROBLEMS, cls)
+
+
+def _load_entry_point(obj, reg) -> None:
+    """A class is registered; a module registered its plugins when imported; a package's modules are imported."""
+    if isinstance(obj, types.ModuleType):
+        if hasattr(obj, "__path__"):
+            for info in pkgutil.iter_modules(obj.__path__):
+                if not info.name.startswith("_"):
+                    importlib.import_module(f"{obj.__name__}.{info.name}")
+    else:
+        reg(obj)
 
 
 def _load() -> None:
-    global _LOADED
+    global _LOADED, _LOADING_BUILTIN
     if _LOADED:
         return
     _LOADED = True
-    import dualfem.problems as builtin_problems
-    import dualfem.solvers as builtin_solvers
-
-    for pkg in (builtin_solvers, builtin_problems):
-        for info in pkgutil.iter_modules(pkg.__path__):
-            if not info.name.startswith("_"):
-                importlib.import_module(f"{pkg.__name__}.{info.name}")
-    for group, reg in (("dualfem.solvers", register_solver), ("dualfem.problems", register_problem)):
-        for ep in entry_points(group=group):
-            try:
-                reg(ep.load())
-            except Exception as exc:  # a broken third-party plugin must not break dualfem
-                _ENTRY_POINT_ERRORS.append(f"{group}:{ep.name}: {exc}")
+    groups = (("dualfem.solvers", register_solver), ("dualfem.problems", register_problem))
+    for builtin in (True, False):           # dualfem's own plugins first: their names are reserved
+        for group, reg in groups:
+            for ep in entry_points(group=group):
+                dist = getattr(ep, "dist", None)
+                if (dist is not None and dist.name == DISTRIBUTION) != builtin:
+                    continue
+                _LOADING_BUILTIN = builtin
+                try:
+                    _load_entry_point(ep.load(), reg)
+                except Exception as exc:  # a broken third-party plugin must not break dualfem
+                    if builtin:
+                        raise
+                    _ENTRY_POINT_ERRORS.append(f"{group}:{ep.name}: {exc}")
+                finally:
+                    _LOADING_BUILTIN = False
+    if not _BUILTIN["solver"]:
+        raise RuntimeError("dualfem's built-in plugins were not found through their entry points: "
+                           "install dualfem (pip install -e .) so that its entry points exist")
 
 
 def solvers() -> dict[str, type[Solver]]:
