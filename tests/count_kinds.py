@@ -39,9 +39,10 @@ VALIDATION_MODULES = {"test_bad_input.py", "test_solver_params.py", "test_robust
                       "test_environment_errors.py"}
 PHYSICS_MODULES = {"test_physics.py"}
 PHYSICS_NAME = re.compile(
-    r"patch|paper|iteration_counts|convergence_rate|known_answer|limit_of_delta|glued|free_crack|"
-    r"uniaxial|uniform_pressure|uniform_stress|equilibrium|resultant|opens_and|softer|rigid_motions|"
-    r"von_mises|linear_field|trapezoid|symmetr|indentation|touches_the_floor", re.I)
+    r"patch|paper_table|report_paper|iteration_counts|convergence_rate|known_answer|delta_limit|glued|"
+    r"free_crack|uniaxial|uniform_pressure|uniform_stress|equilibrium|resultant|opens_and|softer|"
+    r"rigid_motions|von_mises|linear_field|trapezoid|symmetric_contact|point_symmetry|"
+    r"symmetric_scene_is_symmetric|indentation|touches_the_floor", re.I)
 VALIDATION_NAME = re.compile(
     r"refus|reject|bad|invalid|malformed|unknown|missing|not_a_number|out_of_range|input_error|"
     r"one_line|declares_its_range|validation|corrupt|unsafe|clobber|writes_nothing|read_only|enospc|"
