@@ -5,6 +5,10 @@ shared vocabulary's ``COMMON_RANGES``); ``Solver.__init__`` and the runner check
 registered built-in solver is given values just outside each declared range, non-finite numbers,
 booleans for numbers, numbers for booleans and unknown choices, in Python and on the command line:
 each is refused with an InputError naming the parameter and the allowed range.
+
+The range test is table-driven: one item per solver loops over every declared parameter and every
+out-of-range value of :func:`cases` and lists every failure at once (the same checks as one item per
+value, 1558 of them before, in 34 items).
 """
 from __future__ import annotations
 
