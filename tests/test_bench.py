@@ -365,12 +365,29 @@ def test_dask_executor_on_local_cluster(serial_par, tmp_path):
     assert s.skipped_done == 0 and s.ran == 12 and _statuses(tmp_path / "out") == expected
 
 
-def test_dask_bad_address_is_input_error(serial_par, tmp_path):
-    pytest.importorskip("distributed")
-    spec, _ = serial_par
+def test_dask_bad_address_is_input_error(tmp_path, monkeypatch):
+    """A scheduler address nobody listens on is an InputError naming --dask.
+
+    The harness waits ``timeout="20s"`` for the scheduler (``dualfem.experiments.harness._execute_dask``)
+    and offers no parameter or environment variable to shorten it, so this test wraps dask's own
+    ``Client`` to connect with a 1 s timeout (same code path, same refusal, 20 s less waiting). The
+    wrapper records its calls: if the harness stops going through ``distributed.Client``, the test fails
+    instead of silently waiting 20 s again."""
+    distributed = pytest.importorskip("distributed")
+    real, calls = distributed.Client, []
+
+    def short_client(address, *args, **kwargs):
+        calls.append((address, kwargs.get("timeout")))
+        return real(address, *args, **{**kwargs, "timeout": "1s"})
+
+    monkeypatch.setattr(distributed, "Client", short_client)
+    spec = load_spec(write(tmp_path, PAR))                   # no sweep needed: the connection fails first
+    t0 = time.monotonic()
     with pytest.raises(InputError, match="dask"):
         bench.run_sweep(spec, tmp_path / "out", dask="tcp://127.0.0.1:9", progress=False,
                         stream=open(os.devnull, "w"))
+    assert calls and calls[0][0] == "tcp://127.0.0.1:9", calls
+    assert time.monotonic() - t0 < 15, "the 1 s connect timeout did not reach dask"
 
 
 # ------------------------------------------------------------------ progress
