@@ -161,7 +161,7 @@ def test_convergence_order_is_higher_when_the_faces_are_glued():
 def uncracked(qp: QP) -> tuple[QP, sp.csr_matrix]:
     """The body without the defect on the same mesh: every upper copy of a defect node is the lower
     copy (P maps the glued unknowns to the cracked ones), K = P' K_el P, no constraint."""
-    nd = np.asarray(qp.maps["node_dofs"])
+    nd = qp.geometry.node_dofs
     up, lo = np.asarray(qp.maps["defect_upper"]), np.asarray(qp.maps["defect_lower"])
     target = np.arange(qp.n)
     target[nd[:, up].ravel()] = nd[:, lo].ravel()
@@ -187,7 +187,7 @@ def test_glued_limit_nu0_is_the_exact_uncracked_state():
         jump = qp.B @ sol.x
         assert np.all(jump > 0) and jump.max() <= 3.0 * delta          # opening <= delta sigma_nu
         dev.append(np.abs(jump / delta - 3.0).max() / 3.0)
-        X = np.asarray(qp.maps["nodes"])
+        X = qp.geometry.nodes
         exact = np.c_[np.zeros(X.shape[1]), 3.0 * X[1] / E]
         err.append(np.abs(nodal_displacement(qp, sol.x) - exact).max() / np.abs(exact).max())
     assert dev[-1] < 1e-4 and err[-1] < 1e-5, (dev, err)
@@ -204,7 +204,7 @@ def test_glued_limit_approaches_the_uncracked_body():
     qp0, _ = solve("f3", delta=1e-9)
     glued, P = uncracked(qp0)
     xg = P @ sla.spsolve(glued.K, glued.F)
-    nd = np.asarray(qp0.maps["node_dofs"])
+    nd = qp0.geometry.node_dofs
     sigma_nu = -(qp0.K_fixed @ xg)[nd[1, qp0.maps["defect_upper"]]] / qp0.weights
     assert 2.5 < sigma_nu.min() <= sigma_nu.max() < 3.5                # ~ the 3 MPa pulled on the top side
     e_glued = 0.5 * xg @ (qp0.K_fixed @ xg) - qp0.F @ xg
@@ -267,7 +267,7 @@ def test_patch_uniform_compression_is_exact(plane):
         qp = load_scene("f1", {"N": 8, "delta": delta, "nu": 0.0, "plane": plane}).build()
         sol = run("pdas", qp)
         assert sol.ok
-        X = np.asarray(qp.maps["nodes"])
+        X = qp.geometry.nodes
         exact = np.c_[np.zeros(X.shape[1]), -3.0 * X[1] / E]
         u = nodal_displacement(qp, sol.x)
         assert np.abs(u - exact).max() <= 1e-10 * np.abs(exact).max(), delta
