@@ -3,7 +3,8 @@
 A load is a function ``g(x1, x2) -> t2`` giving the vertical traction (units of stress, e.g.
 MPa; positive = pulling up) on the top side, or ``(t1, t2)`` for a vector traction. In a TOML
 scene file or with ``--set``, ``load`` is ``"f1"``, ``"f2"``, ``"f3"`` or an expression in ``x``
-(= x1) and ``y`` (= x2) using numpy functions, e.g. ``load = "-10*sin(pi*x)"``.
+(= x1) and ``y`` (= x2) using numpy functions, e.g. ``load = "-10*sin(pi*x)"`` (vocabulary and
+limits: :mod:`dualfem.core.expressions`).
 """
 from __future__ import annotations
 
