@@ -1,4 +1,4 @@
-"""Time of problems.gmsh_mesh.mesh_with_defects (gmsh, one thread) against the mesh size.
+"""Time of dualfem.problems.gmsh_mesh.mesh_with_defects (gmsh, one thread) against the mesh size.
 
     python benchmarks/gmsh_mesh_timing.py [--scene scenes/curved.toml] [--sizes 0.02,0.01,0.005,0.0025]
                                           [--nodes 65000] [--repeats 3] [--json FILE]

@@ -1,6 +1,6 @@
 """Side test behind a finding of reports/stability.md: objective scaling vs variable scaling.
 
-``dualfem.scaling.scale`` multiplies the objective by c = 1 / max|D F| (D = diag(K)^-1/2), so the
+``dualfem.numerics.scaling.scale`` multiplies the objective by c = 1 / max|D F| (D = diag(K)^-1/2), so the
 scaled Hessian c D K D grows like 1 / (load magnitude) and depends on the units. The alternative
 here scales the unknowns instead, x = s D y with s = max|D F|: P = D K D (unit diagonal), q = -D F / s
 (unit size), whatever the load or the units. This script solves the stress grid's load and units
@@ -16,7 +16,7 @@ import warnings
 import numpy as np
 import scipy.sparse as sp
 
-import dualfem.scaling as S
+import dualfem.numerics.scaling as S
 import solvers.clarabel_ as C
 import solvers.osqp_ as O
 from dualfem.core import evaluator

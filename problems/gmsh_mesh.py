@@ -56,7 +56,7 @@ class DefectMesh:
     ``defect_nodes[i]`` the nodes along defect i from its first given point to its last (tips
     and kinks included); ``boundary[side]`` for side in bottom, top, left, right: the nodes on
     that side (corners included), bottom/top ordered by x, left/right by y. ``mirror`` (only for
-    :func:`problems.gmsh_symmetric.mesh_symmetric`): node i's mirror image about x = width/2 is
+    :func:`dualfem.problems.gmsh_symmetric.mesh_symmetric`): node i's mirror image about x = width/2 is
     node ``mirror[i]``.
     """
 

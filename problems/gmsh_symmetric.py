@@ -1,7 +1,7 @@
 """Mirror-symmetric meshes of a body whose defects are symmetric about the axis x = width/2.
 
 gmsh meshes are not symmetric even for symmetric geometry, so a symmetric scene solved on a
-:func:`problems.gmsh_mesh.mesh_with_defects` mesh has a contact set that is symmetric only up to
+:func:`dualfem.problems.gmsh_mesh.mesh_with_defects` mesh has a contact set that is symmetric only up to
 the discretization. :func:`mesh_symmetric` meshes the left half (0, width/2) x (0, height) with
 gmsh and mirrors it, so the mesh itself is symmetric: node ``mirror[i]`` is node i reflected
 (x -> width - x, the same y), the nodes on the axis are their own images.
@@ -70,7 +70,7 @@ def _half(P: np.ndarray, width: float) -> np.ndarray:
 
 def mesh_symmetric(width: float, height: float, defects: list[dict], mesh_size: float,
                    tip_size: float | None = None) -> DefectMesh:
-    """Like :func:`problems.gmsh_mesh.mesh_with_defects`, but the mesh is exactly symmetric about
+    """Like :func:`dualfem.problems.gmsh_mesh.mesh_with_defects`, but the mesh is exactly symmetric about
     x = width/2 (``DefectMesh.mirror`` gives each node's image); the defects must be symmetric."""
     parsed = validate(width, height, defects, mesh_size, tip_size)
     W, H = float(width), float(height)

@@ -39,48 +39,30 @@ Checkable physics (tests/test_signorini.py):
 """
 from __future__ import annotations
 
-import ast
-
 import numpy as np
 import scipy.sparse as sp
 
 from dualfem.core.elasticity import PLANES, lame
 from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
+from dualfem.core.expressions import compile_expression
 from dualfem.core.parts import GeometryPart, MaterialPart, ShiftPart, UnitsPart
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
 from dualfem.core.registry import register_problem
 
-from .loads import _ALLOWED
-
 
 def gap_function(expr: str):
-    """The initial gap ``g(x)`` from a numpy expression in ``x`` (AST-checked, no builtins)."""
+    """The initial gap ``g(x)`` from a numpy expression in ``x`` (or a Python function).
+
+    Checked and evaluated by the one expression sandbox, :mod:`dualfem.core.expressions` (the same
+    size limits, vocabulary and float-only evaluation as a load expression).
+    """
     if callable(expr):
         return expr
     if not isinstance(expr, (str, int, float)) or isinstance(expr, bool):
         raise InputError(f"obstacle must be a numpy expression in x (e.g. '0.5*(x-0.5)**2'), got {expr!r}")
-    text = str(expr).strip()
-    try:
-        tree = ast.parse(text, mode="eval")
-    except SyntaxError:
-        raise InputError(f"obstacle {text!r} is not a valid expression in x (e.g. '0.5*(x-0.5)**2')") from None
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Name) and node.id not in _ALLOWED and node.id != "x":
-            raise InputError(f"obstacle {text!r}: name {node.id!r} is not allowed "
-                             f"(use x and {', '.join(sorted(_ALLOWED))})")
-        if isinstance(node, (ast.Attribute, ast.Lambda, ast.Subscript, ast.Starred, ast.Call)) and \
-                not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)):
-            raise InputError(f"obstacle {text!r}: only arithmetic and the functions "
-                             f"{', '.join(sorted(_ALLOWED))} are allowed")
-    code = compile(tree, "<obstacle>", "eval")
-
-    def g(x):
-        with np.errstate(all="ignore"):
-            val = eval(code, {"__builtins__": {}}, {**_ALLOWED, "x": x})  # noqa: S307 - AST-checked
-        return np.broadcast_to(np.asarray(val, dtype=float), np.shape(x)).copy()
-
-    return g
+    return compile_expression(str(expr), parameter="obstacle", variables=("x",),
+                              hint="use a numpy expression in x, e.g. '0.5*(x-0.5)**2'")
 
 
 @register_problem

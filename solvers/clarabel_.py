@@ -5,7 +5,7 @@ Clarabel's KKT condition is ``Px + q + A'z = 0`` with ``z >= 0``; with ``A = -B`
 triangle of K is passed. Clarabel's own residuals are not trusted (Clarabel.cpp issue 36): the
 evaluator recomputes them.
 
-With ``scale=True`` (default) the QP is normalised first (:mod:`dualfem.scaling`); unscaled,
+With ``scale=True`` (default) the QP is normalised first (:mod:`dualfem.numerics.scaling`); unscaled,
 Clarabel stops 'AlmostSolved' with a wrong contact set on these badly scaled matrices. Measured
 accuracy limit: at delta = 1e-9 Clarabel reports 'Solved' with x off by ~5e-6 (energy norm)
 from the certified solution, hence the declared tolerance 1e-5. ``polish=True`` (off by default:
@@ -123,7 +123,7 @@ def _check_direct_method(method) -> None:
 
 
 def _polish(qp, x, z):
-    """Active-set polish (:func:`dualfem.polish.active_set_polish`); kept only if it is consistent
+    """Active-set polish (:func:`dualfem.numerics.polish.active_set_polish`); kept only if it is consistent
     and lowers the evaluator's KKT error."""
     from dualfem.core import evaluator
     from dualfem.numerics.polish import active_set_polish

@@ -1,12 +1,12 @@
 """The QP through cvxpy, solved by any installed cvxpy backend (``solver`` parameter).
 
-Formulation (on the normalised QP of :mod:`dualfem.scaling` when ``scale`` is true):
+Formulation (on the normalised QP of :mod:`dualfem.numerics.scaling` when ``scale`` is true):
 
     minimize 1/2 y' P y + q' y   subject to   A y >= 0.
 
 cvxpy's dual value of a constraint ``expr >= 0`` is >= 0 with the Lagrangian ``f - nu' expr``
 (stationarity ``P y + q = A' nu``), so with the scaling undone our nodal contact force is
-``mu = R nu / c`` (see :class:`dualfem.scaling.ScaledQP`), ``K x - F = B' mu``; the sign is
+``mu = R nu / c`` (see :class:`dualfem.numerics.scaling.ScaledQP`), ``K x - F = B' mu``; the sign is
 checked in tests/test_cvxpy.py.
 
 cvxpy's status is reported as it is: ``optimal`` -> solved, ``optimal_inaccurate`` ->
@@ -17,7 +17,7 @@ with its message. ``eps`` is passed to the backend under its own option names (C
 tol_gap_abs, tol_gap_rel, tol_feas; OSQP and SCS: eps_abs, eps_rel; others: not passed).
 The declared ``tolerance`` of an instance depends on the backend (interior point vs ADMM).
 
-``polish`` (default true): after the backend, :func:`dualfem.polish.active_set_polish` guesses
+``polish`` (default true): after the backend, :func:`dualfem.numerics.polish.active_set_polish` guesses
 the active set from the backend's (x, mu), solves the equality-constrained problem on it exactly
 and keeps the result only if it is consistent (mu >= 0, open gaps >= 0); ``info["polish"]`` says
 what happened. Measured on f2, N = 64, delta = 1e-9: CLARABEL alone is 2.8e-6 off (energy norm),

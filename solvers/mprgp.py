@@ -1,7 +1,7 @@
 """MPRGP: Dostal's modified proportioning with reduced gradient projections, on the contact dual.
 
 With the Delassus matrix ``D = B K^-1 B'`` (symmetric positive definite, m x m) and the gaps at
-zero contact force ``b0 = B K^-1 F`` (:meth:`dualfem.linalg.LocalReduction.dual`: the gaps at
+zero contact force ``b0 = B K^-1 F`` (:meth:`dualfem.numerics.linalg.LocalReduction.dual`: the gaps at
 forces mu are ``D mu + b0``), the contact forces minimise
 
     q(mu) = 1/2 mu'D mu + b0'mu   over  mu >= 0,         gradient g(mu) = D mu + b0 = the gaps,
@@ -43,7 +43,7 @@ from dualfem.numerics.linalg import MAX_LOCAL, too_many_local
 
 
 class _Dense:
-    """D and b0 from :class:`dualfem.linalg.LocalReduction` (dense, m x m)."""
+    """D and b0 from :class:`dualfem.numerics.linalg.LocalReduction` (dense, m x m)."""
 
     def __init__(self, qp):
         from dualfem.numerics.linalg import LocalReduction

@@ -1,6 +1,6 @@
 """Semismooth Newton / primal-dual active set (PDAS) on the complementarity form of the contact QP.
 
-Everything happens on the defect unknowns I (:class:`dualfem.linalg.LocalReduction`): the QP
+Everything happens on the defect unknowns I (:class:`dualfem.numerics.linalg.LocalReduction`): the QP
 is exactly ``min 1/2 xI'S xI - g'xI  s.t.  BI xI >= 0`` with S dense and small. With one dense
 Cholesky factorization of S (setup) the multipliers' problem is the linear complementarity problem
 

@@ -12,7 +12,7 @@ multiplier estimate is the penalty force ``mu_j = rho w_j (-[x_nu]_j)^+ >= 0``, 
 ``K x - F = B' mu`` at the minimiser exactly, so the evaluator's stationarity, dual and
 complementarity residuals are small and its primal residual is the relative penetration.
 
-Linear algebra: on the defect unknowns I (:class:`dualfem.linalg.LocalReduction`), P_rho is
+Linear algebra: on the defect unknowns I (:class:`dualfem.numerics.linalg.LocalReduction`), P_rho is
 ``1/2 xI'S xI - g'xI + rho/2 sum_j w_j ((-BI xI)_j^+)^2``; its generalized Hessian on the
 active set A = {j : (BI xI)_j < 0} is ``S + rho BI_A' W_A BI_A``, applied through the Woodbury
 identity with one Cholesky factorization of S (made in setup) and the m x m Delassus matrix

@@ -1,13 +1,13 @@
 """Every backend of qpsolvers as a dualfem solver ``qp_<backend>`` (qp_proxqp, qp_piqp, ...).
 
-The QP is normalised first, exactly as for OSQP (:func:`dualfem.scaling.scale`: unit diagonal,
+The QP is normalised first, exactly as for OSQP (:func:`dualfem.numerics.scaling.scale`: unit diagonal,
 unit load, unit constraint rows), and handed to ``qpsolvers.solve_problem`` as
 
     min 1/2 y'Py + q'y   s.t.   G y <= h,   G = -A (the scaled B),  h = 0.
 
 qpsolvers' multiplier ``z >= 0`` of ``G y <= h`` satisfies ``P y + q + G'z = 0``, i.e.
 ``P y + q = A'z``: in the scaled units ``z`` is our contact force, ``mu = c R z`` after
-:meth:`~dualfem.scaling.ScaledQP.unscale`. Status: ``Solution.found`` (the backend's own
+:meth:`~dualfem.numerics.scaling.ScaledQP.unscale`. Status: ``Solution.found`` (the backend's own
 success test) gives ``solved``; otherwise ``inaccurate`` with the iterate, or
 ``numerical_error`` without one.
 

@@ -61,7 +61,7 @@ status stays the same. A QP without scene units (a QP file) uses r as given, and
 ``info["r_units"]``. ``r_rule="fixed"`` uses r as given always (``report paper`` asks for it).
 
 Linear algebra (``linalg``): ``"reduced"`` (default) works on the local unknowns only via the
-exact Schur reduction of :class:`dualfem.linalg.LocalReduction` (K_fixed factorized once,
+exact Schur reduction of :class:`dualfem.numerics.linalg.LocalReduction` (K_fixed factorized once,
 reused across delta, loads and solvers); each generalized Hessian is a small dense SPD matrix
 whose Cholesky factor is cached by active set. ``"full"`` is the textbook path: it refactorizes
 the sparse 2n x 2n Hessian at every Newton step. Both compute the same iterates: every iterate

@@ -1,7 +1,7 @@
 """``dualfem compare SCENE [--set KEY=VALUE ...] [--solvers a,b,...] [--json]``.
 
 Runs every registered solver (or the chosen ones) on one scene and cross-checks them against a
-certified reference (see :mod:`dualfem.compare`). Exit status: 0 unless a solver that claims
+certified reference (see :mod:`dualfem.experiments.compare`). Exit status: 0 unless a solver that claims
 success is wrong beyond its declared tolerance (a silent wrong answer: exit 1); input errors
 exit 2. Solver parameters: ``--param SOLVER.KEY=VALUE`` (e.g. ``--param osqp.eps_abs=1e-6``).
 Solver output written by C libraries to stdout is sent to stderr, so ``--json`` prints exactly

@@ -1,4 +1,4 @@
-"""``dualfem stress [--quick] [--out DIR]``: the numerical-stability grid (see :mod:`dualfem.stress`)."""
+"""``dualfem stress [--quick] [--out DIR]``: the numerical-stability grid (see :mod:`dualfem.experiments.stress`)."""
 from __future__ import annotations
 
 import math

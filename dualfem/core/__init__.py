@@ -1,1 +1,1 @@
-"""The core: QP, Solution/Status, Solver and Problem bases, registry, evaluator, certificate, runner."""
+"""The core: QP, Solution/Status, Solver and Problem bases, registry, evaluator, grading, scenes, expressions."""

@@ -136,8 +136,8 @@ def active_set_solution(qp: QP, active: np.ndarray) -> tuple[np.ndarray, np.ndar
     any iterative solver.
 
     Deliberately independent of the solvers' linear algebra: one sparse LU of the full KKT
-    matrix, no :class:`dualfem.linalg.LocalReduction` (which uzawa, pdas, penalty, the active-set
-    polish and :mod:`dualfem.certify` share), so a fault in that shared path cannot certify itself.
+    matrix, no :class:`dualfem.numerics.linalg.LocalReduction` (which uzawa, pdas, penalty, the active-set
+    polish and :mod:`dualfem.numerics.certify` share), so a fault in that shared path cannot certify itself.
     """
     import scipy.sparse as sp
     import scipy.sparse.linalg as sla

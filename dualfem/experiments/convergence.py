@@ -131,7 +131,7 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = "f2", progress=print) -> 
     as ``reference.certified_error``.
 
     Memory-lean: one delta at a time, the reference QP is dropped after its delta, and the
-    solvers' cached factorizations are freed (:func:`dualfem.linalg.clear_cache`) after every
+    solvers' cached factorizations are freed (:func:`dualfem.numerics.linalg.clear_cache`) after every
     reference solve, so the peak is one fine QP plus one fine factorization (a reference at
     N = 1024 holding three of them was killed for lack of memory on a 24 GB machine).
     """

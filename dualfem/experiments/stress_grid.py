@@ -72,18 +72,12 @@ def _sid(d: dict) -> str:
 
 
 def _scaled_expression(expr: str, length: float) -> str:
-    """A load expression in ``x``, ``y`` rewritten for coordinates ``length`` times larger."""
-    import ast
+    """A load expression in ``x``, ``y`` rewritten for coordinates ``length`` times larger
+    (checked by the one expression sandbox, :func:`dualfem.core.expressions.rewrite`)."""
+    from dualfem.core.expressions import rewrite
 
-    class _Sub(ast.NodeTransformer):
-        def visit_Name(self, node: ast.Name) -> ast.AST:
-            if node.id in ("x", "y"):
-                return ast.BinOp(left=ast.Name(id=node.id, ctx=ast.Load()), op=ast.Div(),
-                                 right=ast.Constant(float(length)))
-            return node
-
-    tree = ast.fix_missing_locations(_Sub().visit(ast.parse(expr, mode="eval")))
-    return ast.unparse(tree)
+    return rewrite(expr, {v: f"{v} / {float(length)!r}" for v in ("x", "y")}, parameter="load",
+                   variables=("x", "y"), hint="use f1, f2, f3 or a numpy expression in x, y")
 
 
 def _scaled_defects(tables, length: float, stress: float) -> list[dict]:

@@ -25,7 +25,7 @@ order. :func:`certified_error` returns both and their minimum.
 0: the tiny infeasibility of an exact-to-rounding x is not counted, and is reported separately
 by the evaluator's ``primal`` residual). Unlike the KKT residuals it is a bound on the error in x
 itself, so it certifies a reference solution. ``r'K^-1 r`` uses the cached factorization of
-K_fixed through :meth:`dualfem.linalg.LocalReduction.k_solve`.
+K_fixed through :meth:`dualfem.numerics.linalg.LocalReduction.k_solve`.
 """
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ QP is nearly degenerate (open defect nodes with gaps of 1e-9 and tiny forces), a
 the active set from the approximate (x, mu) with the primal-dual active-set rule
 ``A = {mu_j - c gap_j > 0}`` (c = 1 / mean diag of the Delassus matrix D = B K^-1 B'), solves
 the equality-constrained problem on A exactly (reduced space of
-:class:`dualfem.linalg.LocalReduction`: ``D_AA mu_A = -b0_A``, x from mu), refines once with
+:class:`dualfem.numerics.linalg.LocalReduction`: ``D_AA mu_A = -b0_A``, x from mu), refines once with
 full-space residuals, and accepts the result only if it is consistent: mu_A >= 0 and the
 gaps off A are >= 0 (to rounding). Otherwise it returns None and the caller keeps (and says it
 keeps) the unpolished answer.

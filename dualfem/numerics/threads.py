@@ -4,7 +4,7 @@
 PARDISO runs in, loaded by pypardiso -- n threads, and numpy's/scipy's OpenBLAS, which runs the
 dense m x m phases, ``min(DENSE_THREADS, n)``; it exports ``MKL_NUM_THREADS``/``OMP_NUM_THREADS``
 = n and ``OPENBLAS_NUM_THREADS`` for worker processes. :func:`ensure_threads` applies the default
-once (called by :func:`dualfem.linalg.factor_fixed`). ``threads(n)`` sets every pool to n
+once (called by :func:`dualfem.numerics.linalg.factor_fixed`). ``threads(n)`` sets every pool to n
 temporarily (context manager). If numpy itself were linked to MKL the dense phases would follow n.
 
 The dense m x m phases (Cholesky of the Schur block S, D = B_I S^-1 B_I', S @ v in every

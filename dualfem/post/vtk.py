@@ -19,7 +19,7 @@ One unstructured grid holds
   triangles), ``defect_id`` (-1 on the triangles) and ``face`` (0 triangle, +1 upper face,
   -1 lower face) to threshold them.
 
-Files are written atomically (:func:`dualfem.io.atomic_write`). XDMF needs h5py (the
+Files are written atomically (:func:`dualfem.core.io.atomic_write`). XDMF needs h5py (the
 ``xdmf`` extra); its heavy data go to a ``.h5`` file next to the ``.xdmf``.
 """
 from __future__ import annotations

@@ -56,8 +56,8 @@ def _findings(recs) -> list[str]:
     if scaled_fail:
         out.append(f"- **Scaled third-party backends on the load and units axes** ({len(scaled_fail)} runs: "
                    + ", ".join(sorted({f"{r['solver']} ({_fmt(list(r['coords'].values())[0])})" for r in scaled_fail}))
-                   + "). They receive the QP normalised by `dualfem.scaling`, which multiplies the objective by "
-                   "c = 1 / max|D F|: the scaled Hessian c D K D then grows like 1 / (load magnitude) and the "
+                   + "). They receive the QP normalised by `dualfem.numerics.scaling`, which multiplies the objective "
+                   "by c = 1 / max|D F|: the scaled Hessian c D K D then grows like 1 / (load magnitude) and the "
                    "unknowns shrink like the load, which Clarabel's absolute tolerances and OSQP's rho do not "
                    "follow. Measured remedy (not applied here, core code): scale the unknowns by the load "
                    "instead (x = s D y with s = max|D F|, P = D K D, q = -D F / s): in the side test "

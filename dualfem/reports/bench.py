@@ -7,7 +7,7 @@ scene), e.g. a quick parallel sweep followed by a serial sweep of the large size
 in the report (also printed in it):
 
 * time of a run = setup + solve (median over the timed repeats; the factorization cache of
-  :mod:`dualfem.linalg` is cleared before every repeat when the sweep had ``cold_setup``);
+  :mod:`dualfem.numerics.linalg` is cleared before every repeat when the sweep had ``cold_setup``);
 * per tolerance tier and per delta, every solver is ranked by success rate, qpbenchmark's correct
   rate of ``solved`` claims and the shifted geometric mean of time (definitions in
   :mod:`dualfem.reports._correct_rate` and :mod:`dualfem.reports._bench_rank`, printed in the report).
@@ -160,7 +160,7 @@ def _method(runs: list[dict], shift: float, sources: list[dict] | None = None) -
             f"Assembly of the QP itself (scene -> QP) is excluded and recorded separately (`assembly_s`; the "
             "targets table adds it as *end to end*).",
             f"- Cold setup: {'yes' if cold == {'True'} else 'no' if cold == {'False'} else 'mixed'} - "
-            "`dualfem.linalg.clear_cache()` is called before every timed repeat, so a solver that factorizes "
+            "`dualfem.numerics.linalg.clear_cache()` is called before every timed repeat, so a solver that factorizes "
             "K_fixed pays for it in every repeat (the cache that shares it across delta and loads is not "
             "allowed to hide it).",
             "- Floor: one sparse factorization + one solve of the unconstrained K of the same size by every "

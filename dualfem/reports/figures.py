@@ -218,7 +218,7 @@ def _history_section(data: dict, figdir: Path, dpi: int) -> list[str]:
     uz = data["uzawa"]
     if uz is None:
         return md + ["**Not drawn: the `uzawa` solver is not registered in this installation**, so there is no "
-                     "Uzawa history to show. `dualfem.figures.plot_history` draws it from `Solution.history` "
+                     "Uzawa history to show. `dualfem.post.figures.plot_history` draws it from `Solution.history` "
                      "(key `dual_change`) once the solver is available.\n"]
     md.append(f"Left: the Uzawa method (solver `uzawa`, default parameters: r = "
               f"{uz['defaults'].get('r'):g}, tol = {uz['defaults'].get('tol', uz['defaults'].get('tol_outer'))}"
@@ -241,7 +241,7 @@ def _head(data: dict, scale: float) -> list[str]:
             f"<= {max(r['kkt'] for r in data['rows']):.1e} "
             "for the pictured cases). The paper does not state its delta for f1 and f3: we use 1e-5 for f1 "
             "(closed faces) and 1e-1 for f3 (so that the opening is visible). Every figure is drawn by a function "
-            "of `dualfem.figures` from (qp, Solution); see that module's docstring for notebook use.\n",
+            "of `dualfem.post.figures` from (qp, Solution); see that module's docstring for notebook use.\n",
             f"| picture | scene | delta | max von Mises (MPa) | max von Mises within {TIP_RADIUS:g} of a tip | "
             "max [u_nu] | closed nodes | total contact force |",
             "|---|---|---|---|---|---|---|---|---|"]

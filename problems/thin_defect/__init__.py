@@ -3,7 +3,7 @@
 Body: the rectangle (0, width) x (0, height) (unit square by default), isotropic linear
 elasticity (E, nu; ``plane = "strain"`` by default, ``"stress"`` supported: the paper does not
 say which it used), clamped on the bottom side x2 = 0, a traction on the top side x2 = height
-(:mod:`problems.loads`), other sides free. Defects: polylines (or splines, gmsh mesh only)
+(:mod:`dualfem.problems.loads`), other sides free. Defects: polylines (or splines, gmsh mesh only)
 strictly inside the body; the normal nu of a defect is its tangent, from its first to its last
 point, turned by +90 degrees (so for the default horizontal defect nu = (0, 1) and the "+" face
 is the upper one); see :mod:`.cut`. Energy (paper, section 1), one term per defect d:
@@ -12,7 +12,7 @@ is the upper one); see :mod:`.cut`. Energy (paper, section 1), one term per defe
 
 Scene keys beyond the paper's: ``mesh`` = ``"structured"`` (default: N x N squares cut by their
 (1, 1) diagonal, the paper's scenes; defect vertices must be grid nodes and its segments run
-along grid edges) or ``"gmsh"`` (unstructured, defects embedded; :mod:`problems.gmsh_mesh`),
+along grid edges) or ``"gmsh"`` (unstructured, defects embedded; :mod:`dualfem.problems.gmsh_mesh`),
 ``mesh_size`` (gmsh target element size; 0 = min(width, height) / N), ``tip_size`` (gmsh size
 at the defect tips; 0 = mesh_size), ``rotate_deg`` (rigid counter-clockwise rotation of the whole
 scene about the body's centre: body, defects, loads and supports; the mesh is generated once in

@@ -2,7 +2,7 @@
 
 Used by the backends that take an external order (SuperLU; CHOLMOD for its Schur complement):
 with the local unknowns I ordered last, the trailing blocks of the factor give the Schur
-complement onto I directly. Moved here from :mod:`dualfem.linalg` (which re-exports them).
+complement onto I directly. Moved here from :mod:`dualfem.numerics.linalg` (which re-exports them).
 """
 from __future__ import annotations
 
