@@ -54,6 +54,10 @@ class PDASSolver(ReducedDualSolver):
     description = "semismooth Newton / primal-dual active set on the defect unknowns (exact)"
     tolerance = 1e-9
     exact = True
+    #: the first reference solver: exact and the fastest; a reference refines to the rounding floor
+    reference = True
+    reference_rank = 0
+    reference_params = {"refine_tol": 1e-16}
     defaults = {
         "max_iter": 100,
         "tol": 1e-13,

@@ -61,7 +61,8 @@ class _Liar(Solver):
 
 def test_reference_never_chooses_a_run_that_fails_its_residuals(monkeypatch):
     monkeypatch.setitem(registry._SOLVERS, "test_liar", _Liar)
-    monkeypatch.setattr(reference, "PREFERRED", (("test_liar", {}), ("pdas", {})))
+    monkeypatch.setattr(_Liar, "reference", True, raising=False)
+    monkeypatch.setattr(_Liar, "reference_rank", -1, raising=False)   # tried first
     qp = load_scene("f2", {"N": 8}).build()
     ref, tried = reference.compute(qp)
     assert ref is not None and ref.solver == "pdas", tried
