@@ -47,6 +47,11 @@ class ClarabelSolver(Solver):
     # measured: at delta = 1e-9 Clarabel stops 'Solved' with x off by ~5e-6 (energy norm) from the
     # certified solution; tighter tol_* settings end 'AlmostSolved'. polish=True removes that error.
     tolerance = 1e-5
+    #: the second reference solver (an independent method), at dualfem's default tolerances: asking
+    #: it for 1e-12 made it stop 'inaccurate' at delta <= 1e-6 on the stress grid
+    reference = True
+    reference_rank = 10
+    reference_params = {"max_iter": 500}
     defaults = {
         "tol": 1e-10,             # Clarabel's tol_gap_abs = tol_gap_rel = tol_feas
         "tol_ktratio": 1e-8,

@@ -42,25 +42,8 @@ import scipy.linalg as sla
 
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver
-from dualfem.numerics.factor import from_param  # noqa: E402
-from dualfem.numerics.linalg import MAX_LOCAL, too_many_local  # noqa: E402  (shared with penalty, uzawa)
-
-
-class ReducedDualSolver(Solver):
-    """Base of solvers working on the reduced dual (pdas, penalty): skip QPs whose dense
-    reduced matrix would not fit; setup builds the LocalReduction and the LCP data (D, b0)."""
-
-    def skip(self, qp) -> str | None:
-        return too_many_local(qp, MAX_LOCAL)
-
-    def setup(self, qp) -> None:
-        from dualfem.numerics.linalg import LocalReduction
-
-        self.qp = qp
-        self.red = self.reduction = LocalReduction(qp, factor=from_param(self))
-        self.cho = self.red.S_cho
-        self.D, self.b0 = self.red.dual()
+from dualfem.numerics.factor import from_param
+from dualfem.numerics.reduced_dual import ReducedDualSolver
 
 
 @register_solver
@@ -71,6 +54,10 @@ class PDASSolver(ReducedDualSolver):
     description = "semismooth Newton / primal-dual active set on the defect unknowns (exact)"
     tolerance = 1e-9
     exact = True
+    #: the first reference solver: exact and the fastest; a reference refines to the rounding floor
+    reference = True
+    reference_rank = 0
+    reference_params = {"refine_tol": 1e-16}
     defaults = {
         "max_iter": 100,
         "tol": 1e-13,

@@ -47,8 +47,7 @@ import scipy.linalg as sla
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.numerics.factor import from_param
-
-from .pdas import ReducedDualSolver
+from dualfem.numerics.reduced_dual import ReducedDualSolver
 
 
 @register_solver

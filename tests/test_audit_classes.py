@@ -61,7 +61,8 @@ class _Liar(Solver):
 
 def test_reference_never_chooses_a_run_that_fails_its_residuals(monkeypatch):
     monkeypatch.setitem(registry._SOLVERS, "test_liar", _Liar)
-    monkeypatch.setattr(reference, "PREFERRED", (("test_liar", {}), ("pdas", {})))
+    monkeypatch.setattr(_Liar, "reference", True, raising=False)
+    monkeypatch.setattr(_Liar, "reference_rank", -1, raising=False)   # tried first
     qp = load_scene("f2", {"N": 8}).build()
     ref, tried = reference.compute(qp)
     assert ref is not None and ref.solver == "pdas", tried
@@ -130,7 +131,7 @@ def test_default_outputs_are_in_the_user_results_folder():
     assert default_out("stress", "quick") == USER_RESULTS / "stress" / "quick"
     assert USER_RESULTS.parts[0] == "dualfem-results" and not USER_RESULTS.is_absolute()
     defaults = []
-    for f in sorted((ROOT / "dualfem").glob("*/*.py")):
+    for f in sorted((ROOT / "dualfem").rglob("*.py")):
         for m in re.finditer(r'add_argument\(\s*"--(out|md|figdir)"[^)]*?default="([^"]*)"', f.read_text()):
             defaults.append((f.name, m.group(1), m.group(2)))
     assert defaults, "no --out defaults found: update this test"

@@ -114,8 +114,8 @@ def test_plot_history_fake_solution():
 
 @pytest.mark.skipif("uzawa" not in solvers(), reason="the uzawa solver is not registered")
 def test_report_figures_small(tmp_path):
+    from dualfem.cli.reports.figures import generate
     from dualfem.core.scene import library
-    from dualfem.reports.figures import generate
 
     text = generate(tmp_path, N=8, sweep=(1e-1, 1e-5), dpi=40, history_solvers=["pdas"] if "pdas" in solvers() else [],
                     progress=lambda m: None, scene_overrides={"mesh_size": 0.1})
@@ -128,7 +128,7 @@ def test_report_figures_small(tmp_path):
 
 
 def test_report_convergence_small(tmp_path):
-    from dualfem.reports.convergence import run as report
+    from dualfem.cli.reports.convergence import run as report
 
     assert report(["--deltas", "0.1", "--N", "8,16", "--ref-N", "32", "--out", str(tmp_path)]) == 0
     res = json.loads((tmp_path / "convergence.json").read_text())
@@ -181,8 +181,8 @@ def test_convergence_rates_known_answer(p):
 def test_report_paper_small(tmp_path, monkeypatch):
     """Run, store the data, re-render from it without solving; the inner stop test study is consistent."""
     import dualfem.experiments.runner as runner
+    from dualfem.cli.reports.paper import report_paper
     from dualfem.experiments.paper import INNER_VARIANTS
-    from dualfem.reports.paper import report_paper
 
     md = tmp_path / "paper.md"
     assert report_paper(["--N", "8,12", "--inner-N", "8", "--out", str(md)]) == 0
@@ -292,3 +292,23 @@ def test_defect_fields_and_pressure_per_defect(two_defects):
     ax = F.plot_pressure([("p", qp, sol)])
     for k, ln in enumerate(ax.get_lines()[:2]):
         np.testing.assert_allclose(ln.get_ydata()[1:-1], qp.pressure(sol.multipliers)[ids == k])
+
+
+def test_report_figures_renders_without_solving(tmp_path, monkeypatch):
+    """The study's cases are frozen: the renderer looks every Solution up and cannot run a solver."""
+    import dualfem.experiments.runner as runner
+    from dualfem.experiments.figures import collect
+    from dualfem.reports.figures import render
+
+    data = collect(N=8, sweep=(1e-1, 1e-5), history_solvers=[], progress=lambda m: None, scenes=False)
+    cases = data["cases"]
+    assert cases.frozen
+    with pytest.raises(RuntimeError, match="not among the study's results"):
+        cases.solve(data["exact"], data["scene"], 1e-3)
+
+    def no_solver(*a, **k):
+        raise AssertionError("the renderer ran a solver")
+
+    monkeypatch.setattr(runner, "run", no_solver)
+    text = render(data, tmp_path, dpi=30)
+    assert f"Solutions by the exact solver `{data['exact']}`" in text

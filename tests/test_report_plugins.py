@@ -3,8 +3,8 @@
 import pytest
 
 from dualfem.cli.main import main
+from dualfem.cli.reports.plugins import run as report
 from dualfem.core.errors import InputError
-from dualfem.reports.plugins import run as report
 
 
 def test_report_plugins_small(tmp_path):

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from dualfem.cli.main import main
 from dualfem.experiments.robustness import load_cases, run_case
 
 CORPUS = Path(__file__).parent / "bad_inputs"
@@ -24,7 +25,7 @@ def test_corpus_covers_every_class():
 
 @pytest.mark.parametrize("case", CASES, ids=[f"{c['class']}: {c['name']}" for c in CASES])
 def test_case(case):
-    rec = run_case(case, CORPUS)
+    rec = run_case(case, CORPUS, main)
     if case.get("open"):
         assert rec["outcome"] not in ("refused", "answered"), \
             f"open case now passes ({rec['why']}): remove its 'open' marker in cases.toml"

@@ -6,7 +6,6 @@ exactly one JSON object on stdout.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from collections.abc import Callable
@@ -80,10 +79,10 @@ def scene_from_args(args: argparse.Namespace):
 
 
 def dumps(obj: Any) -> str:
-    """JSON with NaN/inf written as null (valid JSON for every consumer)."""
-    from dualfem.core.io import jsonable
+    """The JSON output of every command: :func:`dualfem.core.io.dumps` (imported lazily: cheap start-up)."""
+    from dualfem.core.io import dumps as _dumps
 
-    return json.dumps(jsonable(obj), indent=None)
+    return _dumps(obj)
 
 
 # --------------------------------------------------------------------------- list

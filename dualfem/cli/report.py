@@ -1,7 +1,10 @@
 """``dualfem report KIND [ARGS...]``: regenerate a report in reports/.
 
-Report kinds are registered by the modules of ``dualfem/reports/`` with :func:`register_report`;
-each kind is a function ``run(argv: list[str]) -> int`` with its own argparse.
+Report kinds are registered by the modules of ``dualfem/cli/reports/`` with :func:`register_report`;
+each kind is a function ``run(argv: list[str]) -> int`` with its own argparse, which runs the
+study through :mod:`dualfem.experiments` (or reads the results a study wrote) and then calls a
+renderer of :mod:`dualfem.reports` (renderers only read results and write Markdown and figures;
+they import nothing from the cli).
 """
 from __future__ import annotations
 
@@ -25,12 +28,12 @@ def register_report(kind: str, help: str):
 
 
 def reports() -> dict[str, tuple[str, Callable[[list[str]], int]]]:
-    """All report kinds (imports every module of ``dualfem/reports/``)."""
-    import dualfem.reports
+    """All report kinds (imports every module of ``dualfem/cli/reports/``)."""
+    import dualfem.cli.reports
 
-    for info in pkgutil.iter_modules(dualfem.reports.__path__):
+    for info in pkgutil.iter_modules(dualfem.cli.reports.__path__):
         if not info.name.startswith("_"):
-            importlib.import_module(f"dualfem.reports.{info.name}")
+            importlib.import_module(f"dualfem.cli.reports.{info.name}")
     return dict(_REPORTS)
 
 

@@ -30,6 +30,13 @@ def jsonable(o: Any) -> Any:
     return o
 
 
+def dumps(obj: Any) -> str:
+    """JSON with NaN/inf written as null (valid JSON for every consumer), on one line."""
+    import json
+
+    return json.dumps(jsonable(obj), indent=None)
+
+
 def check_output_path(path: str | Path, flag: str) -> Path:
     """Refuse, before any work, an output path that cannot be written: a directory, a path under a
     regular file, a folder without write permission. Returns the path."""

@@ -9,6 +9,12 @@ from dualfem.core.errors import InputError
 from dualfem.core.problem import Problem
 from dualfem.core.registry import get_problem, problems
 
+#: the scene the framework uses when it needs one and none is given (probes, crafted test files,
+#: the default of a study): a preset of the thin_defect problem plugin (the paper's f2 load). The
+#: one place the framework names a scene; report studies reproducing the paper name the paper's
+#: loads in :mod:`dualfem.experiments.paper`.
+DEFAULT_SCENE = "f2"
+
 
 def presets() -> dict[str, tuple[str, dict[str, Any]]]:
     """Built-in scene names -> (problem name, parameters)."""

@@ -9,6 +9,12 @@ A solver plugin is a subclass of :class:`Solver` that declares
   of x and a bound on the evaluator's residuals (the contract tests hold it to that);
 * ``exact``: False for methods with an intrinsic error (e.g. penalty), whose answer is
   compared against the reference with ``tolerance`` only;
+* ``reference`` (default False): the solver may serve as the trusted reference every other run
+  is measured against (:mod:`dualfem.experiments.reference`; only an ``exact`` solver qualifies,
+  and each of its answers must still pass the policy's checks); ``reference_rank`` orders the
+  reference solvers (smallest first, then the name) and ``reference_params`` are the parameters
+  a reference solve uses (e.g. refinement to the rounding floor). Nothing in the framework names
+  a solver: which one is the reference is this declaration (:func:`reference_solvers`);
 * ``renamed``: old parameter names still accepted, ``{"old": "new"}`` (a DeprecationWarning
   names the new one);
 * ``ranges``: the allowed values of each parameter (see :func:`check_value`): an interval string
@@ -58,6 +64,12 @@ class Solver:
     tolerance: ClassVar[float] = 1e-6
     exact: ClassVar[bool] = True
     renamed: ClassVar[dict[str, str]] = {}
+    #: may serve as the trusted reference (exact solvers only; see the module docstring)
+    reference: ClassVar[bool] = False
+    #: order among the reference solvers: smallest first (ties: by name)
+    reference_rank: ClassVar[int] = 100
+    #: parameters of a reference solve (merged over ``defaults``)
+    reference_params: ClassVar[dict[str, Any]] = {}
     #: optional: the :class:`dualfem.numerics.linalg.LocalReduction` of the QP this solver built in
     #: ``setup``; the runner's certification then reuses its factorization and dense blocks
     #: (accepted only if it is exactly that class and belongs to the QP being certified)
@@ -142,6 +154,20 @@ COMMON_RANGES: dict[str, Any] = {"tol": "(0, inf)", "max_iter": "[1, inf)", "tim
 """Ranges of the shared vocabulary: tol > 0, max_iter >= 1, a finite time_limit > 0 (seconds)."""
 
 _INTERVAL = re.compile(r"^\s*([\[(])\s*([^,\s]+)\s*,\s*([^\])\s]+)\s*([\])])\s*$")
+
+
+def reference_solvers(registry: dict[str, type[Solver]] | None = None,
+                      installed: bool = True) -> list[tuple[str, type[Solver]]]:
+    """(name, class) of the solvers of ``registry`` (default: every registered solver) that declare
+    ``reference`` and ``exact`` (with ``installed``, only those whose dependencies are importable),
+    preferred first: by ``reference_rank``, then by name."""
+    if registry is None:
+        from dualfem.core.registry import solvers
+
+        registry = solvers()
+    found = [(n, c) for n, c in registry.items()
+             if getattr(c, "reference", False) and c.exact and (not installed or c.missing() is None)]
+    return sorted(found, key=lambda nc: (getattr(nc[1], "reference_rank", 100), nc[0]))
 
 
 def interval(spec: str) -> tuple[float, float, bool, bool]:

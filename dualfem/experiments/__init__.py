@@ -1,1 +1,2 @@
-"""Experiments: compare, bench and stress sweeps, and the harness they share."""
+"""Experiments: compare, bench and stress sweeps, the harness they share, and every study a report
+shows (paper, convergence, figures, plugins, robustness): the only code behind a report that runs solvers."""

@@ -1,4 +1,4 @@
-"""The runs behind ``reports/convergence.md``: mesh convergence of a thin-defect scene (f2).
+"""The runs behind ``reports/convergence.md``: mesh convergence of a thin-defect scene (the default scene).
 
 Runs only; :mod:`dualfem.reports.convergence` renders. For each delta, the scene is solved on the
 meshes N = 16 ... 512 and on a fine reference mesh (N = 1024 by default) with an exact solver
@@ -27,6 +27,12 @@ import time
 import numpy as np
 
 from dualfem.core.errors import InputError
+from dualfem.core.scene import DEFAULT_SCENE
+
+#: the study's defaults (``dualfem report convergence``): deltas, coarse meshes, reference mesh
+DEFAULT_DELTAS = (1e-1, 1e-5, 1e-9)
+DEFAULT_NS = (16, 32, 64, 128, 256, 512)
+DEFAULT_REF = 1024
 
 
 def level_quantities(qp, sol) -> dict:
@@ -123,7 +129,7 @@ def exact_solver(name: str | None = None) -> str:
     return allowed[0]
 
 
-def study(deltas, Ns, ref_N, solver: str, scene: str = "f2", progress=print) -> dict:
+def study(deltas, Ns, ref_N, solver: str, scene: str = DEFAULT_SCENE, progress=print) -> dict:
     """Run the study with the exact ``solver`` (see :func:`exact_solver`); returns the JSON-able result dict.
 
     The reference solve must be trusted by :func:`dualfem.experiments.reference.trust` (solved,

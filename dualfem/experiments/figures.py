@@ -2,12 +2,15 @@
 
 Runs only; :mod:`dualfem.reports.figures` draws and writes. The figures need whole fields, so
 :func:`collect` returns the scenes' QPs and the solvers' :class:`~dualfem.core.solution.Solution`
-objects (keyed by scene, delta and solver) together with the plain numbers of the report's
+objects (keyed by scene, delta and solver, in a :class:`Cases` frozen once the study is done: the
+renderer can only look answers up, never solve) together with the plain numbers of the report's
 tables, and the scenes of the library (``scenes/*.toml``: gmsh meshes, inclined, curved, kinked
 and several defects) solved once each. Solutions of the pictures come from the one reference
-policy's first installed exact candidate (:func:`dualfem.experiments.reference.candidates`:
-pdas, else Clarabel) unless a solver is named; the convergence histories come from ``uzawa``
-(the paper's method) and from every other registered solver that records a per-iteration history.
+policy's first installed exact candidate (:func:`dualfem.experiments.reference.candidates`)
+unless a solver is named; the convergence histories come from the paper's method
+(:data:`dualfem.experiments.paper.PAPER_SOLVER`) and from every other registered solver that
+records a per-iteration history. The paper's scenes and solver are named in
+:mod:`dualfem.experiments.paper`.
 """
 from __future__ import annotations
 
@@ -17,15 +20,12 @@ from collections.abc import Callable
 import numpy as np
 
 from dualfem.core.errors import InputError
+from dualfem.experiments.paper import LOADS, PAPER_FIGURES, PAPER_SCENE, PAPER_SOLVER
 
 #: deltas of the jump / pressure / history figures (the paper's range)
 SWEEP = (1e-1, 1e-3, 1e-5, 1e-7, 1e-9)
 #: (scene, delta, caption) of the deformed-body pictures (paper Figs 2, 3, 4, 7)
-DEFORMED = (("f1", 1e-5, "Fig. 2: f1 (pressing down), faces closed"),
-            ("f2", 1e-7, "Fig. 3 (left): f2, delta = 1e-7, faces nearly glued"),
-            ("f2", 1e-5, "Fig. 3 (right): f2, delta = 1e-5, a stress concentrator at the crack tip"),
-            ("f2", 1e-1, "Fig. 4: f2, delta = 1e-1, a crack"),
-            ("f3", 1e-1, "Fig. 7: f3 (pulling up), faces fully apart"))
+DEFORMED = PAPER_FIGURES
 #: radius around the defect tips for the "stress at the tips" column (triangle centroids)
 TIP_RADIUS = 0.05
 #: history quantity per solver, first one found in the solver's history rows
@@ -46,13 +46,13 @@ def history_key(sol) -> str | None:
 
 def solvers_with_history(exclude=(), probe_N: int = 8) -> list[str]:
     """Registered, installed solvers that record a per-iteration history (a key of
-    :data:`HISTORY_KEYS`), found by one solve of a tiny f2 scene (N = ``probe_N``): libraries
+    :data:`HISTORY_KEYS`), found by one solve of a tiny default scene (N = ``probe_N``): libraries
     without a history are not run at full size just to find that out."""
     from dualfem.core.registry import solvers
-    from dualfem.core.scene import load_scene
+    from dualfem.core.scene import DEFAULT_SCENE, load_scene
     from dualfem.experiments.runner import run
 
-    qp = load_scene("f2", {"N": probe_N, "delta": 1e-5}).build()
+    qp = load_scene(DEFAULT_SCENE, {"N": probe_N, "delta": 1e-5}).build()
     out = []
     for name, cls in sorted(solvers().items()):
         if name in exclude or cls.missing() is not None:
@@ -74,26 +74,47 @@ def picture_solver(name: str | None = None) -> str:
         return name
     names = [n for n, _ in candidates()]
     if not names:
-        raise InputError("no exact reference solver (pdas, clarabel) is registered and installed")
+        raise InputError("no exact reference solver (a solver declaring Solver.reference) is registered and installed")
     return names[0]
 
 
 class Cases:
-    """Solve each (scene, delta) once with a given solver and remember the QP and the result."""
+    """Solve each (scene, delta) once with a given solver and remember the QP and the result.
+
+    :meth:`freeze` ends the study: afterwards :meth:`qp` and :meth:`solution` only look up what
+    was solved (a missing case raises), so whoever reads the results cannot run a solver."""
 
     def __init__(self, N: int, progress: Callable[[str], None]):
         self.N = N
         self.progress = progress
         self.qps: dict = {}
         self.sols: dict = {}
+        self.frozen = False
+
+    def freeze(self) -> Cases:
+        """No more builds or solves: the results are final (returns self)."""
+        self.frozen = True
+        return self
+
+    def _missing(self, what: str):
+        raise RuntimeError(f"{what} is not among the study's results (dualfem.experiments.figures.collect)")
 
     def qp(self, scene: str, delta: float):
         from dualfem.core.scene import load_scene
 
         key = (scene, delta)
         if key not in self.qps:
+            if self.frozen:
+                self._missing(f"the QP of {scene} at delta={delta:g}")
             self.qps[key] = load_scene(scene, {"N": self.N, "delta": delta}).build()
         return self.qps[key]
+
+    def solution(self, solver: str, scene: str, delta: float):
+        """The stored Solution of ``solver`` on (scene, delta); never solves."""
+        key = (solver, scene, delta)
+        if key not in self.sols:
+            self._missing(f"the solution of {solver} on {scene} at delta={delta:g}")
+        return self.sols[key]
 
     def solve(self, solver: str, scene: str, delta: float, require_x: bool = False):
         """The Solution of ``solver`` (cached); ``require_x``: raise if it has no x (a pictured solve)."""
@@ -101,6 +122,8 @@ class Cases:
 
         key = (solver, scene, delta)
         if key not in self.sols:
+            if self.frozen:
+                self._missing(f"the solution of {solver} on {scene} at delta={delta:g}")
             t0 = time.perf_counter()
             self.sols[key] = sol = run(solver, self.qp(scene, delta))
             self.progress(f"{scene} delta={delta:g} {solver}: {sol.status} {sol.iterations} "
@@ -183,18 +206,19 @@ def library_runs(solver: str, progress: Callable[[str], None], overrides: dict |
     return out
 
 
-def uzawa_runs(cases: Cases, exact: str, sweep) -> dict:
-    """``uzawa`` on f1/f2/f3 at every delta of ``sweep``: iteration counts and its agreement with ``exact``."""
+def method_runs(cases: Cases, exact: str, sweep, method: str = PAPER_SOLVER) -> dict:
+    """The paper's method on its loads at every delta of ``sweep``: iteration counts and its agreement
+    with ``exact``."""
     from dualfem.core import evaluator
 
     counts, agree = {}, []
-    for scene in ("f1", "f2", "f3"):
+    for scene in LOADS:
         for d in sweep:
-            s = cases.solve("uzawa", scene, d)
+            s = cases.solve(method, scene, d)
             counts[(scene, d)] = {"outer": s.iterations.get("outer", "?"), "inner": s.iterations.get("inner", "?"),
                                   "ok": s.ok, "status": str(s.status)}
             ref = cases.solve(exact, scene, d) if s.x is not None else None
-            if ref is not None and ref.x is not None and exact != "uzawa":
+            if ref is not None and ref.x is not None and exact != method:
                 c = evaluator.compare(cases.qp(scene, d), s.x, s.multipliers, ref.x, ref.multipliers)
                 agree.append({"scene": scene, "delta": d, "x_energy": c["x_energy"], "multipliers": c["multipliers"],
                               "contact_mismatch": c["contact_mismatch"]})
@@ -202,10 +226,10 @@ def uzawa_runs(cases: Cases, exact: str, sweep) -> dict:
 
 
 def other_runs(cases: Cases, others: list[str]) -> dict:
-    """The other history solvers on f1/f2/f3 at :data:`OTHER_DELTAS`: which key each records."""
+    """The other history solvers on the paper's loads at :data:`OTHER_DELTAS`: which key each records."""
     measures: dict[str, str] = {}
     no_hist: set[str] = set()
-    for scene in ("f1", "f2", "f3"):
+    for scene in LOADS:
         for name in others:
             for d, _ in OTHER_DELTAS:
                 key = history_key(cases.solve(name, scene, d))
@@ -220,23 +244,29 @@ def collect(N: int = 64, solver: str | None = None, sweep=SWEEP, history_solvers
             progress: Callable[[str], None] = print, scenes: bool = True,
             scene_overrides: dict | None = None) -> dict:
     """Every solve the figures report needs (see the module docstring); ``scenes``: the scene
-    library too (:func:`library_runs`, with ``scene_overrides``)."""
+    library too (:func:`library_runs`, with ``scene_overrides``). ``data["method"]`` holds the
+    paper's method's runs (None if that solver is not registered); ``data["cases"]`` is frozen."""
     from dualfem.core.registry import solvers
 
     exact = picture_solver(solver)
     cases = Cases(N, progress)
     rows = [picture_row(cases.qp(sc, d), cases.solve(exact, sc, d, True), sc, d, cap) for sc, d, cap in DEFORMED]
     for d in sweep:
-        cases.solve(exact, "f2", d, True)
-    data = {"N": N, "exact": exact, "sweep": list(sweep), "rows": rows, "cases": cases, "uzawa": None,
+        cases.solve(exact, PAPER_SCENE, d, True)
+    for d in (1e-1, 1e-5):         # the faces figure (paper Fig. 6)
+        cases.solve(exact, PAPER_SCENE, d, True)
+    data = {"N": N, "exact": exact, "sweep": list(sweep), "rows": rows, "cases": cases, "method": None,
+            "scene": PAPER_SCENE, "loads": list(LOADS),
             "scenes": library_runs(exact, progress, scene_overrides) if scenes else []}
     reg = solvers()
-    if "uzawa" in reg:
-        others = history_solvers if history_solvers is not None else solvers_with_history(exclude=("uzawa",))
-        data["uzawa"] = {"defaults": dict(reg["uzawa"].defaults), "others": list(others),
-                         **uzawa_runs(cases, exact, sweep), **other_runs(cases, others)}
+    method = PAPER_SOLVER
+    if method in reg:
+        others = history_solvers if history_solvers is not None else solvers_with_history(exclude=(method,))
+        data["method"] = {"solver": method, "defaults": dict(reg[method].defaults), "others": list(others),
+                          **method_runs(cases, exact, sweep, method), **other_runs(cases, others)}
         if history_solvers is None:
             installed = {n for n, c in reg.items() if c.missing() is None}
-            data["uzawa"]["no_history"] = sorted(set(data["uzawa"]["no_history"])
-                                                 | (installed - set(others) - {"uzawa"}))
+            data["method"]["no_history"] = sorted(set(data["method"]["no_history"])
+                                                  | (installed - set(others) - {method}))
+    cases.freeze()
     return data

@@ -35,8 +35,7 @@ def machine_info() -> dict:
     threads = {k: os.environ[k] for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
                                            "RAYON_NUM_THREADS") if k in os.environ}
     vers = {}
-    for pkg in ("dualfem", "numpy", "scipy", "scikit-fem", "osqp", "clarabel", "cvxpy", "scikit-sparse",
-                "joblib", "distributed"):
+    for pkg in ("dualfem", *BASE_PACKAGES, "scikit-sparse", "joblib", "distributed", *plugin_packages()):
         try:
             vers[pkg] = version(pkg)
         except PackageNotFoundError:
@@ -54,6 +53,22 @@ def machine_info() -> dict:
                 "python": platform.python_version(), "platform": platform.platform(terse=True),
                 "versions": json.dumps(vers, sort_keys=True), "git": git}
     return dict(_MACHINE)
+
+
+#: the distributions every run depends on (the solver plugins' own are found by :func:`plugin_packages`)
+BASE_PACKAGES = ("numpy", "scipy", "scikit-fem")
+
+
+def plugin_packages() -> list[str]:
+    """The distributions that provide the modules the registered solver plugins require
+    (``Solver.requires``), sorted: their versions are recorded with the results, whoever the plugins are."""
+    from importlib.metadata import packages_distributions
+
+    from dualfem.core.registry import solvers
+
+    dists = packages_distributions()
+    mods = {m.split(".")[0] for cls in solvers().values() for m in getattr(cls, "requires", ())}
+    return sorted({d for m in mods for d in dists.get(m, [])})
 
 
 def utc_now() -> str:
@@ -85,7 +100,7 @@ def environment() -> dict:
     import importlib.metadata as md
 
     vers = {}
-    for p in ("numpy", "scipy", "scikit-fem", "osqp", "clarabel", "cvxpy"):
+    for p in (*BASE_PACKAGES, *plugin_packages()):
         try:
             vers[p] = md.version(p)
         except md.PackageNotFoundError:

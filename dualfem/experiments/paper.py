@@ -17,6 +17,25 @@ import math
 import time
 from collections.abc import Callable
 
+# ---------------------------------------------------------------- the paper's names, in one place
+# The report studies that reproduce the paper (this module, :mod:`dualfem.experiments.figures`) and
+# their renderers take every scene and solver name of the paper from here.
+#: the paper's three loads (presets of the thin_defect problem plugin)
+LOADS = ("f1", "f2", "f3")
+#: the scene of the paper's Tables 2-3 and Figs 3-6
+PAPER_SCENE = "f2"
+#: the load that pulls the faces apart (the first Uzawa iteration ends the method: m = k = 1)
+OPEN_LOAD = "f3"
+#: the paper's method (solver plugin) and the same method with r taken from the QP (its remedy for small delta)
+PAPER_SOLVER = "uzawa"
+REMEDY_SOLVER = "uzawa_auto"
+#: (scene, delta, caption) of the deformed-body pictures (paper Figs 2, 3, 4, 7)
+PAPER_FIGURES = (("f1", 1e-5, "Fig. 2: f1 (pressing down), faces closed"),
+                 ("f2", 1e-7, "Fig. 3 (left): f2, delta = 1e-7, faces nearly glued"),
+                 ("f2", 1e-5, "Fig. 3 (right): f2, delta = 1e-5, a stress concentrator at the crack tip"),
+                 ("f2", 1e-1, "Fig. 4: f2, delta = 1e-1, a crack"),
+                 ("f3", 1e-1, "Fig. 7: f3 (pulling up), faces fully apart"))
+
 # The paper's tables (Zhiltsov & Maksimova 2023, section 5): (k_MU, m_MN)
 PAPER_T1 = {("f1", 1e-7): (18, 24), ("f1", 1e-5): (22, 33), ("f1", 1e-1): (23, 28),
             ("f2", 1e-7): (22, 24), ("f2", 1e-5): (11, 16), ("f2", 1e-1): (19, 24),
@@ -25,7 +44,6 @@ DELTAS = [1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9]
 PAPER_T2 = dict(zip(DELTAS, zip([26, 21, 19, 17, 15, 50, 18, 111, 899], [32, 27, 26, 22, 21, 53, 20, 112, 900])))
 PAPER_T3 = dict(zip(DELTAS, zip([8, 12, 8, 11, 10, 11, 19, 121, 888], [13, 17, 13, 16, 15, 14, 21, 122, 889])))
 T1_DELTAS = [1e-7, 1e-5, 1e-1]
-LOADS = ("f1", "f2", "f3")
 PAPER_TOL_INNER = 1e-7
 #: the paper's outer stop: max_j |l^{k+1}_j - l^k_j| <= 1e-5 in stress units (MPa), an absolute test
 PAPER_OUTER = {"tol_mode": "absolute", "tol": 1e-5}
@@ -57,7 +75,7 @@ def fmt_delta(d: float) -> str:
 def cells() -> list[tuple[str, str, float, float]]:
     """(table, load, delta, Armijo step factor) of every cell of Tables 1-3."""
     out = [("T1", load, d, 2.0) for load in LOADS for d in T1_DELTAS]
-    out += [("T2", "f2", d, 2.0) for d in DELTAS] + [("T3", "f2", d, 1.1) for d in DELTAS]
+    out += [("T2", PAPER_SCENE, d, 2.0) for d in DELTAS] + [("T3", PAPER_SCENE, d, 1.1) for d in DELTAS]
     return out
 
 
@@ -73,7 +91,7 @@ def _run(load: str, N: int, delta: float, plane: str, solver: str, params: dict)
             "time": time.perf_counter() - t0, "steps": len(steps), "short_steps": sum(s < 1 for s in steps)}
 
 
-def tables(Ns, planes, solver: str = "uzawa", progress: Progress = None) -> list[dict]:
+def tables(Ns, planes, solver: str = PAPER_SOLVER, progress: Progress = None) -> list[dict]:
     """One record {N, plane, load, delta, factor, k, m, status, time, steps, short_steps} per distinct run."""
     out: dict[tuple, dict] = {}
     todo = cells()
@@ -102,7 +120,7 @@ def distance(res: dict[tuple, dict], N: int, plane: str) -> float:
     """Mean |log10(k_ours / k_paper)| over all 27 cells of Tables 1-3 (outer counts)."""
     errs = [abs(math.log10(res[(N, plane, load, d, 2.0)]["k"] / k)) for (load, d), (k, _) in PAPER_T1.items()]
     for tab, f in ((PAPER_T2, 2.0), (PAPER_T3, 1.1)):
-        errs += [abs(math.log10(res[(N, plane, "f2", d, f)]["k"] / k)) for d, (k, _) in tab.items()]
+        errs += [abs(math.log10(res[(N, plane, PAPER_SCENE, d, f)]["k"] / k)) for d, (k, _) in tab.items()]
     return sum(errs) / len(errs)
 
 
@@ -114,12 +132,12 @@ def closest(records: list[dict]) -> tuple[int, str]:
 
 
 def auto(N: int, plane: str, progress: Progress = None) -> list[dict]:
-    """``uzawa_auto`` on f2 at every delta of Table 2: records {delta, k, m, status, ...}."""
+    """:data:`REMEDY_SOLVER` on :data:`PAPER_SCENE` at every delta of Table 2: records {delta, k, m, status, ...}."""
     out = []
     for d in DELTAS:
-        out.append({"delta": d, **_run("f2", N, d, plane, "uzawa_auto", {})})
+        out.append({"delta": d, **_run(PAPER_SCENE, N, d, plane, REMEDY_SOLVER, {})})
         if progress:
-            progress(f"uzawa_auto N={N} {plane} delta={fmt_delta(d)}: k={out[-1]['k']} m={out[-1]['m']}")
+            progress(f"{REMEDY_SOLVER} N={N} {plane} delta={fmt_delta(d)}: k={out[-1]['k']} m={out[-1]['m']}")
     return out
 
 
@@ -132,7 +150,7 @@ def inner_norms(Ns, plane: str = "strain", variants=tuple(INNER_VARIANTS), progr
             for d in T1_DELTAS:
                 for v in variants:
                     out.append({"N": N, "plane": plane, "load": load, "delta": d, "variant": v,
-                                **_run(load, N, d, plane, "uzawa", {"step_factor": 2.0, **PAPER_OUTER,
+                                **_run(load, N, d, plane, PAPER_SOLVER, {"step_factor": 2.0, **PAPER_OUTER,
                                                                     **INNER_VARIANTS[v][0]})})
                     if progress:
                         progress(f"inner test {v}: N={N} {load} delta={fmt_delta(d)}: "

@@ -11,10 +11,10 @@ Runs only; :mod:`dualfem.reports.plugins` renders. :func:`collect` returns plain
 * ``figure``: the deformed body on its obstacle and the contact pressure mu / w along the bottom
   for three indentations, by every exact solver;
 * ``cost``: the template solver ``dual_gradient`` (plain and accelerated) against the mesh size
-  on f2, next to the fastest exact solver.
+  on the default scene, next to the reference solver.
 
 The reference is the first installed candidate of the one reference policy
-(:func:`dualfem.experiments.reference.candidates`).
+(:func:`dualfem.experiments.reference.candidates`: the solvers declaring ``Solver.reference``).
 """
 from __future__ import annotations
 
@@ -23,6 +23,13 @@ from collections.abc import Callable
 
 import numpy as np
 
+from dualfem.core.scene import DEFAULT_SCENE
+
+#: the plugins this study measures, named once: the second problem plugin's scenes (presets of
+#: problems/signorini.py) and the template solver of docs/plugins.md
+SIGNORINI_SCENE = "signorini"
+SIGNORINI_FLAT_SCENE = "signorini_flat"
+TEMPLATE_SOLVER = "dual_gradient"
 INDENTS = (0.002, 0.005, 0.01)
 
 
@@ -36,7 +43,7 @@ def reference_solver() -> str:
 
     names = [n for n, _ in candidates()]
     if not names:
-        raise RuntimeError("no exact reference solver (pdas, clarabel) is installed")
+        raise RuntimeError("no exact reference solver (a solver declaring Solver.reference) is installed")
     return names[0]
 
 
@@ -78,7 +85,7 @@ def flat(ref_name: str, Ns) -> list[dict]:
     out = []
     for n_ in Ns:
         for plane in ("strain", "stress"):
-            fp = load_scene("signorini_flat", {"N": n_, "plane": plane})
+            fp = load_scene(SIGNORINI_FLAT_SCENE, {"N": n_, "plane": plane})
             fq = fp.build()
             fs = run(ref_name, fq)
             out.append({"N": n_, "plane": plane, "exact": fp.flat_pressure(),
@@ -105,7 +112,7 @@ def figure_data(prob, qp, ref, ref_name: str, exact: list[str]) -> dict:
     cn = qp.maps["contact_nodes"]
     pressures = []
     for indent in INDENTS:
-        qk = load_scene("signorini", {"N": p["N"], "indent": indent}).build()
+        qk = load_scene(SIGNORINI_SCENE, {"N": p["N"], "indent": indent}).build()
         for name in exact:
             s = run(name, qk)
             if s.ok:
@@ -118,20 +125,21 @@ def figure_data(prob, qp, ref, ref_name: str, exact: list[str]) -> dict:
 
 
 def cost(fast: str, sizes, progress: Callable[[str], None]) -> list[dict]:
-    """dual_gradient (plain, accelerated) and ``fast`` on f2 (delta = 1e-5) for each N of ``sizes``."""
+    """The template solver (plain, accelerated) and ``fast`` on the default scene (delta = 1e-5) for each N
+    of ``sizes``."""
     from dualfem.core import evaluator
     from dualfem.core.scene import load_scene
     from dualfem.experiments.runner import run
 
     out = []
     for n_ in sizes:
-        q2 = load_scene("f2", {"N": n_}).build()
+        q2 = load_scene(DEFAULT_SCENE, {"N": n_}).build()
         r = run(fast, q2)
-        a = run("dual_gradient", q2, {"max_n": 10**7})
-        b = run("dual_gradient", q2, {"accelerate": False, "max_n": 10**7})
+        a = run(TEMPLATE_SOLVER, q2, {"max_n": 10**7})
+        b = run(TEMPLATE_SOLVER, q2, {"accelerate": False, "max_n": 10**7})
         d = evaluator.compare(q2, a.x, a.multipliers, r.x, r.multipliers)["x_energy"] \
             if (r.ok and a.x is not None) else float("nan")
-        progress(f"f2 N={n_}: plain {b.iterations} accelerated {a.iterations}")
+        progress(f"{DEFAULT_SCENE} N={n_}: plain {b.iterations} accelerated {a.iterations}")
         out.append({"N": n_, "n": q2.n, "x_error": d,
                     **{f"{k}_{f}": v for k, s in (("plain", b), ("accel", a), ("fast", r))
                        for f, v in (("iterations", s.iterations.get("gradient")), ("status", str(s.status)),
@@ -147,12 +155,13 @@ def collect(N: int = 32, sizes=(16, 32, 64, 128), progress: Callable[[str], None
 
     avail = {n: c for n, c in sorted(solvers().items()) if c.missing() is None}
     ref_name = reference_solver()
-    prob = load_scene("signorini", {"N": N})
+    prob = load_scene(SIGNORINI_SCENE, {"N": N})
     qp = prob.build()
     ref = run(ref_name, qp)
     p = prob.params
-    fast = "pdas" if "pdas" in avail else ref_name
-    return {"N": N, "reference": ref_name, "fast": fast, "n": qp.n, "m": qp.m,
+    fast = ref_name          # the first reference solver: exact, and declared first because it is the fastest
+    return {"N": N, "reference": ref_name, "fast": fast, "n": qp.n, "m": qp.m, "scene_name": DEFAULT_SCENE,
+            "template": TEMPLATE_SOLVER,
             "scene": {k: p[k] for k in ("width", "height", "E", "nu", "plane", "indent", "obstacle")},
             "solvers": every_solver(prob, qp, ref, avail, progress), "flat": flat(ref_name, (8, N)),
             "figure": figure_data(prob, qp, ref, ref_name, [n for n, c in avail.items() if c.exact]),

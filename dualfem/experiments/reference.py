@@ -11,9 +11,11 @@ A run is a **trusted reference** when (:func:`trust`)
 
 Among trusted runs the one with the smallest certificate wins, ties broken by KKT error, then
 time (:func:`rank_key`). ``compare`` ranks the runs it has; ``bench`` and ``stress`` compute one
-with :func:`compute`, trying :func:`candidates` in order (pdas first: exact and fastest, then
-Clarabel) until one is trusted. A run of the reference solver itself is measured against the
-next candidate (:func:`candidates` with ``exclude``), never against itself.
+with :func:`compute`, trying :func:`candidates` in order until one is trusted. The candidates are
+the solvers that declare themselves reference solvers (``Solver.reference``, ordered by
+``Solver.reference_rank``, solved with ``Solver.reference_params``): no solver is named here.
+A run of the reference solver itself is measured against the next candidate (:func:`candidates`
+with ``exclude``), never against itself.
 """
 from __future__ import annotations
 
@@ -24,10 +26,6 @@ from typing import Any
 
 import numpy as np
 
-#: preferred reference solvers and their parameters (Clarabel at dualfem's default tolerances:
-#: asking it for 1e-12 made it stop 'inaccurate' at delta <= 1e-6 on the stress grid)
-#: pdas refines whenever the step is above rounding (refine_tol = 1e-16): a reference is driven to the floor
-PREFERRED: tuple[tuple[str, dict], ...] = (("pdas", {"refine_tol": 1e-16}), ("clarabel", {"max_iter": 500}))
 #: default bound on a reference's own evaluator KKT error
 KKT_MAX = 1e-8
 #: default bound on a reference's certified relative energy-norm error (a looser reference only widens the
@@ -50,15 +48,18 @@ class Reference:
 
 
 def candidates(exclude: tuple[str, ...] = (), only: tuple[str, ...] | None = None) -> list[tuple[str, dict]]:
-    """(name, params) of the registered, installed exact reference solvers, preferred first.
+    """(name, params) of the registered, installed exact reference solvers, preferred first
+    (:func:`dualfem.core.solver.reference_solvers`: the solvers declaring ``reference``, by
+    ``reference_rank``), each with its declared ``reference_params``.
 
-    ``only`` replaces the preferred list (e.g. a bench spec's ``reference.solvers``)."""
+    ``only`` replaces that list (e.g. a bench spec's ``reference.solvers``): any registered,
+    installed exact solver, in the order given."""
     from dualfem.core.registry import solvers
+    from dualfem.core.solver import reference_solvers
 
     reg = solvers()
-    preferred = dict(PREFERRED)
-    names = list(only) if only is not None else [n for n, _ in PREFERRED]
-    return [(n, dict(preferred.get(n, {}))) for n in names
+    names = list(only) if only is not None else [n for n, _ in reference_solvers(reg)]
+    return [(n, dict(getattr(reg[n], "reference_params", {}))) for n in names
             if n not in exclude and n in reg and reg[n].missing() is None and reg[n].exact]
 
 
@@ -138,6 +139,6 @@ def compute(qp, *, exclude: tuple[str, ...] = (), kkt_max: float = KKT_MAX, boun
             return Reference(solver=name, x=sol.x, multipliers=sol.multipliers, kkt=kkt, bound=bound, time_s=dt,
                              tolerance=float(cls.tolerance), params=p), tried
     if not tried:
-        names = ", ".join(only if only is not None else [n for n, _ in PREFERRED])
+        names = ", ".join(only) if only is not None else "none declares Solver.reference"
         tried.append(f"no exact reference solver ({names}) is registered and installed")
     return None, tried

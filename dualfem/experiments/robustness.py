@@ -1,7 +1,8 @@
 """Run the bad-input corpus (``tests/bad_inputs``): every case refused cleanly or answered correctly.
 
-Each case runs ``dualfem`` (in this process through :func:`dualfem.cli.main`, or as a real
-subprocess) in a scratch folder and is classified (see tests/bad_inputs/README.md): ``refused``
+Each case runs ``dualfem`` (in this process through the command line's entry point, which the
+caller passes in as ``main``: ``dualfem.cli.main.main``, since experiments do not import the cli;
+or as a real subprocess) in a scratch folder and is classified (see tests/bad_inputs/README.md): ``refused``
 (exit 2, one ``dualfem CMD: error:`` line with the expected words, nothing written),
 ``answered`` (exit 0/1, no traceback, the expected JSON), ``silent_wrong``, ``traceback``,
 ``data_lost``, ``wrote_on_refusal``, ``hang`` or ``wrong_refusal``.
@@ -34,17 +35,17 @@ OUTCOMES = ("refused", "answered", "silent_wrong", "traceback", "data_lost", "wr
 
 # ------------------------------------------------------------------------ crafted files
 def _export(d: Path, **extra) -> None:
-    from dualfem.core.scene import load_scene
+    from dualfem.core.scene import DEFAULT_SCENE, load_scene
 
-    qp = load_scene("f2", {"N": 8}).build()
+    qp = load_scene(DEFAULT_SCENE, {"N": 8}).build()
     data = {**qp.to_dict(), **extra}
     np.savez(d / "qp.npz", **data)
 
 
 def _float_indices(d: Path) -> None:
-    from dualfem.core.scene import load_scene
+    from dualfem.core.scene import DEFAULT_SCENE, load_scene
 
-    data = load_scene("f2", {"N": 8}).build().to_dict()
+    data = load_scene(DEFAULT_SCENE, {"N": 8}).build().to_dict()
     data["K_row"] = data["K_row"].astype(float) + 0.5
     np.savez(d / "qp.npz", **data)
 
@@ -122,10 +123,11 @@ class _Timeout(Exception):
     pass
 
 
-def _in_process(argv: list[str], timeout: float) -> tuple[int | None, str, str, str]:
-    """(exit code, stdout, stderr, traceback text) of ``dualfem ARGV`` run in this process."""
-    from dualfem.cli.main import main
+Main = Callable[[list[str]], int]
 
+
+def _in_process(main: Main, argv: list[str], timeout: float) -> tuple[int | None, str, str, str]:
+    """(exit code, stdout, stderr, traceback text) of ``dualfem ARGV`` run in this process by ``main``."""
     out, err = io.StringIO(), io.StringIO()
 
     def alarm(*_):
@@ -169,8 +171,9 @@ def _as_subprocess(argv: list[str], timeout: float, close_early: bool) -> tuple[
     return r.returncode, r.stdout, r.stderr, r.stderr if "Traceback" in r.stderr else ""
 
 
-def run_case(case: dict, corpus: Path) -> dict:
-    """Run one case in a fresh scratch folder; its record (``outcome`` one of :data:`OUTCOMES`)."""
+def run_case(case: dict, corpus: Path, main: Main) -> dict:
+    """Run one case in a fresh scratch folder; its record (``outcome`` one of :data:`OUTCOMES`).
+    ``main``: the ``dualfem`` entry point (``argv -> exit code``) that runs an in-process case."""
     with tempfile.TemporaryDirectory(prefix="dualfem-bad-") as tmp:
         d = Path(tmp)
         if case.get("make"):
@@ -186,7 +189,7 @@ def run_case(case: dict, corpus: Path) -> dict:
             if case.get("subprocess"):
                 rc, out, err, tb = _as_subprocess(argv, case.get("timeout", 60), case.get("close_stdout_early", False))
             else:
-                rc, out, err, tb = _in_process(argv, case.get("timeout", 60))
+                rc, out, err, tb = _in_process(main, argv, case.get("timeout", 60))
         finally:
             os.chdir(cwd)
         after = _snapshot(d)
@@ -242,12 +245,12 @@ def _check_answer(case: dict, out: str) -> tuple[str, str]:
     return "answered", f"status {rec.get('status')}"
 
 
-def run_corpus(corpus: Path, progress: Callable[[str], None] | None = None) -> list[dict]:
-    """Run every case of the corpus; their records in file order."""
+def run_corpus(corpus: Path, main: Main, progress: Callable[[str], None] | None = None) -> list[dict]:
+    """Run every case of the corpus with the entry point ``main``; their records in file order."""
     corpus = Path(corpus).resolve()
     recs = []
     for case in load_cases(corpus):
-        rec = run_case(case, corpus)
+        rec = run_case(case, corpus, main)
         recs.append(rec)
         if progress:
             progress(f"{rec['class']:8s} {rec['outcome']:16s} {rec['name']}")

@@ -23,14 +23,14 @@ import numpy as np
 from dualfem.core.errors import InputError
 from dualfem.post.fields import Post
 
-#: solvers tried in this order by :func:`pick_solver` (fast and exact first)
-PREFERRED = ("pdas", "uzawa", "clarabel")
 
-
-def pick_solver(name: str | None = None, *, exact: bool = True, order: Sequence[str] = PREFERRED) -> str:
+def pick_solver(name: str | None = None, *, exact: bool = True, order: Sequence[str] | None = None) -> str:
     """Name of the solver to use: ``name`` if given (checked), else the first registered and
-    installed solver of ``order`` (with ``exact`` True, only solvers declaring ``exact``)."""
+    installed solver of ``order`` (with ``exact`` True, only solvers declaring ``exact``); without
+    ``order``, the reference solvers in their declared order (``Solver.reference``,
+    :func:`dualfem.core.solver.reference_solvers`)."""
     from dualfem.core.registry import get_solver, solvers
+    from dualfem.core.solver import reference_solvers
 
     if name is not None:
         cls = get_solver(name)
@@ -38,11 +38,14 @@ def pick_solver(name: str | None = None, *, exact: bool = True, order: Sequence[
             raise InputError(cls.missing())
         return name
     reg = solvers()
+    if order is None:
+        order = [n for n, _ in reference_solvers(reg)]
     for n in order:
         cls = reg.get(n)
         if cls is not None and cls.missing() is None and (cls.exact or not exact):
             return n
-    raise InputError(f"none of the solvers {', '.join(order)} is registered and installed")
+    raise InputError(f"none of the solvers {', '.join(order) or '(no reference solver declared)'} "
+                     "is registered and installed")
 
 
 def _axes(ax, figsize=(6.4, 4.8)):

@@ -1,45 +1,19 @@
-"""``dualfem report convergence``: render the mesh-convergence study of f2 (reports/convergence.md).
+"""The convergence report: render the mesh-convergence study (reports/convergence.md).
 
-Render only: the runs are :mod:`dualfem.experiments.convergence` (what is measured and how is
-documented there). The command runs the study, stores its numbers in ``convergence.json`` and
-renders ``convergence.md`` plus two figures; ``--from-json FILE`` re-renders from stored numbers
-without solving anything (the committed report is regenerated that way).
+Render only: :func:`render` writes ``convergence.md`` plus two figures from the study's numbers
+(:func:`dualfem.experiments.convergence.study`, what is measured and how is documented there, or
+the ``convergence.json`` it was stored in). ``dualfem report convergence``
+(:mod:`dualfem.cli.reports.convergence`) runs the study and stores its numbers, or with
+``--from-json FILE`` reads stored ones (the committed report is regenerated that way), then
+calls :func:`render`.
 """
 from __future__ import annotations
 
-import argparse
-import json
-import math
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
-from dualfem.cli.report import register_report
-from dualfem.core.errors import InputError
-from dualfem.experiments.convergence import errors, fit_rate, triple_rates  # noqa: F401  (errors: old import path)
-
-DEFAULT_DELTAS = (1e-1, 1e-5, 1e-9)
-DEFAULT_NS = (16, 32, 64, 128, 256, 512)
-DEFAULT_REF = 1024
-
-def _floats(text: str, name: str) -> list[float]:
-    try:
-        vals = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise InputError(f"{name} must be a comma-separated list of numbers, got {text!r}") from None
-    if not vals or any(not (math.isfinite(v) and v > 0) for v in vals):
-        raise InputError(f"{name} must be positive numbers, got {text!r}")
-    return vals
-
-
-def _ints(text: str, name: str) -> list[int]:
-    vals = _floats(text, name)
-    if any(v != int(v) or v < 4 for v in vals):
-        raise InputError(f"{name} must be integers >= 4, got {text!r}")
-    return [int(v) for v in vals]
-
+from dualfem.experiments.convergence import fit_rate, triple_rates
 
 
 # ----------------------------------------------------------------------------- output
@@ -390,62 +364,12 @@ def _discussion(res: dict) -> str:
     return "\n".join(summary + triple_lines + _what(res, fitted, triples) + _why(res))
 
 
-def _read_json(path: str) -> dict:
-    try:
-        return json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot read {path!r}: {exc}") from None
-
-
-@register_report("convergence", "mesh-convergence study of f2 against a fine reference (slow: ~8 min per delta "
-                                "at the defaults, ~9 GB; --from-json re-renders)")
-def run(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="dualfem report convergence", description=__doc__.splitlines()[0])
-    ap.add_argument("--deltas", default=",".join(f"{d:g}" for d in DEFAULT_DELTAS), help="comma-separated deltas")
-    ap.add_argument("--N", dest="Ns", default=",".join(map(str, DEFAULT_NS)), help="comma-separated coarse N")
-    ap.add_argument("--ref-N", type=int, default=DEFAULT_REF, help="N of the fine reference mesh (default 1024)")
-    ap.add_argument("--solver", default=None,
-                    help="exact solver (default: the reference policy's first installed candidate, pdas then clarabel)")
-    ap.add_argument("--scene", default="f2")
-    ap.add_argument("--out", default="dualfem-results/reports",
-                    help="output directory (default dualfem-results/reports; reports/ for the committed one)")
-    ap.add_argument("--from-json", default=None, metavar="FILE",
-                    help="re-render the report and plots from a convergence.json written earlier (no solves)")
-    ap.add_argument("--supplement", action="append", default=[], metavar="FILE",
-                    help="append the results of another run (its convergence.json), e.g. a finer reference "
-                         "for one delta")
-    argv = list(argv)
-    if argv[:1] == ["--"]:  # 'dualfem report KIND -- --opt ...' with older dispatchers
-        argv = argv[1:]
-    args = ap.parse_args(argv)
-    supplements = [_read_json(f) for f in args.supplement]
-    from dualfem.cli.main import dumps
+def render(res: dict, out: Path, command: str | None = None) -> Path:
+    """Draw the two figures into ``out/figures`` and write ``out/convergence.md`` from the study's
+    result (:func:`dualfem.experiments.convergence.study`, or its stored ``convergence.json``);
+    returns the Markdown path. Solves nothing."""
     from dualfem.core.io import atomic_write_text
 
-    out = Path(args.out)
-    if args.from_json:
-        res = _read_json(args.from_json)
-        res["supplements"] = supplements or res.get("supplements", [])
-        atomic_write_text(out / "convergence.json", dumps(res) + "\n")
-        pngs = plot(res, out / "figures")
-        atomic_write_text(out / "convergence.md", markdown(res, pngs, res.get("command", "dualfem report convergence")))
-        print(f"wrote {out / 'convergence.md'} from {args.from_json}", file=sys.stderr)
-        return 0
-    from dualfem.experiments.convergence import exact_solver, study
-
-    deltas = _floats(args.deltas, "--deltas")
-    Ns = sorted(_ints(args.Ns, "--N"))
-    if any(args.ref_N % n or args.ref_N <= n for n in Ns):
-        raise InputError(f"--ref-N ({args.ref_N}) must be a multiple of, and larger than, every coarse N ({Ns})")
-    solver = exact_solver(args.solver)
-    t0 = time.perf_counter()
-    res = study(deltas, Ns, args.ref_N, solver, args.scene, progress=lambda m: print(m, file=sys.stderr, flush=True))
-    res["time_s"] = time.perf_counter() - t0
-    res["supplements"] = supplements
-    res["command"] = " ".join(["dualfem report convergence", *argv])
-    atomic_write_text(out / "convergence.json", dumps(res) + "\n")
     pngs = plot(res, out / "figures")
-    atomic_write_text(out / "convergence.md", markdown(res, pngs, res["command"]))
-    print(f"wrote {out / 'convergence.md'}", file=sys.stderr)
-    return 0
-
+    cmd = command or res.get("command", "dualfem report convergence")
+    return atomic_write_text(out / "convergence.md", markdown(res, pngs, cmd))

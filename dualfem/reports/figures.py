@@ -1,24 +1,22 @@
-"""``dualfem report figures``: the paper's figures and the scene library's (reports/figures.md + figures/*.png).
+"""The figures report: the paper's figures and the scene library's (reports/figures.md + figures/*.png).
 
-Render only: the solves are :mod:`dualfem.experiments.figures`. Every picture is drawn by
-:mod:`dualfem.post.figures` from a scene's QP and a registry solver's Solution, so the same calls
-work in a notebook. The pictured solutions come from the reference policy's first exact solver
-(pdas, else Clarabel) unless ``--solver`` names one; the convergence histories come from the
-``uzawa`` solver (the paper's method) and from every other registered solver that records a
+Render only: :func:`render` draws and writes from the results of :func:`dualfem.experiments.figures.collect`
+(its frozen :class:`~dualfem.experiments.figures.Cases`: every Solution is looked up, none is
+computed here); ``dualfem report figures`` (:mod:`dualfem.cli.reports.figures`) runs the study,
+then calls it. Every picture is drawn by :mod:`dualfem.post.figures` from a scene's QP and a
+registry solver's Solution, so the same calls work in a notebook. The pictured solutions come
+from the reference policy's first exact solver unless ``--solver`` names one; the convergence
+histories from the paper's method and from every other registered solver that records a
 per-iteration history.
 """
 from __future__ import annotations
 
-import argparse
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
-from dualfem.cli.report import register_report
-from dualfem.core.errors import InputError
-from dualfem.experiments.figures import HISTORY_KEYS, OTHER_DELTAS, SWEEP, TIP_RADIUS, history_key
+from dualfem.experiments.figures import HISTORY_KEYS, OTHER_DELTAS, TIP_RADIUS, history_key
+from dualfem.experiments.paper import PAPER_SOLVER
 
 #: the same in plain text (Markdown)
 KEY_TEXT = {"dual_change": "max_j |l^{k+1}_j - l^k_j| in MPa"}
@@ -57,7 +55,7 @@ def _deformed_section(data: dict, figdir: Path, scale: float, dpi: int) -> list[
         scene, delta = r["scene"], r["delta"]
         qp = cases.qp(scene, delta)
         fig, ax = plt.subplots(figsize=(6.2, 5.0))
-        F.plot_deformed(qp, Post(qp, cases.solve(data["exact"], scene, delta)), ax=ax, scale=scale,
+        F.plot_deformed(qp, Post(qp, cases.solution(data["exact"], scene, delta)), ax=ax, scale=scale,
                         title=f"{scene}, delta = {delta:g}, N = {N}: x + {scale:g} u")
         fig.tight_layout()
         name = _save(fig, figdir / f"deformed_{scene}_delta{delta:g}.png", dpi)
@@ -66,13 +64,13 @@ def _deformed_section(data: dict, figdir: Path, scale: float, dpi: int) -> list[
 
 
 def _defect_sections(data: dict, figdir: Path, scale: float, dpi: int) -> list[str]:
-    """Paper Figs 5 and 6 (jump, faces) and the contact pressure, f2 over the delta sweep."""
+    """Paper Figs 5 and 6 (jump, faces) and the contact pressure, the paper's scene over the delta sweep."""
     import matplotlib.pyplot as plt
 
     from dualfem.post import figures as F
 
-    cases, N, exact = data["cases"], data["N"], data["exact"]
-    f2 = [(f"delta = {d:g}", cases.qp("f2", d), cases.solve(exact, "f2", d)) for d in data["sweep"]]
+    cases, N, exact, sc = data["cases"], data["N"], data["exact"], data["scene"]
+    f2 = [(f"delta = {d:g}", cases.qp(sc, d), cases.solution(exact, sc, d)) for d in data["sweep"]]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     F.plot_jump(f2, ax=axes[0], unit=1e-5)
     axes[0].set_title("f2: normal jump [u_nu] along the defect", fontsize=10)
@@ -86,7 +84,7 @@ def _defect_sections(data: dict, figdir: Path, scale: float, dpi: int) -> list[s
           f"![jump](figures/{_save(fig, figdir / 'jump_f2.png', dpi)})\n"]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.0))
     for ax, d in zip(axes, (1e-1, 1e-5), strict=True):
-        F.plot_faces(cases.qp("f2", d), cases.solve(exact, "f2", d), ax=ax, scale=scale,
+        F.plot_faces(cases.qp(sc, d), cases.solution(exact, sc, d), ax=ax, scale=scale,
                      title=f"f2, delta = {d:g}: faces X + {scale:g} u")
     fig.tight_layout()
     md += ["## Shapes of the two faces (paper Fig. 6)\n",
@@ -162,16 +160,16 @@ def _history_figure(data: dict, scene: str, figdir: Path, dpi: int) -> str:
 
     from dualfem.post import figures as F
 
-    cases, uz = data["cases"], data["uzawa"]
+    cases, uz = data["cases"], data["method"]
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.3))
-    runs = [(f"delta = {d:g}", cases.solve("uzawa", scene, d)) for d in data["sweep"]]
+    runs = [(f"delta = {d:g}", cases.solution(uz["solver"], scene, d)) for d in data["sweep"]]
     F.plot_history(runs, ax=axes[0], key="dual_change", ylabel=KEY_LABEL["dual_change"],
                    title=f"{scene}: Uzawa, N = {data['N']}", logx=True)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     other = []
     for i, name in enumerate(uz["others"]):
         for d, ls in OTHER_DELTAS:
-            s = cases.solve(name, scene, d)
+            s = cases.solution(name, scene, d)
             if history_key(s) is not None:
                 other.append((f"{name}, delta = {d:g}", s, {"color": colors[i % len(colors)], "ls": ls}))
     if other:
@@ -186,7 +184,7 @@ def _history_figure(data: dict, scene: str, figdir: Path, dpi: int) -> str:
 
 def _history_tables(data: dict) -> list[str]:
     """Progress measures, solvers without history, Uzawa's counts and its agreement with the exact solver."""
-    uz, sweep, md = data["uzawa"], data["sweep"], []
+    uz, sweep, md = data["method"], data["sweep"], []
     if uz["measures"]:
         md.append("Progress measures drawn for the other solvers (the first of "
                   + ", ".join(f"`{k}`" for k in HISTORY_KEYS) + " found in each row of `Solution.history`):\n")
@@ -197,7 +195,7 @@ def _history_tables(data: dict) -> list[str]:
     md += [f"Uzawa iterations k_MU / m_MN (outer / total inner Newton) at N = {data['N']} (compare with the "
            "paper's Tables 1-3; the paper's mesh size is not stated):\n",
            "| scene | " + " | ".join(f"delta = {d:g}" for d in sweep) + " |", "|---|" + "---|" * len(sweep)]
-    for scene in ("f1", "f2", "f3"):
+    for scene in data["loads"]:
         cells = [uz["counts"][(scene, d)] for d in sweep]
         md.append(f"| {scene} | " + " | ".join(f"{c['outer']} / {c['inner']}" + ("" if c["ok"] else f" ({c['status']})")
                                                for c in cells) + " |")
@@ -215,12 +213,13 @@ def _history_tables(data: dict) -> list[str]:
 
 def _history_section(data: dict, figdir: Path, dpi: int) -> list[str]:
     md = ["## Convergence histories\n"]
-    uz = data["uzawa"]
+    uz = data["method"]
     if uz is None:
-        return md + ["**Not drawn: the `uzawa` solver is not registered in this installation**, so there is no "
-                     "Uzawa history to show. `dualfem.post.figures.plot_history` draws it from `Solution.history` "
-                     "(key `dual_change`) once the solver is available.\n"]
-    md.append(f"Left: the Uzawa method (solver `uzawa`, default parameters: r = "
+        return md + [f"**Not drawn: the `{PAPER_SOLVER}` solver is not registered in this installation**, so "
+                     "there is no Uzawa history to show. `dualfem.post.figures.plot_history` draws it from "
+                     "`Solution.history` (key `dual_change`) once the solver is available.
+"]
+    md.append(f"Left: the Uzawa method (solver `{uz['solver']}`, default parameters: r = "
               f"{uz['defaults'].get('r'):g}, tol = {uz['defaults'].get('tol', uz['defaults'].get('tol_outer'))}"
               f"{', tol_mode = ' + str(uz['defaults']['tol_mode']) if 'tol_mode' in uz['defaults'] else ''}) — "
               "the dual change max_j |l^{k+1}_j - l^k_j| (MPa) per outer iteration, for delta from 1e-1 to "
@@ -228,12 +227,12 @@ def _history_section(data: dict, figdir: Path, dpi: int) -> list[str]:
               "1e-5 (solid) and 1e-9 (dashed), each with its own progress measure (named in the legend); "
               "solvers without a history (direct/interior-point libraries) are listed below the plots. The "
               "measures of different solvers are not comparable with each other (see the list below).\n")
-    md += [f"![history {scene}](figures/{_history_figure(data, scene, figdir, dpi)})\n" for scene in ("f1", "f2", "f3")]
+    md += [f"![history {scene}](figures/{_history_figure(data, scene, figdir, dpi)})\n" for scene in data["loads"]]
     return md + _history_tables(data)
 
 
 def _head(data: dict, scale: float) -> list[str]:
-    qp, N = data["cases"].qp("f2", 1e-5), data["N"]
+    qp, N = data["cases"].qp(data["scene"], 1e-5), data["N"]
     head = ["# Figures of the thin-defect problem (Zhiltsov & Maksimova 2023)\n",
             f"Generated by `dualfem report figures` with N = {N} (h = 1/{N}; {qp.n} unknowns, "
             f"{qp.m} doubled defect nodes), plane strain, E = 69000 MPa, nu = 0.3; displacements "
@@ -262,59 +261,3 @@ def render(data: dict, outdir: Path, scale: float = 300.0, dpi: int = 110) -> st
     md += _scenes_section(data, figdir, scale, dpi)
     md += _history_section(data, figdir, dpi)
     return "\n".join(_head(data, scale) + md) + "\n"
-
-
-def generate(outdir: Path, N: int = 64, solver: str | None = None, scale: float = 300.0, dpi: int = 110,
-             sweep=SWEEP, history_solvers: list[str] | None = None, progress=print, scenes: bool = True,
-             scene_overrides: dict | None = None) -> str:
-    """Run the experiment, then render (the text of figures.md); ``scenes``: the scene library too."""
-    from dualfem.experiments.figures import collect
-
-    data = collect(N=N, solver=solver, sweep=sweep, history_solvers=history_solvers, progress=progress,
-                   scenes=scenes, scene_overrides=scene_overrides)
-    return render(data, outdir, scale=scale, dpi=dpi)
-
-
-@register_report("figures", "the paper's figures (deformed bodies, jumps, faces, pressure, Uzawa histories) "
-                            "and the scene library's deformed bodies with every defect")
-def run(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="dualfem report figures", description=__doc__.splitlines()[0])
-    ap.add_argument("--N", type=int, default=64, help="mesh size N (default 64)")
-    ap.add_argument("--solver", default=None,
-                    help="solver for the pictures (default: the reference policy's first, pdas else clarabel)")
-    ap.add_argument("--scale", type=float, default=300.0, help="displacement magnification (default 300, as the paper)")
-    ap.add_argument("--dpi", type=int, default=110)
-    ap.add_argument("--history-solvers", default=None, metavar="A,B",
-                    help="solvers besides uzawa whose histories are drawn (default: every registered one "
-                         "that records a history, found by a solve of a tiny scene)")
-    ap.add_argument("--scenes", action=argparse.BooleanOptionalAction, default=True,
-                    help="include the scene library (scenes/*.toml) section (default: yes)")
-    ap.add_argument("--out", default="dualfem-results/reports",
-                    help="output directory (default dualfem-results/reports; reports/ for the committed one)")
-    argv = list(argv)
-    if argv[:1] == ["--"]:  # 'dualfem report KIND -- --opt ...' with older dispatchers
-        argv = argv[1:]
-    args = ap.parse_args(argv)
-    from dualfem.core.errors import check_int, check_positive
-
-    N = check_int("--N", args.N, 4, 1024)
-    if N % 4:
-        raise InputError(f"--N must be a multiple of 4 (the defect ends at x1 = 1/4, 3/4), got {N}")
-    scale = check_positive("--scale", args.scale)
-    dpi = check_int("--dpi", args.dpi, 30, 600)
-    out = Path(args.out)
-    hist = None
-    if args.history_solvers is not None:
-        from dualfem.core.registry import get_solver
-
-        hist = [h.strip() for h in args.history_solvers.split(",") if h.strip()]
-        for h in hist:
-            get_solver(h)
-    t0 = time.perf_counter()
-    text = generate(out, N=N, solver=args.solver, scale=scale, dpi=dpi, history_solvers=hist,
-                    progress=lambda m: print(m, file=sys.stderr, flush=True), scenes=args.scenes)
-    from dualfem.core.io import atomic_write_text
-
-    atomic_write_text(out / "figures.md", text + f"\n_Wall time {time.perf_counter() - t0:.0f} s._\n")
-    print(f"wrote {out / 'figures.md'}", file=sys.stderr)
-    return 0

@@ -1,22 +1,28 @@
-"""``dualfem report paper``: render the paper's Tables 1-3 beside our iteration counts.
+"""The paper report: render the paper's Tables 1-3 beside our iteration counts.
 
-Render only: the runs are :mod:`dualfem.experiments.paper` (``uzawa`` with the paper's settings on
-f1/f2/f3 for N in {16, ..., 256} and both plane assumptions, ``uzawa_auto``, and the inner stop
-test variants). The command runs them, stores their data in ``reports/paper_tables.json`` and
-writes ``reports/paper_tables.md``; ``--render-only`` re-renders from the stored data.
+Render only: :func:`render` turns the data of :func:`dualfem.experiments.paper.collect` (the
+paper's method with the paper's settings on its three loads for N in {16, ..., 256} and both
+plane assumptions, the remedy solver, and the inner stop test variants; stored in
+``reports/paper_tables.json``) into ``reports/paper_tables.md``. ``dualfem report paper``
+(:mod:`dualfem.cli.reports.paper`) runs the study and stores its data, or with ``--render-only``
+reads the stored data, then calls :func:`render`.
 """
 from __future__ import annotations
 
-import argparse
-import json
 import platform
-import sys
-from pathlib import Path
 
-from dualfem.cli.report import register_report
-from dualfem.core.io import atomic_write_text
 from dualfem.experiments import paper as exp
-from dualfem.experiments.paper import DELTAS, LOADS, PAPER_T1, PAPER_T2, PAPER_T3, T1_DELTAS, fmt_delta
+from dualfem.experiments.paper import (
+    DELTAS,
+    LOADS,
+    OPEN_LOAD,
+    PAPER_SCENE,
+    PAPER_T1,
+    PAPER_T2,
+    PAPER_T3,
+    T1_DELTAS,
+    fmt_delta,
+)
 
 
 def _cell(r: dict) -> str:
@@ -53,7 +59,7 @@ def _tables(res: dict, settings: list[tuple[int, str]]) -> list[str]:
                   "|---|" + "---|" * len(DELTAS),
                   "| **paper** | " + " | ".join(f"{tab[d][0]} / {tab[d][1]}" for d in DELTAS) + " |"]
         for N, p in settings:
-            lines.append(f"| N={N} {p} | " + " | ".join(_cell(res[(N, p, 'f2', d, f)]) for d in DELTAS) + " |")
+            lines.append(f"| N={N} {p} | " + " | ".join(_cell(res[(N, p, PAPER_SCENE, d, f)]) for d in DELTAS) + " |")
     return lines
 
 
@@ -68,7 +74,7 @@ def _closeness(res: dict, settings: list[tuple[int, str]], best: tuple[int, str]
 
 def _small_delta(res: dict, auto: dict, best: tuple[int, str]) -> list[str]:
     Nr, pr = best
-    k8, k9 = res[(Nr, pr, "f2", 1e-8, 2.0)], res[(Nr, pr, "f2", 1e-9, 2.0)]
+    k8, k9 = res[(Nr, pr, PAPER_SCENE, 1e-8, 2.0)], res[(Nr, pr, PAPER_SCENE, 1e-9, 2.0)]
     by_d = {r["delta"]: r for r in auto["runs"]}
     return ["", "## Why the counts differ, and what agrees", "",
             f"* **Small delta (the paper's main observation) is reproduced.** With r = 1e7 fixed, f2 needs "
@@ -83,7 +89,7 @@ def _small_delta(res: dict, auto: dict, best: tuple[int, str]) -> list[str]:
             "* **Remedy that keeps the method:** `uzawa_auto` takes r = 100 / mu_min from the QP itself "
             f"(scale-invariant, ~1e11 at delta = 1e-9). Its counts on f2, N={auto['N']} {auto['plane']}:", "",
             "| solver | " + " | ".join(f"d={fmt_delta(d)}" for d in DELTAS) + " |", "|---|" + "---|" * len(DELTAS),
-            "| uzawa (r = 1e7) | " + " | ".join(_cell(res[(auto['N'], auto['plane'], 'f2', d, 2.0)])
+            "| uzawa (r = 1e7) | " + " | ".join(_cell(res[(auto['N'], auto['plane'], PAPER_SCENE, d, 2.0)])
                                                 for d in DELTAS) + " |",
             "| uzawa_auto | " + " | ".join(_cell(by_d[d]) for d in DELTAS) + " |", ""]
 
@@ -121,7 +127,7 @@ def _unstated(res: dict, data: dict) -> list[str]:
 
 def _extra_steps(runs: list[dict], N: int, variant: str) -> list[int]:
     """m - k of the f1/f2 Table 1 cells (f3 ends by the shortcut, m = k = 1, in every variant)."""
-    return [r["m"] - r["k"] for r in runs if r["N"] == N and r["variant"] == variant and r["load"] != "f3"]
+    return [r["m"] - r["k"] for r in runs if r["N"] == N and r["variant"] == variant and r["load"] != OPEN_LOAD]
 
 
 def _inner_section(inner: dict) -> list[str]:
@@ -129,7 +135,7 @@ def _inner_section(inner: dict) -> list[str]:
     runs, variants = inner["runs"], inner["variants"]
     Ns = sorted({r["N"] for r in runs})
     by = {(r["N"], r["variant"], r["load"], r["delta"]): r for r in runs}
-    paper_extra = [PAPER_T1[(ld, d)][1] - PAPER_T1[(ld, d)][0] for ld in LOADS if ld != "f3" for d in T1_DELTAS]
+    paper_extra = [PAPER_T1[(ld, d)][1] - PAPER_T1[(ld, d)][0] for ld in LOADS if ld != OPEN_LOAD for d in T1_DELTAS]
     lines = ["## m versus k: the inner stop test", "",
              f"In the paper m exceeds k by {min(paper_extra)} to {max(paper_extra)} on the f1/f2 cells of Table 1; "
              "ours (first table above) is about 2k. The difference is the inner (Newton) stop test "
@@ -160,7 +166,7 @@ def _inner_conclusion(runs, variants, Ns, by, paper_extra) -> list[str]:
     ex = {v: _extra_steps(runs, N, v) for v in variants}
     mean = {v: sum(e) / len(e) for v, e in ex.items()}
     paper_mean = sum(paper_extra) / len(paper_extra)
-    ks = [by[(N, "energy", ld, d)]["k"] for ld in LOADS if ld != "f3" for d in T1_DELTAS]
+    ks = [by[(N, "energy", ld, d)]["k"] for ld in LOADS if ld != OPEN_LOAD for d in T1_DELTAS]
     nearest = min(variants, key=lambda v: abs(mean[v] - paper_mean))
     fewest = min(variants, key=lambda v: mean[v])
     same_k = all(len({by[(n, v, ld, d)]["k"] for v in variants}) == 1 for n in Ns for ld in LOADS for d in T1_DELTAS)
@@ -190,46 +196,3 @@ def render(data: dict, command: str) -> str:
     if data.get("inner"):
         lines += _inner_section(data["inner"])
     return "\n".join(lines)
-
-
-def _ints(text: str) -> list[int]:
-    from dualfem.core.errors import InputError
-
-    try:
-        vals = [int(n) for n in text.split(",") if n.strip()]
-    except ValueError:
-        raise InputError(f"--N must be comma-separated integers >= 4, got {text!r}") from None
-    if not vals or min(vals) < 4:
-        raise InputError(f"--N must be comma-separated integers >= 4, got {text!r}")
-    return vals
-
-
-@register_report("paper", "the paper's Tables 1-3 beside our k / m (reports/paper_tables.md)")
-def report_paper(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="dualfem report paper")
-    ap.add_argument("--N", default="16,32,64,128,256", help="comma-separated mesh sizes")
-    ap.add_argument("--inner-N", default=None, help="mesh sizes of the inner stop test study (default: N <= 128)")
-    ap.add_argument("--out", default="dualfem-results/reports/paper_tables.md",
-                    help="output (default dualfem-results/reports/paper_tables.md; reports/paper_tables.md for the "
-                         "committed one)")
-    ap.add_argument("--data", default=None, help="data JSON (default: the --out path with .json)")
-    ap.add_argument("--render-only", action="store_true", help="re-render from the data JSON, run nothing")
-    args = ap.parse_args(argv)
-    data_path = Path(args.data) if args.data else Path(args.out).with_suffix(".json")
-    if args.render_only:
-        data = json.loads(data_path.read_text())
-        command = data.get("command", "dualfem report paper")
-    else:
-        tty = sys.stderr.isatty()
-
-        def progress(msg):
-            print(msg, file=sys.stderr, end="\r" if tty else "\n", flush=True)
-
-        data = exp.collect(_ints(args.N), ["strain", "stress"],
-                           _ints(args.inner_N) if args.inner_N else None, progress=progress)
-        data["command"] = "dualfem report paper" + (" " + " ".join(argv) if argv else "")
-        atomic_write_text(data_path, json.dumps(data, indent=1) + "\n")
-        command = data["command"]
-    atomic_write_text(args.out, render(data, command))
-    print(f"wrote {args.out}" + ("" if args.render_only else f" and {data_path}"), file=sys.stderr)
-    return 0

@@ -1,23 +1,16 @@
-"""``dualfem report robustness --out DIR``: the bad-input corpus, refused or answered, case by case.
+"""The robustness report: the bad-input corpus, refused or answered, case by case.
 
-Runs the corpus (:mod:`dualfem.experiments.robustness`, ``tests/bad_inputs`` of a checkout) and
-writes ``DIR/robustness.md``: the corpus size by class, and how many cases were refused cleanly,
+Render only: :func:`render` turns the records of :func:`dualfem.experiments.robustness.run_corpus`
+into ``robustness.md``: the corpus size by class, and how many cases were refused cleanly,
 answered correctly, silently wrong, ended in a traceback, or lost data (all three must be 0).
+``dualfem report robustness --out DIR`` (:mod:`dualfem.cli.reports.robustness`) runs the corpus,
+then calls it.
 """
 from __future__ import annotations
 
-import argparse
-import sys
-import time
 from collections import Counter
-from pathlib import Path
 
-from dualfem.cli.report import register_report
-from dualfem.core.errors import InputError
-from dualfem.experiments.robustness import OUTCOMES, run_corpus
-
-#: the corpus of a source checkout (it ships with the tests, not with the package)
-CORPUS = Path(__file__).resolve().parents[2] / "tests" / "bad_inputs"
+from dualfem.experiments.robustness import OUTCOMES
 
 
 def render(recs: list[dict], command: str, machine: str) -> str:
@@ -46,27 +39,3 @@ def render(recs: list[dict], command: str, machine: str) -> str:
         why = r["why"][:140].replace("|", "/")
         L.append(f"| {r['class']} | {r['name']} | {r['outcome']} | {why} | {r['seconds']:.1f} |")
     return "\n".join(L) + "\n"
-
-
-@register_report("robustness", "the bad-input corpus: refused cleanly / answered / tracebacks / data lost")
-def report_robustness(argv: list[str]) -> int:
-    from dualfem.core.io import atomic_write_text, check_output_path
-    from dualfem.experiments.machine import machine_info
-
-    ap = argparse.ArgumentParser(prog="dualfem report robustness")
-    ap.add_argument("--out", required=True, metavar="DIR",
-                    help="folder for robustness.md (reports/ for the committed one)")
-    ap.add_argument("--corpus", default=str(CORPUS), metavar="DIR", help="the corpus folder (default tests/bad_inputs)")
-    args = ap.parse_args(argv)
-    corpus = Path(args.corpus)
-    if not (corpus / "cases.toml").is_file():
-        raise InputError(f"--corpus {str(corpus)!r} has no cases.toml (the corpus ships with a source checkout)")
-    md = check_output_path(Path(args.out) / "robustness.md", "--out")
-    t0 = time.perf_counter()
-    recs = run_corpus(corpus, progress=lambda s: print(s, file=sys.stderr, flush=True))
-    m = machine_info()
-    machine = f"{m['cpu']}, {m['cores']} cores, Python {m['python']}, commit {m['git'] or '?'}, " \
-              f"{time.perf_counter() - t0:.0f} s"
-    atomic_write_text(md, render(recs, "dualfem report robustness " + " ".join(argv), machine))
-    print(f"wrote {md}", file=sys.stderr)
-    return 0

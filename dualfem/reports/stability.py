@@ -1,4 +1,7 @@
-"""``dualfem report stability RESULTS [OUTPUT.md]``: reports/stability.md from a ``dualfem stress`` run.
+"""The stability report: reports/stability.md from a ``dualfem stress`` run (render only).
+
+``dualfem report stability RESULTS [OUTPUT.md]`` (:mod:`dualfem.cli.reports.stability`) reads the
+results (:func:`dualfem.experiments.stress.load_results`) and calls :func:`render`.
 
 Colour maps (outcome, error, iterations, time) per axis of the grid, the boundaries where each
 solver stops being correct (with the solver's own message), the list of silent wrong answers
@@ -8,14 +11,12 @@ Figures go to ``reports/stability/`` next to the Markdown file; every file is wr
 """
 from __future__ import annotations
 
-import argparse
 import copy
 import math
 from collections import Counter, defaultdict
 from pathlib import Path
 
-from dualfem.cli.report import register_report
-from dualfem.core.errors import InputError
+from dualfem.experiments.stress_grid import BASE
 from dualfem.reports._stability_correct import correct_rate_section
 from dualfem.reports._stability_findings import _findings
 
@@ -361,16 +362,16 @@ def _r_axis(recs: list, fig_dir: Path) -> list[str]:
     L = []
     for s in sorted({r["solver"] for r in rr}):
         sub = [r for r in rr if r["solver"] == s]
-        dflt = [_with_coords(r, r="default") for r in d if r["solver"] == s and r["coords"].get("load") == "f2"]
+        dflt = [_with_coords(r, r="default") for r in d if r["solver"] == s and r["coords"].get("load") == BASE["load"]]
         dparams = dflt[0].get("params_used", {}).get("r") if dflt else None
         # variants of the same method that choose r themselves (e.g. uzawa_auto), side by side
         variants = sorted({r["solver"] for r in d if r["solver"].startswith(s + "_")})
         for v in variants:
             dflt += [_with_coords(r, r=f"{v} (default)") for r in d
-                     if r["solver"] == v and r["coords"].get("load") == "f2"]
+                     if r["solver"] == v and r["coords"].get("load") == BASE["load"]]
         extra = [f"Rows: r (stress per length); the row `default` is `{s}` with its default parameters "
-                 f"(from the delta axis, f2{'' if dparams is None else ', r = ' + str(dparams)}); the paper used "
-                 "r = 1e7 at every delta"
+                 f"(from the delta axis, {BASE['load']}{'' if dparams is None else ', r = ' + str(dparams)}); "
+                 "the paper used r = 1e7 at every delta"
                  + (f"; the rows {', '.join('`' + v + ' (default)`' for v in variants)} are the variants that "
                     "choose r from the problem itself (their tolerance may differ)" if variants else "")
                  + ". The table below gives the outer iterations against r x delta "
@@ -423,31 +424,3 @@ def render(meta: dict, recs: list, md_path: Path) -> str:
           f"{meta.get('time_limit')} s.", ""]
     L += _delta_axis(recs, fig_dir) + _r_axis(recs, fig_dir) + _other_axes(recs, fig_dir)
     return "\n".join(L) + "\n"
-
-
-@register_report("stability", "numerical-stability grid: colour maps and silent wrong answers (from dualfem stress)")
-def run(argv: list[str]) -> int:
-    from dualfem.core.io import atomic_write_text
-    from dualfem.experiments.stress import load_results
-
-    ap = argparse.ArgumentParser(prog="dualfem report stability",
-                                 description="write reports/stability.md from a dualfem stress results directory")
-    ap.add_argument("results", metavar="RESULTS", help="directory written by dualfem stress (runs.jsonl, meta.json)")
-    ap.add_argument("output", nargs="?", default=None, metavar="OUTPUT.md",
-                    help="Markdown file to write (default reports/stability.md; figures go to <its folder>/stability/)")
-    ap.add_argument("-o", "--output", dest="output_opt", default=None, metavar="FILE",
-                    help="same as OUTPUT.md (needs 'dualfem report stability -- RESULTS -o FILE')")
-    try:
-        args = ap.parse_args(argv)
-    except SystemExit as exc:
-        return int(exc.code or 0)
-    out = Path(args.output_opt or args.output or "dualfem-results/reports/stability.md")
-    if out.suffix != ".md":
-        raise InputError(f"OUTPUT must name a .md file, got {str(out)!r}")
-    meta, recs = load_results(args.results)
-    if not recs:
-        raise InputError(f"RESULTS {args.results!r} holds no runs")
-    text = render(meta, recs, out)
-    atomic_write_text(out, text)
-    print(f"wrote {out} and {out.parent / 'stability'}/*.png ({len(recs)} runs)")
-    return 0
