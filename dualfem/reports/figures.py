@@ -217,8 +217,7 @@ def _history_section(data: dict, figdir: Path, dpi: int) -> list[str]:
     if uz is None:
         return md + [f"**Not drawn: the `{PAPER_SOLVER}` solver is not registered in this installation**, so "
                      "there is no Uzawa history to show. `dualfem.post.figures.plot_history` draws it from "
-                     "`Solution.history` (key `dual_change`) once the solver is available.
-"]
+                     "`Solution.history` (key `dual_change`) once the solver is available.\n"]
     md.append(f"Left: the Uzawa method (solver `{uz['solver']}`, default parameters: r = "
               f"{uz['defaults'].get('r'):g}, tol = {uz['defaults'].get('tol', uz['defaults'].get('tol_outer'))}"
               f"{', tol_mode = ' + str(uz['defaults']['tol_mode']) if 'tol_mode' in uz['defaults'] else ''}) — "
