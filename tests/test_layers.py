@@ -1,0 +1,64 @@
+"""The rooms import in one direction only, function-local imports included (see tests/_imports.py and
+the README's Layout), the core imports no plugin, solver plugins do not import each other, and the
+built-in plugins are found through entry points like third-party ones (their names reserved)."""
+from __future__ import annotations
+
+import pytest
+from _imports import Edge, cycles, edges, plugin_cross_imports, room, upward
+
+from dualfem.core import registry
+from dualfem.core.errors import InputError
+from dualfem.core.solver import Solver
+
+
+@pytest.fixture(scope="module")
+def graph() -> list[Edge]:
+    return edges()
+
+
+def _show(es: list[Edge]) -> str:
+    return "\n".join(f"{e.src}:{e.line} -> {e.dst}{' (function-local)' if e.local else ''}" for e in es)
+
+
+def test_the_scanner_sees_every_kind_of_import(graph):
+    """Guard the guard: module-level, function-local and relative imports are all found."""
+    kinds = {(e.src, e.local) for e in graph}
+    assert ("dualfem.experiments.runner", False) in kinds
+    assert any(e.local for e in graph)
+    assert any(e.src.startswith("dualfem.problems.thin_defect") and e.dst == "dualfem.problems.loads" for e in graph)
+    fake = upward([Edge("dualfem.core.qp", "dualfem.numerics.linalg", True, 1),
+                   Edge("dualfem.solvers.pdas", "dualfem.post.fields", False, 1),
+                   Edge("dualfem.cli.main", "dualfem.core.qp", False, 1)])
+    assert [e.src for e in fake] == ["dualfem.core.qp", "dualfem.solvers.pdas"]
+
+
+def test_imports_point_one_way(graph):
+    bad = upward(graph)
+    assert not bad, "imports against the room order core <- numerics <- {solvers, problems, post} <- " \
+                    "experiments <- reports <- cli:\n" + _show(bad)
+
+
+def test_no_room_imports_the_facade(graph):
+    bad = [e for e in graph if room(e.src) != "facade" and room(e.dst) == "facade" and e.dst != "dualfem"]
+    assert not bad, _show(bad)
+
+
+def test_no_import_cycles(graph):
+    assert cycles(graph) == []
+
+
+def test_solver_plugins_do_not_import_each_other(graph):
+    bad = plugin_cross_imports(graph)
+    assert not bad, "shared algorithm pieces belong in dualfem.numerics:\n" + _show(bad)
+
+
+def test_builtin_plugins_come_from_entry_points_and_keep_their_names():
+    reg = registry.solvers()
+    assert {"uzawa", "uzawa_auto", "pdas"} <= set(reg) and "thin_defect" in registry.problems()
+
+    class Impostor(Solver):
+        name = "pdas"
+
+    with pytest.raises(InputError, match="built-in"):
+        registry.register_solver(Impostor)
+    assert registry.solvers()["pdas"] is reg["pdas"]
