@@ -142,7 +142,7 @@ def picture_row(qp, sol, scene: str, delta: float, caption: str) -> dict:
     from dualfem.post.fields import Post
 
     p = Post(qp, sol)
-    tips = qp.maps["nodes"][:, qp.maps["defect_tips"]]
+    tips = qp.geometry.nodes[:, qp.maps["defect_tips"]]
     cen = p.nodes[:, p.triangles].mean(axis=1)
     near = np.min(np.linalg.norm(cen[:, :, None] - tips[:, None, :], axis=0), axis=1) < TIP_RADIUS
     return {"scene": scene, "delta": delta, "caption": caption, "von_mises": float(p.von_mises.max()),

@@ -101,7 +101,7 @@ def figure_data(prob, qp, ref, ref_name: str, exact: list[str]) -> dict:
     from dualfem.experiments.runner import run
 
     p = prob.params
-    X, nd = qp.maps["nodes"], qp.maps["node_dofs"]
+    X, nd = qp.geometry.nodes, qp.geometry.node_dofs
     u = np.zeros_like(X)
     full = prob.displacement(ref.x)
     for c in range(2):
@@ -118,7 +118,7 @@ def figure_data(prob, qp, ref, ref_name: str, exact: list[str]) -> dict:
             if s.ok:
                 pressures.append({"indent": indent, "solver": name, "x": qk.maps["contact_x"].tolist(),
                                   "pressure": qk.pressure(s.multipliers).tolist()})
-    return {"nodes": X.tolist(), "u": u.tolist(), "triangles": qp.maps["triangles"].T.tolist(),
+    return {"nodes": X.tolist(), "u": u.tolist(), "triangles": qp.geometry.cells.T.tolist(),
             "obstacle_x": xs.tolist(), "gap": prob._gap(xs).tolist(), "height": p["height"],
             "contact_nodes": cn[evaluator.contact_set(qp, ref.x)].tolist(), "reference": ref_name,
             "exact": exact, "pressures": pressures}
