@@ -62,3 +62,17 @@ def test_builtin_plugins_come_from_entry_points_and_keep_their_names():
     with pytest.raises(InputError, match="built-in"):
         registry.register_solver(Impostor)
     assert registry.solvers()["pdas"] is reg["pdas"]
+
+
+def test_every_package_is_installed():
+    """A non-editable install ships exactly the packages pyproject.toml lists: every package of the tree."""
+    import tomllib
+
+    from _imports import ROOT
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {".".join(p.relative_to(ROOT).parent.parts) for p in (ROOT / "dualfem").rglob("__init__.py")}
+    found |= {"dualfem.solvers", "dualfem.problems", "dualfem.scenes"}
+    found |= {"dualfem.problems." + ".".join(p.relative_to(ROOT / "problems").parent.parts)
+              for p in (ROOT / "problems").rglob("*/__init__.py")}
+    assert found <= listed, f"packages missing from pyproject.toml: {sorted(found - listed)}"
