@@ -12,6 +12,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from dualfem.core.errors import InputError, MissingDependency
+from dualfem.experiments.row import COLUMNS, Row
+from dualfem.experiments.store import read_results
+from dualfem.experiments.stress import load_results
 
 
 def load(path: str | Path):
@@ -20,15 +23,12 @@ def load(path: str | Path):
         import pandas as pd
     except ImportError:
         raise MissingDependency("dualfem.results.load needs pandas: pip install 'dualfem[analysis]'") from None
-    from dualfem.experiments.row import COLUMNS, Row
 
     p = Path(path)
     if (p / "runs.jsonl").is_file() or p.suffix == ".jsonl":
-        from dualfem.experiments.stress import load_results
 
         rows = [r.to_dict() for r in load_results(p)[1]]
     elif (p / "results.csv").is_file() or p.suffix == ".csv":
-        from dualfem.experiments.store import read_results
 
         rows = [Row.from_dict(r).to_dict() for r in read_results(p)]
     else:

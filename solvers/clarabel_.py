@@ -17,10 +17,12 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from dualfem.core import evaluator
 from dualfem.core.errors import InputError
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
+from dualfem.numerics.polish import active_set_polish
 from dualfem.numerics.scaling import scale
 
 _STATUS = {
@@ -130,8 +132,6 @@ def _check_direct_method(method) -> None:
 def _polish(qp, x, z):
     """Active-set polish (:func:`dualfem.numerics.polish.active_set_polish`); kept only if it is consistent
     and lowers the evaluator's KKT error."""
-    from dualfem.core import evaluator
-    from dualfem.numerics.polish import active_set_polish
 
     before = evaluator.kkt_error(evaluator.residuals(qp, x, z))
     out = active_set_polish(qp, x, z)

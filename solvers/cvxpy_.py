@@ -37,6 +37,7 @@ from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
+from dualfem.numerics.polish import active_set_polish
 from dualfem.numerics.scaling import scale
 
 #: accuracy promised per backend at default settings (relative energy-norm error of x)
@@ -160,7 +161,6 @@ class CvxpySolver(Solver):
         x, mu = self._scaled.unscale(np.asarray(yv, float).ravel(), np.asarray(nu, float).ravel())
         msg = f"cvxpy/{backend}: {text}"
         if self.params["polish"] and status in (Status.SOLVED, Status.INACCURATE):
-            from dualfem.numerics.polish import active_set_polish
 
             try:
                 pol = active_set_polish(self.qp, x, mu)

@@ -39,14 +39,14 @@ import numpy as np
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
-from dualfem.numerics.linalg import MAX_LOCAL, too_many_local
+from dualfem.numerics.linalg import MAX_LOCAL, LocalReduction, sparse_factor, too_many_local
+from dualfem.numerics.polish import refine_on_active_set
 
 
 class _Dense:
     """D and b0 from :class:`dualfem.numerics.linalg.LocalReduction` (dense, m x m)."""
 
     def __init__(self, qp):
-        from dualfem.numerics.linalg import LocalReduction
 
         self.red = LocalReduction(qp)
         self.D, self.b0 = self.red.dual()
@@ -71,7 +71,6 @@ class _MatrixFree:
     """D v = B K^-1 B'v with one sparse factorization of K (no m x m matrix is formed)."""
 
     def __init__(self, qp):
-        from dualfem.numerics.linalg import sparse_factor
 
         self.qp = qp
         self.lu = sparse_factor(qp.K)          # the chosen backend (--factor / DUALFEM_FACTOR / fastest)
@@ -264,6 +263,5 @@ class MPRGPSolver(Solver):
 
     def _refine(self, x, mu, steps):
         """Iterative refinement on the final active set (:func:`dualfem.numerics.polish.refine_on_active_set`)."""
-        from dualfem.numerics.polish import refine_on_active_set
 
         return refine_on_active_set(self.qp, self.op.red, x, mu, steps)

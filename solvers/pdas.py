@@ -43,6 +43,7 @@ import scipy.linalg as sla
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.numerics.factor import from_param
+from dualfem.numerics.polish import refine_on_active_set
 from dualfem.numerics.reduced_dual import ReducedDualSolver
 
 
@@ -120,7 +121,6 @@ class PDASSolver(ReducedDualSolver):
 
     def _refine(self, x, mu, steps):
         """Iterative refinement on the final active set (:func:`dualfem.numerics.polish.refine_on_active_set`)."""
-        from dualfem.numerics.polish import refine_on_active_set
 
         return refine_on_active_set(self.qp, self.red, x, mu, steps, float(self.params["refine_tol"]))
 

@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
@@ -214,7 +215,6 @@ class QpsolversSolver(Solver):
     def solve(self) -> Solution:
         import qpsolvers
 
-        from dualfem.core.quiet import c_stdout_to_stderr
 
         with warnings.catch_warnings(), c_stdout_to_stderr():
             warnings.simplefilter("ignore")

@@ -83,7 +83,7 @@ from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
 from dualfem.numerics.factor import from_param
-from dualfem.numerics.linalg import sparse_factor
+from dualfem.numerics.linalg import LocalReduction, sparse_factor, too_many_local
 
 #: the paper's unit system (Zhiltsov & Maksimova 2023, section 5): E in MPa, the unit square
 PAPER_E = 69000.0
@@ -123,7 +123,6 @@ class _ReducedSpace:
     """
 
     def __init__(self, qp, norm: str, factor: str | None = None):
-        from dualfem.numerics.linalg import LocalReduction
 
         if norm != "energy":
             raise InputError("parameter 'inner_norm' of solver 'uzawa' must be 'energy' with "
@@ -259,7 +258,6 @@ class Uzawa(Solver):
 
     def skip(self, qp) -> str | None:
         if self.params["linalg"] == "reduced":
-            from dualfem.numerics.linalg import too_many_local
 
             return too_many_local(qp)
         return None

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("gmsh")
-pytest.importorskip("problems.gmsh_mesh")
+pytest.importorskip("dualfem.problems.gmsh_mesh")
 
 from _defects import patch_check, rotation_check  # noqa: E402
 

@@ -227,7 +227,7 @@ def test_newton_solve_without_the_newton_matrix(scene, name, delta, penalty):
     dense Newton matrix (the former method) for small penalties C_A (in units of 1 / min diag D, the
     scale of uzawa_auto's r) and far more accurate for huge ones (measured: 8.5e-12 against 4.4e-9
     on f2, 4.4e-9 against 1.1e-5 on f1 at delta = 1e-9, penalty 1e8)."""
-    from solvers.uzawa import _ReducedSpace
+    from dualfem.solvers.uzawa import _ReducedSpace
 
     _, qp = scene(name, 16, delta)
     space = _ReducedSpace(qp, "energy")

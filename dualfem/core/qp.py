@@ -31,7 +31,9 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from dualfem.core.elasticity import PLANES
 from dualfem.core.errors import InputError
+from dualfem.core.io import atomic_write
 from dualfem.core.parts import GeometryPart, LocalPart, MaterialPart, ShiftPart, UnitsPart
 
 
@@ -68,7 +70,6 @@ def coo_from_arrays(d: dict, name: str, where: str, rows: int | None = None,
 
 def check_params(params: dict, where: str) -> None:
     """Material and model parameters read from a file, validated like scene parameters."""
-    from dualfem.core.elasticity import PLANES
 
     def number(k: str) -> float | None:
         v = params.get(k)
@@ -284,7 +285,6 @@ class QP:
 
     def save(self, path: str | Path) -> Path:
         """Write the QP to ``.npz`` or ``.mat`` atomically (write to a temp file, then rename)."""
-        from dualfem.core.io import atomic_write
 
         path = Path(path)
         data = self.to_dict()

@@ -26,8 +26,14 @@ import time
 
 import numpy as np
 
+from dualfem.core import evaluator
 from dualfem.core.errors import InputError
-from dualfem.core.scene import DEFAULT_SCENE
+from dualfem.core.evaluator import kkt_residuals
+from dualfem.core.scene import DEFAULT_SCENE, load_scene
+from dualfem.experiments.reference import candidates, trust
+from dualfem.experiments.runner import run
+from dualfem.numerics.linalg import clear_cache
+from dualfem.post.fields import contact_length, defect_fields, mass_norm2, prolongate
 
 #: the study's defaults (``dualfem report convergence``): deltas, coarse meshes, reference mesh
 DEFAULT_DELTAS = (1e-1, 1e-5, 1e-9)
@@ -37,8 +43,6 @@ DEFAULT_REF = 1024
 
 def level_quantities(qp, sol) -> dict:
     """Energy, contact-zone length, total contact force and contact nodes of one solution."""
-    from dualfem.core import evaluator
-    from dualfem.post.fields import contact_length, defect_fields
 
     d = defect_fields(qp, sol.x)
     tol = evaluator.CONTACT_RTOL * max(np.abs(sol.x).max(initial=0.0), evaluator.TINY)
@@ -53,7 +57,6 @@ def level_quantities(qp, sol) -> dict:
 
 def errors(qp_f, x_f: np.ndarray, qp_c, x_c: np.ndarray) -> dict:
     """Relative energy-norm, full-K-norm and L2 errors of a coarse solution against the fine one."""
-    from dualfem.post.fields import mass_norm2, prolongate
 
     e = x_f - prolongate(qp_c, x_c, qp_f)
     Kel = qp_f.K_fixed
@@ -119,7 +122,6 @@ def triple_rates(errs: list[float], with_reference: bool = True) -> list[float |
 def exact_solver(name: str | None = None) -> str:
     """The solver of the study: ``name`` if it is an installed exact solver, else the reference
     policy's first candidate (:func:`dualfem.experiments.reference.candidates`)."""
-    from dualfem.experiments.reference import candidates
 
     allowed = [n for n, _ in candidates(only=(name,) if name else None)]
     if not allowed:
@@ -141,11 +143,6 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = DEFAULT_SCENE, progress=p
     reference solve, so the peak is one fine QP plus one fine factorization (a reference at
     N = 1024 holding three of them was killed for lack of memory on a 24 GB machine).
     """
-    from dualfem.core.evaluator import kkt_residuals
-    from dualfem.core.scene import load_scene
-    from dualfem.experiments.reference import trust
-    from dualfem.experiments.runner import run
-    from dualfem.numerics.linalg import clear_cache
 
     res = {"scene": scene, "solver": solver, "ref_N": ref_N, "Ns": list(Ns), "deltas": {},
            "params": {k: v for k, v in load_scene(scene, {"N": min(Ns)}).build().params.items()

@@ -19,8 +19,15 @@ from collections.abc import Callable
 
 import numpy as np
 
+from dualfem.core import evaluator
 from dualfem.core.errors import InputError
+from dualfem.core.registry import get_solver, solvers
+from dualfem.core.scene import DEFAULT_SCENE, library, load_scene
 from dualfem.experiments.paper import LOADS, PAPER_FIGURES, PAPER_SCENE, PAPER_SOLVER
+from dualfem.experiments.reference import candidates
+from dualfem.experiments.runner import run
+from dualfem.post.fields import Post
+from dualfem.post.figures import history_series
 
 #: deltas of the jump / pressure / history figures (the paper's range)
 SWEEP = (1e-1, 1e-3, 1e-5, 1e-7, 1e-9)
@@ -36,7 +43,6 @@ OTHER_DELTAS = ((1e-5, "-"), (1e-9, "--"))
 
 def history_key(sol) -> str | None:
     """The first key of :data:`HISTORY_KEYS` present in ``sol.history``."""
-    from dualfem.post.figures import history_series
 
     for key in HISTORY_KEYS:
         if history_series(sol, key) is not None:
@@ -48,9 +54,6 @@ def solvers_with_history(exclude=(), probe_N: int = 8) -> list[str]:
     """Registered, installed solvers that record a per-iteration history (a key of
     :data:`HISTORY_KEYS`), found by one solve of a tiny default scene (N = ``probe_N``): libraries
     without a history are not run at full size just to find that out."""
-    from dualfem.core.registry import solvers
-    from dualfem.core.scene import DEFAULT_SCENE, load_scene
-    from dualfem.experiments.runner import run
 
     qp = load_scene(DEFAULT_SCENE, {"N": probe_N, "delta": 1e-5}).build()
     out = []
@@ -64,8 +67,6 @@ def solvers_with_history(exclude=(), probe_N: int = 8) -> list[str]:
 
 def picture_solver(name: str | None = None) -> str:
     """``name`` if given (an installed solver), else the reference policy's first exact candidate."""
-    from dualfem.core.registry import get_solver
-    from dualfem.experiments.reference import candidates
 
     if name is not None:
         cls = get_solver(name)
@@ -100,7 +101,6 @@ class Cases:
         raise RuntimeError(f"{what} is not among the study's results (dualfem.experiments.figures.collect)")
 
     def qp(self, scene: str, delta: float):
-        from dualfem.core.scene import load_scene
 
         key = (scene, delta)
         if key not in self.qps:
@@ -118,7 +118,6 @@ class Cases:
 
     def solve(self, solver: str, scene: str, delta: float, require_x: bool = False):
         """The Solution of ``solver`` (cached); ``require_x``: raise if it has no x (a pictured solve)."""
-        from dualfem.experiments.runner import run
 
         key = (solver, scene, delta)
         if key not in self.sols:
@@ -138,8 +137,6 @@ class Cases:
 def picture_row(qp, sol, scene: str, delta: float, caption: str) -> dict:
     """Numbers of one pictured solution: max von Mises (MPa) overall and near the tips, max normal
     jump, closed defect nodes, total contact force (force per unit thickness), KKT error."""
-    from dualfem.core import evaluator
-    from dualfem.post.fields import Post
 
     p = Post(qp, sol)
     tips = qp.geometry.nodes[:, qp.maps["defect_tips"]]
@@ -174,9 +171,6 @@ def library_runs(solver: str, progress: Callable[[str], None], overrides: dict |
     """Each scene of the library (``scenes/*.toml``) solved by ``solver`` at its own mesh size (or
     with ``overrides``, e.g. a coarser ``mesh_size`` for tests): QP, Solution and a picture row
     with the number of defects, their deltas, the unknowns and the solve time."""
-    from dualfem.core import evaluator
-    from dualfem.core.scene import library, load_scene
-    from dualfem.experiments.runner import run
 
     lib = library()
     unknown = sorted(set(names or ()) - set(lib))
@@ -209,7 +203,6 @@ def library_runs(solver: str, progress: Callable[[str], None], overrides: dict |
 def method_runs(cases: Cases, exact: str, sweep, method: str = PAPER_SOLVER) -> dict:
     """The paper's method on its loads at every delta of ``sweep``: iteration counts and its agreement
     with ``exact``."""
-    from dualfem.core import evaluator
 
     counts, agree = {}, []
     for scene in LOADS:
@@ -246,7 +239,6 @@ def collect(N: int = 64, solver: str | None = None, sweep=SWEEP, history_solvers
     """Every solve the figures report needs (see the module docstring); ``scenes``: the scene
     library too (:func:`library_runs`, with ``scene_overrides``). ``data["method"]`` holds the
     paper's method's runs (None if that solver is not registered); ``data["cases"]`` is frozen."""
-    from dualfem.core.registry import solvers
 
     exact = picture_solver(solver)
     cases = Cases(N, progress)

@@ -17,6 +17,9 @@ import math
 import time
 from collections.abc import Callable
 
+from dualfem.core.scene import load_scene
+from dualfem.experiments.runner import run
+
 # ---------------------------------------------------------------- the paper's names, in one place
 # The report studies that reproduce the paper (this module, :mod:`dualfem.experiments.figures`) and
 # their renderers take every scene and solver name of the paper from here.
@@ -80,8 +83,6 @@ def cells() -> list[tuple[str, str, float, float]]:
 
 
 def _run(load: str, N: int, delta: float, plane: str, solver: str, params: dict) -> dict:
-    from dualfem.core.scene import load_scene
-    from dualfem.experiments.runner import run
 
     qp = load_scene(load, {"N": N, "delta": delta, "plane": plane}).build()
     t0 = time.perf_counter()

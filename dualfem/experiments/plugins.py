@@ -23,7 +23,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from dualfem.core.scene import DEFAULT_SCENE
+from dualfem.core import evaluator
+from dualfem.core.evaluator import kkt_error
+from dualfem.core.registry import solvers
+from dualfem.core.scene import DEFAULT_SCENE, load_scene
+from dualfem.core.solution import Status
+from dualfem.experiments.reference import candidates
+from dualfem.experiments.runner import run
 
 #: the plugins this study measures, named once: the second problem plugin's scenes (presets of
 #: problems/signorini.py) and the template solver of docs/plugins.md
@@ -39,7 +45,6 @@ def _progress(msg: str) -> None:
 
 def reference_solver() -> str:
     """The reference policy's first installed exact candidate."""
-    from dualfem.experiments.reference import candidates
 
     names = [n for n, _ in candidates()]
     if not names:
@@ -48,16 +53,12 @@ def reference_solver() -> str:
 
 
 def _kkt(sol) -> float:
-    from dualfem.core.evaluator import kkt_error
 
     return kkt_error(sol.residuals) if sol.residuals else float("nan")
 
 
 def every_solver(prob, qp, ref, avail, progress: Callable[[str], None]) -> list[dict]:
     """One record per installed solver on the Signorini QP (see the module docstring)."""
-    from dualfem.core import evaluator
-    from dualfem.core.solution import Status
-    from dualfem.experiments.runner import run
 
     out = []
     for name in avail:
@@ -78,9 +79,6 @@ def every_solver(prob, qp, ref, avail, progress: Callable[[str], None]) -> list[
 
 def flat(ref_name: str, Ns) -> list[dict]:
     """The flat foundation: max relative error of the pressure mu / w against the exact one."""
-    from dualfem.core import evaluator
-    from dualfem.core.scene import load_scene
-    from dualfem.experiments.runner import run
 
     out = []
     for n_ in Ns:
@@ -96,9 +94,6 @@ def flat(ref_name: str, Ns) -> list[dict]:
 
 def figure_data(prob, qp, ref, ref_name: str, exact: list[str]) -> dict:
     """Deformed mesh (displacements in the foundation's frame), obstacle and pressures per indentation."""
-    from dualfem.core import evaluator
-    from dualfem.core.scene import load_scene
-    from dualfem.experiments.runner import run
 
     p = prob.params
     X, nd = qp.geometry.nodes, qp.geometry.node_dofs
@@ -127,9 +122,6 @@ def figure_data(prob, qp, ref, ref_name: str, exact: list[str]) -> dict:
 def cost(fast: str, sizes, progress: Callable[[str], None]) -> list[dict]:
     """The template solver (plain, accelerated) and ``fast`` on the default scene (delta = 1e-5) for each N
     of ``sizes``."""
-    from dualfem.core import evaluator
-    from dualfem.core.scene import load_scene
-    from dualfem.experiments.runner import run
 
     out = []
     for n_ in sizes:
@@ -149,9 +141,6 @@ def cost(fast: str, sizes, progress: Callable[[str], None]) -> list[dict]:
 
 def collect(N: int = 32, sizes=(16, 32, 64, 128), progress: Callable[[str], None] = _progress) -> dict:
     """Everything :mod:`dualfem.reports.plugins` shows (see the module docstring)."""
-    from dualfem.core.registry import solvers
-    from dualfem.core.scene import load_scene
-    from dualfem.experiments.runner import run
 
     avail = {n: c for n, c in sorted(solvers().items()) if c.missing() is None}
     ref_name = reference_solver()

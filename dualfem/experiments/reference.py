@@ -26,6 +26,12 @@ from typing import Any
 
 import numpy as np
 
+from dualfem.core.evaluator import kkt_error
+from dualfem.core.registry import get_solver, solvers
+from dualfem.core.solver import reference_solvers
+from dualfem.experiments.runner import run
+from dualfem.numerics.certify import certified_error
+
 #: default bound on a reference's own evaluator KKT error
 KKT_MAX = 1e-8
 #: default bound on a reference's certified relative energy-norm error (a looser reference only widens the
@@ -54,8 +60,6 @@ def candidates(exclude: tuple[str, ...] = (), only: tuple[str, ...] | None = Non
 
     ``only`` replaces that list (e.g. a bench spec's ``reference.solvers``): any registered,
     installed exact solver, in the order given."""
-    from dualfem.core.registry import solvers
-    from dualfem.core.solver import reference_solvers
 
     reg = solvers()
     names = list(only) if only is not None else [n for n, _ in reference_solvers(reg)]
@@ -65,7 +69,6 @@ def candidates(exclude: tuple[str, ...] = (), only: tuple[str, ...] | None = Non
 
 def certificate(qp, x: np.ndarray | None, mu: np.ndarray | None, ksolve=None) -> float:
     """Certified relative energy-norm error of (x, mu); 0 for the exact zero answer of a zero load."""
-    from dualfem.numerics.certify import certified_error
 
     if x is None or mu is None:
         return float("nan")
@@ -96,7 +99,6 @@ def trusted(status: str, exact: bool, kkt: float | None, bound: float | None, *,
 def trust(qp, sol, *, exact: bool = True, kkt_max: float = KKT_MAX, bound_max: float = BOUND_MAX,
           ksolve=None) -> tuple[bool, float, float, str]:
     """(trusted, certificate, kkt, reason) of a solution ``sol`` (see the module docstring)."""
-    from dualfem.core.evaluator import kkt_error
 
     finite = sol.residuals is not None and sol.residuals.get("finite", False)
     kkt = kkt_error(sol.residuals) if finite else float("nan")
@@ -120,8 +122,6 @@ def compute(qp, *, exclude: tuple[str, ...] = (), kkt_max: float = KKT_MAX, boun
     ``tol`` asks each solver for that accuracy (``Solver.tolerance_params``), ``params`` adds
     per-solver parameters, ``time_limit`` goes to solvers that take one.
     """
-    from dualfem.core.registry import get_solver
-    from dualfem.experiments.runner import run
 
     tried: list[str] = []
     for name, base in candidates(exclude, only):

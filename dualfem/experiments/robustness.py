@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dualfem.core.scene import DEFAULT_SCENE, load_scene
+
 #: outcome classes, in report order; only the first two are acceptable
 OUTCOMES = ("refused", "answered", "silent_wrong", "traceback", "data_lost", "wrote_on_refusal", "hang",
             "wrong_refusal")
@@ -35,7 +37,6 @@ OUTCOMES = ("refused", "answered", "silent_wrong", "traceback", "data_lost", "wr
 
 # ------------------------------------------------------------------------ crafted files
 def _export(d: Path, **extra) -> None:
-    from dualfem.core.scene import DEFAULT_SCENE, load_scene
 
     qp = load_scene(DEFAULT_SCENE, {"N": 8}).build()
     data = {**qp.to_dict(), **extra}
@@ -43,7 +44,6 @@ def _export(d: Path, **extra) -> None:
 
 
 def _float_indices(d: Path) -> None:
-    from dualfem.core.scene import DEFAULT_SCENE, load_scene
 
     data = load_scene(DEFAULT_SCENE, {"N": 8}).build().to_dict()
     data["K_row"] = data["K_row"].astype(float) + 0.5

@@ -27,6 +27,7 @@ import functools
 import numpy as np
 
 from dualfem.core.errors import InputError
+from dualfem.numerics.factor import get_default
 
 MB = 2**20
 #: measured (n unknowns, peak RSS of the build, RSS held by the QP; factor's extra peak) in MB.
@@ -111,7 +112,6 @@ def fits(n_unknowns: int, backend: str = "pardiso", limit_bytes: int | None = No
 
 def check_fits(problem, max_bytes: float | None = None, backend: str | None = None) -> None:
     """InputError naming the size, the estimate and the memory when a scene cannot fit (before assembly)."""
-    from dualfem.numerics.factor import get_default
 
     est = problem.size_estimate() if hasattr(problem, "size_estimate") else None
     if est is None:

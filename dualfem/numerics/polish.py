@@ -17,12 +17,12 @@ import numpy as np
 import scipy.linalg as sla
 
 from dualfem.core.qp import QP
+from dualfem.numerics.certify import guess_active_set
+from dualfem.numerics.linalg import LocalReduction
 
 
 def active_set_polish(qp: QP, x: np.ndarray, mu: np.ndarray, red=None):
     """(x, mu, info) polished on the guessed active set, or None if the guess is inconsistent."""
-    from dualfem.numerics.certify import guess_active_set
-    from dualfem.numerics.linalg import LocalReduction
 
     if x is None or mu is None or not (np.all(np.isfinite(x)) and np.all(np.isfinite(mu))):
         return None

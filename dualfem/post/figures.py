@@ -20,8 +20,11 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from dualfem.core import evaluator
 from dualfem.core.errors import InputError
-from dualfem.post.fields import Post
+from dualfem.core.registry import get_solver, solvers
+from dualfem.core.solver import reference_solvers
+from dualfem.post.fields import Post, defect_stretches
 
 
 def pick_solver(name: str | None = None, *, exact: bool = True, order: Sequence[str] | None = None) -> str:
@@ -29,8 +32,6 @@ def pick_solver(name: str | None = None, *, exact: bool = True, order: Sequence[
     installed solver of ``order`` (with ``exact`` True, only solvers declaring ``exact``); without
     ``order``, the reference solvers in their declared order (``Solver.reference``,
     :func:`dualfem.core.solver.reference_solvers`)."""
-    from dualfem.core.registry import get_solver, solvers
-    from dualfem.core.solver import reference_solvers
 
     if name is not None:
         cls = get_solver(name)
@@ -76,7 +77,6 @@ def _along(post: Post) -> tuple[np.ndarray, str]:
 
 def _stretches(post: Post, label: str):
     """(label, index array, abscissa) per defect: one curve per defect when there are several."""
-    from dualfem.post.fields import defect_stretches
 
     x, xlabel = _along(post)
     parts = defect_stretches(post.defect)
@@ -114,12 +114,10 @@ def plot_deformed(qp, sol, ax=None, *, scale: float = 300.0, title: str | None =
 
 def _draw_defects(ax, qp, p: Post, xy: np.ndarray, *, reference: bool, contact: bool, labels: bool) -> None:
     """Both faces of each defect (white), optionally its undeformed line, closed nodes and number."""
-    from dualfem.post.fields import defect_stretches
 
     d = p.defect
     closed = None
     if contact:
-        from dualfem.core import evaluator
 
         closed = np.zeros(d["s"].size, dtype=bool)
         closed[d["interior"]] = evaluator.contact_set(qp, p.x)[d["row"][d["interior"]]]
@@ -179,7 +177,6 @@ def plot_faces(qp, sol, ax=None, *, scale: float = 300.0, title: str | None = No
     """Shapes of the upper and lower faces of the defect, X + scale u, with the undeformed defect."""
     ax = _axes(ax)
     p = _post(qp, sol)
-    from dualfem.post.fields import defect_stretches
 
     d = p.defect
     for n, idx in enumerate(defect_stretches(d)):     # each defect on its own

@@ -33,7 +33,7 @@ import numpy as np
 
 from dualfem.core.errors import InputError, MissingDependency
 from dualfem.core.io import atomic_write, check_output_path
-from dualfem.post.fields import Post
+from dualfem.post.fields import Post, defect_stretches
 
 SUFFIXES = {"vtu": (".vtu",), "xdmf": (".xdmf", ".xmf")}
 
@@ -105,7 +105,6 @@ def to_meshio(qp, sol=None, *, post: Post | None = None):
 def _defect_edges(d: dict, nodal: dict) -> tuple[np.ndarray, dict, np.ndarray, np.ndarray]:
     """Line cells of every defect (its upper-face edges, then its lower-face edges, defect by
     defect), the nodal values averaged per edge (ignoring NaN), the defect id and face per edge."""
-    from dualfem.post.fields import defect_stretches
 
     edges, vals, ids, face = [], {k: [] for k in nodal}, [], []
     for idx in defect_stretches(d):

@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from dualfem.core.io import atomic_savefig
 from dualfem.reports._bench_util import _f
 
 
@@ -19,7 +20,6 @@ def save_with_legend(fig, axes, figdir, name: str) -> str:
                 lab.append(ll)
     fig.legend(h, lab, loc="upper center", ncol=min(len(lab), 8), fontsize=8, bbox_to_anchor=(0.5, 1.08))
     fig.tight_layout()
-    from dualfem.core.io import atomic_savefig
 
     atomic_savefig(fig, figdir / name, dpi=90, bbox_inches="tight")
     plt.close(fig)

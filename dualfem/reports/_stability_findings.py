@@ -2,6 +2,8 @@
 stated only when the stress runs show the effect it explains."""
 from __future__ import annotations
 
+from dualfem.experiments.stress_grid import r_set_by_user
+
 
 def _fmt(v) -> str:
     if isinstance(v, float):
@@ -13,7 +15,6 @@ def _findings(recs) -> list[str]:
     """Explanations of the boundaries, each stated only when the data show the effect."""
     import numpy as np
 
-    from dualfem.experiments.stress_grid import r_set_by_user
 
     out = []
     # the explanation below is about an outer (dual) stopping test: only runs that have one

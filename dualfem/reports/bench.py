@@ -20,6 +20,8 @@ from collections import defaultdict
 from pathlib import Path
 
 from dualfem.core.errors import InputError
+from dualfem.core.io import atomic_write_text
+from dualfem.experiments.store import read_results
 from dualfem.reports._bench_plots import plots
 from dualfem.reports._bench_rank import rank_table, ranking
 from dualfem.reports._bench_targets import targets
@@ -43,7 +45,6 @@ def _slot(r: dict) -> tuple:
 def load_sources(results: list[str | Path]) -> tuple[list[dict], list[dict]]:
     """Rows of several results (later ones replace earlier rows of the same slot) and one
     source record per results (path, directory, sweep.json, rows kept)."""
-    from dualfem.experiments.store import read_results
 
     merged: dict[tuple, dict] = {}
     sources = []
@@ -267,7 +268,6 @@ def build_report(results: str | Path | list[str | Path], md: str | Path, figdir:
                  ours: list[str], shift: float = 10.0, err_target: float = 1e-8, floor_target: float = 1.5,
                  speed_target: float = 10.0, command: str = "") -> Path:
     """Write the markdown report and its figures from one or several results; returns the markdown path."""
-    from dualfem.core.io import atomic_write_text
 
     results = [results] if isinstance(results, (str, Path)) else list(results)
     if not results:

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dualfem.core.io import atomic_savefig, atomic_write_text
 from dualfem.experiments.convergence import fit_rate, triple_rates
 
 
@@ -34,7 +35,6 @@ def _plot_errors(res: dict, outdir: Path) -> str:
     """convergence_errors.png: energy-norm and L2 errors against h, with reference slopes."""
     import matplotlib.pyplot as plt
 
-    from dualfem.core.io import atomic_savefig
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for ax, key, title in ((axes[0], "energy_norm", "energy-norm error sqrt(e'K_el e) (relative)"),
@@ -64,7 +64,6 @@ def _plot_quantities(res: dict, outdir: Path) -> str:
     """convergence_quantities.png: energy, contact-zone length and total force against h."""
     import matplotlib.pyplot as plt
 
-    from dualfem.core.io import atomic_savefig
 
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -368,7 +367,6 @@ def render(res: dict, out: Path, command: str | None = None) -> Path:
     """Draw the two figures into ``out/figures`` and write ``out/convergence.md`` from the study's
     result (:func:`dualfem.experiments.convergence.study`, or its stored ``convergence.json``);
     returns the Markdown path. Solves nothing."""
-    from dualfem.core.io import atomic_write_text
 
     pngs = plot(res, out / "figures")
     cmd = command or res.get("command", "dualfem report convergence")

@@ -15,8 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
+from dualfem.core.io import atomic_savefig
 from dualfem.experiments.figures import HISTORY_KEYS, OTHER_DELTAS, TIP_RADIUS, history_key
 from dualfem.experiments.paper import PAPER_SOLVER
+from dualfem.post import figures as F
+from dualfem.post.fields import Post
 
 #: the same in plain text (Markdown)
 KEY_TEXT = {"dual_change": "max_j |l^{k+1}_j - l^k_j| in MPa"}
@@ -30,7 +33,6 @@ KEY_LABEL = {
 
 
 def _save(fig, path: Path, dpi: int) -> str:
-    from dualfem.core.io import atomic_savefig
 
     atomic_savefig(fig, path, dpi=dpi)
     import matplotlib.pyplot as plt
@@ -43,8 +45,6 @@ def _deformed_section(data: dict, figdir: Path, scale: float, dpi: int) -> list[
     """Paper Figs 2, 3, 4, 7: one picture per pictured solution."""
     import matplotlib.pyplot as plt
 
-    from dualfem.post import figures as F
-    from dualfem.post.fields import Post
 
     cases, N = data["cases"], data["N"]
     md = ["## Deformed body coloured by von Mises stress (paper Figs 2, 3, 4, 7)\n",
@@ -67,7 +67,6 @@ def _defect_sections(data: dict, figdir: Path, scale: float, dpi: int) -> list[s
     """Paper Figs 5 and 6 (jump, faces) and the contact pressure, the paper's scene over the delta sweep."""
     import matplotlib.pyplot as plt
 
-    from dualfem.post import figures as F
 
     cases, N, exact, sc = data["cases"], data["N"], data["exact"], data["scene"]
     f2 = [(f"delta = {d:g}", cases.qp(sc, d), cases.solution(exact, sc, d)) for d in data["sweep"]]
@@ -106,8 +105,6 @@ def _scene_figure(item: dict, figdir: Path, scale: float, dpi: int) -> str:
     """scene_{name}.png: the deformed body with every defect (left), the jump along each defect (right)."""
     import matplotlib.pyplot as plt
 
-    from dualfem.post import figures as F
-    from dualfem.post.fields import Post
 
     name, qp, r = item["name"], item["qp"], item["row"]
     post = Post(qp, item["sol"])
@@ -158,7 +155,6 @@ def _history_figure(data: dict, scene: str, figdir: Path, dpi: int) -> str:
     """history_{scene}.png: Uzawa's dual change (left), the other solvers' own measures (right)."""
     import matplotlib.pyplot as plt
 
-    from dualfem.post import figures as F
 
     cases, uz = data["cases"], data["method"]
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.3))

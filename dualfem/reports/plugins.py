@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dualfem.core.io import atomic_savefig
+
 
 def _solvers_section(data: dict) -> list[str]:
     p, N = data["scene"], data["N"]
@@ -91,7 +93,6 @@ def _figure_section(data: dict, out: Path, dpi: int) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from dualfem.core.io import atomic_savefig
 
     fig, axes = plt.subplots(1, 2, figsize=(12.5, 4.6))
     _draw_body(axes[0], data["figure"], data["N"])

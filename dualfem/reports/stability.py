@@ -16,6 +16,7 @@ import math
 from collections import Counter, defaultdict
 from pathlib import Path
 
+from dualfem.core.io import atomic_savefig
 from dualfem.experiments.stress_grid import BASE
 from dualfem.reports._stability_correct import correct_rate_section
 from dualfem.reports._stability_findings import _findings
@@ -106,7 +107,6 @@ def _heatmaps(recs, rowf, colf, title, rowlabel, collabel, path: Path, keep_col_
             fig.colorbar(im, ax=ax, shrink=0.8)
     axs[0].set_ylabel(rowlabel, fontsize=8)
     fig.suptitle(title, fontsize=10)
-    from dualfem.core.io import atomic_savefig
 
     atomic_savefig(fig, path, dpi=110)
     plt.close(fig)
@@ -204,7 +204,6 @@ def _scatter_r_delta(recs, solver: str, path: Path) -> None:
     ax.set_title(f"{solver}: outer iterations against r x delta (all r, all delta)", fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
-    from dualfem.core.io import atomic_savefig
 
     atomic_savefig(fig, path, dpi=110)
     plt.close(fig)
