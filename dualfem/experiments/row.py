@@ -27,7 +27,7 @@ class Row:
     run_id: str = ""
     kind: str = "run"
     spec: str | None = None
-    scene: str | dict | None = None          # a scene name (bench) or its parameters (stress)
+    scene: str | dict | None = None          # a scene name (bench, compare) or its parameters (stress)
     scene_key: str | None = None
     label: str | None = None
     n_unknowns: int | None = None
@@ -148,6 +148,11 @@ class Row:
                     v = json.loads(v) if v else {}
                 except ValueError:
                     v = {"text": v}
+            elif k == "scene" and isinstance(v, str) and v.startswith("{"):
+                try:        # a scene given by its parameters (stress), written to CSV as JSON text
+                    v = json.loads(v)
+                except ValueError:
+                    pass
             row[k] = v
         return row
 
