@@ -8,7 +8,7 @@ import pytest
 
 from dualfem.cli.main import main
 from dualfem.core.grade import grade
-from dualfem.experiments import stress
+from dualfem.experiments import store, stress
 from dualfem.experiments.stress import Task
 
 
@@ -77,23 +77,25 @@ def test_run_grid_end_to_end_and_report(tmp_path):
     # the reference solver (pdas) is graded against the second reference, never itself
     assert next(r for r in recs if r.run_id == "nu:pdas").ref_solver == "clarabel"
     assert "mapped exactly" in next(r for r in recs if r.run_id == "load:osqp").ref_solver
-    lines = (out / "runs.jsonl").read_text().splitlines()
-    assert len(lines) == 6 and json.loads((out / "meta.json").read_text())["complete"]
-    # resume runs nothing again and keeps every record
+    # the one store of the bench engine: a row file per run and results.csv
+    files = {p.name: p.read_bytes() for p in (out / "rows").glob("*.json")}
+    assert len(files) == 6 and len(store.read_results(out)) == 6
+    assert json.loads((out / "meta.json").read_text())["complete"] and not (out / "runs.jsonl").exists()
+    # resume runs nothing again and keeps every record byte for byte
     again = stress.run_grid(_tasks(), out, jobs=1, resume=True)
     assert [r.run_id for r in again] == [r.run_id for r in recs]
-    assert (out / "runs.jsonl").read_text().splitlines() == lines
+    assert {p.name: p.read_bytes() for p in (out / "rows").glob("*.json")} == files
 
     # a silent wrong answer added by hand must be listed with its scene
     fake = dict(recs[0].to_dict(), run_id="fake", solver="osqp", third_party=True, grade="silent_wrong",
                 err_x_energy=0.5, kkt_error=1e-12, status="solved", message="osqp: solved")
-    with open(out / "runs.jsonl", "a") as fh:
-        fh.write(json.dumps(fake) + "\n")
+    store.write_csv(out / "results.csv", store.read_results(out) + [fake])
     md = tmp_path / "rep" / "stability.md"
     assert main(["report", "stability", str(out), str(md)]) == 0
     text = md.read_text()
     assert "Our solvers: 0" in text and "Third-party solvers: 1" in text
-    assert "| osqp | nu | load=f2, N=8" in text
+    line = next(ln for ln in text.splitlines() if ln.startswith("| osqp | nu |"))
+    assert "load=f2" in line and "N=8" in line
     assert (md.parent / "stability" / "nu.png").stat().st_size > 1000
     assert (md.parent / "stability" / "load.png").exists()
 
