@@ -117,3 +117,157 @@ def test_n_axis_skips_with_a_reason_when_too_slow(tmp_path):
     assert by_n[16].grade == by_n[32].grade == "skipped"
     assert "exceeds" in by_n[16].message or "exceeded" in by_n[16].message
     assert np.isfinite(by_n[8].total_s)
+
+
+# ------------------------------------------------------------------ one engine, one store, one Row
+def _nu_task(solver: str, nu: float = 0.3, n: int = 8) -> Task:
+    base = {**stress.BASE, "N": n}
+    return Task(id=f"nu:{solver}:{nu}", axis="nu", coords={"nu": nu}, scene={**base, "nu": nu}, solver=solver,
+                params={}, ref={"mode": "solve"}, time_limit=20.0)
+
+
+def test_resume_keeps_every_finished_row(tmp_path, capsys):
+    """--resume continues a folder: finished rows are kept byte for byte and not redone, rows of
+    tasks not in this grid are kept (rows/ and results.csv), a folder with results is refused
+    without --resume before anything is written."""
+    from dualfem.core.errors import InputError
+
+    out = tmp_path / "res"
+    first = stress.run_grid([_nu_task("pdas"), _nu_task("clarabel")], out, jobs=1)
+    assert [r.grade for r in first] == ["correct", "correct"]
+    files = {p.name: p.read_bytes() for p in (out / "rows").glob("*.json")}
+    csv_before = (out / "results.csv").read_bytes()
+    with pytest.raises(InputError, match="--resume"):
+        stress.run_grid([_nu_task("pdas")], out, jobs=1)
+    assert (out / "results.csv").read_bytes() == csv_before
+    # resume with another grid: one old task, one new one; the clarabel row is of no task now
+    seen = []
+    again = stress.run_grid([_nu_task("pdas"), _nu_task("pdas", nu=0.45)], out, jobs=1, resume=True,
+                            progress=lambda i, n, row: seen.append(row.run_id))
+    assert seen == ["nu:pdas:0.45"]                      # only the new task ran
+    assert [r.run_id for r in again] == ["nu:pdas:0.3", "nu:pdas:0.45"]
+    now = {p.name: p.read_bytes() for p in (out / "rows").glob("*.json")}
+    assert all(now[k] == v for k, v in files.items()) and len(now) == 3
+    assert {r["run_id"] for r in store.read_results(out)} == {"nu:pdas:0.3", "nu:clarabel:0.3", "nu:pdas:0.45"}
+    # the CLI: the same refusal, one line, exit 2
+    assert main(["stress", "--out", str(out), "--axes", "nu", "--solvers", "pdas", "--quick"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("dualfem stress: error:") and "--resume" in err
+
+
+def test_resume_of_a_folder_written_before_the_one_engine(tmp_path):
+    """A runs.jsonl folder: readable as is, and on --resume its rows are imported into the store
+    (the file itself untouched), its finished runs not redone."""
+    import shutil
+
+    from dualfem.experiments.stress import load_results
+
+    committed = stress_results()
+    lines = committed.joinpath("runs.jsonl").read_text().splitlines()[:6]
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "runs.jsonl").write_text("\n".join(lines) + "\n")
+    shutil.copy(committed / "meta.json", old / "meta.json")
+    meta, rows = load_results(old)
+    assert len(rows) == 6 and meta["solvers"]
+    recs = [json.loads(ln) for ln in lines]
+    done = next(r for r in recs if r["status"] == "solved")
+    task = next(t for t in stress.build_grid([done["solver"]], quick=False, axes=(done["axis"],))
+                if t.id == done["id"])
+    ran = []
+    got = stress.run_grid([task], old, jobs=1, resume=True, progress=lambda i, n, row: ran.append(row.run_id))
+    assert ran == [] and got[0].run_id == done["id"] and got[0].status == "solved"
+    assert {r["run_id"] for r in store.read_results(old)} == {r["id"] for r in recs}
+    assert (old / "runs.jsonl").read_text().splitlines() == lines
+    assert len(load_results(old)[1]) == 6                       # now read from results.csv
+
+
+def stress_results():
+    from pathlib import Path
+
+    return Path(__file__).resolve().parent.parent / "benchmarks" / "results" / "stress"
+
+
+def test_committed_stress_folders_still_load(tmp_path):
+    """Results written by the stress grid before the one engine (runs.jsonl + meta.json) load as
+    graded Rows through dualfem.experiments.stress.load_results, dualfem.results.load and the report."""
+    import shutil
+
+    from dualfem.core.grade import GRADES
+    from dualfem.experiments.row import Row
+    from dualfem.experiments.stress import load_results
+
+    for name in ("stress", "stress_breadth"):
+        meta, rows = load_results(stress_results().parent / name)
+        assert rows and all(isinstance(r, Row) and r.kind == "stress" and r.grade in GRADES for r in rows)
+        assert all(isinstance(r.scene, dict) and r.axis in stress.AXES for r in rows)
+    pd = pytest.importorskip("pandas")
+    from dualfem import results
+
+    df = results.load(stress_results())
+    assert isinstance(df, pd.DataFrame) and len(df) == len(load_results(stress_results())[1])
+    small = tmp_path / "small"
+    small.mkdir()
+    (small / "runs.jsonl").write_text("\n".join(stress_results().joinpath("runs.jsonl").read_text()
+                                                .splitlines()[:20]) + "\n")
+    shutil.copy(stress_results() / "meta.json", small / "meta.json")
+    assert main(["report", "stability", str(small), str(tmp_path / "rep" / "stability.md")]) == 0
+
+
+def test_stress_on_a_signorini_scene(tmp_path, capsys):
+    """Any registered problem: the grid around a signorini scene (its own axes; the units axis maps
+    its lengths, stresses and the obstacle exactly), run by the one engine."""
+    from dualfem.core.errors import InputError
+    from dualfem.experiments.stress_grid import scene_base
+
+    base = {**scene_base("signorini"), "N": 8}
+    grid = stress.build_grid(["pdas"], quick=True, axes=("units", "nu", "N"), max_n=16, scene=base,
+                             scene_name="signorini")
+    assert {t.scene_name for t in grid} == {"signorini"}
+    with pytest.raises(InputError, match="delta"):
+        stress.build_grid(["pdas"], quick=True, axes=("delta",), scene_name="signorini")
+    tasks = [t for t in grid if (t.axis == "units" and t.coords["units"] in ("Pa-mm", "GPa-km"))
+             or (t.axis == "nu" and t.coords["nu"] == 0.45) or t.axis == "N"]
+    recs = stress.run_grid(tasks, tmp_path / "sig", jobs=1)
+    assert len(recs) == 5
+    for r in recs:
+        assert r.status == "solved" and r.grade == "correct", (r.run_id, r.grade, r.message)
+        assert r["scene_name"] == "signorini" and "obstacle" in r.scene
+    assert all("mapped exactly" in r.ref_solver for r in recs if r.axis == "units")
+    # the CLI: --scene signorini lists its own axes; an axis that does not apply is one error line
+    assert main(["stress", "--scene", "signorini", "--quick", "--dry-run", "--out", str(tmp_path / "d")]) == 0
+    out = capsys.readouterr().out
+    assert "units" in out and "nu" in out and "delta" not in out and "load " not in out
+    assert main(["stress", "--scene", "signorini", "--axes", "delta", "--out", str(tmp_path / "e")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "dualfem stress: error:" in err and "delta" in err
+    assert not (tmp_path / "e").exists()
+
+
+def test_compare_bench_and_stress_make_the_same_graded_row(tmp_path):
+    """One Row type, one grade function: the rows of all three commands are Rows whose grade is
+    dualfem.core.grade.grade of their own status, error, KKT error, tolerance and reference bound."""
+    import os
+
+    from dualfem.core.grade import GRADES, grade
+    from dualfem.core.scene import load_scene
+    from dualfem.experiments import bench
+    from dualfem.experiments.compare import compare_solvers
+    from dualfem.experiments.row import COLUMNS, Row
+    from dualfem.experiments.spec import parse_spec
+
+    cmp_rows = compare_solvers(load_scene("f2", {"N": 8}).build(), ["pdas", "clarabel"]).rows
+    spec = parse_spec({"name": "tiny", "repeats": 1, "warmup": False, "tiers": {"mid": 1e-6},
+                       "floor": {"enabled": False}, "scenes": [{"scene": "f2", "N": 8}],
+                       "solvers": [{"name": "pdas"}]})
+    bench.run_sweep(spec, tmp_path / "bench", progress=False, stream=open(os.devnull, "w"))
+    bench_rows = [Row.from_dict(r) for r in store.read_results(tmp_path / "bench") if r["kind"] == "run"]
+    stress_rows = stress.run_grid([_nu_task("clarabel")], tmp_path / "stress", jobs=1)
+    stress_rows_csv = [Row.from_dict(r) for r in store.read_results(tmp_path / "stress")]
+    for kind, rows in (("compare", cmp_rows), ("run", bench_rows), ("stress", stress_rows + stress_rows_csv)):
+        assert rows and all(type(r) is Row and r.kind == kind for r in rows)
+        for r in rows:
+            assert r.grade in GRADES and r.grade == "correct", (kind, r.grade, r.message)
+            assert r.grade == grade(r.status, r.err_x_energy, r.kkt_error, r.tol, r.ref_bound)
+            assert set(COLUMNS) <= set(r.to_dict())
+            assert r.ref_solver and r.err_x_energy is not None

@@ -63,7 +63,8 @@ def cmd_stress(args) -> int:
 
     reg = solvers()
     names = _choice("--solvers", args.solvers, sorted(reg), "solver", "known solvers")
-    axes = None if args.axes is None or args.axes.strip() == "all" else tuple(_choice("--axes", args.axes, list(stress.AXES), "axis", "allowed"))
+    axes = None if args.axes is None or args.axes.strip() == "all" else \
+        tuple(_choice("--axes", args.axes, list(stress.AXES), "axis", "allowed"))
     tl = None if args.time_limit is None else check_positive("--time-limit", args.time_limit)
     max_n = None if args.max_n is None else check_int("--max-n", args.max_n, 8, 4096)
     jobs = check_int("--jobs", args.jobs, 1, 4 * (os.cpu_count() or 1))

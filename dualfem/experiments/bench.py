@@ -441,8 +441,11 @@ def _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, strea
     run_ids = {t["run_id"] for t in tasks}
     floor_ids = {t["run_id"] for t in floor_tasks(spec, scenes)}
     scene_keys = {sc.key for sc in scenes}
+    # results.csv: this spec's rows, and every row of another spec (a folder shared with --force);
+    # rows of this spec's runs that are no longer in it stay in rows/
     store.keep = lambda r: (r.get("run_id") in run_ids or r.get("run_id") in floor_ids
-                            or (r.get("kind") == "reference" and r.get("scene_key") in scene_keys))
+                            or (r.get("kind") == "reference" and r.get("scene_key") in scene_keys)
+                            or r.get("spec") not in (None, spec.name))
     refs, aux, n_refs = _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream, progress)
     statuses, ran = _runs(pending, refs, store, jobs, dask, stream, progress, spec.name)
     store.write_csv()

@@ -364,6 +364,7 @@ def _import_legacy(store, path: Path) -> int:
             bad += 1
             continue
         if row.run_id not in store.rows:
+            row.spec = row.spec or GRID_NAME
             store.add(row)
             n += 1
     if bad:
