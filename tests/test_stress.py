@@ -271,3 +271,17 @@ def test_compare_bench_and_stress_make_the_same_graded_row(tmp_path):
             assert r.grade == grade(r.status, r.err_x_energy, r.kkt_error, r.tol, r.ref_bound)
             assert set(COLUMNS) <= set(r.to_dict())
             assert r.ref_solver and r.err_x_energy is not None
+
+
+def test_stress_rows_survive_results_csv(tmp_path):
+    """A stress row read back from results.csv (a fresh clone has no rows/) has its scene, coords
+    and dict-valued extras (params_used) as dicts again."""
+    from dualfem.experiments.row import Row
+
+    row = Row(run_id="nu:x", kind="stress", axis="nu", coords={"nu": 0.3}, scene={**stress.BASE, "N": 8},
+              solver="pdas", status="solved", grade="correct", solver_params={"r": 1e7}, err_x_energy=1e-12)
+    row.update(params_used={"r": 1e7, "r_rule": "scaled"}, scene_name="f2", reason="x")
+    store.write_csv(tmp_path / "results.csv", [row])
+    back = Row.from_dict(store.read_results(tmp_path)[0])
+    for k in ("scene", "coords", "solver_params", "params_used", "scene_name", "reason", "err_x_energy", "grade"):
+        assert back[k] == row[k], k

@@ -140,7 +140,8 @@ class Row:
 
     @classmethod
     def from_dict(cls, d: dict) -> Row:
-        """A row from a dict (e.g. a CSV or JSON record); JSON text of dict fields is parsed."""
+        """A row from a dict (e.g. a CSV or JSON record); JSON text of dict fields, of ``scene`` and of
+        extra keys (``{...}``, ``[...]``) is parsed."""
         row = cls()
         for k, v in d.items():
             if k in _DICT_FIELDS and isinstance(v, str):
@@ -148,8 +149,8 @@ class Row:
                     v = json.loads(v) if v else {}
                 except ValueError:
                     v = {"text": v}
-            elif k == "scene" and isinstance(v, str) and v.startswith("{"):
-                try:        # a scene given by its parameters (stress), written to CSV as JSON text
+            elif (k == "scene" or k not in _NAMES) and isinstance(v, str) and v[:1] in ("{", "["):
+                try:        # a dict or list (a stress scene's parameters, an extra) written to CSV as JSON text
                     v = json.loads(v)
                 except ValueError:
                     pass
