@@ -2,9 +2,9 @@
 
 The base scene is the paper's f2 (:data:`BASE`) or any scene of any registered problem (a
 library scene, a preset or a TOML file: :func:`scene_base`); an axis is made only where it
-applies to the scene's problem (:func:`applicable_axes`: delta, load and nu need the scene keys
-``delta``, ``load_scale`` and ``nu``, the N axis ``N``, the units axis a unit map of the problem,
-:data:`UNIT_MAPS`).
+applies to the scene's problem (:func:`applicable_axes`: delta and r (a map over delta x r) need
+the scene key ``delta``, load ``load_scale``, nu ``nu``, the N axis ``N``, the units axis a unit
+map of the problem, :data:`UNIT_MAPS`).
 
 For the ``units`` and ``load`` axes the reference does not come from solving the scaled QP at
 all: it is the reference of the base scene mapped by the exact physics (a change of units maps
@@ -164,7 +164,7 @@ def applicable_axes(problem: str, params: dict) -> tuple[str, ...]:
     from dualfem.core.registry import get_problem
 
     params = {**get_problem(problem).defaults, **params}
-    need = {"delta": "delta", "load": "load_scale", "nu": "nu", "N": "N"}
+    need = {"delta": "delta", "r": "delta", "load": "load_scale", "nu": "nu", "N": "N"}   # r: a (delta, r) map
     out = []
     for ax in AXES:
         if ax in need and need[ax] not in params:
@@ -265,12 +265,9 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] | 
                     add("delta", {"load": load, "delta": d}, {**base, "load": load, "delta": d}, s)
     if "r" in axes:
         for s in r_solvers:
-            for d in (DELTAS if "delta" in base else [None]):     # a problem without delta: r alone
+            for d in DELTAS:
                 for r in RS:
-                    if d is None:
-                        add("r", {"r": r}, dict(base), s, {"r": r})
-                    else:
-                        add("r", {"delta": d, "r": r}, {**base, "delta": d}, s, {"r": r})
+                    add("r", {"delta": d, "r": r}, {**base, "delta": d}, s, {"r": r})
     if "units" in axes:
         for uname, (fs, fl) in UNITS.items():
             scene = scene_in_units(base, fs, fl, problem)
