@@ -421,7 +421,8 @@ def load_results(path: str | Path) -> tuple[dict, list[Row]]:
     runs = p / "runs.jsonl" if p.is_dir() else (p if p.suffix != ".csv" else None)
     folder = p if p.is_dir() else p.parent
     if csv_path is not None and csv_path.is_file():
-        rows = [Row.from_dict(r) for r in read_results(csv_path)]
+        # the stress rows (a folder shared with a bench sweep through --force holds others too)
+        rows = [Row.from_dict(r) for r in read_results(csv_path) if r.get("kind") == "stress"]
     elif runs is not None and runs.is_file():
         rows = _read_jsonl(runs)
     else:

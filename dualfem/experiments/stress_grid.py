@@ -18,6 +18,7 @@ import hashlib
 import json
 from collections import OrderedDict
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -235,6 +236,8 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] | 
     if scene is None and scene_name is not None:
         scene = scene_base(scene_name)
     name = scene_name or "f2"
+    if Path(name).suffix == ".toml" and Path(name).is_file():
+        name = str(Path(name).resolve())      # a scene file: found again by a resume from another folder
     problem = scene_problem(name) if scene_name is not None else "thin_defect"
     fits = applicable_axes(problem, scene if scene is not None else BASE)
     if axes is None:
