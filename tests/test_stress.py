@@ -285,3 +285,32 @@ def test_stress_rows_survive_results_csv(tmp_path):
     back = Row.from_dict(store.read_results(tmp_path)[0])
     for k in ("scene", "coords", "solver_params", "params_used", "scene_name", "reason", "err_x_energy", "grade"):
         assert back[k] == row[k], k
+
+
+def test_force_writes_into_a_folder_of_another_spec_and_drops_nothing(tmp_path):
+    from dualfem.core.errors import InputError
+    from dualfem.experiments.stress import load_results
+
+    res = tmp_path / "res"
+    res.mkdir()
+    (res / "spec.toml").write_text('name = "someone_else"\n')
+    store.write_csv(res / "results.csv", [{"run_id": "abc", "kind": "run", "spec": "someone_else",
+                                           "status": "solved", "solver": "pdas"}])
+    with pytest.raises(InputError, match="another spec"):
+        stress.run_grid([_nu_task("pdas")], res, jobs=1, resume=True)
+    recs = stress.run_grid([_nu_task("pdas")], res, jobs=1, force=True)
+    assert recs[0].grade == "correct"
+    assert {r["run_id"] for r in store.read_results(res)} == {"abc", "nu:pdas:0.3"}
+    assert [r.run_id for r in load_results(res)[1]] == ["nu:pdas:0.3"]     # the stress rows
+
+
+def test_parallel_workers_and_the_n_gate(tmp_path):
+    """--jobs 2 (joblib): the same engine, the N chain still waits for its previous N."""
+    pytest.importorskip("joblib")
+    tasks = stress.build_grid(["pdas", "clarabel"], quick=True, axes=("N",), max_n=16)
+    seen = []
+    recs = stress.run_grid(tasks, tmp_path / "p", jobs=2, progress=lambda i, n, row: seen.append(row.run_id))
+    assert len(recs) == 4 and all(r.grade == "correct" for r in recs)
+    for t in tasks:
+        if t.after:
+            assert seen.index(t.after) < seen.index(t.id)
