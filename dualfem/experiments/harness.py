@@ -156,7 +156,7 @@ def error_row(task: dict, message: str, status: str = "error") -> dict:
     row = Row(run_id=task.get("run_id", ""), kind=task.get("kind", "run"), status=status, claimed_status=None,
               message=message, started_utc=utc_now())
     for k in ("spec", "scene", "scene_key", "label", "solver", "variant", "tier", "tol", "repeats", "time_limit",
-              "cold_setup", "axis", "coords"):
+              "cold_setup", "axis", "coords", "scene_name"):
         if task.get(k) is not None:
             row[k] = task[k]
     row.solver_params = dict(task.get("params") or {})
