@@ -1,7 +1,7 @@
 """Results for analysis: ``dualfem.results.load(PATH)`` -> a pandas DataFrame, one row per run.
 
-PATH is a ``dualfem bench`` results folder (or its ``results.csv``) or a ``dualfem stress``
-folder (or its ``runs.jsonl``). The columns are the fields of
+PATH is a ``dualfem bench`` or ``dualfem stress`` results folder (or its ``results.csv``), or a
+stress folder written before both used one store (its ``runs.jsonl``). The columns are the fields of
 :class:`dualfem.experiments.row.Row` (documented there; times in seconds ``*_s``, memory in MB
 ``peak_rss_mb``, errors relative), then the row's extra keys (``scene_*`` parameters, ...).
 Dict-valued fields (``solver_params``, ``iterations``, ``coords``) are dicts. Needs pandas
@@ -25,12 +25,11 @@ def load(path: str | Path):
         raise MissingDependency("dualfem.results.load needs pandas: pip install 'dualfem[analysis]'") from None
 
     p = Path(path)
-    if (p / "runs.jsonl").is_file() or p.suffix == ".jsonl":
-
-        rows = [r.to_dict() for r in load_results(p)[1]]
-    elif (p / "results.csv").is_file() or p.suffix == ".csv":
+    if (p / "results.csv").is_file() or p.suffix == ".csv":       # bench and stress: the one store
 
         rows = [Row.from_dict(r).to_dict() for r in read_results(p)]
+    elif (p / "runs.jsonl").is_file() or p.suffix == ".jsonl":    # a stress folder written before it
+        rows = [r.to_dict() for r in load_results(p)[1]]
     else:
         raise InputError(f"{str(p)!r} is not a dualfem bench folder (results.csv) or stress folder (runs.jsonl)")
     df = pd.DataFrame(rows)

@@ -1,4 +1,4 @@
-"""dualfem compare: reference choice, verdicts, JSON interface, exit status."""
+"""dualfem compare: reference choice, grades (one Row type, one grade function), JSON interface, exit status."""
 from __future__ import annotations
 
 import json
@@ -9,10 +9,12 @@ import pytest
 
 from dualfem.cli.main import main
 from dualfem.core import registry
+from dualfem.core.grade import grade
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
 from dualfem.experiments.compare import RUN_FIELDS, compare_solvers
+from dualfem.experiments.row import Row
 
 
 @pytest.fixture(scope="module")
@@ -65,12 +67,20 @@ def test_reference_and_verdicts(qp):
     assert res["reference"]["error_bound"] < 1e-10
     cc = res["reference"]["cross_check"]
     assert cc["solver"] == "clarabel" and cc["agrees"]
-    v = {r["solver"]: r["verdict"] for r in res["runs"]}
+    g = {r["solver"]: r["grade"] for r in res["runs"]}
+    assert g == {"pdas": "correct", "clarabel": "correct", "penalty": "correct"}
+    v = {r["solver"]: r["verdict"] for r in res["runs"]}          # the deprecated alias, derived from grade
     assert v == {"pdas": "reference", "clarabel": "ok", "penalty": "ok"}
     assert res["silent_wrong"] == []
     for r in res["runs"]:
         assert set(RUN_FIELDS) <= set(r)
         assert r["diff"]["x_energy"] < 1e-6
+    # the records are views of graded Rows, graded by the one policy
+    assert [type(r) for r in res.rows] == [Row] * 3 and all(r.kind == "compare" for r in res.rows)
+    for row, rec in zip(res.rows, res["runs"]):
+        assert row.grade == rec["grade"] == grade(row.status, row.err_x_energy, row.kkt_error, row.tol,
+                                                  row.ref_bound)
+        assert row.ref_solver == "pdas" and row.err_x_energy == rec["diff"]["x_energy"]
 
 
 def test_wrong_claim_is_demoted_by_the_runner_and_honest_failure_is_not(qp, doubles):
@@ -81,25 +91,31 @@ def test_wrong_claim_is_demoted_by_the_runner_and_honest_failure_is_not(qp, doub
     assert wrong["status"] == "inaccurate" and wrong["claimed_status"] == "solved"
     assert "not certified" in wrong["message"] and "stationarity" in wrong["message"]
     assert v["test_wrong"] == "failed" and v["test_honest"] == "failed"
+    assert {r["solver"]: r["grade"] for r in res["runs"]} == {"pdas": "correct", "test_wrong": "failed",
+                                                              "test_honest": "failed"}
     assert res["silent_wrong"] == []
     assert wrong["diff"]["x_energy"] == pytest.approx(1e-3, rel=1e-6)
 
 
-@pytest.mark.parametrize("kkt,diff,expected", [(1e-12, 1e-3, "wrong"), (1e-3, 1e-12, "wrong"),
-                                               (1e-12, 1e-12, "ok")])
-def test_verdict_of_a_solved_claim(kkt, diff, expected):
-    """compare's own check behind the runner's: a 'solved' record that is off is a silent wrong answer."""
-    from dualfem.experiments.compare import _verdict
+@pytest.mark.parametrize("kkt,diff,energy,expected", [(1e-12, 1e-3, -1.0, "silent_wrong"),
+                                                      (1e-3, 1e-12, -1.0, "flagged"),
+                                                      (1e-12, 1e-12, -1.0, "correct"),
+                                                      (None, None, None, "flagged")])   # solved, no answer
+def test_grade_of_a_solved_claim(kkt, diff, energy, expected):
+    """compare's own check behind the runner's: a 'solved' record that is off is a wrong claim."""
+    from dualfem.experiments.compare import VERDICT_OF_GRADE, grade_record
 
-    rec = {"solver": "s", "status": "solved", "energy": -1.0, "kkt_error": kkt, "tolerance": 1e-6,
-           "diff": {"x_energy": diff}}
-    assert _verdict(rec, {"solver": "pdas", "error_bound": 1e-12}) == expected
+    rec = {"solver": "s", "status": "solved", "energy": energy, "kkt_error": kkt, "tolerance": 1e-6,
+           "diff": {"x_energy": diff} if diff else None}
+    g = grade_record(rec, {"solver": "pdas", "error_bound": 1e-12})
+    assert g == expected
+    assert VERDICT_OF_GRADE[g] == ("ok" if expected == "correct" else "wrong")
 
 
 def test_no_exact_solver_means_no_reference(qp):
     res = compare_solvers(qp, ["penalty"])
     assert res["reference"] is None
-    assert res["runs"][0]["verdict"] == "unchecked"
+    assert res["runs"][0]["verdict"] == "unchecked" and res["runs"][0]["grade"] == "unverified"
     assert res["silent_wrong"] == []
 
 
@@ -110,7 +126,7 @@ def test_cli_json(capsys):
     assert rc == 0
     assert [r["solver"] for r in data["runs"]] == ["pdas", "penalty", "osqp"]
     for r in data["runs"]:
-        for k in ("solver", "status", "iterations", "energy", "time_s", "residuals", "diff", "verdict"):
+        for k in ("solver", "status", "iterations", "energy", "time_s", "residuals", "diff", "verdict", "grade"):
             assert k in r
         assert {"x_energy", "multipliers", "contact_mismatch"} <= set(r["diff"])
     assert data["reference"]["solver"] == "pdas"
@@ -123,6 +139,7 @@ def test_cli_exit_0_when_the_runner_demotes_a_wrong_claim(doubles, capsys):
     out = capsys.readouterr().out
     assert rc == 0 and "SILENT WRONG ANSWER" not in out
     assert re.search(r"test_wrong +inaccurate +failed", out) and "not certified" in out
+    assert re.search(r"pdas +solved +correct", out)
 
 
 def test_cli_exit_1_on_silent_wrong_answer(doubles, capsys, monkeypatch):
@@ -134,6 +151,7 @@ def test_cli_exit_1_on_silent_wrong_answer(doubles, capsys, monkeypatch):
     out = capsys.readouterr().out
     assert rc == 1
     assert "SILENT WRONG ANSWER: test_wrong" in out
+    assert re.search(r"test_wrong +solved +(silent_wrong|flagged)", out)
 
 
 def test_cli_exit_0_on_honest_failure(doubles, capsys):

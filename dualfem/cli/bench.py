@@ -1,4 +1,10 @@
-"""``dualfem bench SPEC.toml [--jobs N] [--dask ADDRESS] [--out DIR]``: run or resume a sweep."""
+"""``dualfem bench SPEC.toml [--jobs N] [--dask ADDRESS] [--out DIR] [--resume] [--force]``: run or resume a sweep.
+
+The one sweep engine (:func:`dualfem.experiments.bench.run_tasks`, shared with ``dualfem stress``):
+``--jobs`` parallel guarded workers, ``--resume`` continues DIR (finished rows kept and not
+redone; for bench also what a plain rerun does), ``--force`` writes into a DIR that holds the
+results of another spec (nothing in it is dropped).
+"""
 from __future__ import annotations
 
 import os
@@ -19,8 +25,10 @@ def _cfg(p):
                    help="send the tasks to this dask.distributed scheduler (e.g. tcp://10.0.0.1:8786)")
     p.add_argument("--out", metavar="DIR", default=None,
                    help="results directory (default dualfem-results/bench/<spec name>); rerun to resume")
+    p.add_argument("--resume", action="store_true",
+                   help="continue --out: finished rows are kept and not redone (a rerun without it does the same)")
     p.add_argument("--force", action="store_true",
-                   help="write into an --out that holds the results of another spec")
+                   help="write into an --out that holds the results of another spec (its rows are kept)")
     p.add_argument("--retry-failed", action="store_true",
                    help="also redo finished runs whose status is not solved/inaccurate")
     p.add_argument("--no-progress-bar", action="store_true",

@@ -1,4 +1,9 @@
-"""``dualfem stress [--quick] [--out DIR]``: the numerical-stability grid (see :mod:`dualfem.experiments.stress`)."""
+"""``dualfem stress [--quick] [--axes ...] [--solvers ...] [--scene ...] [--out DIR] [--jobs N] [--resume] [--force]``.
+
+The numerical-stability grid (:mod:`dualfem.experiments.stress`), run by the one sweep engine of
+``dualfem bench`` into its results store (``results.csv``, ``rows/``; plus ``meta.json``).
+``--jobs``, ``--resume`` and ``--force`` mean what they mean for ``dualfem bench``.
+"""
 from __future__ import annotations
 
 import math
@@ -17,25 +22,34 @@ def _cfg(p):
                    help="small version: N=16 base scene, load f2 only on the delta axis, N up to 128, "
                         "20 s per-run time limit (default: N=32, loads f1/f2/f3, N up to 1024, 120 s)")
     p.add_argument("--out", default=None, metavar="DIR",
-                   help="results directory (runs.jsonl, meta.json); default dualfem-results/stress/quick or .../full "
-                        "(the committed grid is regenerated only with an explicit --out benchmarks/results/stress)")
+                   help="results directory (results.csv, rows/, meta.json; a folder of runs.jsonl written by an "
+                        "earlier version is read and, with --resume, continued); default dualfem-results/stress/quick "
+                        "or .../full (the committed grid is regenerated only with an explicit --out "
+                        "benchmarks/results/stress)")
     p.add_argument("--scene", default=None, metavar="SCENE",
-                   help="base scene: a scene of the library (e.g. two_defects), a preset or a .toml file "
-                        "(default: the paper's f2, N = 32, or 16 with --quick); it keeps its own mesh and load "
-                        "except on the N axis")
+                   help="base scene of any registered problem: a scene of the library (e.g. two_defects), a preset "
+                        "(e.g. signorini) or a .toml file (default: the paper's f2, N = 32, or 16 with --quick); it "
+                        "keeps its own mesh and load except on the N axis; only the axes that apply to its problem "
+                        "are run")
     p.add_argument("--solvers", default=None, metavar="A,B",
                    help="comma-separated solver names, or 'all' (the default): every registered solver; one that "
                         "is not installed gives skipped runs with its install hint")
     p.add_argument("--axes", default=None, metavar="A,B",
-                   help="which axes: delta, r, units, load, nu, N (default all)")
+                   help="which axes: delta, r, units, load, nu, N (default all that apply to the scene)")
     p.add_argument("--time-limit", type=str, default=None, metavar="SECONDS",
                    help="per-run solver time limit (passed to solvers that take one; the harness kills "
                         "a run after 2x this plus an assembly allowance)")
     p.add_argument("--max-n", type=str, default=None, metavar="N", help="largest N on the N axis")
-    p.add_argument("-j", "--jobs", type=str, default="1", metavar="J", help="worker processes (default 1)")
-    p.add_argument("--resume", action="store_true", help="keep finished runs in DIR/runs.jsonl, run the rest")
+    p.add_argument("-j", "--jobs", type=str, default="1", metavar="J",
+                   help="parallel guarded worker processes (joblib; default 1)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue DIR: every finished row is kept and not redone, the rest run; rows of other "
+                        "runs in DIR are always kept")
     p.add_argument("--force", action="store_true",
-                   help="start a new grid in a DIR that holds one (its runs.jsonl is kept as runs.<time>.jsonl.old)")
+                   help="write into a DIR that holds the results of another spec (e.g. a bench sweep), adding "
+                        "this grid's rows to it (nothing is dropped)")
+    p.add_argument("--retry-failed", action="store_true",
+                   help="with --resume: also redo finished runs whose status is not solved/inaccurate")
     p.add_argument("--dry-run", action="store_true", help="print the number of runs per axis and exit")
 
 
@@ -49,19 +63,20 @@ def cmd_stress(args) -> int:
 
     reg = solvers()
     names = _choice("--solvers", args.solvers, sorted(reg), "solver", "known solvers")
-    axes = tuple(_choice("--axes", args.axes, list(stress.AXES), "axis", "allowed"))
+    axes = None if args.axes is None or args.axes.strip() == "all" else \
+        tuple(_choice("--axes", args.axes, list(stress.AXES), "axis", "allowed"))
     tl = None if args.time_limit is None else check_positive("--time-limit", args.time_limit)
     max_n = None if args.max_n is None else check_int("--max-n", args.max_n, 8, 4096)
     jobs = check_int("--jobs", args.jobs, 1, 4 * (os.cpu_count() or 1))
     out = Path(args.out) if args.out else default_out("stress", "quick" if args.quick else "full")
     if out.exists() and not out.is_dir():
         raise InputError(f"--out must be a directory, {str(out)!r} is a file")
-    if (out / "runs.jsonl").exists() and not (args.resume or args.force or args.dry_run):
-        raise InputError(f"--out {str(out)!r} already holds a stress grid (runs.jsonl): pass --resume to continue it "
-                         f"or --force to start a new one beside it")
+    held = stress.holds_results(out)
+    if held and not (args.resume or args.force or args.dry_run):
+        raise InputError(f"--out {str(out)!r} already holds results ({held}): pass --resume to continue it "
+                         f"(finished runs are kept), or choose another --out")
 
-    base = None if args.scene is None else stress.scene_base(args.scene)
-    tasks = stress.build_grid(names, quick=args.quick, axes=axes, time_limit=tl, max_n=max_n, scene=base)
+    tasks = stress.build_grid(names, quick=args.quick, axes=axes, time_limit=tl, max_n=max_n, scene_name=args.scene)
     if args.dry_run:
         from collections import Counter
 
@@ -85,8 +100,9 @@ def cmd_stress(args) -> int:
 
     print(f"dualfem stress: {len(tasks)} runs ({', '.join(names)}), reference "
           f"{refs[0][0] if refs else 'NONE'} -> {out}", file=sys.stderr)
-    recs = stress.run_grid(tasks, out, jobs=jobs, resume=args.resume, progress=progress,
-                           meta={**meta})
+    recs = stress.run_grid(tasks, out, jobs=jobs, resume=args.resume, force=args.force,
+                           retry_failed=args.retry_failed, progress=progress, meta={**meta},
+                           command=meta.get("command") or "")
     if tty:
         print(file=sys.stderr)
     from collections import Counter
@@ -98,7 +114,7 @@ def cmd_stress(args) -> int:
                              "n_tasks": len(tasks), "n_records": len(every),
                              "outcomes": dict(c)})
     print("outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(c.items())), file=sys.stderr)
-    print(f"results in {out}/runs.jsonl; report: dualfem report stability {out}", file=sys.stderr)
+    print(f"results in {out}/results.csv; report: dualfem report stability {out}", file=sys.stderr)
     return 0
 
 
@@ -119,14 +135,15 @@ def _meta(args, reg: dict, names: list[str], axes: tuple, tasks: list, refs: lis
     from dualfem.experiments.machine import environment
 
     return {"quick": bool(args.quick), "scene": getattr(args, "scene", None) or "f2 (paper)",
-            "solvers": names, "axes": list(axes),
+            "solvers": names, "axes": sorted({t.axis for t in tasks}, key=stress.AXES.index),
             "grading": "dualfem.core.grade: error <= declared tolerance + the reference's certified bound",
             "ref_kkt": stress.REF_KKT, "references": refs,
             "tolerances": {n: reg[n]().tolerance for n in names if reg[n].missing() is None},
             "exact": {n: reg[n].exact for n in names},
             "third_party": {n: bool(reg[n].requires) for n in names},
             "missing": {n: reg[n].missing() for n in names if reg[n].missing()},
-            "base": stress.BASE, "time_limit": tasks[0].time_limit if tasks else None,
+            "base": tasks[0].scene if tasks and getattr(args, "scene", None) else stress.BASE,
+            "time_limit": tasks[0].time_limit if tasks else None,
             "command": "dualfem " + " ".join(sys.argv[1:]) if sys.argv and "dualfem" in sys.argv[0] else None,
             "started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
             "environment": environment(), "git_commit": _git_head()}

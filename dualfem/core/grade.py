@@ -1,5 +1,9 @@
 """One grading policy for every experiment (compare, bench, stress) and every report.
 
+Every experiment produces :class:`dualfem.experiments.row.Row` records and grades them with
+:func:`grade` (through ``Row.regrade``); ``status`` is the certified solver status (the runner's,
+:mod:`dualfem.experiments.runner`), the solver's own claim is ``claimed_status``.
+
 A run is judged from four facts: the status it claims, its error against a trusted reference
 (relative energy norm, ``|x - x_ref|_K / |x_ref|_K``), the evaluator's largest KKT residual, and
 the tolerance it declared. The answer is within tolerance when
@@ -9,11 +13,13 @@ the tolerance it declared. The answer is within tolerance when
 ==============  ==========================================================================
 ``correct``     claims ``solved``, the error is within tolerance and so is the KKT error
 ``failed``      an honest "not solved" status (max_iter, time_limit, stagnation, inaccurate, ...)
-``flagged``     claims ``solved`` but the evaluator's residuals exceed ``tol`` (the answer, or
-                its multipliers, is wrong and a user who checks the residuals sees it)
+``flagged``     claims ``solved`` but the evaluator's residuals exceed ``tol`` or are not finite
+                (the answer, or its multipliers, is wrong and a user who checks the residuals
+                sees it; decided before, and without, any reference)
 ``silent_wrong`` claims ``solved``, is wrong, and the residuals look fine: the case no user can
                 detect (must never happen)
-``unverified``  claims ``solved`` but there is no trusted reference to measure the error
+``unverified``  claims ``solved``, residuals within ``tol``, but there is no trusted reference to
+                measure the error
 ``skipped``     not applicable / not installed
 ``timeout``     killed by the harness's wall-clock guard
 ``crashed``     the worker process died (segmentation fault, out of memory)
@@ -44,9 +50,8 @@ def grade(status: str, err: float | None, kkt: float | None, tol: float, slack: 
         return status
     if status != "solved":
         return "failed"
+    if not _finite(kkt) or kkt > tol:  # type: ignore[operator]
+        return "flagged"        # the evaluator sees it, with or without a reference
     if not _finite(err):
         return "unverified"
-    flagged = not _finite(kkt) or kkt > tol  # type: ignore[operator]
-    if flagged:
-        return "flagged"
     return "correct" if within(err, tol, slack) else "silent_wrong"

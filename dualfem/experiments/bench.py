@@ -247,23 +247,108 @@ class SweepSummary:
 
 
 
-# ===================================================================== sweep
-def _begin(spec: Spec, store: ResultStore, out: Path, jobs: int, dask: str | None, command: str) -> dict:
-    """Write spec.toml and the sweep's invocation log (sweep.json); returns the meta record."""
-    if not command:   # called from Python: the equivalent command line
-        command = f"dualfem bench {spec.path} --out {out}" + (f" --jobs {jobs}" if jobs > 1 else "") + \
-            (f" --dask {dask}" if dask else "")
-    atomic_write_text(store.out / "spec.toml", spec.text or json.dumps(_canon(spec.__dict__)))
-    meta = {"spec": spec.path, "name": spec.name, "command": command, "jobs": jobs, "dask": dask,
-            "started_utc": utc_now(), "machine": machine_info()}
+# ===================================================================== the one engine
+def run_tasks(tasks: list[dict], store: ResultStore, *, jobs: int = 1, dask: str | None = None,
+              gate: Callable[[dict, dict[str, dict]], str | None] | None = None,
+              on_row: Callable[[dict, Any], None] | None = None,
+              order: Callable[[dict], Any] | None = None) -> int:
+    """The one scheduler of every sweep (``dualfem bench`` and ``dualfem stress``); returns the rows written.
+
+    ``tasks``: dicts with ``kind`` (a handler of :data:`dualfem.experiments.harness.HANDLERS`),
+    ``run_id``, and optionally ``skip`` (a reason: a skipped row, nothing run) and ``after`` (the
+    run id of a task that must be finished first: a task dependency). Tasks run in waves through
+    :func:`dualfem.experiments.harness.execute_all` (guarded worker processes: serial, joblib with
+    ``jobs`` workers, or dask): every task whose dependency is finished (in this call, or a
+    finished row of ``store`` that is not itself being redone) is ready; ``gate(task, finished
+    rows)`` then returns None (run it) or a reason (a ``skipped`` row marked ``skip_budget``,
+    e.g. a predicted time or memory over the budget); a gate may also adjust the task. Tasks whose
+    dependency never finishes get a skipped row. ``order`` sorts each wave (e.g. biggest first).
+    Every row is written to ``store`` (after ``on_row(row, payload)``, e.g. to cache a reference).
+    """
+    from dualfem.experiments.harness import error_row
+
+    redo = {t["run_id"] for t in tasks}
+    finished: dict[str, dict] = {k: v for k, v in store.rows.items() if k not in redo}
+    written = 0
+
+    def finish(row: dict, payload: Any = None) -> None:
+        nonlocal written
+        if on_row is not None:
+            on_row(row, payload)
+        store.add(row)
+        finished[row["run_id"]] = store.rows[row["run_id"]]
+        written += 1
+
+    def skip(task: dict, reason: str, budget: bool) -> None:
+        if task["kind"] in ("run", "reference", "floor"):
+            row = skipped_row({**task, "skip": reason})
+        else:
+            row = error_row(task, reason, status="skipped")
+        if budget:
+            row["skip_budget"] = True
+        finish(row)
+
+    pending = list(tasks)
+    while pending:
+        ready = [t for t in pending if not t.get("after") or t["after"] in finished]
+        waiting = [t for t in pending if t.get("after") and t["after"] not in finished]
+        if not ready:       # every remaining task waits on one that will never finish
+            for t in waiting:
+                skip(t, f"not attempted: the run it depends on ({t['after']}) never finished", False)
+            break
+        to_run = []
+        for t in ready:
+            why = t.get("skip") or (gate(t, finished) if gate is not None else None)
+            if why:
+                skip(t, why, not t.get("skip"))
+            else:
+                to_run.append(t)
+        if order is not None:
+            to_run.sort(key=order)
+        for row, payload in execute_all(to_run, jobs, dask):
+            finish(row, payload)
+        pending = waiting
+    return written
+
+
+def open_store(out: str | Path, name: str, text: str, *, force: bool = False,
+               warn: Callable[[str], None] | None = None) -> ResultStore:
+    """The results folder ``out`` for the sweep ``name`` (spec ``text``), validated, claimed and locked.
+
+    A folder belongs to one spec (``force``: add this sweep's rows to a folder of another spec;
+    nothing in it is dropped); ``spec.toml`` is replaced by ``text``. Close it when done.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out must be a directory, {str(out)!r} is a file")
+    store = ResultStore(out, warn)
+    store.claim(name, text, force)
+    store.open()
+    atomic_write_text(store.out / "spec.toml", text)
+    return store
+
+
+def log_invocation(store: ResultStore, meta: dict) -> dict:
+    """Write the sweep's invocation log (sweep.json: ``meta`` plus every earlier invocation)."""
     try:   # a resumed sweep keeps the list of every invocation that wrote into this directory
         prev = json.loads((store.out / "sweep.json").read_text(encoding="utf-8"))
         meta["invocations"] = list(prev.get("invocations", []))
     except (OSError, ValueError):
         meta["invocations"] = []
-    meta["invocations"].append({"command": command, "started_utc": meta["started_utc"]})
+    meta["invocations"].append({"command": meta.get("command"), "started_utc": meta.get("started_utc")})
     atomic_write_text(store.out / "sweep.json", json.dumps(meta, indent=1, sort_keys=True))
     return meta
+
+
+# ===================================================================== sweep
+def _begin(spec: Spec, store: ResultStore, out: Path, jobs: int, dask: str | None, command: str) -> dict:
+    """The sweep's invocation log (sweep.json); returns the meta record."""
+    if not command:   # called from Python: the equivalent command line
+        command = f"dualfem bench {spec.path} --out {out}" + (f" --jobs {jobs}" if jobs > 1 else "") + \
+            (f" --dask {dask}" if dask else "")
+    meta = {"spec": spec.path, "name": spec.name, "command": command, "jobs": jobs, "dask": dask,
+            "started_utc": utc_now(), "machine": machine_info()}
+    return log_invocation(store, meta)
 
 
 def _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream,
@@ -278,44 +363,44 @@ def _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, st
             if refs[sc.key] is None:
                 tasks.append(reference_task(spec, sc))
     tasks += [t for t in floor_tasks(spec, scenes) if not is_done(t["run_id"])]
-    aux = n_refs = 0
-    if tasks:
-        bar = Progress(len(tasks), "references+floor", stream, None if progress else False)
-        for row, payload in execute_all(tasks, jobs, dask):
-            if row["kind"] == "reference" and payload is not None:
-                store.save_ref(row["scene_key"], payload)       # only certified references are cached
-                refs[row["scene_key"]] = store.load_ref(row["scene_key"])
-            store.add(row)
-            aux += 1
-            n_refs += row["kind"] == "reference"
-            bar.update(_describe(row))
+    n_refs = 0
+    bar = Progress(len(tasks), "references+floor", stream, None if progress else False) if tasks else None
+
+    def on_row(row: dict, payload: Any) -> None:
+        nonlocal n_refs
+        if row["kind"] == "reference" and payload is not None:
+            store.save_ref(row["scene_key"], payload)       # only certified references are cached
+            refs[row["scene_key"]] = store.load_ref(row["scene_key"])
+        n_refs += row["kind"] == "reference"
+        bar.update(_describe(row))
+
+    aux = run_tasks(tasks, store, jobs=jobs, dask=dask, on_row=on_row)
     return refs, aux, n_refs
+
+
+def _size(t: dict) -> float:
+    """A run's scene size (biggest first: better load balance across workers)."""
+    n = (t.get("scene_params") or {}).get("N", 0)
+    return float(n) if isinstance(n, (int, float)) else 0.0
 
 
 def _runs(pending, refs, store, jobs, dask, stream, progress, title) -> tuple[dict[str, int], int]:
     """Phase 2: the runs (skipped ones are written directly); returns (status counts, runs executed)."""
     statuses: dict[str, int] = {}
-    to_run = []
-    for t in pending:
-        if t["skip"]:
-            store.add(skipped_row(t))
-            statuses["skipped"] = statuses.get("skipped", 0) + 1
-        else:
-            to_run.append({**t, "ref": refs.get(t["scene_key"])})
-
-    def size(t: dict) -> float:      # biggest scenes first: better load balance across workers
-        n = t["scene_params"].get("N", 0)
-        return float(n) if isinstance(n, (int, float)) else 0.0
-
-    to_run.sort(key=lambda t: -size(t))
+    tasks = [t if t["skip"] else {**t, "ref": refs.get(t["scene_key"])} for t in pending]
+    skip_ids = {t["run_id"] for t in tasks if t["skip"]}
+    n_run = len(tasks) - len(skip_ids)
+    bar = Progress(n_run, title, stream, None if progress else False) if n_run else None
     ran = 0
-    if to_run:
-        bar = Progress(len(to_run), title, stream, None if progress else False)
-        for row, _ in execute_all(to_run, jobs, dask):
-            store.add(row)
-            statuses[row["status"]] = statuses.get(row["status"], 0) + 1
+
+    def on_row(row: dict, payload: Any) -> None:
+        nonlocal ran
+        statuses[row["status"]] = statuses.get(row["status"], 0) + 1
+        if row["run_id"] not in skip_ids:
             ran += 1
             bar.update(_describe(row))
+
+    run_tasks(tasks, store, jobs=jobs, dask=dask, on_row=on_row, order=lambda t: -_size(t))
     return statuses, ran
 
 
@@ -325,7 +410,9 @@ def run_sweep(spec: Spec | str | Path, out: str | Path, *, jobs: int = 1, dask: 
     """Run (or resume) a sweep; returns a summary. Files: see :class:`ResultStore`.
 
     Everything is validated before anything is written; the folder is locked for the run and must
-    belong to this spec (``force`` adds the rows of another spec to it).
+    belong to this spec (``force`` adds the rows of another spec to it). Finished rows are never
+    redone (``retry_failed``: those whose status is not solved/inaccurate are). The tasks go
+    through the one engine, :func:`run_tasks`: references and floors, then the runs.
     """
     if not isinstance(spec, Spec):
         spec = load_spec(spec)
@@ -334,11 +421,7 @@ def run_sweep(spec: Spec | str | Path, out: str | Path, *, jobs: int = 1, dask: 
     scenes = expand_scenes(spec)          # every scene validated before anything is written
     tasks = expand_tasks(spec, scenes)
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out must be a directory, {str(out)!r} is a file")
-    store = ResultStore(out)
-    store.claim(spec.name, spec.text, force)
-    store.open()
+    store = open_store(out, spec.name, spec.text or json.dumps(_canon(spec.__dict__)), force=force)
     try:
         return _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, stream, retry_failed)
     finally:
@@ -358,8 +441,11 @@ def _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, strea
     run_ids = {t["run_id"] for t in tasks}
     floor_ids = {t["run_id"] for t in floor_tasks(spec, scenes)}
     scene_keys = {sc.key for sc in scenes}
+    # results.csv: this spec's rows, and every row of another spec (a folder shared with --force);
+    # rows of this spec's runs that are no longer in it stay in rows/
     store.keep = lambda r: (r.get("run_id") in run_ids or r.get("run_id") in floor_ids
-                            or (r.get("kind") == "reference" and r.get("scene_key") in scene_keys))
+                            or (r.get("kind") == "reference" and r.get("scene_key") in scene_keys)
+                            or r.get("spec") not in (None, spec.name))
     refs, aux, n_refs = _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream, progress)
     statuses, ran = _runs(pending, refs, store, jobs, dask, stream, progress, spec.name)
     store.write_csv()

@@ -1,8 +1,12 @@
 """Cross-check several solvers on one QP against a certified reference.
 
 :func:`compare_solvers` runs the chosen (default: every registered and installed) solvers on one
-QP, through :func:`dualfem.runner.run` (so statuses, timings and the evaluator's independent
-residuals are the same as for ``dualfem solve``), picks the reference, and judges each run.
+QP, through :func:`dualfem.experiments.runner.run` (so statuses, timings and the evaluator's
+independent residuals are the same as for ``dualfem solve``), picks the reference, and grades
+each run. Every run is one :class:`~dualfem.experiments.row.Row` (``kind = "compare"``), the
+record bench and stress produce too, graded by the one policy :func:`dualfem.core.grade.grade`
+(:meth:`Row.regrade`); the JSON record of a run (:data:`RUN_FIELDS`, the stable interface of
+``dualfem compare --json``) is a view of its Row (:func:`record`).
 
 Reference: chosen by the one reference policy (:mod:`dualfem.experiments.reference`): among the
 runs of *exact* solvers that claim success with an evaluator KKT error within their own declared
@@ -15,17 +19,19 @@ cross-checked against the next best trusted run: their difference must lie withi
 one's declared tolerance plus both bounds. Runs whose x is bit-for-bit the reference's are listed
 (``identical_to_reference``) but skipped as cross-checks.
 
-Verdict of each run (``verdict`` field), compare's word for :func:`dualfem.core.grade.grade`:
+``grade`` of each run (the vocabulary of :mod:`dualfem.core.grade`, as in bench and stress):
+``correct``, ``failed`` (an honest non-success status), ``flagged`` (claims ``solved``, but the
+evaluator's residuals exceed its declared tolerance), ``silent_wrong`` (claims ``solved``,
+residuals clean, answer off the reference by more than its tolerance + the reference's bound),
+``unverified`` (claims ``solved``, no certified reference), ``skipped``. ``flagged`` and
+``silent_wrong`` are the wrong ``solved`` claims (listed in ``silent_wrong`` of the result):
+the only grades that make ``dualfem compare`` exit non-zero. The reference itself is graded
+like any run (``correct``) and named in ``reference``.
 
-* ``reference``: the reference itself;
-* ``ok``: claims success and is right: evaluator KKT error <= its declared ``tolerance`` and
-  relative energy-norm difference to the reference <= ``tolerance`` + the reference's bound;
-* ``wrong``: claims success (status ``solved``) but fails one of those tests -- a *silent wrong
-  answer*: the only verdict that makes ``dualfem compare`` exit non-zero;
-* ``failed``: reports a non-success status (honest; the differences are still shown when it
-  returned an x);
-* ``skipped``: not applicable or not installed (reason in ``message``);
-* ``unchecked``: claims success but no certified reference exists to check it against.
+Deprecated: ``verdict``, compare's former word for the grade, is kept in every JSON record as
+an alias derived from ``grade`` (:data:`VERDICT_OF_GRADE`; ``reference`` for the reference):
+``ok`` = correct, ``wrong`` = flagged or silent_wrong, ``failed`` = failed/timeout/crashed,
+``unchecked`` = unverified, ``skipped`` = skipped. Read ``grade``.
 """
 from __future__ import annotations
 
@@ -47,9 +53,22 @@ from dualfem.experiments.row import Row
 from dualfem.experiments.runner import jsonable_params
 from dualfem.numerics.certify import certified_error, solver_for
 
-#: fields of each run record (stable JSON interface of ``dualfem compare --json``)
-RUN_FIELDS = ("solver", "status", "verdict", "exact", "tolerance", "iterations", "energy", "time_s",
+#: fields of each run record (stable JSON interface of ``dualfem compare --json``; ``verdict`` is a
+#: deprecated alias of ``grade``)
+RUN_FIELDS = ("solver", "status", "grade", "verdict", "exact", "tolerance", "iterations", "energy", "time_s",
               "residuals", "kkt_error", "error_bound", "certificate", "diff", "n_contact", "message", "params")
+#: the deprecated ``verdict`` of each grade (see the module docstring)
+VERDICT_OF_GRADE = {"correct": "ok", "flagged": "wrong", "silent_wrong": "wrong", "failed": "failed",
+                    "unverified": "unchecked", "skipped": "skipped", "timeout": "failed", "crashed": "failed"}
+#: grades of a wrong ``solved`` claim: exit status 1
+WRONG = ("flagged", "silent_wrong")
+
+
+class Comparison(dict):
+    """The result of :func:`compare_solvers`: the JSON record (a dict, see the module docstring),
+    and the graded :class:`Row` of every run in :attr:`rows` (the same order as ``runs``)."""
+
+    rows: list[Row]
 
 
 def default_solvers() -> list[str]:
@@ -58,8 +77,8 @@ def default_solvers() -> list[str]:
 
 
 def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, dict] | None = None,
-                    progress: Callable[[str], None] | None = None) -> dict[str, Any]:
-    """Run ``names`` on ``qp``; return the comparison record (see module docstring).
+                    progress: Callable[[str], None] | None = None) -> Comparison:
+    """Run ``names`` on ``qp``; return the comparison (see module docstring).
 
     ``params`` maps a solver name to its parameters. ``progress`` receives one line per finished
     solver.
@@ -70,50 +89,46 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     params = params or {}
     insts = {nm: make_solver(nm, params.get(nm)) for nm in names}  # validate all before solving
     ksolve = solver_for(qp)
-    runs: list[dict[str, Any]] = []
+    rows: list[Row] = []
     sols: dict[str, Solution] = {}
     for nm, inst in insts.items():
         t0 = time.perf_counter()
-        rec, sols[nm] = _run_one(qp, nm, inst, ksolve)
-        runs.append(rec)
+        row, sols[nm] = _run_one(qp, nm, inst, ksolve)
+        rows.append(row)
         if progress:
-            progress(f"{nm}: {rec['status']} in {time.perf_counter() - t0:.2f} s")
-    out: dict[str, Any] = {"problem": qp.name, "ndof": qp.n, "n_defect_nodes": qp.m,
-                           "params": jsonable_params(qp.params), "reference": None, "runs": runs}
-    ref_name, others = _choose_reference(runs)
+            progress(f"{nm}: {row.status} in {time.perf_counter() - t0:.2f} s")
+    out = Comparison({"problem": qp.name, "ndof": qp.n, "n_defect_nodes": qp.m,
+                      "params": jsonable_params(qp.params), "reference": None})
+    ref_name, others = _choose_reference(rows)
     if ref_name is not None:
-        out["reference"] = _reference_record(qp, runs, sols, ref_name, others)
-    for rec in runs:
-        rec["verdict"] = _verdict(rec, out["reference"])
-    out["silent_wrong"] = [r["solver"] for r in runs if r["verdict"] == "wrong"]
+        out["reference"] = _reference_record(qp, rows, sols, ref_name, others)
+    for row in rows:
+        row.regrade()
+    out.rows = rows
+    out["runs"] = [record(r, out["reference"]) for r in rows]
+    out["silent_wrong"] = [r.solver for r in rows if r.grade in WRONG]
     return out
 
 
-def _run_one(qp: QP, nm: str, inst, ksolve) -> tuple[dict[str, Any], Solution]:
-    """Solve with one solver; its record (without diff and verdict) and its solution."""
+def _run_one(qp: QP, nm: str, inst, ksolve) -> tuple[Row, Solution]:
+    """Solve with one solver; its row (not yet graded, no difference to a reference) and its solution."""
     from dualfem.experiments.runner import run
 
     sol = run(inst, qp)
     finite = sol.residuals is not None and sol.residuals.get("finite", False)
-    rec = {
-        "solver": nm,
-        "status": str(sol.status),
-        "claimed_status": sol.info.get("claimed_status", str(sol.status)),
-        "exact": bool(getattr(inst, "exact", True)),
-        "tolerance": float(getattr(inst, "tolerance", get_solver(nm).tolerance)),
-        "iterations": sol.iterations,
-        "energy": sol.residuals["energy"] if finite else None,
-        "time_s": {**sol.time_s, "total": sum(v for k, v in sol.time_s.items() if k in ("setup", "solve"))},
-        "residuals": evaluator.kkt_residuals(sol.residuals) if finite else None,
-        "kkt_error": evaluator.kkt_error(sol.residuals) if finite else None,
-        "error_bound": None,
-        "certificate": None,
-        "n_contact": int(evaluator.contact_set(qp, sol.x).sum()) if finite else None,
-        "message": sol.message,
-        "params": jsonable_params(sol.params),
-        "diff": None,
-        "verdict": None,
-    }
+    tol = float(getattr(inst, "tolerance", get_solver(nm).tolerance))
+    row = Row(kind="compare", run_id=f"compare:{nm}", scene=qp.name, n_unknowns=qp.n, n_constraints=qp.m,
+              solver=nm, variant=nm, solver_params=jsonable_params(sol.params), tol=tol, status=str(sol.status),
+              claimed_status=sol.info.get("claimed_status", str(sol.status)), message=sol.message,
+              iterations=dict(sol.iterations), setup_s=sol.time_s.get("setup"), solve_s=sol.time_s.get("solve"),
+              total_s=sum(v for k, v in sol.time_s.items() if k in ("setup", "solve")),
+              exact=bool(getattr(inst, "exact", True)), third_party=bool(get_solver(nm).requires))
+    row.set_residuals(sol.residuals if finite else None, tol)
+    if not finite and str(sol.status) == str(Status.SOLVED):
+        row.kkt_error = float("inf")      # claims success without a finite answer: the evaluator flags it
+    row.update(energy=sol.residuals["energy"] if finite else None,
+               time_s={**sol.time_s, "total": row.total_s}, error_bound=None, certificate=None, diff=None,
+               n_contact=int(evaluator.contact_set(qp, sol.x).sum()) if finite else None)
     if finite:
         cert = sol.info.get("certificate")       # computed by the runner's certification when it got there
         if not isinstance(cert, dict):
@@ -122,24 +137,42 @@ def _run_one(qp: QP, nm: str, inst, ksolve) -> tuple[dict[str, Any], Solution]:
             except (np.linalg.LinAlgError, ValueError, RuntimeError) as exc:
                 cert = {"bound": float("nan"), "active_set": float("nan"), "value": float("nan"),
                         "error": f"{type(exc).__name__}: {exc}"}
-        rec["certificate"] = cert
-        rec["error_bound"] = 0.0 if reference.exact_zero(qp, sol.x, sol.multipliers) else cert["value"]
-    return rec, sol
+        row["certificate"] = cert
+        row["error_bound"] = 0.0 if reference.exact_zero(qp, sol.x, sol.multipliers) else cert["value"]
+    return row, sol
 
 
-def _reference_record(qp: QP, runs: list[dict], sols: dict[str, Solution], ref_name: str,
+def record(row: Row, ref: dict | None = None) -> dict[str, Any]:
+    """The JSON record of one compare run (:data:`RUN_FIELDS`), a view of its graded Row."""
+    finite = row.get("energy") is not None
+    verdict = "reference" if ref is not None and row.solver == ref["solver"] else VERDICT_OF_GRADE[row.grade]
+    return {
+        "solver": row.solver, "status": row.status, "claimed_status": row.claimed_status, "grade": row.grade,
+        "verdict": verdict, "exact": row.exact, "tolerance": row.tol, "iterations": row.iterations,
+        "energy": row.get("energy"), "time_s": row.get("time_s"),
+        "residuals": {k: row[k] for k in evaluator.RESIDUALS} if finite else None,
+        "kkt_error": row.kkt_error if finite else None, "error_bound": row.get("error_bound"),
+        "certificate": row.get("certificate"), "n_contact": row.get("n_contact"), "message": row.message,
+        "params": row.solver_params, "diff": row.get("diff"),
+    }
+
+
+def _reference_record(qp: QP, rows: list[Row], sols: dict[str, Solution], ref_name: str,
                       others: list[str]) -> dict[str, Any]:
-    """Differences of every run to the reference, and the cross-check of the reference."""
+    """Differences of every run to the reference (into its row), and the cross-check of the reference."""
     ref = sols[ref_name]
-    rrec = next(r for r in runs if r["solver"] == ref_name)
-    for rec in runs:
-        s = sols[rec["solver"]]
-        if rec["energy"] is not None:
-            rec["diff"] = evaluator.compare(qp, s.x, s.multipliers, ref.x, ref.multipliers)
+    rrow = next(r for r in rows if r.solver == ref_name)
+    for row in rows:
+        s = sols[row.solver]
+        if row.get("energy") is not None:
+            d = evaluator.compare(qp, s.x, s.multipliers, ref.x, ref.multipliers)
+            row.update(diff=d, err_x_energy=d["x_energy"], err_x_max=d["x_max"], err_multipliers=d["multipliers"],
+                       err_energy=d["energy"], contact_mismatch=d["contact_mismatch"])
+        row.update(ref_solver=ref_name, ref_kkt=rrow.kkt_error, ref_bound=rrow["error_bound"])
     out: dict[str, Any] = {
-        "solver": ref_name, "error_bound": rrec["error_bound"], "kkt_error": rrec["kkt_error"],
+        "solver": ref_name, "error_bound": rrow["error_bound"], "kkt_error": rrow.kkt_error,
         "why": (f"exact solver with the smallest certified energy-norm error bound "
-                f"({rrec['error_bound']:.1e}) among exact solvers claiming success"),
+                f"({rrow['error_bound']:.1e}) among exact solvers claiming success"),
         "cross_check": None,
     }
     # the cross-check is the best certified other exact run whose x is not bit-for-bit the
@@ -148,42 +181,37 @@ def _reference_record(qp: QP, runs: list[dict], sols: dict[str, Solution], ref_n
     identical = [nm for nm in others if np.array_equal(sols[nm].x, ref.x)]
     rest = [nm for nm in others if nm not in identical]
     if rest:
-        c = next(r for r in runs if r["solver"] == rest[0])
-        d = c["diff"]["x_energy"]
-        allowed = c["tolerance"] + (rrec["error_bound"] or 0.0) + (c["error_bound"] or 0.0)
+        c = next(r for r in rows if r.solver == rest[0])
+        d = c.err_x_energy
+        allowed = c.tol + (rrow["error_bound"] or 0.0) + (c["error_bound"] or 0.0)
         out["cross_check"] = {"solver": rest[0], "identical_to_reference": identical, "x_energy": d,
-                              "multipliers": c["diff"]["multipliers"], "allowed": allowed, "agrees": bool(d <= allowed)}
+                              "multipliers": c.err_multipliers, "allowed": allowed, "agrees": bool(d <= allowed)}
     return out
 
 
-def _choose_reference(runs: list[dict]) -> tuple[str | None, list[str]]:
+def _choose_reference(rows: list[Row]) -> tuple[str | None, list[str]]:
     """The one reference policy (:mod:`dualfem.experiments.reference`) applied to the runs made:
     trusted runs (exact, solved, KKT error within the solver's own tolerance, finite certificate)
     ranked by certificate, KKT error, time. Returns (reference, the other trusted runs in order)."""
     ranked = []
-    for r in runs:
-        ok, _ = reference.trusted(r["status"], r["exact"], r["kkt_error"], r["error_bound"], kkt_max=r["tolerance"])
+    for r in rows:
+        ok, _ = reference.trusted(r.status, r.exact, r.kkt_error, r.get("error_bound"), kkt_max=r.tol)
         if ok:
-            ranked.append((reference.rank_key(r["error_bound"], r["kkt_error"], r["time_s"]["total"]), r["solver"]))
+            ranked.append((reference.rank_key(r["error_bound"], r.kkt_error, r.total_s), r.solver))
     ranked.sort()
     names = [n for _, n in ranked]
     return (names[0] if names else None), names[1:]
 
 
-_VERDICT = {"correct": "ok", "flagged": "wrong", "silent_wrong": "wrong", "failed": "failed",
-            "unverified": "unchecked", "skipped": "skipped", "timeout": "failed", "crashed": "failed"}
-
-
-def _verdict(rec: dict, ref: dict | None) -> str:
-    """compare's word for :func:`dualfem.core.grade.grade` of a run (``reference`` for the reference)."""
-    if ref is not None and rec["solver"] == ref["solver"]:
-        return "reference"
-    if rec["status"] == str(Status.SOLVED) and rec["energy"] is None:
-        return "wrong"            # claims success without a finite answer
+def grade_record(rec: dict, ref: dict | None) -> str:
+    """The grade of a compare JSON record (``status``, ``tolerance``, ``kkt_error``, ``energy``,
+    ``diff``) against a reference record (``solver``, ``error_bound``) or None: the one policy."""
+    solved_without_answer = rec["status"] == str(Status.SOLVED) and rec.get("energy") is None
     row = Row(kind="compare", solver=rec["solver"], status=rec["status"], tol=rec["tolerance"],
-              kkt_error=rec["kkt_error"], err_x_energy=(rec["diff"] or {}).get("x_energy") if ref else None,
+              kkt_error=float("inf") if solved_without_answer else rec["kkt_error"],
+              err_x_energy=(rec.get("diff") or {}).get("x_energy") if ref else None,
               ref_bound=ref["error_bound"] if ref else None)
-    return _VERDICT[row.regrade()]
+    return row.regrade()
 
 
 # ------------------------------------------------------------------------ printing
@@ -205,7 +233,7 @@ def table(result: dict) -> str:
     else:
         lines.append("reference: none (no exact solver claimed success with finite residuals)")
     w = max([10] + [len(r["solver"]) for r in result["runs"]])
-    hdr = (f"{'solver':{w}s} {'status':15s} {'verdict':9s} {'iterations':22s} {'setup_s':>8s} {'solve_s':>8s} "
+    hdr = (f"{'solver':{w}s} {'status':15s} {'grade':12s} {'iterations':22s} {'setup_s':>8s} {'solve_s':>8s} "
            f"{'energy':>17s} {'kkt':>8s} {'bound':>8s} {'tol':>7s} {'dx_K':>8s} {'dmu':>8s} {'contact':>7s}")
     lines += [hdr, "-" * len(hdr)]
     for r in result["runs"]:
@@ -213,17 +241,18 @@ def table(result: dict) -> str:
         d = r["diff"] or {}
         en = f"{r['energy']:17.10e}" if r["energy"] is not None else f"{'-':>17s}"
         cm = "-" if not d else ("same" if d["contact_mismatch"] == 0 else f"{d['contact_mismatch']} off")
-        lines.append(f"{r['solver']:{w}s} {r['status']:15s} {r['verdict']:9s} {it[:22]:22s} "
+        lines.append(f"{r['solver']:{w}s} {r['status']:15s} {r['grade']:12s} {it[:22]:22s} "
                      f"{r['time_s'].get('setup', 0):8.3f} {r['time_s'].get('solve', 0):8.3f} {en} "
                      f"{_num8(r['kkt_error'])} {_num8(r['error_bound'])} {r['tolerance']:7.0e} "
                      f"{_num8(d.get('x_energy'))} {_num8(d.get('multipliers'))} {cm:>7s}")
     for r in result["runs"]:
-        if (r["status"] != "solved" or r["verdict"] == "wrong") and r["message"]:
+        if (r["status"] != "solved" or r["grade"] in WRONG) and r["message"]:
             msg = r["message"]
             lines.append(f"  {msg}" if msg.startswith(r["solver"]) else f"  {r['solver']}: {msg}")
     lines.append("dx_K: relative energy-norm difference to the reference; dmu: multipliers, relative to "
                  "max(|mu_ref|, |F|); bound: certified relative energy-norm error bound (- where x is infeasible); "
-                 "tol: the solver's declared tolerance; contact: contact set vs the reference")
+                 "tol: the solver's declared tolerance; contact: contact set vs the reference; grade: "
+                 "dualfem.core.grade (correct, failed, flagged, silent_wrong, unverified, skipped)")
     if result["silent_wrong"]:
         lines.append("SILENT WRONG ANSWER: " + ", ".join(result["silent_wrong"]) +
                      " claim(s) success but are wrong beyond their declared tolerance")

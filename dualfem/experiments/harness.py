@@ -9,7 +9,9 @@ sweep) and report their peak resident memory with every row (``peak_rss_mb``).
 
 The child dispatches on ``task["kind"]`` to the handlers in :data:`HANDLERS` (``bench`` runs,
 references and floors; ``stress`` runs). Executors: the calling thread (``jobs = 1``),
-joblib/loky (``jobs > 1``) or a dask.distributed scheduler; only the parent writes files.
+joblib/loky (``jobs > 1``) or a dask.distributed scheduler; only the parent writes files. The one
+scheduler that feeds them (task dependencies, gates, the results store) is
+:func:`dualfem.experiments.bench.run_tasks`.
 """
 from __future__ import annotations
 
@@ -147,18 +149,18 @@ def _child_main() -> None:  # pragma: no cover - runs in the child process
 
 
 def error_row(task: dict, message: str, status: str = "error") -> dict:
-    """The row of a task that produced no result (``status`` error, time_limit, crashed)."""
+    """The row of a task that produced no result (``status`` error, time_limit, crashed, skipped)."""
     from dualfem.experiments.machine import utc_now
     from dualfem.experiments.row import Row
 
     row = Row(run_id=task.get("run_id", ""), kind=task.get("kind", "run"), status=status, claimed_status=None,
               message=message, started_utc=utc_now())
     for k in ("spec", "scene", "scene_key", "label", "solver", "variant", "tier", "tol", "repeats", "time_limit",
-              "cold_setup", "axis", "coords"):
+              "cold_setup", "axis", "coords", "scene_name"):
         if task.get(k) is not None:
             row[k] = task[k]
     row.solver_params = dict(task.get("params") or {})
-    row.grade = {"time_limit": "timeout", "crashed": "crashed"}.get(status, "failed")
+    row.grade = {"time_limit": "timeout", "crashed": "crashed", "skipped": "skipped"}.get(status, "failed")
     return row.to_dict()
 
 

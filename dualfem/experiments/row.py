@@ -27,7 +27,7 @@ class Row:
     run_id: str = ""
     kind: str = "run"
     spec: str | None = None
-    scene: str | dict | None = None          # a scene name (bench) or its parameters (stress)
+    scene: str | dict | None = None          # a scene name (bench, compare) or its parameters (stress)
     scene_key: str | None = None
     label: str | None = None
     n_unknowns: int | None = None
@@ -140,7 +140,8 @@ class Row:
 
     @classmethod
     def from_dict(cls, d: dict) -> Row:
-        """A row from a dict (e.g. a CSV or JSON record); JSON text of dict fields is parsed."""
+        """A row from a dict (e.g. a CSV or JSON record); JSON text of dict fields, of ``scene`` and of
+        extra keys (``{...}``, ``[...]``) is parsed."""
         row = cls()
         for k, v in d.items():
             if k in _DICT_FIELDS and isinstance(v, str):
@@ -148,6 +149,11 @@ class Row:
                     v = json.loads(v) if v else {}
                 except ValueError:
                     v = {"text": v}
+            elif (k == "scene" or k not in _NAMES) and isinstance(v, str) and v[:1] in ("{", "["):
+                try:        # a dict or list (a stress scene's parameters, an extra) written to CSV as JSON text
+                    v = json.loads(v)
+                except ValueError:
+                    pass
             row[k] = v
         return row
 

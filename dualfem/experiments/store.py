@@ -21,10 +21,11 @@ from dualfem.core.errors import InputError
 from dualfem.core.io import atomic_write, atomic_write_text
 from dualfem.experiments.row import COLUMNS, Row
 
-#: statuses of a run that are final (a resumed sweep does not redo them); ``skipped`` rows are
-#: cheap and redone, so that a solver registered later gets its runs.
+#: statuses of a run that are final (a resumed sweep does not redo them, ``--retry-failed`` redoes
+#: those other than solved/inaccurate); ``skipped`` rows are cheap and redone, so that a solver
+#: registered later gets its runs and a gate (:func:`dualfem.experiments.bench.run_tasks`) decides again.
 FINAL_STATUSES = {"solved", "inaccurate", "max_iter", "time_limit", "stagnation", "numerical_error",
-                  "infeasible", "error"}
+                  "infeasible", "error", "crashed"}
 
 
 class ResultStore:

@@ -1,29 +1,36 @@
 """Stress runs: every registered solver under extreme delta, r, units, load magnitude, nu and N.
 
-The grid is defined in :mod:`dualfem.experiments.stress_grid`. Each run executes in a guarded
+The grid is defined in :mod:`dualfem.experiments.stress_grid` (around the paper's f2, or any
+scene of any registered problem: the axes that apply to it). The runs go through the one sweep
+engine of ``dualfem bench`` (:func:`dualfem.experiments.bench.run_tasks`): each run in a guarded
 worker process of the shared harness (:mod:`dualfem.experiments.harness`: a hung or crashing
-solver is killed and reported, never hangs the grid), is measured against the reference chosen
-by the one reference policy (:mod:`dualfem.experiments.reference`), and graded by
-:func:`dualfem.core.grade.grade` with the tolerance the solver instance declares. Each worker
-caches QPs and references; runs of one scene go to one worker. On the N axis a run is attempted
-only when the previous N of the same solver finished and the predicted time and memory fit.
+solver is killed and reported, never hangs the grid), its row written to the one results store
+(:class:`dualfem.experiments.store.ResultStore`: ``rows/<run_id>.json``, ``results.csv``). Stress's
+own needs are features of that engine: the N axis is a chain of task dependencies (``after``)
+with a gate (:func:`gate`): a run is attempted only when the previous N of the same solver
+finished and the predicted time and memory fit. Each run is measured against the reference
+chosen by the one reference policy (:mod:`dualfem.experiments.reference`; for the units and load
+axes the base scene's reference mapped exactly) and graded by :func:`dualfem.core.grade.grade`
+with the tolerance the solver instance declares. Each worker caches QPs and references.
 
-Results: ``DIR/runs.jsonl``, one complete :class:`~dualfem.experiments.row.Row` (JSON) per
-finished run, appended (resumable with ``resume=True``); ``DIR/meta.json`` written atomically.
+Results: the store's files plus ``DIR/meta.json`` (the grid's description for the report).
+Folders written before the one engine (``runs.jsonl``, one JSON record per line) stay readable
+(:func:`load_results`) and are imported into the store when a grid is resumed in them.
 """
 from __future__ import annotations
 
 import json
-import select
+import sys
 import time
 from collections import OrderedDict
-from dataclasses import asdict
+from collections.abc import Callable
+from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from dualfem.experiments.harness import GuardedWorker, rss_mb
+from dualfem.core.errors import InputError
 from dualfem.experiments.machine import mem_available_gb
 from dualfem.experiments.row import Row
 from dualfem.experiments.stress_grid import (  # noqa: F401  (re-exported: the grid's public names)
@@ -63,10 +70,10 @@ class _Cache:
         self.refs: OrderedDict[tuple, Any] = OrderedDict()
         self.size = size
 
-    def qp(self, scene: dict):
+    def qp(self, scene: dict, scene_name: str = "f2"):
         from dualfem.core.scene import load_scene
 
-        k = json.dumps(scene, sort_keys=True, default=str)
+        k = json.dumps([scene_name, scene], sort_keys=True, default=str)
         if k not in self.qps and int(scene.get("N", 32)) >= LARGE_N:
             # a large scene: free every cached QP, reference and factorization first
             import gc
@@ -79,7 +86,7 @@ class _Cache:
             gc.collect()
         if k not in self.qps:
             t0 = time.perf_counter()
-            qp = load_scene("f2", dict(scene)).build()
+            qp = load_scene(scene_name, dict(scene)).build()
             qp.params["_build_s"] = time.perf_counter() - t0
             self.qps[k] = qp
             while len(self.qps) > self.size:
@@ -87,13 +94,13 @@ class _Cache:
         self.qps.move_to_end(k)
         return self.qps[k]
 
-    def ref(self, scene: dict, exclude: tuple[str, ...]):
+    def ref(self, scene: dict, exclude: tuple[str, ...], scene_name: str = "f2"):
         """(reference, None) of ``scene`` not computed by a solver in ``exclude``, or (None, reason)."""
         from dualfem.experiments import reference
 
-        k = (json.dumps(scene, sort_keys=True, default=str), exclude)
+        k = (json.dumps([scene_name, scene], sort_keys=True, default=str), exclude)
         if k not in self.refs:
-            ref, tried = reference.compute(self.qp(scene), exclude=exclude, kkt_max=REF_KKT)
+            ref, tried = reference.compute(self.qp(scene, scene_name), exclude=exclude, kkt_max=REF_KKT)
             self.refs[k] = (ref, None) if ref is not None else (None, "no trusted reference: " + "; ".join(tried))
             while len(self.refs) > 2 * self.size:
                 self.refs.popitem(last=False)
@@ -102,14 +109,14 @@ class _Cache:
 
 def _reference(cache: _Cache, task: Task, exclude: tuple[str, ...]):
     if task.ref.get("mode") == "transform":
-        base, why = cache.ref(task.ref["base"], exclude)
+        base, why = cache.ref(task.ref["base"], exclude, task.scene_name)
         if base is None:
             return None, why
         from dataclasses import replace
 
         return replace(base, x=base.x * task.ref["x"], multipliers=base.multipliers * task.ref["mu"],
                        solver=base.solver + " (base scene, mapped exactly)"), None
-    return cache.ref(task.scene, exclude)
+    return cache.ref(task.scene, exclude, task.scene_name)
 
 
 # ---------------------------------------------------------------------------- one run
@@ -125,6 +132,8 @@ def main_iterations(it: dict) -> float | None:
 
 def _stiffness_ratio(qp) -> float | None:
     """max diagonal of the delta-dependent interface part of K over max diagonal of the elastic part."""
+    if qp.K_fixed is None or qp.K_fixed is qp.K:
+        return None
     dk = (qp.K - qp.K_fixed).diagonal()
     kf = qp.K_fixed.diagonal()
     if not dk.any() or not kf.any():
@@ -133,8 +142,10 @@ def _stiffness_ratio(qp) -> float | None:
 
 
 def _row(task: Task) -> Row:
-    return Row(run_id=task.id, kind="stress", axis=task.axis, coords=dict(task.coords), solver=task.solver,
-               solver_params=dict(task.params), scene=task.scene)
+    row = Row(run_id=task.id, kind="stress", spec=GRID_NAME, axis=task.axis, coords=dict(task.coords),
+              solver=task.solver, variant=task.solver, solver_params=dict(task.params), scene=task.scene)
+    row["scene_name"] = task.scene_name
+    return row
 
 
 def execute(task: Task, cache: _Cache) -> Row:
@@ -147,7 +158,7 @@ def execute(task: Task, cache: _Cache) -> Row:
         params["time_limit"] = task.time_limit
     solver = cls(**params)
     row = _row(task)
-    qp = cache.qp(task.scene)
+    qp = cache.qp(task.scene, task.scene_name)
     row.update(tol=float(solver.tolerance), exact=bool(solver.exact), third_party=bool(cls.requires),
                n_unknowns=qp.n, n_constraints=qp.m, assembly_s=qp.params.get("_build_s"), time_limit=task.time_limit,
                stiffness_ratio=_stiffness_ratio(qp))
@@ -187,7 +198,7 @@ def execute_task(task: dict, tick) -> tuple[dict, None]:
     global _CACHE
     if _CACHE is None:
         _CACHE = _Cache()
-    t = Task(**{k: v for k, v in task.items() if k not in ("kind", "run_id", "keep_cache", "hard_limit")})
+    t = task_of(task)
     tick("run", task["hard_limit"])
     try:
         return execute(t, _CACHE).to_dict(), None
@@ -197,7 +208,17 @@ def execute_task(task: dict, tick) -> tuple[dict, None]:
         return row.to_dict(), None
 
 
+def task_of(task: dict) -> Task:
+    """The :class:`Task` of an engine task dict (:func:`as_engine_task`)."""
+    names = {f.name for f in fields(Task)}
+    return Task(**{k: v for k, v in task.items() if k in names})
+
+
 # ---------------------------------------------------------------------------- scheduling
+#: the name a stress grid claims its results folder with (a folder of a bench spec needs --force)
+GRID_NAME = "stress"
+
+
 def hard_limit(task: Task) -> float:
     """Wall-clock limit after which the harness kills a run (solver + assembly + reference)."""
     n = task.scene.get("N", 32)
@@ -205,24 +226,28 @@ def hard_limit(task: Task) -> float:
     return 2.0 * task.time_limit + allowance
 
 
-def _ref_budget(t: Task) -> float:
-    return max(10 * t.time_limit, 300.0)
+def _ref_budget(time_limit: float) -> float:
+    return max(10 * time_limit, 300.0)
 
 
-def _skipped(t: Task, reason: str) -> Row:
-    row = _row(t)
-    row.update(status="skipped", grade="skipped", message=reason, skip_budget=True)
-    return row
+def as_engine_task(t: Task) -> dict:
+    """The task dict the engine (:func:`dualfem.experiments.bench.run_tasks`) runs: kind ``stress``,
+    its dependency ``after`` (the previous N of the same solver), the harness's hard limit."""
+    return {**asdict(t), "kind": "stress", "run_id": t.id, "keep_cache": True, "hard_limit": hard_limit(t)}
 
 
-def _gate(t: Task, results: dict[str, Row], idle_rss_mb: float) -> str | None:
-    """None if ``t`` may run now, 'wait' if its predecessor is unfinished, else a skip reason."""
-    if t.after is None:
+def gate(task: dict, finished: dict[str, dict]) -> str | None:
+    """The N-axis gate of the engine: None if ``task`` may run, else why it is not attempted.
+
+    A run at N is attempted only when the previous N of the same solver (``after``) finished, was
+    not skipped, crashed, killed or out of memory, and its time x :data:`GROWTH` fits the time
+    limit and its peak memory x :data:`MEM_GROWTH` fits 80% of the memory available now. When
+    the previous reference took too long to repeat at this N, the run goes without a reference.
+    """
+    if not task.get("after"):
         return None
-    prev = results.get(t.after)
-    if prev is None:
-        return "wait"
-    pn = prev.get("scene", {}).get("N")
+    prev = Row.from_dict(finished[task["after"]])
+    pn = prev.scene.get("N") if isinstance(prev.scene, dict) else None
     if prev.grade == "skipped" and not prev.get("skip_budget"):
         return f"not attempted: the solver skipped N={pn} itself ({(prev.message or '')[:100]})"
     if prev.grade == "crashed" or "out of memory" in (prev.message or ""):
@@ -230,141 +255,124 @@ def _gate(t: Task, results: dict[str, Row], idle_rss_mb: float) -> str | None:
     if prev.grade == "timeout" or prev.get("skip_budget"):
         return f"not attempted: N={pn} already exceeded the time or memory budget"
     mem = (prev.peak_rss_mb or 0.0) / 1e3 * MEM_GROWTH
-    avail = mem_available_gb() + idle_rss_mb / 1e3    # our own idle workers' memory is ours to reuse
+    avail = mem_available_gb()
     if mem > 0.8 * avail:
         return (f"not attempted: predicted peak memory {mem:.1f} GB (x{MEM_GROWTH:g} per doubling of N from "
                 f"{(prev.peak_rss_mb or 0) / 1e3:.1f} GB at N={pn}) exceeds 80% of the {avail:.1f} GB "
                 f"available on this machine now")
     wall = (prev.setup_s or 0) + (prev.solve_s or 0)
-    if prev.status == "time_limit" or wall * GROWTH > t.time_limit:
+    tl = float(task["time_limit"])
+    if prev.status == "time_limit" or wall * GROWTH > tl:
         return (f"not attempted: predicted {wall * GROWTH:.0f} s (x{GROWTH:g} per doubling of N from "
-                f"{wall:.1f} s at N={pn}) exceeds the {t.time_limit:g} s time limit")
+                f"{wall:.1f} s at N={pn}) exceeds the {tl:g} s time limit")
+    ref_t = prev.get("ref_time_s")
+    if isinstance(ref_t, (int, float)) and ref_t * GROWTH > _ref_budget(tl):
+        task["ref_ok"] = False
     return None
 
 
-class _Scheduler:
-    """Feeds tasks to guarded workers (runs of one scene to one worker), honouring N-axis gates."""
-
-    def __init__(self, tasks: list[Task], jobs: int, finish, results: dict[str, Row]) -> None:
-        self.workers = [GuardedWorker() for _ in range(jobs)]
-        self.queues: list[list[Task]] = [[] for _ in self.workers]
-        for t in tasks:
-            self.queues[int(_sid(t.scene), 16) % jobs].append(t)
-        self.finish = finish
-        self.results = results           # every finished row (finish() adds them): the N-axis gates
-        self.ref_time: dict[int, float] = {}
-
-    def _idle_rss(self) -> float:
-        return sum(rss_mb(w.pid) for w in self.workers if w.task is None and w.pid)
-
-    def _feed(self, i: int, w: GuardedWorker) -> bool:
-        q, j, progressed = self.queues[i], 0, False
-        while w.task is None and j < len(q):
-            t = q[j]
-            g = _gate(t, self.results, self._idle_rss())
-            if g == "wait":
-                j += 1
-                continue
-            q.pop(j)
-            progressed = True
-            if g is not None:
-                self.finish(_skipped(t, g))
-                continue
-            prev_n = t.scene.get("N", 32) // 2
-            if prev_n in self.ref_time and self.ref_time[prev_n] * GROWTH > _ref_budget(t):
-                t.ref_ok = False
-            w.submit({"kind": "stress", "run_id": t.id, "keep_cache": True, "hard_limit": hard_limit(t), **asdict(t)})
-        return progressed
-
-    def run(self) -> None:
-        try:
-            while any(self.queues) or any(w.task for w in self.workers):
-                progressed = any([self._feed(i, w) for i, w in enumerate(self.workers)])
-                busy = [w for w in self.workers if w.task is not None]
-                if not busy:
-                    if any(self.queues) and not progressed:   # every remaining task waits on one that
-                        for q in self.queues:                 # can no longer run: never spin forever
-                            while q:
-                                self.finish(_skipped(q.pop(0), "dependency never ran"))
-                    continue
-                select.select(busy, [], [], 1.0)
-                for w in busy:
-                    res = w.poll(0.0)
-                    if res is not None:
-                        row = Row.from_dict(res[0])
-                        if row.axis == "N" and row.get("ref_time_s"):
-                            self.ref_time[row["scene"]["N"]] = row["ref_time_s"]
-                        self.finish(row)
-        finally:
-            for w in self.workers:
-                w.close()
+def grid_text(tasks: list[Task], meta: dict | None = None) -> str:
+    """The grid's description written as the folder's ``spec.toml`` (its name claims the folder)."""
+    m = meta or {}
+    lines = [f'name = "{GRID_NAME}"', 'kind = "stress grid (dualfem stress)"',
+             f"quick = {'true' if m.get('quick') else 'false'}",
+             f"scene = {json.dumps(str(m.get('scene') or (tasks[0].scene_name if tasks else 'f2')))}",
+             f"axes = {json.dumps(sorted({t.axis for t in tasks}))}",
+             f"solvers = {json.dumps(sorted({t.solver for t in tasks}))}",
+             f"runs = {len(tasks)}"]
+    return "\n".join(lines) + "\n"
 
 
-def run_grid(tasks: list[Task], out: Path, *, jobs: int = 1, resume: bool = False,
-             progress=None, meta: dict | None = None) -> list[Row]:
-    """Execute ``tasks``; append rows to ``out/runs.jsonl``; return the rows of ``tasks``."""
-    from dualfem.experiments.store import lock_folder
+def run_grid(tasks: list[Task], out: str | Path, *, jobs: int = 1, resume: bool = False, force: bool = False,
+             retry_failed: bool = False, dask: str | None = None,
+             progress: Callable[[int, int, Row], None] | None = None, meta: dict | None = None,
+             command: str = "") -> list[Row]:
+    """Run (or continue) ``tasks`` into the results folder ``out``; return the rows of ``tasks``.
 
-    out.mkdir(parents=True, exist_ok=True)
-    with lock_folder(out):
-        return _run_grid(tasks, out, jobs, resume, progress, meta)
+    The one engine's meanings: ``resume`` continues a folder that holds results (finished rows
+    are kept and not redone; ``retry_failed`` redoes those whose status is not solved/inaccurate);
+    ``force`` writes into a folder that holds another spec's results (nothing in it is dropped);
+    without either, a folder with results is refused. Rows of tasks not in ``tasks`` are always kept
+    (and listed in ``results.csv``). ``jobs``: parallel guarded workers (joblib), ``dask``: a scheduler.
+    """
+    from dualfem.experiments.bench import log_invocation, open_store, run_tasks
+    from dualfem.experiments.machine import utc_now
+    from dualfem.experiments.store import FINAL_STATUSES
 
+    out = Path(out)
+    held = holds_results(out)
+    if held and not (resume or force):       # refused before anything is written
+        raise InputError(f"--out {str(out)!r} already holds results ({held}): pass --resume to continue it "
+                         f"(finished runs are kept), or choose another --out")
+    store = open_store(out, GRID_NAME, grid_text(tasks, meta), force=force,
+                       warn=lambda msg: print(f"dualfem stress: warning: {msg}", file=sys.stderr, flush=True))
+    try:
+        legacy = (out / "runs.jsonl").is_file()
+        if legacy:
+            _import_legacy(store, out / "runs.jsonl")
+        log_invocation(store, {"name": GRID_NAME, "command": command or f"dualfem stress --out {out}",
+                               "jobs": jobs, "dask": dask, "started_utc": utc_now()})
 
-def _run_grid(tasks: list[Task], out: Path, jobs: int, resume: bool, progress, meta: dict | None) -> list[Row]:
-    runs_path = out / "runs.jsonl"
-    kept: dict[str, Row] = _kept_rows(runs_path, tasks) if resume else {}
-    if not resume and runs_path.exists():     # never deleted: kept beside the new grid
-        runs_path.replace(out / f"runs.{time.strftime('%Y%m%dT%H%M%S')}.jsonl.old")
-    ids = {t.id for t in tasks}
-    done = {k: v for k, v in kept.items() if k in ids}
-    todo = [t for t in tasks if t.id not in done]
-    _write_meta(out, {**(meta or {}), "complete": False, "n_tasks": len(tasks)})
-    total, finished = len(todo), 0
-    results: dict[str, Row] = dict(done)
-    with open(runs_path, "a", encoding="utf-8") as fh:
-        def finish(row: Row) -> None:
+        def done(rid: str) -> bool:
+            r = store.rows.get(rid)
+            if r is None or r.get("status") not in FINAL_STATUSES:
+                return False
+            return not (retry_failed and r.get("status") not in ("solved", "inaccurate"))
+
+        todo = [as_engine_task(t) for t in tasks if not done(t.id)]
+        _write_meta(out, {**(meta or {}), "complete": False, "n_tasks": len(tasks)})
+        finished = 0
+
+        def on_row(row: dict, payload: Any) -> None:
             nonlocal finished
             finished += 1
-            results[row.run_id] = row
-            fh.write(json.dumps(row.to_dict()) + "\n")
-            fh.flush()
             if progress:
-                progress(finished, total, row)
+                progress(finished, len(todo), Row.from_dict(row))
 
-        _Scheduler(todo, max(1, min(jobs, len(todo) or 1)), finish, results).run()
-    ordered = [results[t.id] for t in tasks if t.id in results]
-    _write_meta(out, {**(meta or {}), "complete": len(ordered) == len(tasks), "n_tasks": len(tasks)})
-    return ordered
+        run_tasks(todo, store, jobs=max(1, min(jobs, len(todo) or 1)), dask=dask, gate=gate, on_row=on_row,
+                  order=lambda t: _sid(t["scene"]))
+        store.write_csv()
+        ordered = [Row.from_dict(store.rows[t.id]) for t in tasks if t.id in store.rows]
+        _write_meta(out, {**(meta or {}), "complete": len(ordered) == len(tasks), "n_tasks": len(tasks)})
+        return ordered
+    finally:
+        store.close()
 
 
-def _kept_rows(runs_path: Path, tasks: list[Task]) -> dict[str, Row]:
-    """Rows of a resumed grid worth keeping (rewritten atomically): complete rows of axes/solvers not
-    in this run, and this run's own finished rows except its scheduling decisions (re-made)."""
-    if not runs_path.exists():
-        return {}
-    kept: dict[str, Row] = {}
-    for line in runs_path.read_text(encoding="utf-8").splitlines():
+def holds_results(out: Path) -> str | None:
+    """Which results file a folder holds (results.csv, rows/, runs.jsonl), or None."""
+    if not out.is_dir():
+        return None
+    for name in ("results.csv", "runs.jsonl"):
+        if (out / name).is_file():
+            return name
+    if (out / "rows").is_dir() and any((out / "rows").glob("[!.]*.json")):
+        return "rows/"
+    return None
+
+
+def _import_legacy(store, path: Path) -> int:
+    """Rows of a folder written before the one engine (``runs.jsonl``) into the store (the file is
+    left as it is); a line cut by a kill is skipped, its run redone. Returns the rows imported."""
+    n = bad = 0
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if not line.strip():
+            continue
         try:
             row = row_from_record(json.loads(line))
         except (ValueError, TypeError, AttributeError):
-            continue  # a line cut by a kill: rerun that task
-        kept[row.run_id] = row
-    ids_now = {t.id for t in tasks}
-    axes_now, solvers_now = {t.axis for t in tasks}, {t.solver for t in tasks}
-    kept = {k: r for k, r in kept.items()
-            if (k in ids_now and not r.get("skip_budget"))
-            or (k not in ids_now and (r.axis not in axes_now or r.solver not in solvers_now))}
-    _atomic_lines(runs_path, list(kept.values()))
-    return kept
+            bad += 1
+            continue
+        if row.run_id not in store.rows:
+            row.spec = row.spec or GRID_NAME
+            store.add(row)
+            n += 1
+    if bad:
+        store.warn(f"{bad} unreadable line(s) of {str(path)!r} not imported; their runs are redone")
+    return n
 
 
 # ------------------------------------------------------------------------------ storage
-def _atomic_lines(path: Path, rows: list[Row]) -> None:
-    from dualfem.core.io import atomic_write_text
-
-    atomic_write_text(path, "".join(json.dumps(r.to_dict()) + "\n" for r in rows))
-
-
 def _write_meta(out: Path, meta: dict) -> None:
     from dualfem.core.io import atomic_write_text, jsonable
 
@@ -404,14 +412,33 @@ def row_from_record(rec: dict) -> Row:
 
 
 def load_results(path: str | Path) -> tuple[dict, list[Row]]:
-    """(meta, rows) from a results directory (or its ``runs.jsonl``); InputError if unusable."""
-    from dualfem.core.errors import InputError
+    """(meta, rows) from a stress results folder: its ``results.csv`` (the one store), or, for a folder
+    written before the one engine, its ``runs.jsonl`` (also a path to either file); InputError if unusable."""
+    from dualfem.experiments.store import read_results
 
     p = Path(path)
-    runs, metap = (p / "runs.jsonl", p / "meta.json") if p.is_dir() else (p, p.with_name("meta.json"))
-    if not runs.is_file():
-        raise InputError(f"RESULTS must be a stress results directory (with runs.jsonl) or a runs.jsonl "
-                         f"file; {str(p)!r} has none")
+    csv_path = p / "results.csv" if p.is_dir() else (p if p.suffix == ".csv" else None)
+    runs = p / "runs.jsonl" if p.is_dir() else (p if p.suffix != ".csv" else None)
+    folder = p if p.is_dir() else p.parent
+    if csv_path is not None and csv_path.is_file():
+        # the stress rows (a folder shared with a bench sweep through --force holds others too)
+        rows = [Row.from_dict(r) for r in read_results(csv_path) if r.get("kind") == "stress"]
+    elif runs is not None and runs.is_file():
+        rows = _read_jsonl(runs)
+    else:
+        raise InputError(f"RESULTS must be a stress results directory (with results.csv, or runs.jsonl written "
+                         f"before the one engine) or one of those files; {str(p)!r} has none")
+    meta = {}
+    metap = folder / "meta.json"
+    if metap.is_file():
+        try:
+            meta = json.loads(metap.read_text(encoding="utf-8"))
+        except json.JSONDecodeError:
+            raise InputError(f"{str(metap)!r} is not valid JSON") from None
+    return meta, rows
+
+
+def _read_jsonl(runs: Path) -> list[Row]:
     rows = []
     for i, line in enumerate(runs.read_text(encoding="utf-8").splitlines(), 1):
         if not line.strip():
@@ -422,11 +449,4 @@ def load_results(path: str | Path) -> tuple[dict, list[Row]]:
             raise InputError(f"{str(runs)!r} line {i} is not valid JSON (a cut run? rerun with --resume)") from None
         except (ValueError, TypeError, AttributeError):
             raise InputError(f"{str(runs)!r} line {i} is not a stress run record") from None
-    meta = {}
-    if metap.is_file():
-        try:
-            meta = json.loads(metap.read_text(encoding="utf-8"))
-        except json.JSONDecodeError:
-            raise InputError(f"{str(metap)!r} is not valid JSON") from None
-    return meta, rows
-
+    return rows

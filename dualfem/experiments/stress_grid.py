@@ -1,5 +1,11 @@
 """The stress grid: which runs ``dualfem stress`` makes (axes delta, r, units, load, nu, N).
 
+The base scene is the paper's f2 (:data:`BASE`) or any scene of any registered problem (a
+library scene, a preset or a TOML file: :func:`scene_base`); an axis is made only where it
+applies to the scene's problem (:func:`applicable_axes`: delta and r (a map over delta x r) need
+the scene key ``delta``, load ``load_scale``, nu ``nu``, the N axis ``N``, the units axis a unit
+map of the problem, :data:`UNIT_MAPS`).
+
 For the ``units`` and ``load`` axes the reference does not come from solving the scaled QP at
 all: it is the reference of the base scene mapped by the exact physics (a change of units maps
 x by the length factor and the nodal forces by stress x length; the QP is positively
@@ -12,6 +18,7 @@ import hashlib
 import json
 from collections import OrderedDict
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -61,6 +68,7 @@ class Task:
     time_limit: float
     after: str | None = None          # id of the task that must finish first (N axis)
     ref_ok: bool = True                # False: do not compute a reference (beyond budget)
+    scene_name: str = "f2"             # what ``scene`` (all of its parameters) is given to: load_scene(name, scene)
 
     def key(self) -> str:
         """Stable identity of the run (used to resume)."""
@@ -93,23 +101,36 @@ def _scaled_defects(tables, length: float, stress: float) -> list[dict]:
     return out
 
 
-def scene_in_units(base: dict, stress: float, length: float) -> dict:
+def scene_in_units(base: dict, stress: float, length: float, problem: str = "thin_defect") -> dict:
     """The same physics as ``base`` (paper units) in a unit system; see :data:`UNITS`.
 
-    E and tractions are stresses (x ``stress``); width, height, the defect, the points of every
-    ``[[defects]]`` table, ``mesh_size`` and ``tip_size`` are lengths (x ``length``); delta (the
-    scene's and each defect's own) is a length per stress (the interface pressure is [u]/delta).
+    thin_defect: E and tractions are stresses (x ``stress``); width, height, the defect, the points
+    of every ``[[defects]]`` table, ``mesh_size`` and ``tip_size`` are lengths (x ``length``); delta
+    (the scene's and each defect's own) is a length per stress (the interface pressure is [u]/delta).
     A load expression in ``x``, ``y`` is rewritten so that it is evaluated at the unscaled
     coordinates (the paper's f1/f2/f3 already scale with ``width``); a Python function is refused.
+    signorini: E is a stress; width, height, the indentation and the obstacle's gap are lengths
+    (the gap expression in ``x`` becomes ``length * g(x / length)``). In both, x maps by ``length``
+    and the nodal forces mu by ``stress * length``.
     """
     from dualfem.core.errors import InputError
     from dualfem.core.registry import get_problem
 
-    d = {**get_problem("thin_defect").defaults, **base}
+    if problem not in UNIT_MAPS:
+        raise InputError(f"the units axis has no unit map for problem {problem!r} (it has: {', '.join(UNIT_MAPS)})")
+    d = {**get_problem(problem).defaults, **base}
     out = dict(base)
     out["E"] = float(d["E"]) * stress
     out["width"] = float(d["width"]) * length
     out["height"] = float(d["height"]) * length
+    if problem == "signorini":
+        out["indent"] = float(d["indent"]) * length
+        g = d["obstacle"]
+        if callable(g):
+            raise InputError("scene_in_units: an obstacle given as a Python function cannot be converted to "
+                             "other units")
+        out["obstacle"] = f"{float(length)!r} * ({_scaled_expression(str(g).strip(), length)})" if length != 1 else g
+        return out
     out["load_scale"] = float(d["load_scale"]) * stress
     out["delta"] = float(d["delta"]) * length / stress
     for k in ("mesh_size", "tip_size"):
@@ -128,21 +149,53 @@ def scene_in_units(base: dict, stress: float, length: float) -> dict:
     return out
 
 
+#: problems whose scenes the units axis can convert (:func:`scene_in_units`)
+UNIT_MAPS = ("thin_defect", "signorini")
+
+
+def applicable_axes(problem: str, params: dict) -> tuple[str, ...]:
+    """The axes of :data:`AXES` that apply to a scene of ``problem`` with parameters ``params``
+    (over the problem's defaults)."""
+    from dualfem.core.registry import get_problem
+
+    params = {**get_problem(problem).defaults, **params}
+    need = {"delta": "delta", "r": "delta", "load": "load_scale", "nu": "nu", "N": "N"}   # r: a (delta, r) map
+    out = []
+    for ax in AXES:
+        if ax in need and need[ax] not in params:
+            continue
+        if ax == "units" and problem not in UNIT_MAPS:
+            continue
+        out.append(ax)
+    return tuple(out)
+
+
+def scene_problem(spec: str) -> str:
+    """The problem name of a scene (a library name, a preset or a TOML file); InputError otherwise."""
+    from dualfem.core.scene import load_scene
+
+    return load_scene(spec).name
+
+
 def scene_base(spec: str) -> dict:
-    """Every parameter of a thin_defect scene (a library name, a preset or a TOML file) as plain
-    JSON-able values, to replace :data:`BASE` in :func:`build_grid`; InputError otherwise."""
+    """Every parameter of a scene of any registered problem (a library name, a preset or a TOML
+    file) as plain JSON-able values, to replace :data:`BASE` in :func:`build_grid`; InputError
+    otherwise (e.g. a QP file, or a load given as a Python function)."""
     from dualfem.core.errors import InputError
+    from dualfem.core.io import jsonable
     from dualfem.core.scene import load_scene
 
     prob = load_scene(spec)
-    if prob.name != "thin_defect":
-        raise InputError(f"--scene {spec!r} is a {prob.name} scene; the stress grid needs a thin_defect scene")
+    if prob.name == "qp_file":
+        raise InputError(f"--scene {spec!r} is a QP file: the stress grid varies scene parameters, a QP file has none")
     p = {k: v for k, v in prob.params.items() if not callable(v)}
     if len(p) < len(prob.params):
         raise InputError(f"--scene {spec!r}: a load given as a Python function cannot be converted to other units")
-    p["defect"] = np.asarray(p["defect"], dtype=float).tolist()
-    p["defects"] = [dict(t) for t in p.get("defects") or []]
-    return p
+    if "defect" in p:
+        p["defect"] = np.asarray(p["defect"], dtype=float).tolist()
+    if prob.name == "thin_defect":
+        p["defects"] = [dict(t) for t in p.get("defects") or []]
+    return jsonable(p)
 
 
 def _at_n(base: dict, n: int) -> dict:
@@ -159,14 +212,34 @@ def r_set_by_user(params: dict) -> bool:
     return params.get("r_rule", "fixed") in ("fixed", "scaled")
 
 
-def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = AXES,
-               time_limit: float | None = None, max_n: int | None = None, scene: dict | None = None) -> list[Task]:
-    """All tasks of the stress grid for ``solver_names`` (see the module docstring); ``scene``: the
-    base scene's parameters (:func:`scene_base`) instead of the paper's f2 (:data:`BASE`): its own
-    mesh and load on every axis but N (there: N, and for a gmsh scene mesh_size = min(width, height) / N)."""
+def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] | None = None,
+               time_limit: float | None = None, max_n: int | None = None, scene: dict | None = None,
+               scene_name: str | None = None) -> list[Task]:
+    """All tasks of the stress grid for ``solver_names`` (see the module docstring).
+
+    ``scene_name``: the base scene (a library scene, a preset or a TOML file of any problem), its
+    parameters ``scene`` (default :func:`scene_base` of it) instead of the paper's f2
+    (:data:`BASE`): its own mesh and load on every axis but N (there: N, and for a gmsh scene
+    mesh_size = min(width, height) / N). ``axes``: default every axis that applies to the scene's
+    problem; an axis asked for that does not apply is an InputError.
+    """
+    from dualfem.core.errors import InputError
     from dualfem.core.registry import solvers
 
     reg = solvers()
+    if scene is None and scene_name is not None:
+        scene = scene_base(scene_name)
+    name = scene_name or "f2"
+    if Path(name).suffix == ".toml" and Path(name).is_file():
+        name = str(Path(name).resolve())      # a scene file: found again by a resume from another folder
+    problem = scene_problem(name) if scene_name is not None else "thin_defect"
+    fits = applicable_axes(problem, scene if scene is not None else BASE)
+    if axes is None:
+        axes = fits
+    bad = [a for a in axes if a not in fits]
+    if bad:
+        raise InputError(f"--axes: axis {bad[0]!r} does not apply to a {problem} scene ({name}); "
+                         f"its axes: {', '.join(fits)}")
     tl = float(time_limit if time_limit is not None else (20.0 if quick else 120.0))
     n_small = 16 if quick else 32
     top_base = BASE if scene is None else scene
@@ -177,13 +250,13 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = 
         params = params or {}
         tid = f"{axis}:{solver}:{_sid({'s': scene, 'p': params, 'c': coords})}"
         tasks.append(Task(id=tid, axis=axis, coords=coords, scene=scene, solver=solver, params=params,
-                          ref=ref or {"mode": "solve"}, time_limit=tl, after=after))
+                          ref=ref or {"mode": "solve"}, time_limit=tl, after=after, scene_name=name))
         return tid
 
     # the r axis: solvers with a parameter r that the user sets (as given, or in the paper's units)
     r_solvers = [s for s in solver_names if "r" in reg[s].defaults and r_set_by_user(reg[s].defaults)]
     if "delta" in axes:
-        for load in ([base["load"]] if scene is not None else ["f2"] if quick else ["f1", "f2", "f3"]):
+        for load in ([base.get("load")] if scene is not None else ["f2"] if quick else ["f1", "f2", "f3"]):
             for d in DELTAS:
                 for s in solver_names:
                     add("delta", {"load": load, "delta": d}, {**base, "load": load, "delta": d}, s)
@@ -194,7 +267,7 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] = 
                     add("r", {"delta": d, "r": r}, {**base, "delta": d}, s, {"r": r})
     if "units" in axes:
         for uname, (fs, fl) in UNITS.items():
-            scene = scene_in_units(base, fs, fl)
+            scene = scene_in_units(base, fs, fl, problem)
             ref = {"mode": "transform", "base": base, "x": fl, "mu": fs * fl}
             for s in solver_names:
                 add("units", {"units": uname, "r": "default"}, scene, s, ref=ref)
