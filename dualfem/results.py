@@ -26,7 +26,6 @@ def load(path: str | Path):
 
     p = Path(path)
     if (p / "results.csv").is_file() or p.suffix == ".csv":       # bench and stress: the one store
-
         rows = [Row.from_dict(r).to_dict() for r in read_results(p)]
     elif (p / "runs.jsonl").is_file() or p.suffix == ".jsonl":    # a stress folder written before it
         rows = [r.to_dict() for r in load_results(p)[1]]
