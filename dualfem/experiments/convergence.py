@@ -131,7 +131,7 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = "f2", progress=print) -> 
     as ``reference.certified_error``.
 
     Memory-lean: one delta at a time, the reference QP is dropped after its delta, and the
-    solvers' cached factorizations are freed (:func:`dualfem.linalg.clear_cache`) after every
+    solvers' factorizations are freed (``store_of(qp).clear()``, :mod:`dualfem.numerics.linalg`) after every
     reference solve, so the peak is one fine QP plus one fine factorization (a reference at
     N = 1024 holding three of them was killed for lack of memory on a 24 GB machine).
     """
@@ -139,7 +139,7 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = "f2", progress=print) -> 
     from dualfem.core.scene import load_scene
     from dualfem.experiments.reference import trust
     from dualfem.experiments.runner import run
-    from dualfem.numerics.linalg import clear_cache
+    from dualfem.numerics.linalg import store_of
 
     res = {"scene": scene, "solver": solver, "ref_N": ref_N, "Ns": list(Ns), "deltas": {},
            "params": {k: v for k, v in load_scene(scene, {"N": min(Ns)}).build().params.items()
@@ -151,7 +151,7 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = "f2", progress=print) -> 
         tb = time.perf_counter() - t0
         sf = run(solver, qpf)
         trusted, bound, _, why = trust(qpf, sf)
-        clear_cache()
+        store_of(qpf).clear()
         if not trusted:
             raise RuntimeError(f"reference solve at N={ref_N}, delta={delta:g} is not trusted: {why} "
                                f"({sf.status} {sf.message})")
@@ -174,7 +174,6 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = "f2", progress=print) -> 
             progress(f"delta={delta:g} N={N}: energy-norm error {lev['energy_norm']:.3e}, L2 {lev['L2']:.3e} "
                      f"({time.perf_counter() - t_start:.0f} s so far)")
         del qpf, xf
-        clear_cache()
         gc.collect()  # the fine QP and factorization hold several GB at N = 1024: free them before the next delta
         for key in ("energy_norm", "K_norm", "L2"):
             for lev, r in zip(levels, rates([lv[key] for lv in levels])):
