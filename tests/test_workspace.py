@@ -155,3 +155,15 @@ def test_no_module_level_reuse_state():
     import problems.thin_defect as td
 
     assert not hasattr(td, "_ASSEMBLY") and not hasattr(td, "clear_assembly_cache")
+
+
+def test_readme_example_runs(capsys):
+    """The README's five-line sweep (at a small N)."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    block = next(b.split("```", 1)[0] for b in text.split("```python\n")[1:] if "dualfem.workspace" in b)
+    assert len([ln for ln in block.splitlines() if ln.strip()]) == 5
+    ns: dict = {}
+    exec(block.replace('"N": 256', '"N": 12'), ns)      # noqa: S102 - the project's own README
+    ws = ns["ws"]
+    assert (ws.assemblies, ws.factorizations) == (1, 1)
+    assert capsys.readouterr().out.count("solved") == 3
