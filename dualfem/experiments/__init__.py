@@ -1,1 +1,1 @@
-"""Experiments: compare, bench and stress sweeps, and the harness they share."""
+"""Experiments: the workspace (setup / update / solve), compare, bench and stress sweeps, the harness they share."""

@@ -126,7 +126,8 @@ class Workspace:
     @property
     def assemblies(self) -> int:
         """Delta-free assemblies the problem made for this workspace (0 for a problem that keeps none)."""
-        return int(self.problem.shared.assemblies)
+        shared = getattr(self.problem, "shared", None)
+        return int(shared.assemblies) if shared is not None else 0
 
     @property
     def factorizations(self) -> int:
