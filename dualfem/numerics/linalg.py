@@ -132,8 +132,10 @@ class FactorStore:
     on first use (:func:`store_of`), shared by the solvers and the certificate that work on it.
 
     Entries are keyed by (K_fixed, local unknowns, backend). Read-only ("frozen", :func:`freeze`)
-    arrays are known by identity (the store keeps them, so their ids cannot be reused while the entry
-    lives); any other array by a SHA-1 of its contents, computed on every look-up, so a K_fixed changed
+    arrays, such as the delta-free stiffness a workspace's QPs share, are known by identity: the memory
+    they view (root array, address, shape, strides), so another view of it finds the entry, and the
+    store keeps those roots, so their ids cannot be reused while the entry lives; no hashing. Any
+    other array is known by a SHA-1 of its contents, computed on every look-up, so a K_fixed changed
     in place gets a new factorization. ``factorizations`` counts the factorizations made for this store
     (:meth:`clear` does not reset it).
     """
@@ -142,21 +144,17 @@ class FactorStore:
         self.size = int(size)
         self.factorizations = 0
         self._d: OrderedDict[str, FixedFactor] = OrderedDict()
-        #: identity of frozen arrays -> (the arrays' roots, kept alive so that their ids stay theirs; content key)
-        self._known: dict[tuple, tuple[list[np.ndarray], str]] = {}
+        #: key of frozen arrays -> their roots, kept alive so that their ids stay theirs while the key is used
+        self._known: dict[str, list[np.ndarray]] = {}
 
     def key(self, arrays: tuple[np.ndarray, ...], tag: str) -> str:
-        """The content key of ``arrays`` plus ``tag``; frozen arrays are hashed once per store."""
+        """The key of ``arrays`` plus ``tag``: identity of frozen memory, else a hash of the contents."""
         if not all(_frozen(a) for a in arrays):
-            return _hash(*arrays) + tag
+            return "sha1:" + _hash(*arrays) + tag
         roots = [_root(a) for a in arrays]
-        ident = tuple((id(r), a.__array_interface__["data"][0], a.shape, a.strides, a.dtype.str)
-                      for r, a in zip(roots, arrays)) + (tag,)
-        hit = self._known.get(ident)
-        if hit is not None:
-            return hit[1]
-        k = _hash(*arrays) + tag
-        self._known[ident] = (roots, k)
+        k = "frozen:" + repr(tuple((id(r), a.__array_interface__["data"][0], a.shape, a.strides, a.dtype.str)
+                                   for r, a in zip(roots, arrays))) + tag
+        self._known.setdefault(k, roots)
         return k
 
     def get(self, key: str) -> FixedFactor | None:
@@ -172,9 +170,8 @@ class FactorStore:
         self._forget_unused()
 
     def _forget_unused(self) -> None:
-        live = set(self._d)
-        for ident in [i for i, (_, k) in self._known.items() if k not in live]:
-            del self._known[ident]
+        for k in [k for k in self._known if k not in self._d]:
+            del self._known[k]
 
     def clear(self) -> None:
         """Forget every factorization (cold timings, memory); their memory is released when no solver holds
