@@ -167,3 +167,25 @@ def test_readme_example_runs(capsys):
     ws = ns["ws"]
     assert (ws.assemblies, ws.factorizations) == (1, 1)
     assert capsys.readouterr().out.count("solved") == 3
+
+
+def test_the_workspace_backend_goes_to_setup_and_solvers():
+    from dualfem.numerics.factor import available
+
+    ws = Workspace("f2", {"N": 12}, factor="superlu").setup()
+    sol = ws.solve("pdas")
+    assert sol.ok and sol.params["factor"] == "superlu" and ws.factorizations == 1
+    assert linalg.factor_fixed(ws.qp, "superlu").backend == "superlu"
+    assert ws.solve("pdas", {"factor": available()[0]}).ok      # the solver's own choice wins
+    with pytest.raises(InputError, match="factor"):
+        Workspace("f2", {"N": 12}, factor="no_such_backend")
+
+
+def test_a_problem_instance_and_its_updates():
+    problem = load_scene("f3", {"N": 12})
+    ws = Workspace(problem, {"delta": 1e-3})
+    assert ws.problem.params["delta"] == 1e-3 and ws.problem.shared is problem.shared
+    assert ws.update(delta=1e-7).solve("uzawa_auto").ok
+    assert problem.params["delta"] == 1e-5                      # the given instance is left as it was
+    assert (ws.builds, ws.assemblies, ws.factorizations) == (1, 1, 1)
+    assert "assemblies=1" in repr(ws)
