@@ -5,9 +5,10 @@
 For each solver, in fresh worker processes (f2, plane strain, the process-wide factorization backend):
 * **cold**: one process per delta in 1e-1 ... 1e-9 that builds the scene and solves it once
   (``dualfem.runner.run``: setup + solve + certification), as `dualfem solve` does;
-* **sweep**: one process that builds and solves the nine deltas one after the other through the
-  Python API (``load_scene(...).build()`` + ``run(...)``), so the delta-free assembly and the
-  factorization of K_fixed are reused (only the interface term and the dense reduced phase change).
+* **sweep**: one process that builds and solves the nine deltas one after the other through a
+  :class:`dualfem.workspace.Workspace` (``ws.update(delta=d).solve(solver)``), so the delta-free
+  assembly and the factorization of K_fixed are reused (only the interface term and the dense
+  reduced phase change); the workspace's counters (assemblies, factorizations) are recorded.
 Times are wall clock inside the worker (imports excluded; the first, untimed, N = 8 solve warms the
 imports up); one untimed worker per solver and N runs first (the first process after a while pays
 for the file-system caches: it measured 1.4-1.6x the others). The ratio asked for by the issue:
@@ -31,24 +32,23 @@ DELTAS = [10.0 ** -k for k in range(1, 10)]
 
 WORKER = """
 import json, sys, time
-from dualfem.core.scene import load_scene
-from dualfem.experiments.runner import run
 from dualfem.numerics.factor import get_default
+from dualfem.workspace import Workspace
 N, solver, deltas = int(sys.argv[1]), sys.argv[2], [float(d) for d in sys.argv[3].split(",")]
-run(solver, load_scene("f2", {"N": 8}).build())
-from dualfem.numerics.linalg import clear_cache
-clear_cache()
+Workspace("f2", {"N": 8}).solve(solver)
+ws = Workspace("f2", {"N": N})
 rows = []
 for d in deltas:
     t0 = time.perf_counter()
-    qp = load_scene("f2", {"N": N, "delta": d}).build()
+    qp = ws.update(delta=d).qp
     t1 = time.perf_counter()
-    sol = run(solver, qp)
+    sol = ws.solve(solver)
     t2 = time.perf_counter()
     rows.append({"delta": d, "assembly": t1 - t0, "setup": sol.time_s["setup"], "solve": sol.time_s["solve"],
                  "certify": sol.time_s.get("certify", 0.0), "total": t2 - t0, "status": str(sol.status),
                  "iterations": sol.iterations})
-print(json.dumps({"factor": get_default(), "n": qp.n, "rows": rows}))
+print(json.dumps({"factor": get_default(), "n": qp.n, "rows": rows, "assemblies": ws.assemblies,
+                  "factorizations": ws.factorizations}))
 """
 
 
@@ -75,7 +75,8 @@ def measure(N: int, solver: str, repeat: int = 1) -> dict:
     sweeps = [worker(N, solver, DELTAS) for _ in range(repeat)]
     sweep = _median_run(sweeps, lambda w: sum(r["total"] for r in w["rows"]))
     return {"solver": solver, "N": N, "n": sweep["n"], "factor": sweep["factor"], "repeat": repeat, "cold": cold,
-            "sweep": sweep["rows"], "sweep_totals": sweep["all_totals"]}
+            "sweep": sweep["rows"], "sweep_totals": sweep["all_totals"],
+            "sweep_counters": {k: sweep.get(k) for k in ("assemblies", "factorizations")}}
 
 
 def table(results: list[dict]) -> str:
@@ -96,7 +97,9 @@ def table(results: list[dict]) -> str:
         L += ["", f"Sweep of {len(r['sweep'])} deltas: {tot:.2f} s = **{tot / cm:.2f} x** one cold solve (median "
               f"of the nine: {cm:.2f} s; {tot / c5:.2f} x the one at delta = 1e-5, {c5:.2f} s); each further delta "
               f"{min(further):.2f}-{max(further):.2f} s (median {np.median(further):.2f}); slowest cold delta "
-              f"{max(c['total'] for c in r['cold'].values()) / cm:.2f} x the median.", ""]
+              f"{max(c['total'] for c in r['cold'].values()) / cm:.2f} x the median."
+              + (f" The sweep's workspace assembled {r['sweep_counters']['assemblies']} time(s) and factorized "
+                 f"{r['sweep_counters']['factorizations']} time(s)." if r.get("sweep_counters") else ""), ""]
     return "\n".join(L)
 
 

@@ -6,7 +6,7 @@
 
 One worker process per (backend, N), so that its peak RSS (``ru_maxrss``) belongs to that run:
 build the QP (f2, delta = 1e-5, plane strain), then `repeats` times, from scratch
-(``linalg.clear_cache()``):
+(``linalg.store_of(qp).clear()``):
 * ``schur``: what the exact solvers' setup does: factorize the delta-free K_fixed with the Schur
   complement onto the defect unknowns (``linalg.factor_fixed``) + one solve with it;
 * ``K``: analysis + factorization of the whole K + one solve (``linalg.sparse_factor``).
@@ -53,7 +53,7 @@ def worker(backend: str, N: int, repeats: int) -> dict:
     out["rss_after_build_now_mb"] = _rss_now_mb()
     ts, info = [], {}
     for _ in range(repeats):
-        linalg.clear_cache()
+        linalg.store_of(qp).clear()
         gc.collect()
         t0 = time.perf_counter()
         ff = linalg.factor_fixed(qp, backend)
@@ -61,7 +61,7 @@ def worker(backend: str, N: int, repeats: int) -> dict:
         ts.append(time.perf_counter() - t0)
         info = {k: v for k, v in ff.fact.info.items() if k != "time_s"}
         del ff
-    linalg.clear_cache()
+    linalg.store_of(qp).clear()
     gc.collect()
     out.update(schur_s=statistics.median(ts), schur_runs=ts, rss_schur_mb=_rss_mb(), schur_info=info)
     ts = []

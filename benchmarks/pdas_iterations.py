@@ -4,7 +4,7 @@
                                          [--scenes f1,f2,f3] [--json FILE]
 
 One line per solve on stdout (scene, N, delta, status, Newton steps, evaluator KKT error, setup
-and solve time); the assembly of each (scene, N) is done once per delta. With --json, all records
+and solve time); one Workspace per (scene, N): assembled and factorized once for all deltas. With --json, all records
 are also written to FILE.
 """
 from __future__ import annotations
@@ -23,19 +23,19 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     from dualfem.core import evaluator
-    from dualfem.core.scene import load_scene
-    from dualfem.experiments.runner import run
+    from dualfem.workspace import Workspace
 
     recs = []
     print(f"{'scene':5s} {'N':>4s} {'delta':>7s} {'status':8s} {'newton':>6s} {'active':>6s} {'kkt':>8s} "
           f"{'setup_s':>7s} {'solve_s':>7s}", flush=True)
     for N in [int(v) for v in a.N.split(",")]:
         for sc in a.scenes.split(","):
+            ws = Workspace(sc, {"N": N})            # one assembly and factorization for every delta
             for d in [float(v) for v in a.delta.split(",")]:
                 t0 = time.perf_counter()
-                qp = load_scene(sc, {"N": N, "delta": d}).build()
+                qp = ws.update(delta=d).qp
                 tb = time.perf_counter() - t0
-                s = run("pdas", qp)
+                s = ws.solve("pdas")
                 kkt = evaluator.kkt_error(s.residuals) if s.residuals else float("nan")
                 rec = {"scene": sc, "N": N, "delta": d, "status": str(s.status), "newton": s.iterations.get("newton"),
                        "n_active": s.info.get("n_active"), "m": qp.m, "kkt": kkt, "build_s": tb, **s.time_s}

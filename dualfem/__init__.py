@@ -2,8 +2,9 @@
 
 The public API: :class:`~dualfem.qp.QP`, :class:`~dualfem.solution.Solution`,
 :class:`~dualfem.solution.Status`, :mod:`~dualfem.evaluator`, :func:`~dualfem.runner.run`,
-:func:`~dualfem.scene.load_scene`, and the plugin bases :class:`~dualfem.solver.Solver` and
-:class:`~dualfem.problem.Problem`.
+:func:`~dualfem.scene.load_scene`, :class:`~dualfem.workspace.Workspace` (one scene's assembly and
+factorization reused across deltas, loads and solvers: setup / update / solve), and the plugin bases
+:class:`~dualfem.solver.Solver` and :class:`~dualfem.problem.Problem`.
 """
 from dualfem.core.errors import InputError, MissingDependency
 from dualfem.core.qp import QP

@@ -125,7 +125,7 @@ def _mu_resolution(sol, qp) -> float:
 
 
 def _solve(name, qp, factor):
-    linalg.clear_cache()
+    linalg.store_of(qp).clear()
     s = get_solver(name)(factor=factor, **_TIGHT[name])
     s.setup(qp)
     return s.solve()
@@ -151,9 +151,9 @@ def test_solvers_agree_across_backends(scene, solver, scene_name):
 
 
 @BOTH
-def test_factor_fixed_cache_per_backend(scene):
+def test_factor_fixed_store_per_backend(scene):
     _, qp = scene("f2", 16, 1e-5)
-    cache = linalg.FactorCache()
+    cache = linalg.FactorStore()
     p = linalg.factor_fixed(qp, "pardiso", cache)
     s = linalg.factor_fixed(qp, "superlu", cache)
     assert (p.backend, s.backend) == ("pardiso", "superlu") and len(cache) == 2

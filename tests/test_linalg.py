@@ -40,12 +40,15 @@ def test_reduction_is_exact(scene, name, delta):
     assert np.array_equal(V.T @ V, D)
 
 
-def test_factorization_shared_across_delta_and_load(scene):
-    linalg.clear_cache()
-    _, a = scene("f2", 16, 1e-5)
-    _, b = scene("f1", 16, 1e-9)
-    ra, rb = linalg.LocalReduction(a), linalg.LocalReduction(b)
-    assert ra.factor is rb.factor           # one factorization of K_fixed for both
+def test_factorization_shared_across_delta_and_load():
+    from dualfem.core.scene import load_scene
+
+    problem = load_scene("f2", {"N": 16, "delta": 1e-5})
+    a = problem.build()
+    b = problem.with_params(load="f1", delta=1e-9).build()      # the same delta-free K_fixed
+    store = linalg.FactorStore()
+    ra, rb = linalg.LocalReduction(a, store=store), linalg.LocalReduction(b, store=store)
+    assert ra.factor is rb.factor and store.factorizations == 1     # one factorization of K_fixed for both
     assert not np.allclose(ra.S, rb.S)      # but the delta part differs
 
 
@@ -95,25 +98,29 @@ def test_every_unknown_local(scene):
     assert np.abs(red.full(np.linalg.solve(red.S, red.g)) - x).max() <= 1e-10 * np.abs(x).max()
 
 
-def test_cache_key_follows_the_content_of_K_fixed(scene):
-    """A K_fixed changed in place gets a new factorization; frozen (read-only) memory is hashed once."""
+def test_store_key_follows_the_content_of_K_fixed(scene):
+    """A K_fixed changed in place gets a new factorization; frozen (read-only) memory is known by identity
+    (no hashing), also through another view of the same memory."""
     import dataclasses
 
     _, qp = scene("f2", 16, 1e-5)
+    store = linalg.FactorStore()
     Kf = qp.K_fixed.copy()                                    # writable: hashed on every call
-    q1 = dataclasses.replace(qp, K_fixed=Kf)
+    q1 = dataclasses.replace(qp, K_fixed=Kf, store=store)
     f1 = linalg.factor_fixed(q1)
     Kf.data *= 2.0
     f2 = linalg.factor_fixed(q1)
-    assert f2 is not f1 and np.allclose(f2.S_fixed, 2.0 * f1.S_fixed)
+    assert f2 is not f1 and np.allclose(f2.S_fixed, 2.0 * f1.S_fixed) and store.factorizations == 2
+    assert not store._known                                   # nothing frozen: nothing known by identity
     frozen = qp.K_fixed.copy()
     linalg.freeze(frozen.data, frozen.indices, frozen.indptr)
     with pytest.raises(ValueError):
         frozen.data[0] = 1.0
-    q2 = dataclasses.replace(qp, K_fixed=frozen)
-    linalg._FROZEN_HASHES.clear()
+    q2 = dataclasses.replace(qp, K_fixed=frozen, store=store)
     a = linalg.factor_fixed(q2)
-    assert len(linalg._FROZEN_HASHES) == 1
+    assert a is not f1 and len(store._known) == 1     # frozen memory of its own: its own entry
     view = sp.csc_matrix((frozen.data, frozen.indices, frozen.indptr), shape=frozen.shape)
-    again = dataclasses.replace(qp, K_fixed=view)
-    assert linalg.factor_fixed(again) is a and len(linalg._FROZEN_HASHES) == 1
+    again = dataclasses.replace(qp, K_fixed=view, store=store)
+    assert linalg.factor_fixed(again) is a and len(store._known) == 1 and store.factorizations == 3
+    store.clear()
+    assert len(store) == 0 and not store._known and store.factorizations == 3

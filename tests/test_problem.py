@@ -165,18 +165,19 @@ def test_bad_scene_parameters(params, words):
 
 
 def test_delta_free_assembly_is_reused_only_when_only_delta_changes():
-    """A second delta on the same mesh reuses mesh, K_el and F (read-only), and gives the same QP as a fresh build."""
+    """with_params for a new delta or load reuses the instance's mesh and K_el (read-only) and gives the same
+    QP as a fresh build; any other key, or another instance, assembles afresh."""
     import numpy as np
 
     from dualfem.core.scene import load_scene
-    from dualfem.numerics.linalg import clear_cache
 
-    clear_cache()
-    a = load_scene("f2", {"N": 12, "delta": 1e-5}).build()
-    b = load_scene("f2", {"N": 12, "delta": 1e-3}).build()
-    assert np.shares_memory(b.K_fixed.data, a.K_fixed.data)          # reused
-    clear_cache()
-    fresh = load_scene("f2", {"N": 12, "delta": 1e-3}).build()
+    first = load_scene("f2", {"N": 12, "delta": 1e-5})
+    a = first.build()
+    second = first.with_params(delta=1e-3)
+    b = second.build()
+    assert np.shares_memory(b.K_fixed.data, a.K_fixed.data) and second.shared is first.shared   # reused
+    assert first.shared.assemblies == 1
+    fresh = load_scene("f2", {"N": 12, "delta": 1e-3}).build()      # another instance: its own assembly
     assert not np.shares_memory(fresh.K_fixed.data, a.K_fixed.data)
     for M in ("K", "K_fixed", "B"):
         assert abs(getattr(b, M) - getattr(fresh, M)).max() == 0.0
@@ -184,9 +185,14 @@ def test_delta_free_assembly_is_reused_only_when_only_delta_changes():
     with pytest.raises(ValueError):
         b.K_fixed.data[0] = 1.0                                     # shared, so read-only
     b.F[0] = 1.0                                                    # F is each QP's own
-    assert load_scene("f2", {"N": 12, "delta": 1e-7}).build().F[0] == fresh.F[0]
-    other = load_scene("f2", {"N": 12, "delta": 1e-3, "E": 1000.0}).build()
-    assert not np.shares_memory(other.K_fixed.data, fresh.K_fixed.data)  # anything but delta: new assembly
+    assert first.with_params(delta=1e-7).build().F[0] == fresh.F[0]
+    f1 = first.with_params(load="f1").build()                       # another load: same K_el, its own F
+    assert np.shares_memory(f1.K_fixed.data, a.K_fixed.data)
+    assert np.array_equal(f1.F, load_scene("f1", {"N": 12}).build().F) and first.shared.assemblies == 1
+    other_problem = first.with_params(E=1000.0)
+    other = other_problem.build()
+    assert other_problem.shared is not first.shared                 # anything else: a new assembly
+    assert not np.shares_memory(other.K_fixed.data, a.K_fixed.data)
 
 
 @pytest.mark.parametrize("scene_name", ["f2", "f1", "f3"])
@@ -196,15 +202,13 @@ def test_planned_stiffness_sum_equals_scipys_sum_bit_for_bit(scene_name):
     import numpy as np
 
     from dualfem.core.scene import load_scene
-    from dualfem.numerics.linalg import clear_cache
-    from problems.thin_defect import _ASSEMBLY
     from problems.thin_defect.assemble import interface
 
-    clear_cache()
+    first = load_scene(scene_name, {"N": 12, "delta": 1e-1})
     for delta in (1e-1, 1e-5, 3e-9, 1e-5):
-        sc = load_scene(scene_name, {"N": 12, "delta": delta})
+        sc = first.with_params(delta=delta)
         qp = sc.build()
-        a = next(iter(_ASSEMBLY.values()))
+        a = sc.shared.data["delta_free"]
         c, maps = a["cut"], a["maps"]
         coef = c.weights / np.array([d["delta"] for d in sc._defects])[c.defect_id]
         K_par, B_ref, _ = interface(maps["node_dofs"], c.lower, c.upper, maps["defect_normals"], coef, a["n"])
@@ -216,7 +220,7 @@ def test_planned_stiffness_sum_equals_scipys_sum_bit_for_bit(scene_name):
         assert "B" not in a or not np.shares_memory(qp.B.data, a["B"].data)      # each QP's own B
     assert a["interface_sum"]                                         # planned (builds 2, 3, 4 used it)
     qp.K.data[0] += 1.0                                               # each QP's values are its own
-    assert load_scene(scene_name, {"N": 12, "delta": 1e-5}).build().K.data[0] == ref.data[0]
+    assert first.with_params(delta=1e-5).build().K.data[0] == ref.data[0]
 
 
 def test_planned_stiffness_sum_falls_back_on_an_exact_cancellation():
@@ -225,14 +229,13 @@ def test_planned_stiffness_sum_falls_back_on_an_exact_cancellation():
     import numpy as np
 
     from dualfem.core.scene import load_scene
-    from dualfem.numerics.linalg import clear_cache
-    from problems.thin_defect import _ASSEMBLY, ThinDefect
+    from problems.thin_defect import ThinDefect
     from problems.thin_defect.assemble import interface
 
-    clear_cache()
-    load_scene("f2", {"N": 12, "delta": 1e-1}).build()
-    load_scene("f2", {"N": 12, "delta": 1e-2}).build()
-    a = next(iter(_ASSEMBLY.values()))
+    problem = load_scene("f2", {"N": 12, "delta": 1e-1})
+    problem.build()
+    problem.with_params(delta=1e-2).build()
+    a = problem.shared.data["delta_free"]
     plan, c, maps = a["interface_sum"], a["cut"], a["maps"]
     coef = np.ones(c.lower.size)
     j = 0                          # coefficient of node j chosen to cancel K_el's (up, up) entry

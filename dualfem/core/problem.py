@@ -4,6 +4,11 @@ A problem plugin is a subclass of :class:`Problem` declaring ``name``, ``default
 parameter with its default), optionally ``presets`` (named scenes, e.g. the paper's ``f1``),
 and implementing :meth:`Problem.build` returning a :class:`~dualfem.qp.QP`. Problems return plain
 scipy.sparse / numpy data and know nothing of solvers.
+
+Reuse across builds is owned by the instance, never by the module: a problem may keep derived data
+(e.g. its delta-free assembly) in ``self.shared`` and declare in ``update_keys`` the scene keys
+that leave it valid; :meth:`Problem.with_params` then makes the instance for new values of those
+keys sharing it (what :class:`dualfem.workspace.Workspace` uses for a sweep over delta).
 """
 from __future__ import annotations
 
@@ -12,6 +17,18 @@ from typing import Any, ClassVar
 from dualfem.core.errors import InputError, MissingDependency, missing_module
 from dualfem.core.qp import QP
 from dualfem.core.solver import _coerce
+
+
+class Shared:
+    """Derived data a problem instance reuses across its builds and shares with the instances
+    :meth:`Problem.with_params` derives from it: ``data`` (problem-specific) and ``assemblies`` (how many
+    times the problem computed it: a sweep that reuses it keeps this at 1)."""
+
+    __slots__ = ("data", "assemblies")
+
+    def __init__(self) -> None:
+        self.data: dict[str, Any] = {}
+        self.assemblies = 0
 
 
 class Problem:
@@ -23,6 +40,9 @@ class Problem:
     presets: ClassVar[dict[str, dict[str, Any]]] = {}
     requires: ClassVar[tuple[str, ...]] = ()     # importable modules build() needs
     extra: ClassVar[str | None] = None           # the pyproject extra providing them
+    #: scene keys whose change keeps ``self.shared`` valid (e.g. delta and the load of a thin-defect
+    #: scene: they leave the mesh and the delta-free stiffness K_fixed as they are)
+    update_keys: ClassVar[tuple[str, ...]] = ()
 
     @classmethod
     def missing(cls) -> str | None:
@@ -42,7 +62,17 @@ class Problem:
             d = self.defaults[k]
             merged[k] = _coerce(k, v, d, self.name, owner="problem") if isinstance(d, (int, float)) else v
         self.params: dict[str, Any] = merged
+        self.shared = Shared()
         self.validate()
+
+    def with_params(self, **changes: Any) -> Problem:
+        """The same scene with ``changes`` applied (validated); when every changed key is one of
+        :attr:`update_keys` the new instance shares this one's derived data (:class:`Shared`: e.g. the
+        delta-free assembly), otherwise it starts afresh."""
+        new = type(self)(**{**self.params, **changes})
+        if set(changes) <= set(self.update_keys):
+            new.shared = self.shared
+        return new
 
     def validate(self) -> None:
         """Check ``self.params``; raise InputError naming the parameter and its range."""

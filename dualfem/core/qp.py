@@ -148,6 +148,11 @@ class QP:
     local unknowns: ``K_fixed=``/``local_dofs=`` are a shorthand for it), ``shift``, ``geometry``,
     ``units``, ``material``. ``params``: write-only provenance (the scene's parameters; no algorithm reads it).
     ``maps``: problem-specific extras (defect node maps for post-processing and export).
+    ``store``: the owner of reusable derived data (the factorizations of ``K_fixed``: a
+    :class:`dualfem.numerics.linalg.FactorStore`), set by the workspace that built the QP
+    (:class:`dualfem.workspace.Workspace`: its QPs share one across deltas and loads); None = the QP
+    gets a private one on first use, shared by every solver and the certificate working on it. Not part
+    of the QP's value: excluded from equality, ``repr``, export, pickling and copies.
     """
 
     K: sp.csc_matrix
@@ -164,6 +169,7 @@ class QP:
     geometry: GeometryPart | None = None
     units: UnitsPart | None = None
     material: MaterialPart | None = None
+    store: object | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self, K_fixed, local_dofs) -> None:
         self.K = self.K if sp.issparse(self.K) and self.K.format == "csc" and self.K.dtype == float \
@@ -226,6 +232,11 @@ class QP:
             g = self.geometry
             promoted.update(nodes=g.nodes, triangles=g.cells, node_dofs=g.node_dofs)
         self.maps = Maps(rest, promoted)
+
+    def __getstate__(self) -> dict:
+        """Pickling and copies leave the store behind (a factorization is neither picklable nor the
+        copy's: the copy gets a private store on first use)."""
+        return {**self.__dict__, "store": None}
 
     # ---------------------------------------------------------------- sizes
     @property

@@ -145,7 +145,7 @@ def _timed_runs(task: dict, qp, name: str, params: dict, tick, warmup: bool, rep
     if warmup:
         tick("warmup", task["hard_limit"])
         if task.get("cold_setup", True):
-            linalg.clear_cache()
+            linalg.store_of(qp).clear()
         sol = run(name, qp, params, tol=task.get("tol"))
         if sol.status in stop:     # nothing to time: report the warm-up as is
             return sol, [sol.time_s["setup"]], [sol.time_s["solve"]], 0, "from the warm-up run"
@@ -153,7 +153,7 @@ def _timed_runs(task: dict, qp, name: str, params: dict, tick, warmup: bool, rep
     for i in range(repeats):
         tick(f"repeat {i + 1}", task["hard_limit"])
         if task.get("cold_setup", True):
-            linalg.clear_cache()
+            linalg.store_of(qp).clear()
         sol = run(name, qp, params, tol=task.get("tol"))
         setups.append(sol.time_s["setup"])
         solves.append(sol.time_s["solve"])

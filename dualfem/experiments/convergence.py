@@ -32,7 +32,7 @@ from dualfem.core.evaluator import kkt_residuals
 from dualfem.core.scene import DEFAULT_SCENE, load_scene
 from dualfem.experiments.reference import candidates, trust
 from dualfem.experiments.runner import run
-from dualfem.numerics.linalg import clear_cache
+from dualfem.numerics.linalg import store_of
 from dualfem.post.fields import contact_length, defect_fields, mass_norm2, prolongate
 
 #: the study's defaults (``dualfem report convergence``): deltas, coarse meshes, reference mesh
@@ -139,8 +139,8 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = DEFAULT_SCENE, progress=p
     as ``reference.certified_error``.
 
     Memory-lean: one delta at a time, the reference QP is dropped after its delta, and the
-    solvers' cached factorizations are freed (:func:`dualfem.numerics.linalg.clear_cache`) after every
-    reference solve, so the peak is one fine QP plus one fine factorization (a reference at
+    solvers' factorizations are freed (``store_of(qp).clear()``, :mod:`dualfem.numerics.linalg`) after
+    every reference solve, so the peak is one fine QP plus one fine factorization (a reference at
     N = 1024 holding three of them was killed for lack of memory on a 24 GB machine).
     """
 
@@ -154,7 +154,7 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = DEFAULT_SCENE, progress=p
         tb = time.perf_counter() - t0
         sf = run(solver, qpf)
         trusted, bound, _, why = trust(qpf, sf)
-        clear_cache()
+        store_of(qpf).clear()
         if not trusted:
             raise RuntimeError(f"reference solve at N={ref_N}, delta={delta:g} is not trusted: {why} "
                                f"({sf.status} {sf.message})")
@@ -177,7 +177,6 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = DEFAULT_SCENE, progress=p
             progress(f"delta={delta:g} N={N}: energy-norm error {lev['energy_norm']:.3e}, L2 {lev['L2']:.3e} "
                      f"({time.perf_counter() - t_start:.0f} s so far)")
         del qpf, xf
-        clear_cache()
         gc.collect()  # the fine QP and factorization hold several GB at N = 1024: free them before the next delta
         for key in ("energy_norm", "K_norm", "L2"):
             for lev, r in zip(levels, rates([lv[key] for lv in levels])):

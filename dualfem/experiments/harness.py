@@ -143,9 +143,9 @@ def _child_main() -> None:  # pragma: no cover - runs in the child process
         row["peak_rss_mb"] = round(max(watch.peak, rss_mb()), 1)
         _send(out, ("done", row, payload))
         if not task.get("keep_cache"):
-            from dualfem.numerics import linalg
+            import gc
 
-            linalg.clear_cache()      # free cached factorizations between unrelated tasks
+            gc.collect()      # the task's QP took its factorizations with it: free any cycle too
 
 
 def error_row(task: dict, message: str, status: str = "error") -> dict:

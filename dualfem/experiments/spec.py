@@ -7,8 +7,9 @@ A sweep is described by a TOML spec (see ``benchmarks/default.toml``)::
     warmup = true          # one untimed run first
     time_limit = 60.0      # seconds per run: passed to the solver's own "time_limit" option and
                            # enforced by a wall-clock guard (the run's process is killed)
-    cold_setup = true      # dualfem.numerics.linalg.clear_cache() before every run: setup is
-                           # measured with the factorization, never read from a cache
+    cold_setup = true      # the QP's FactorStore is emptied before every run (store_of(qp).clear(),
+                           # dualfem.numerics.linalg): setup is measured with the factorization,
+                           # never read from a store; false: every run after the first reuses it
     [tiers]                # tolerance tiers -> each solver's Solver.tolerance_params(tol)
     low = 1e-3
     high = 1e-9

@@ -84,11 +84,8 @@ class _Cache:
             # a large scene: free every cached QP, reference and factorization first
             import gc
 
-            from dualfem.numerics.linalg import clear_cache
-
             self.qps.clear()
             self.refs.clear()
-            clear_cache()
             gc.collect()
         if k not in self.qps:
             t0 = time.perf_counter()

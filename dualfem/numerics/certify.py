@@ -69,8 +69,12 @@ class _SparseK:
 
 
 class KSolver:
-    """r -> K^-1 r (cached local reduction when possible, else a sparse LU), and the Delassus
-    matrix D = B K^-1 B' (dense, from the reduction, or by m solves for small m)."""
+    """r -> K^-1 r (the local reduction when possible, else a sparse LU), and the Delassus
+    matrix D = B K^-1 B' (dense, from the reduction, or by m solves for small m).
+
+    ``reduction``: a solver's LocalReduction of this very QP, reused as is; otherwise a new reduction
+    takes the factorization of K_fixed from the QP's store (``QP.store``,
+    :func:`dualfem.numerics.linalg.store_of`), where the solvers that ran on the QP left it."""
 
     def __init__(self, qp: QP, factor=None, reduction=None):
         from dualfem.numerics.linalg import LocalReduction

@@ -11,9 +11,10 @@ So the QP reduces exactly to the local unknowns:
 
 :class:`FixedFactor` factorizes ``K_fixed`` once with a backend of :mod:`dualfem.numerics.factor`
 (PARDISO computes S_fixed itself; SuperLU/CHOLMOD order I *last* and read S_fixed from the
-trailing blocks of the factors, no extra solves). It is cached in a :class:`FactorCache` by a
-hash of ``K_fixed``, I and the backend, so every delta, load case and solver that shares the mesh
-reuses it.
+trailing blocks of the factors, no extra solves). It is kept by the :class:`FactorStore` that
+``QP.store`` names (the owner's: a :class:`dualfem.workspace.Workspace` shares one across every
+delta, load case and solver of its mesh; a QP built alone gets a private one), keyed by
+``K_fixed``, I and the backend. No factorization is kept by the module.
 
 :class:`LocalReduction` is what solvers use: ``S``, ``g``, ``B_I`` (dense), ``full(x_I)`` to
 recover all of x, ``c0`` (energy constant), ``k_solve`` (K^-1 r for the whole K), ``k_quad``
@@ -48,11 +49,6 @@ def _hash(*arrays: np.ndarray) -> str:
     return h.hexdigest()
 
 
-#: hashes of frozen arrays (read-only, and so are the arrays they view: their content cannot change):
-#: id tuple -> (weak references to the arrays, hash); e.g. the shared delta-free K_fixed of a sweep
-_FROZEN_HASHES: dict[tuple, tuple[list, str]] = {}
-
-
 def _frozen(a) -> bool:
     """True if ``a`` and every array it is a view of are read-only (its content cannot change)."""
     if not isinstance(a, np.ndarray):
@@ -65,7 +61,8 @@ def _frozen(a) -> bool:
 
 
 def freeze(*arrays: np.ndarray) -> None:
-    """Make arrays (and the arrays they are views of) read-only, so that their hashes can be remembered."""
+    """Make arrays (and the arrays they are views of) read-only: a :class:`FactorStore` then knows them by
+    identity instead of hashing their contents on every look-up."""
     for a in arrays:
         chain = []
         while isinstance(a, np.ndarray):
@@ -79,27 +76,6 @@ def _root(a: np.ndarray) -> np.ndarray:
     while isinstance(a.base, np.ndarray):
         a = a.base
     return a
-
-
-def _hash_cached(*arrays: np.ndarray) -> str:
-    """:func:`_hash`, remembered for arrays that are frozen (see _FROZEN_HASHES), recomputed otherwise.
-
-    Keyed by the memory the arrays view (their root array, address, shape and strides), so another
-    view of the same frozen memory (a QP wraps K_fixed in a new matrix object) finds the hash too.
-    """
-    if not all(_frozen(a) for a in arrays):
-        return _hash(*arrays)
-    roots = [_root(a) for a in arrays]
-    key = tuple((id(r), a.__array_interface__["data"][0], a.shape, a.strides, a.dtype.str)
-                for r, a in zip(roots, arrays))
-    hit = _FROZEN_HASHES.get(key)
-    if hit is not None and all(ref() is r for ref, r in zip(hit[0], roots)):
-        return hit[1]
-    h = _hash(*arrays)
-    for k in [k for k, (refs, _) in _FROZEN_HASHES.items() if any(ref() is None for ref in refs)]:
-        del _FROZEN_HASHES[k]                                       # forget memory that is gone
-    _FROZEN_HASHES[key] = ([weakref.ref(r) for r in roots], h)
-    return h
 
 
 # --------------------------------------------------------------------------- factor
@@ -147,16 +123,39 @@ class FixedFactor:
         return self.fact.backward(fwd, xI)
 
 
-class FactorCache:
-    """Factorizations of ``K_fixed`` kept by (values of K_fixed, local unknowns, backend), LRU.
+class FactorStore:
+    """The factorizations of ``K_fixed`` that one owner reuses (LRU, ``size`` entries): an ordinary object.
 
-    Every delta, load case and solver sharing the mesh reuses one entry. ``DEFAULT_CACHE`` is the
-    process-wide instance :func:`factor_fixed` uses unless given another one.
+    A QP names the store that owns its factorizations in ``QP.store``: a
+    :class:`dualfem.workspace.Workspace` gives every QP it builds its own store, so every delta, load
+    case and solver of the workspace reuses one factorization; a QP built elsewhere gets a private store
+    on first use (:func:`store_of`), shared by the solvers and the certificate that work on it.
+
+    Entries are keyed by (K_fixed, local unknowns, backend). Read-only ("frozen", :func:`freeze`)
+    arrays, such as the delta-free stiffness a workspace's QPs share, are known by identity: the memory
+    they view (root array, address, shape, strides), so another view of it finds the entry, and the
+    store keeps those roots, so their ids cannot be reused while the entry lives; no hashing. Any
+    other array is known by a SHA-1 of its contents, computed on every look-up, so a K_fixed changed
+    in place gets a new factorization. ``factorizations`` counts the factorizations made for this store
+    (:meth:`clear` does not reset it).
     """
 
     def __init__(self, size: int = 4):
         self.size = int(size)
+        self.factorizations = 0
         self._d: OrderedDict[str, FixedFactor] = OrderedDict()
+        #: key of frozen arrays -> their roots, kept alive so that their ids stay theirs while the key is used
+        self._known: dict[str, list[np.ndarray]] = {}
+
+    def key(self, arrays: tuple[np.ndarray, ...], tag: str) -> str:
+        """The key of ``arrays`` plus ``tag``: identity of frozen memory, else a hash of the contents."""
+        if not all(_frozen(a) for a in arrays):
+            return "sha1:" + _hash(*arrays) + tag
+        roots = [_root(a) for a in arrays]
+        k = "frozen:" + repr(tuple((id(r), a.__array_interface__["data"][0], a.shape, a.strides, a.dtype.str)
+                                   for r, a in zip(roots, arrays))) + tag
+        self._known.setdefault(k, roots)
+        return k
 
     def get(self, key: str) -> FixedFactor | None:
         ff = self._d.get(key)
@@ -168,36 +167,53 @@ class FactorCache:
         self._d[key] = ff
         while len(self._d) > self.size:
             self._d.popitem(last=False)
+        self._forget_unused()
+
+    def _forget_unused(self) -> None:
+        for k in [k for k in self._known if k not in self._d]:
+            del self._known[k]
 
     def clear(self) -> None:
-        """Forget every entry (their memory is released when no solver holds them any more)."""
+        """Forget every factorization (cold timings, memory); their memory is released when no solver holds
+        them any more."""
         self._d.clear()
+        self._known.clear()
 
     def __len__(self) -> int:
         return len(self._d)
 
 
-DEFAULT_CACHE = FactorCache()
+def store_of(qp: QP) -> FactorStore:
+    """The :class:`FactorStore` that owns ``qp``'s factorizations: ``qp.store``, set to a private new
+    one when it is None."""
+    store = qp.store
+    if store is None:
+        store = qp.store = FactorStore()
+    if not isinstance(store, FactorStore):
+        raise TypeError(f"QP.store must be a dualfem.numerics.linalg.FactorStore or None, got {type(store).__name__}")
+    return store
 
 
-def factor_fixed(qp: QP, factor: str | Backend | None = None, cache: FactorCache | None = None) -> FixedFactor:
-    """Factorize ``qp.K_fixed`` with its Schur complement onto ``qp.local_dofs`` (cached).
+def factor_fixed(qp: QP, factor: str | Backend | None = None, store: FactorStore | None = None) -> FixedFactor:
+    """Factorize ``qp.K_fixed`` with its Schur complement onto ``qp.local_dofs``, once per store.
 
     ``factor``: backend name or object (default: :func:`dualfem.numerics.factor.choose`, i.e.
-    ``--factor`` / ``DUALFEM_FACTOR`` / the fastest installed); ``cache``: default DEFAULT_CACHE.
+    ``--factor`` / ``DUALFEM_FACTOR`` / the fastest installed); ``store``: default the QP's own
+    (:func:`store_of`).
     """
     backend = choose_backend(factor)
     ensure_threads()
-    cache = DEFAULT_CACHE if cache is None else cache
+    store = store_of(qp) if store is None else store
     local = np.asarray(qp.local_dofs, np.int64)
     Kf = qp.K_fixed if qp.K_fixed.format in ("csr", "csc") else qp.K_fixed.tocsr()
-    key = _hash_cached(Kf.indptr, Kf.indices, Kf.data, local) + f":{Kf.format}:{backend.name}"
-    ff = cache.get(key)
+    key = store.key((Kf.indptr, Kf.indices, Kf.data, local), f":{Kf.format}:{backend.name}")
+    ff = store.get(key)
     if ff is not None:
         return ff
     Kf = Kf.tocsr()
     t0 = time.perf_counter()
-    fact = backend.make(local, order=lambda: ordering(qp, local))
+    ref = weakref.ref(qp)             # the factorization must not keep the QP alive (QP -> store -> factor)
+    fact = backend.make(local, order=lambda: ordering(ref(), local))
     fact.analyze(Kf)
     t1 = time.perf_counter()
     fact.factorize(Kf)
@@ -206,7 +222,8 @@ def factor_fixed(qp: QP, factor: str | Backend | None = None, cache: FactorCache
     t3 = time.perf_counter()
     ff = FixedFactor(n=Kf.shape[0], local=local, fact=fact, S_fixed=S,
                      time_s={"ordering": t1 - t0, "factorize": t2 - t1, "schur": t3 - t2})
-    cache.put(key, ff)
+    store.put(key, ff)
+    store.factorizations += 1
     return ff
 
 
@@ -216,15 +233,6 @@ def sparse_factor(A: sp.spmatrix, factor: str | Backend | None = None) -> Factor
     return choose_backend(factor).factor(A)
 
 
-def clear_cache() -> None:
-    """Forget every cached factorization (of DEFAULT_CACHE) and every other registered process cache
-    (:mod:`dualfem.core.caches`, e.g. a problem's delta-free assembly)."""
-    from dualfem.core import caches
-
-    DEFAULT_CACHE.clear()
-    caches.clear_all()
-
-
 # ------------------------------------------------------------------------ reduction
 class LocalReduction:
     """Exact reduction of a QP onto its local unknowns I (see module docstring).
@@ -232,13 +240,14 @@ class LocalReduction:
     Attributes: ``I`` (indices into x), ``S`` (dense Schur complement of K onto I, includes the
     parameter part), ``g`` (reduced load), ``BI`` (dense ``B[:, I]``), ``c0`` (energy constant:
     ``Pi(full(xI)) = 1/2 xI'S xI - g'xI + c0``), ``factor`` (the shared :class:`FixedFactor`).
-    ``factor=`` names the backend (default: the process-wide choice), ``cache=`` the FactorCache.
+    ``factor=`` names the backend (default: the process-wide choice), ``store=`` the
+    :class:`FactorStore` (default: the QP's own, :func:`store_of`).
     """
 
-    def __init__(self, qp: QP, factor: str | Backend | None = None, cache: FactorCache | None = None):
+    def __init__(self, qp: QP, factor: str | Backend | None = None, store: FactorStore | None = None):
         self.qp = qp
         t0 = time.perf_counter()
-        self.factor = ff = factor_fixed(qp, factor, cache)
+        self.factor = ff = factor_fixed(qp, factor, store)
         t1 = time.perf_counter()
         I = ff.local
         self.I = I

@@ -159,7 +159,7 @@ def _method(runs: list[dict], shift: float, sources: list[dict] | None = None) -
             f"Assembly of the QP itself (scene -> QP) is excluded and recorded separately (`assembly_s`; the "
             "targets table adds it as *end to end*).",
             f"- Cold setup: {'yes' if cold == {'True'} else 'no' if cold == {'False'} else 'mixed'} - "
-            "`dualfem.numerics.linalg.clear_cache()` is called before every timed repeat, so a solver that factorizes "
+            "`dualfem.numerics.linalg.store_of(qp).clear()` is called before every timed repeat, so a solver that factorizes "
             "K_fixed pays for it in every repeat (the cache that shares it across delta and loads is not "
             "allowed to hide it).",
             "- Floor: one sparse factorization + one solve of the unconstrained K of the same size by every "

@@ -32,11 +32,8 @@ defect, ``normal`` and ``tangent`` (2,).
 """
 from __future__ import annotations
 
-import json
-
 import numpy as np
 
-from dualfem.core import caches
 from dualfem.core.elasticity import PLANES, lame  # noqa: F401  (re-exported)
 from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
 from dualfem.core.parts import GeometryPart, MaterialPart, UnitsPart
@@ -55,6 +52,11 @@ from .mesh import rotate, rotation, structured_defect_nodes, structured_mesh
 MESHES = ("structured", "gmsh")
 #: smallest delta * E / max(width, height) accepted (dimensionless; see ThinDefect.validate)
 MIN_DELTA_E_OVER_L = 1e-12
+
+
+def _same_load(a, b) -> bool:
+    """The same load: the same preset name, or the very same function object."""
+    return a is b or (isinstance(a, str) and isinstance(b, str) and a == b)
 
 
 def _load_label(load) -> str:
@@ -85,6 +87,8 @@ class ThinDefect(Problem):
         "defects": (),
     }
     presets = {"f1": {"load": "f1"}, "f2": {"load": "f2"}, "f3": {"load": "f3"}}
+    #: keys that keep the mesh and K_el: ``with_params`` / a Workspace's ``update`` reuse the delta-free assembly
+    update_keys = ("delta", "load", "load_scale")
 
     def validate(self) -> None:
         p = self.params
@@ -153,15 +157,17 @@ class ThinDefect(Problem):
         return pts, tri, [np.asarray(n, dtype=np.int64) for n in dm.defect_nodes]
 
     def cut(self) -> tuple[Cut, np.ndarray]:
-        """The doubled mesh in the reference frame, and its node coordinates after ``rotate_deg``."""
-        if getattr(self, "_cut", None) is None:
+        """The doubled mesh in the reference frame, and its node coordinates after ``rotate_deg`` (kept in
+        ``self.shared``: computed once for this instance and those ``with_params`` derives from it)."""
+        shared = self.shared.data
+        if shared.get("cut") is None:
             pts, tri, dn = self._reference_mesh()
             p = self.params
             label = f"N={p['N']}" if p["mesh"] == "structured" else f"mesh_size={p['mesh_size'] or 'width/N'}"
             c = cut(pts, tri, dn, label)
             centre = np.array([p["width"], p["height"]]) / 2
-            self._cut = (c, rotate(c.points, float(p["rotate_deg"]), centre))
-        return self._cut
+            shared["cut"] = (c, rotate(c.points, float(p["rotate_deg"]), centre))
+        return shared["cut"]
 
     def mesh(self):
         """(scikit-fem MeshTri of the doubled, rotated mesh, the Cut)."""
@@ -213,36 +219,23 @@ class ThinDefect(Problem):
         K_all = stiffness(pts, c.triangles, lam, mu, nd, 2 * nn)
         return K_all, self.nodal_load().T.ravel(), self.basis()
 
-    def _assembly_key(self) -> str | None:
-        """Identity of everything but the deltas (None: not cacheable, e.g. a load given as a function)."""
-        p = self.params
-        if callable(p["load"]):
-            return None
-        free = {k: v for k, v in p.items() if k not in ("delta", "defects")}
-        free["defects"] = [{"points": d["points"], "curve": d.get("curve")} for d in self._defects]
-        return json.dumps(free, sort_keys=True, default=lambda o: np.asarray(o).tolist())
-
     def _delta_free(self) -> dict:
-        """Mesh, DOF maps, elastic stiffness K_el and load F: everything that does not depend on delta.
+        """Mesh, DOF maps and elastic stiffness K_el: everything that depends neither on delta nor on the load.
 
-        Kept for the last scene in a process (:data:`_ASSEMBLY`), so a sweep over delta on one mesh
-        assembles once; its arrays are read-only (they are shared by the QPs built from it).
+        Computed once per :class:`~dualfem.core.problem.Shared` (this instance and those
+        :meth:`with_params` derives from it for new ``update_keys``), so a sweep over delta or loads
+        on one mesh assembles once; its arrays are read-only (they are shared by the QPs built from it).
         """
-        key = self._assembly_key()
-        hit = _ASSEMBLY.get(key) if key is not None else None
-        if hit is not None:
-            self._cut = hit["cut_rotated"]
-            return hit
+        shared = self.shared
+        a = shared.data.get("delta_free")
+        if a is not None:
+            return a
         p = self.params
         c, pts = self.cut()
         lam, mu = lame(p["E"], p["nu"], p["plane"])
         node_dofs = free_dofs(self._sides(c)[0], pts.shape[1])
         n = int(node_dofs.max()) + 1
         K_el = stiffness(pts, c.triangles, lam, mu, node_dofs, n)
-        Fn = self.nodal_load()
-        F = np.zeros(n)
-        free = node_dofs >= 0
-        F[node_dofs[free]] = Fn[free]
         R = rotation(float(p["rotate_deg"]))
         local = np.unique(np.concatenate([node_dofs[:, c.upper].ravel(), node_dofs[:, c.lower].ravel()]))
         maps = {
@@ -250,12 +243,25 @@ class ThinDefect(Problem):
             "defect_upper": c.upper, "defect_lower": c.lower, "defect_tips": c.tips, "defect_s": c.s,
             "defect_id": c.defect_id, "defect_normals": R @ c.normals, "defect_tangents": R @ c.tangents,
         }
-        out = {"cut": c, "cut_rotated": self._cut, "n": n, "K_el": K_el, "F": F, "local": local, "maps": maps}
-        freeze(K_el.data, K_el.indices, K_el.indptr, F, local, *maps.values())
-        _ASSEMBLY.clear()
-        if key is not None:
-            _ASSEMBLY[key] = out
-        return out
+        a = {"cut": c, "n": n, "K_el": K_el, "local": local, "maps": maps}
+        freeze(K_el.data, K_el.indices, K_el.indptr, local, *maps.values())
+        shared.data["delta_free"] = a
+        shared.assemblies += 1
+        return a
+
+    def _load_vector(self, a: dict) -> np.ndarray:
+        """F on the free DOFs for this instance's load and load_scale; the last one is remembered in the
+        delta-free assembly (a sweep over delta assembles it once). Each QP gets its own copy."""
+        p = self.params
+        last = a.get("F")
+        if last is None or not (_same_load(last[0], p["load"]) and last[1] == p["load_scale"]):
+            node_dofs = a["maps"]["node_dofs"]
+            Fn = self.nodal_load()
+            F = np.zeros(a["n"])
+            free = node_dofs >= 0
+            F[node_dofs[free]] = Fn[free]
+            last = a["F"] = (p["load"], p["load_scale"], F)
+        return last[2].copy()
 
     @staticmethod
     def _stiffness(a: dict, coef: np.ndarray) -> tuple:
@@ -282,8 +288,9 @@ class ThinDefect(Problem):
     def build(self) -> QP:
         """Assemble K (elastic + interface/delta), F (top traction), B (normal jumps).
 
-        The delta-free part (mesh, K_el, F, maps) is reused from the previous build in this process
-        when only the deltas differ; the interface term is assembled for this delta.
+        The delta-free part (mesh, K_el, maps; F per load) is reused from earlier builds of this
+        instance and of those :meth:`with_params` derived from it for new ``update_keys`` (delta, load,
+        load_scale); the interface term is assembled for this delta.
         """
         p = self.params
         a = self._delta_free()
@@ -301,18 +308,9 @@ class ThinDefect(Problem):
             params["defects"] = defects_label(self._defects)
         self.jump_operators = J
         geometry = GeometryPart(2, maps.pop("nodes"), maps.pop("triangles"), maps.pop("node_dofs"))
-        return QP(K=K, F=a["F"].copy(), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],
+        return QP(K=K, F=self._load_vector(a), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],
                   name=f"thin_defect[{p['load'] if isinstance(p['load'], str) else 'custom'}]",
                   params=params, maps=maps, geometry=geometry,
                   units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
                   material=MaterialPart(float(p["E"]), float(p["nu"]), str(p["plane"])))
 
-
-#: the delta-free assembly of the last scene built in this process (see ThinDefect._delta_free)
-_ASSEMBLY: dict[str, dict] = {}
-
-
-@caches.register
-def clear_assembly_cache() -> None:
-    """Forget the cached delta-free assembly."""
-    _ASSEMBLY.clear()
