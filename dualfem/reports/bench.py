@@ -159,9 +159,9 @@ def _method(runs: list[dict], shift: float, sources: list[dict] | None = None) -
             f"Assembly of the QP itself (scene -> QP) is excluded and recorded separately (`assembly_s`; the "
             "targets table adds it as *end to end*).",
             f"- Cold setup: {'yes' if cold == {'True'} else 'no' if cold == {'False'} else 'mixed'} - "
-            "`dualfem.numerics.linalg.store_of(qp).clear()` is called before every timed repeat, so a solver that factorizes "
-            "K_fixed pays for it in every repeat (the cache that shares it across delta and loads is not "
-            "allowed to hide it).",
+            "`dualfem.numerics.linalg.store_of(qp).clear()` is called before every timed repeat, so a solver "
+            "that factorizes K_fixed pays for it in every repeat (the store that shares it across delta and "
+            "loads is not allowed to hide it).",
             "- Floor: one sparse factorization + one solve of the unconstrained K of the same size by every "
             "installed library (scipy `splu` with `permc_spec=\"MMD_AT_PLUS_A\"`; MKL PARDISO when pypardiso is "
             "installed; CHOLMOD when scikit-sparse is), same threads: the fastest is the floor (named in the "
