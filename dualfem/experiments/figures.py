@@ -26,6 +26,7 @@ from dualfem.core.scene import DEFAULT_SCENE, library, load_scene
 from dualfem.experiments.paper import LOADS, PAPER_FIGURES, PAPER_SCENE, PAPER_SOLVER
 from dualfem.experiments.reference import candidates
 from dualfem.experiments.runner import run
+from dualfem.experiments.workspace import Workspace
 from dualfem.post.fields import Post
 from dualfem.post.figures import history_series
 
@@ -89,6 +90,7 @@ class Cases:
         self.N = N
         self.progress = progress
         self.qps: dict = {}
+        self.spaces: dict[str, Workspace] = {}
         self.sols: dict = {}
         self.frozen = False
 
@@ -106,7 +108,9 @@ class Cases:
         if key not in self.qps:
             if self.frozen:
                 self._missing(f"the QP of {scene} at delta={delta:g}")
-            self.qps[key] = load_scene(scene, {"N": self.N, "delta": delta}).build()
+            if scene not in self.spaces:           # the deltas of a scene share its assembly and factorization
+                self.spaces[scene] = Workspace(scene, {"N": self.N})
+            self.qps[key] = self.spaces[scene].update(delta=delta).qp
         return self.qps[key]
 
     def solution(self, solver: str, scene: str, delta: float):

@@ -17,8 +17,8 @@ import math
 import time
 from collections.abc import Callable
 
-from dualfem.core.scene import load_scene
 from dualfem.experiments.runner import run
+from dualfem.experiments.workspace import Workspace
 
 # ---------------------------------------------------------------- the paper's names, in one place
 # The report studies that reproduce the paper (this module, :mod:`dualfem.experiments.figures`) and
@@ -82,9 +82,23 @@ def cells() -> list[tuple[str, str, float, float]]:
     return out
 
 
-def _run(load: str, N: int, delta: float, plane: str, solver: str, params: dict) -> dict:
+class _Meshes:
+    """One :class:`~dualfem.experiments.workspace.Workspace` per (N, plane), the last one only: the
+    loads and deltas of a table are updates of its assembly and factorization."""
 
-    qp = load_scene(load, {"N": N, "delta": delta, "plane": plane}).build()
+    def __init__(self) -> None:
+        self.key: tuple | None = None
+        self.ws: Workspace | None = None
+
+    def qp(self, load: str, N: int, delta: float, plane: str):
+        if self.key != (N, plane) or self.ws is None:
+            self.key, self.ws = (N, plane), Workspace(load, {"N": N, "plane": plane})
+        return self.ws.update(delta=delta, load=load).qp
+
+
+def _run(load: str, N: int, delta: float, plane: str, solver: str, params: dict,
+         meshes: _Meshes | None = None) -> dict:
+    qp = (meshes or _Meshes()).qp(load, N, delta, plane)
     t0 = time.perf_counter()
     sol = run(solver, qp, params)
     steps = [s for h in sol.history for s in h.get("steps", [])]
@@ -97,13 +111,14 @@ def tables(Ns, planes, solver: str = PAPER_SOLVER, progress: Progress = None) ->
     out: dict[tuple, dict] = {}
     todo = cells()
     total, done = len(Ns) * len(planes) * len(todo), 0
+    meshes = _Meshes()
     for N in Ns:
         for plane in planes:
             for table, load, d, factor in todo:
                 key = (N, plane, load, d, factor)
                 if key not in out:
                     out[key] = {"N": N, "plane": plane, "load": load, "delta": d, "factor": factor,
-                                **_run(load, N, d, plane, solver, {"step_factor": factor, **PAPER_OUTER})}
+                                **_run(load, N, d, plane, solver, {"step_factor": factor, **PAPER_OUTER}, meshes)}
                 done += 1
                 if progress:
                     r = out[key]
@@ -134,9 +149,9 @@ def closest(records: list[dict]) -> tuple[int, str]:
 
 def auto(N: int, plane: str, progress: Progress = None) -> list[dict]:
     """:data:`REMEDY_SOLVER` on :data:`PAPER_SCENE` at every delta of Table 2: records {delta, k, m, status, ...}."""
-    out = []
+    out, meshes = [], _Meshes()
     for d in DELTAS:
-        out.append({"delta": d, **_run(PAPER_SCENE, N, d, plane, REMEDY_SOLVER, {})})
+        out.append({"delta": d, **_run(PAPER_SCENE, N, d, plane, REMEDY_SOLVER, {}, meshes)})
         if progress:
             progress(f"{REMEDY_SOLVER} N={N} {plane} delta={fmt_delta(d)}: k={out[-1]['k']} m={out[-1]['m']}")
     return out
@@ -145,14 +160,14 @@ def auto(N: int, plane: str, progress: Progress = None) -> list[dict]:
 def inner_norms(Ns, plane: str = "strain", variants=tuple(INNER_VARIANTS), progress: Progress = None) -> list[dict]:
     """Table 1 cells (f1/f2/f3 x three delta, step factor 2) with each inner stop test of
     :data:`INNER_VARIANTS`; records {N, plane, load, delta, variant, k, m, status, time, ...}."""
-    out = []
+    out, meshes = [], _Meshes()
     for N in Ns:
         for load in LOADS:
             for d in T1_DELTAS:
                 for v in variants:
                     out.append({"N": N, "plane": plane, "load": load, "delta": d, "variant": v,
                                 **_run(load, N, d, plane, PAPER_SOLVER, {"step_factor": 2.0, **PAPER_OUTER,
-                                                                    **INNER_VARIANTS[v][0]})})
+                                                                    **INNER_VARIANTS[v][0]}, meshes)})
                     if progress:
                         progress(f"inner test {v}: N={N} {load} delta={fmt_delta(d)}: "
                                  f"k={out[-1]['k']} m={out[-1]['m']} {out[-1]['status']}")

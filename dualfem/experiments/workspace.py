@@ -9,7 +9,7 @@
 Who owns what is reused (nothing is kept by a module):
 
 * the delta-free assembly (mesh, DOF maps, elastic stiffness K_el, the planned interface sum, F of
-  the last load): the workspace's problem instance (:attr:`dualfem.core.problem.Problem.shared`),
+  the last load): the workspace's problem instance (its ``shared``, a :class:`dualfem.core.problem.Shared`),
   handed on by :meth:`~dualfem.core.problem.Problem.with_params` to the instance of each update;
 * the factorization of K_fixed with its Schur complement onto the defect unknowns: the workspace's
   :class:`~dualfem.numerics.linalg.FactorStore`, which every QP it builds names (``QP.store``), so
