@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dualfem.core.errors import InputError
 from dualfem.core.scene import DEFAULT_SCENE, load_scene
 
 #: outcome classes, in report order; only the first two are acceptable
@@ -104,8 +105,17 @@ MAKERS: dict[str, Callable[[Path], None]] = {
 
 # ------------------------------------------------------------------------ running a case
 def load_cases(corpus: Path) -> list[dict]:
-    """The cases of ``corpus/cases.toml``."""
-    return list(tomllib.loads((corpus / "cases.toml").read_text(encoding="utf-8"))["case"])
+    """The cases of ``corpus/cases.toml`` and then of every ``corpus/cases_*.toml`` (sorted; one file per
+    class of attack keeps additions apart); two cases with one name are refused."""
+    out: list[dict] = []
+    for f in [corpus / "cases.toml", *sorted(corpus.glob("cases_*.toml"))]:
+        if f.is_file():
+            out += list(tomllib.loads(f.read_text(encoding="utf-8")).get("case", []))
+    names = [c.get("name") for c in out]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise InputError(f"the corpus {str(corpus)!r} names two cases {dup[0]!r}")
+    return out
 
 
 def _snapshot(d: Path) -> dict[str, str]:
