@@ -22,6 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
+from dualfem.core.scene import DEFAULT_SCENE
+from dualfem.experiments.paper import LOADS, PAPER_SCENE
+
 DELTAS = [1e-12, 1e-9, 1e-6, 1e-3, 1.0, 1e3]
 
 
@@ -46,8 +49,8 @@ UNITS = OrderedDict([("MPa-m", (1.0, 1.0)), ("MPa-mm", (1.0, 1e3)), ("Pa-m", (1e
 AXES = ("delta", "r", "units", "load", "nu", "N")
 
 
-#: the paper's scene (f2, delta = 1e-5, E = 69000 MPa, nu = 0.3, plane strain) at N = 32
-BASE = {"load": "f2", "N": 32, "delta": 1e-5, "E": 69000.0, "nu": 0.3, "plane": "strain"}
+#: the paper's scene (its load f2, delta = 1e-5, E = 69000 MPa, nu = 0.3, plane strain) at N = 32
+BASE = {"load": PAPER_SCENE, "N": 32, "delta": 1e-5, "E": 69000.0, "nu": 0.3, "plane": "strain"}
 
 
 #: the paper's fixed augmentation parameter r (MPa per unit length)
@@ -68,7 +71,7 @@ class Task:
     time_limit: float
     after: str | None = None          # id of the task that must finish first (N axis)
     ref_ok: bool = True                # False: do not compute a reference (beyond budget)
-    scene_name: str = "f2"             # what ``scene`` (all of its parameters) is given to: load_scene(name, scene)
+    scene_name: str = DEFAULT_SCENE    # what ``scene`` (all of its parameters) is given to: load_scene(name, scene)
 
     def key(self) -> str:
         """Stable identity of the run (used to resume)."""
@@ -144,7 +147,7 @@ def scene_in_units(base: dict, stress: float, length: float, problem: str = "thi
     load = d["load"]
     if callable(load):
         raise InputError("scene_in_units: a load given as a Python function cannot be converted to other units")
-    if isinstance(load, str) and load.strip() not in ("f1", "f2", "f3") and length != 1:
+    if isinstance(load, str) and load.strip() not in LOADS and length != 1:
         out["load"] = _scaled_expression(load.strip(), length)
     return out
 
@@ -229,7 +232,7 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] | 
     reg = solvers()
     if scene is None and scene_name is not None:
         scene = scene_base(scene_name)
-    name = scene_name or "f2"
+    name = scene_name or DEFAULT_SCENE
     if Path(name).suffix == ".toml" and Path(name).is_file():
         name = str(Path(name).resolve())      # a scene file: found again by a resume from another folder
     problem = scene_problem(name) if scene_name is not None else "thin_defect"
@@ -256,7 +259,7 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] | 
     # the r axis: solvers with a parameter r that the user sets (as given, or in the paper's units)
     r_solvers = [s for s in solver_names if "r" in reg[s].defaults and r_set_by_user(reg[s].defaults)]
     if "delta" in axes:
-        for load in ([base.get("load")] if scene is not None else ["f2"] if quick else ["f1", "f2", "f3"]):
+        for load in ([base.get("load")] if scene is not None else [PAPER_SCENE] if quick else list(LOADS)):
             for d in DELTAS:
                 for s in solver_names:
                     add("delta", {"load": load, "delta": d}, {**base, "load": load, "delta": d}, s)
