@@ -202,7 +202,7 @@ def test_planned_stiffness_sum_equals_scipys_sum_bit_for_bit(scene_name):
     import numpy as np
 
     from dualfem.core.scene import load_scene
-    from problems.thin_defect.assemble import interface
+    from dualfem.problems.thin_defect.assemble import interface
 
     first = load_scene(scene_name, {"N": 12, "delta": 1e-1})
     for delta in (1e-1, 1e-5, 3e-9, 1e-5):
@@ -229,8 +229,8 @@ def test_planned_stiffness_sum_falls_back_on_an_exact_cancellation():
     import numpy as np
 
     from dualfem.core.scene import load_scene
-    from problems.thin_defect import ThinDefect
-    from problems.thin_defect.assemble import interface
+    from dualfem.problems.thin_defect import ThinDefect
+    from dualfem.problems.thin_defect.assemble import interface
 
     problem = load_scene("f2", {"N": 12, "delta": 1e-1})
     problem.build()

@@ -152,7 +152,7 @@ def test_no_module_level_reuse_state():
     assert not (ROOT / "dualfem/core/caches.py").exists()
     for name in ("DEFAULT_CACHE", "FactorCache", "clear_cache", "_FROZEN_HASHES"):
         assert not hasattr(linalg, name), name
-    import problems.thin_defect as td
+    import dualfem.problems.thin_defect as td
 
     assert not hasattr(td, "_ASSEMBLY") and not hasattr(td, "clear_assembly_cache")
 
