@@ -11,7 +11,6 @@ import json
 import os
 import subprocess
 import sys
-import textwrap
 import warnings
 from pathlib import Path
 
@@ -529,4 +528,3 @@ def test_closed_stdout_in_a_real_shell(tmp_path):
 def test_doc_lists_the_guards():
     text = (Path(__file__).parents[1] / "docs" / "plugins.md").read_text()
     assert "read-only" in text and "(0, 1)" in text and "SystemExit" in text
-    assert textwrap.dedent("x").strip()
