@@ -431,19 +431,90 @@ class Loud(Solver):
 '''
 
 
-@pytest.fixture
-def loud_env(tmp_path):
-    """A subprocess environment in which a plugin printing at import time is 'installed'."""
+def installed(tmp_path: Path, modules: dict[str, str]) -> dict:
+    """A subprocess environment in which the plugin ``modules`` (name -> source; each one entry point
+    of the group dualfem.solvers) are 'installed': a dist-info on PYTHONPATH, as pip writes it."""
     src = tmp_path / "src"
     src.mkdir()
-    (src / "hostile_loud.py").write_text(PLUGIN_SRC)
-    dist = tmp_path / "site" / "hostile_loud-0.1.dist-info"
+    for name, code in modules.items():
+        (src / f"{name}.py").write_text(code)
+    dist = tmp_path / "site" / "hostile_plugins-0.1.dist-info"
     dist.mkdir(parents=True)
-    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: hostile-loud\nVersion: 0.1\n")
-    (dist / "entry_points.txt").write_text("[dualfem.solvers]\nhostile_loud = hostile_loud\n")
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: hostile-plugins\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[dualfem.solvers]\n" + "".join(f"{n} = {n}\n" for n in modules))
     env = dict(os.environ, MPLBACKEND="Agg")
     env["PYTHONPATH"] = os.pathsep.join([str(tmp_path / "site"), str(src), env.get("PYTHONPATH", "")])
     return env
+
+
+@pytest.fixture
+def loud_env(tmp_path):
+    """A subprocess environment in which a plugin printing at import time is 'installed'."""
+    return installed(tmp_path, {"hostile_loud": PLUGIN_SRC})
+
+
+def test_plugin_exiting_at_import_is_listed_not_fatal(tmp_path):
+    env = installed(tmp_path, {"hostile_exit_import": "raise SystemExit(0)\n"})
+    r = subprocess.run([sys.executable, "-m", "dualfem", "list", "--json"], env=env, capture_output=True,
+                       text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    errors = json.loads(r.stdout)["plugin_errors"]
+    assert any("hostile_exit_import" in e and "SystemExit" in e for e in errors), errors
+    r = subprocess.run([sys.executable, "-m", "dualfem", "solve", "f1", *SMALL, "--json"], env=env,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and json.loads(r.stdout)["status"] == "solved", r.stderr
+
+
+SLEEPY_SRC = '''
+import sys, time
+from dualfem.core.registry import register_solver
+from dualfem.core.solver import Solver
+
+
+@register_solver
+class Sleepy(Solver):
+    name = "hostile_sleepy"
+
+    def solve(self):
+        print("ready", file=sys.stderr, flush=True)
+        time.sleep(60)
+'''
+
+
+def test_a_real_ctrl_c_still_interrupts(tmp_path):
+    import signal
+
+    env = installed(tmp_path, {"hostile_sleepy": SLEEPY_SRC})
+    p = subprocess.Popen([sys.executable, "-m", "dualfem", "solve", "f1", *SMALL, "--solver", "hostile_sleepy",
+                          "--json"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        for line in p.stderr:
+            if "ready" in line:
+                break
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=30)
+    finally:
+        p.kill()
+    assert p.returncode == 130 and "interrupted" in err and out == "", (p.returncode, err)
+
+
+def test_keyboard_interrupt_subclass_is_contained(qp):
+    class Fake(KeyboardInterrupt):
+        pass
+
+    cls = type("E", (Exits,), {"exc": Fake("not a Ctrl-C")})
+    sol = run(cls(), qp)
+    assert sol.status == Status.ERROR and "Fake" in sol.message
+
+
+def test_bench_flags_a_run_that_changed_the_qp(register):
+    from dualfem.experiments.bench import _timed_runs
+
+    register(Unlocks)
+    qp = load_scene("f1", {"N": 8}).build()
+    task = {"hard_limit": 60, "cold_setup": True, "tol": None}
+    sol, setups, solves, done, note = _timed_runs(task, qp, "hostile_unlocks", {}, lambda *a: None, False, 3)
+    assert sol.status == Status.ERROR and "changed the QP" in sol.message and done == 1
 
 
 def test_fd_level_and_import_time_prints_do_not_corrupt_json(loud_env):

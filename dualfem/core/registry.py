@@ -100,10 +100,8 @@ def _load_groups(groups) -> None:
                 _LOADING_BUILTIN = builtin
                 try:
                     _load_entry_point(ep.load(), reg)
-                except KeyboardInterrupt:
-                    raise
                 except BaseException as exc:  # a broken third-party plugin (even SystemExit) must not break dualfem
-                    if builtin:
+                    if builtin or type(exc) is KeyboardInterrupt:    # a real Ctrl-C still stops
                         raise
                     _ENTRY_POINT_ERRORS.append(f"{group}:{ep.name}: {type(exc).__name__}: {exc}")
                 finally:

@@ -153,8 +153,10 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
             return cls(**params)
         try:
             return cls(**params)
-        except (InputError, KeyboardInterrupt):
+        except InputError:
             raise
         except BaseException as exc:   # noqa: BLE001 - a third-party plugin's bug (even SystemExit): say so
+            if type(exc) is KeyboardInterrupt:     # a real Ctrl-C still stops
+                raise
             raise InputError(f"problem plugin {pname!r} ({cls.__module__}.{cls.__qualname__}) failed to "
                              f"create the scene: {type(exc).__name__}: {exc}") from None

@@ -46,9 +46,11 @@ def make_solver(name: str, params: dict[str, Any] | None = None) -> Solver:
             return cls(**(params or {}))
         try:
             return cls(**(params or {}))
-        except (InputError, KeyboardInterrupt):
+        except InputError:
             raise
         except BaseException as exc:  # noqa: BLE001 - a plugin's bug, whatever it raises
+            if type(exc) is KeyboardInterrupt:     # a real Ctrl-C (exactly this class) still stops
+                raise
             raise InputError(f"solver plugin {name!r} ({cls.__module__}.{cls.__qualname__}) could not be created: "
                              f"{type(exc).__name__}: {exc}") from None
 
@@ -106,9 +108,9 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
             tick("solve (iterations)", t2 - t1)
         except InputError:
             raise
-        except KeyboardInterrupt:      # a real Ctrl-C stops the program
-            raise
         except BaseException as exc:   # noqa: BLE001 - the solver broke (even SystemExit): say so, never hide it
+            if type(exc) is KeyboardInterrupt:     # a real Ctrl-C (exactly this class) still stops the program
+                raise
             return failed(f"{type(exc).__name__}: {exc}", solve=time.perf_counter() - t0)
         try:
             changed_declared = check_declared(solver) != declared
