@@ -405,6 +405,30 @@ def test_prints_do_not_corrupt_json(register, capsys):
     assert "hello from setup" in err and "hello from solve" in err and "hello from __init__" in err
 
 
+class BrokenMissing(Zero):
+    name = "hostile_broken_missing"
+
+    @classmethod
+    def missing(cls):
+        print("missing() prints")
+        raise SystemExit("missing() exits")
+
+
+def test_a_raising_missing_is_contained(register, capsys):
+    register(BrokenMissing)
+    assert main(["list", "--json"]) == 0
+    out, err = capsys.readouterr()
+    d = json.loads(out)
+    assert "SystemExit" in d["solvers"]["hostile_broken_missing"]["missing"] and "missing() prints" in err
+    assert main(["list"]) == 0
+    rc = main(["solve", "f1", *SMALL, "--solver", "hostile_broken_missing"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "Traceback" not in err and "hostile_broken_missing" in err
+    qp = load_scene("f1", {"N": 8}).build()
+    sol = run(BrokenMissing(), qp)
+    assert sol.status == Status.ERROR and "SystemExit" in sol.message
+
+
 PLUGIN_SRC = '''
 import os, sys
 import numpy as np

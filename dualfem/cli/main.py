@@ -92,14 +92,22 @@ def _cfg_list(p):
 
 @command("list", "list problems, scenes and solvers (and whether each is installed)")(_cfg_list)
 def cmd_list(args) -> int:
+    from dualfem.core.quiet import plugin_output
     from dualfem.core.registry import entry_point_errors, problems, solvers
     from dualfem.core.scene import describe, library, preset_conflicts, presets
 
-    sol = {n: {"installed": c.missing() is None, "missing": c.missing(), "description": c.description,
-               "exact": c.exact, "parameters": c.defaults, "allowed": c.allowed(),
-               "renamed": dict(getattr(c, "renamed", {}))} for n, c in sorted(solvers().items())}
-    prb = {n: {"description": c.description, "installed": c.missing() is None, "missing": c.missing(),
-               "parameters": {k: str(v) for k, v in c.defaults.items()}} for n, c in sorted(problems().items())}
+    def describe_solver(c) -> dict:
+        return {"installed": c.missing() is None, "missing": c.missing(), "description": c.description,
+                "exact": c.exact, "parameters": c.defaults, "allowed": c.allowed(),
+                "renamed": dict(getattr(c, "renamed", {}))}
+
+    def describe_problem(c) -> dict:
+        return {"description": c.description, "installed": c.missing() is None, "missing": c.missing(),
+                "parameters": {k: str(v) for k, v in c.defaults.items()}}
+
+    with plugin_output():                 # a plugin's classmethods may print: --json stays one object
+        sol = {n: _plugin_info(describe_solver, c) for n, c in sorted(solvers().items())}
+        prb = {n: _plugin_info(describe_problem, c) for n, c in sorted(problems().items())}
     scn = {n: {"problem": pn, **{k: str(v) for k, v in prm.items()}} for n, (pn, prm) in sorted(presets().items())}
     lib = {n: {"file": str(p), "description": describe(p)} for n, p in library().items()}
     errors = entry_point_errors() + preset_conflicts()
@@ -125,6 +133,19 @@ def cmd_list(args) -> int:
     for e in preset_conflicts():
         print(f"  plugin preset refused: {e}")
     return 0
+
+
+def _plugin_info(describe: Callable[[Any], dict], cls: Any) -> dict:
+    """``describe(cls)``, or, when a plugin's classmethod raises (anything but a real Ctrl-C), a record
+    saying so: ``dualfem list`` shows every other plugin."""
+    try:
+        return describe(cls)
+    except BaseException as exc:  # noqa: BLE001 - a third-party plugin's bug
+        if type(exc) is KeyboardInterrupt:
+            raise
+        why = f"plugin error: {type(exc).__name__}: {exc}"
+        return {"installed": False, "missing": why, "description": str(getattr(cls, "description", "")),
+                "parameters": {}}
 
 
 # ------------------------------------------------------------------------- export
@@ -167,10 +188,10 @@ def _cfg_solve(p):
 def cmd_solve(args) -> int:
     from dualfem.core.scene import parse_set
     from dualfem.core.solution import Status
-    from dualfem.experiments.runner import make_solver, run, summary
+    from dualfem.experiments.runner import make_solver, missing_reason, run, summary
 
     solver = make_solver(args.solver, parse_set(args.param, "-p"))  # validate before the (slow) assembly
-    missing = solver.missing()
+    missing = missing_reason(solver)
     if missing:
         raise MissingDependency(missing)
     if args.vtk or args.xdmf:

@@ -55,6 +55,19 @@ def make_solver(name: str, params: dict[str, Any] | None = None) -> Solver:
                              f"{type(exc).__name__}: {exc}") from None
 
 
+def missing_reason(solver: Solver) -> str | None:
+    """``solver.missing()`` (an install hint, or None), contained: its prints go to stderr, and if the
+    plugin's ``missing`` raises (anything but a real Ctrl-C), the reason says so."""
+    with plugin_output():
+        try:
+            reason = solver.missing()
+        except BaseException as exc:  # noqa: BLE001 - a plugin's bug
+            if type(exc) is KeyboardInterrupt:
+                raise
+            return f"solver plugin {_name(solver)!r}: missing() raised {type(exc).__name__}: {exc}"
+    return None if reason is None else str(reason)
+
+
 def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, tol: float | None = None,
         progress: Callable[[str, float], None] | None = None) -> Solution:
     """Solve ``qp`` with ``solver`` (an instance, or a registry name plus ``params``).
