@@ -263,6 +263,16 @@ def test_deliberate_change_is_caught_by_the_fingerprint(register):
     assert sol.status == Status.ERROR and "changed the QP" in sol.message and sol.info["qp_changed"] == ["F"]
 
 
+def test_a_change_is_caught_even_when_the_plugin_then_raises():
+    class UnlocksAndRaises(Unlocks):
+        def solve(self):
+            raise RuntimeError("and now I fail")
+
+    qp = load_scene("f1", {"N": 8}).build()
+    sol = run(UnlocksAndRaises(), qp)
+    assert sol.status == Status.ERROR and sol.info["qp_changed"] == ["F"] and "changed the QP" in sol.message
+
+
 def test_compare_stops_when_a_plugin_changes_the_qp(register):
     register(Unlocks)
     qp = load_scene("f1", {"N": 8}).build()

@@ -102,48 +102,54 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
         sol.info["claimed_status"] = str(status)
         return sol
 
+    before = fingerprint(qp)
+    view = guarded_view(qp)
+    t0 = t1 = t2 = time.perf_counter()
+    returned: Any = None
+    why: str | None = None
+    status = Status.ERROR
     with plugin_output():
         solver.check_params()          # again: a plugin may override __init__ or change params after it
         declared = check_declared(solver)  # tolerance in (0, 1), exact a bool (InputError otherwise)
-        view = guarded_view(qp)
-        before = fingerprint(qp)
-        t0 = time.perf_counter()
         try:
             reason = solver.missing() or solver.skip(view)
             if reason:
-                return failed(str(reason), Status.SKIPPED)
-            t0 = time.perf_counter()
-            solver.setup(view)
-            t1 = time.perf_counter()
-            tick("setup (factorization)", t1 - t0)
-            returned = solver.solve()
-            t2 = time.perf_counter()
-            tick("solve (iterations)", t2 - t1)
+                why, status = str(reason), Status.SKIPPED
+            else:
+                t0 = time.perf_counter()
+                solver.setup(view)
+                t1 = t2 = time.perf_counter()
+                tick("setup (factorization)", t1 - t0)
+                returned = solver.solve()
+                t2 = time.perf_counter()
+                tick("solve (iterations)", t2 - t1)
         except InputError:
             raise
         except BaseException as exc:   # noqa: BLE001 - the solver broke (even SystemExit): say so, never hide it
             if type(exc) is KeyboardInterrupt:     # a real Ctrl-C (exactly this class) still stops the program
                 raise
-            return failed(f"{type(exc).__name__}: {exc}", solve=time.perf_counter() - t0)
-        try:
-            changed_declared = check_declared(solver) != declared
-            why = None if not changed_declared else (
-                f"solver plugin {name!r} changed its declared tolerance/exact during the run "
-                f"(from {declared[0]:g}/{declared[1]} to {solver.tolerance!r}/{solver.exact!r})")
-        except InputError as exc:
-            why = f"{exc} (changed during the run)"
-        reduction = _reduction_of(solver, view, qp)
-    after = fingerprint(qp)
+            why, t2 = f"{type(exc).__name__}: {exc}", time.perf_counter()
+        if why is None:
+            try:
+                if check_declared(solver) != declared:
+                    why = (f"solver plugin {name!r} changed its declared tolerance/exact during the run "
+                           f"(from {declared[0]:g}/{declared[1]} to {solver.tolerance!r}/{solver.exact!r})")
+            except InputError as exc:
+                why = f"{exc} (changed during the run)"
+        reduction = _reduction_of(solver, view, qp) if why is None else None
+    after = fingerprint(qp)            # whatever happened: did the plugin write into the caller's QP?
     changed = [k for k in before if after.get(k) != before[k]]
     if changed:
-        why = (f"solver {name!r} changed the QP it was given ({', '.join(changed)}): its answer is discarded, "
-               f"and any later run on this QP is unreliable")
-    sol, problem = _checked_solution(returned, qp, name)
-    if why or problem:
-        sol = failed(why or problem or "", setup=t1 - t0, solve=t2 - t1)
+        why, status = (f"solver {name!r} changed the QP it was given ({', '.join(changed)}): its answer is "
+                       f"discarded, and any later run on this QP is unreliable"), Status.ERROR
+    sol, problem = _checked_solution(returned, qp, name) if why is None else (None, None)
+    if sol is None or problem:
+        out = failed(why or problem or "", status, setup=t1 - t0, solve=t2 - t1)
+        if isinstance(returned, Solution) and str(getattr(returned, "status", "")) in set(map(str, Status)):
+            out.info["claimed_status"] = str(returned.status)
         if changed:
-            sol.info["qp_changed"] = changed
-        return sol
+            out.info["qp_changed"] = changed
+        return out
     sol.time_s = {"setup": t1 - t0, "solve": t2 - t1, **sol.time_s}
     sol.params = _params(solver)
     sol.info["declared"] = {"tolerance": declared[0], "exact": declared[1]}
@@ -172,7 +178,7 @@ def _params(solver: Any) -> dict:
     return dict(p) if isinstance(p, dict) else {}
 
 
-def _checked_solution(returned: Any, qp: QP, name: str) -> tuple[Solution, str | None]:
+def _checked_solution(returned: Any, qp: QP, name: str) -> tuple[Solution | None, str | None]:
     """A fresh Solution made of what the plugin returned, checked; (solution, None) or (_, the problem).
 
     Only x, multipliers, status, iterations, message, history and the plugin's own ``info`` keys are
