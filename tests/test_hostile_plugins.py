@@ -323,7 +323,8 @@ def test_problem_preset_cannot_take_a_builtin_scene_name(register):
         prob = load_scene("f2", {"N": 8})
     assert prob.name == "thin_defect"
     assert any(issubclass(x.category, PresetConflictWarning) and "hostile_taker" in str(x.message) for x in w)
-    assert load_scene("curved").name == "thin_defect"
+    with pytest.warns(PresetConflictWarning, match="curved"):
+        assert load_scene("curved").name == "thin_defect"
 
 
 def test_list_names_the_refused_preset(register, capsys):
@@ -332,6 +333,35 @@ def test_list_names_the_refused_preset(register, capsys):
     d = json.loads(capsys.readouterr().out)
     assert d["scenes"]["f2"]["problem"] == "thin_defect"
     assert any("hostile_taker" in e and "'f2'" in e for e in d["plugin_errors"])
+
+
+class LoudProblem(Problem):
+    name = "hostile_loud_problem"
+    description = "a problem plugin that prints, exits or returns garbage"
+    defaults = {"N": 8, "mode": "print"}
+    presets = {"hostile_loud_scene": {"N": 8}, "hostile_bad_preset": "not a dict"}
+
+    def build(self):
+        print("problem build prints")
+        if self.params["mode"] == "exit":
+            raise SystemExit(0)
+        if self.params["mode"] == "none":
+            return None
+        return load_scene("f1", {"N": self.params["N"]}).build()
+
+
+@pytest.mark.parametrize("mode, rc, words", [("print", 0, None), ("exit", 2, "SystemExit"),
+                                             ("none", 2, "NoneType, not a dualfem QP")])
+def test_problem_plugin_build_is_contained(mode, rc, words, register, capsys):
+    register(LoudProblem, "problem")
+    got = main(["solve", "hostile_loud_scene", "--set", f"mode={mode}", "--solver", "pdas", "--json"])
+    out, err = capsys.readouterr()
+    assert got == rc and "Traceback" not in err and "problem build prints" in err
+    if words is None:
+        assert json.loads(out)["status"] == "solved"
+    else:
+        assert out == "" and words in err and "hostile_loud_problem" in err
+    assert any("hostile_bad_preset" in m for m in preset_conflicts())
 
 
 # ------------------------------------------------------- SystemExit and other BaseExceptions

@@ -209,10 +209,9 @@ def cmd_solve(args) -> int:
     t0 = time.perf_counter()
     problem = scene_from_args(args)
     t1 = time.perf_counter()
-    from dualfem.core.quiet import plugin_output
+    from dualfem.core.scene import build_qp
 
-    with plugin_output():            # a problem plugin printing while it assembles must not corrupt --json
-        qp = problem.build()
+    qp = build_qp(problem)           # contained: a problem plugin's prints, exceptions, a non-QP
     t2 = time.perf_counter()
     stages("assembly (mesh, matrices)", t2 - t1)
     hint = missing_fast_backend_hint(qp.n)

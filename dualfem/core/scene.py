@@ -8,6 +8,7 @@ from typing import Any
 
 from dualfem.core.errors import InputError
 from dualfem.core.problem import Problem
+from dualfem.core.qp import QP
 from dualfem.core.registry import builtin_names, get_problem, problems
 
 #: the scene the framework uses when it needs one and none is given (probes, crafted test files,
@@ -48,6 +49,10 @@ def _presets() -> tuple[dict[str, tuple[str, dict[str, Any]]], list[str]]:
         who = f"problem plugin {pname!r} ({cls.__module__}.{cls.__qualname__})"
         items = cls.presets.items() if isinstance(cls.presets, dict) else ()
         for sname, params in items:
+            if not isinstance(sname, str) or not isinstance(params, dict):
+                conflicts.append(f"{who} declares the preset {sname!r} with {type(params).__name__} parameters "
+                                 f"(a dict of scene parameters is needed): ignored")
+                continue
             if pname not in builtin and (sname in out or sname in lib):
                 taken = owner.get(sname) or f"the scene library's {sname!r} ({lib[sname]})"
                 conflicts.append(f"{who} may not take the scene name {sname!r} of {taken}: its preset is "
@@ -160,3 +165,28 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
                 raise
             raise InputError(f"problem plugin {pname!r} ({cls.__module__}.{cls.__qualname__}) failed to "
                              f"create the scene: {type(exc).__name__}: {exc}") from None
+
+
+def build_qp(problem: Problem) -> QP:
+    """``problem.build()``, contained: a problem plugin's prints go to stderr (``--json`` stays one
+    object); a third-party plugin that raises (anything but a real Ctrl-C) or returns something else
+    than a :class:`~dualfem.core.qp.QP` is refused with an InputError naming it."""
+    from dualfem.core.quiet import plugin_output
+
+    name = getattr(problem, "name", type(problem).__name__)
+    who = f"problem plugin {name!r} ({type(problem).__module__}.{type(problem).__qualname__})"
+    with plugin_output():
+        if name in builtin_names("problem"):
+            qp = problem.build()
+        else:
+            try:
+                qp = problem.build()
+            except InputError:
+                raise
+            except BaseException as exc:   # noqa: BLE001 - a third-party plugin's bug (even SystemExit)
+                if type(exc) is KeyboardInterrupt:
+                    raise
+                raise InputError(f"{who} failed to build the QP: {type(exc).__name__}: {exc}") from None
+    if not isinstance(qp, QP):
+        raise InputError(f"{who}: build() returned {type(qp).__name__}, not a dualfem QP")
+    return qp
