@@ -391,6 +391,18 @@ def test_base_exceptions_become_errors(exc, where, qp):
     assert sol.status == Status.ERROR and type(exc).__name__ in sol.message
 
 
+def test_a_raising_check_params_is_an_error(qp):
+    class BadCheck(Zero):
+        def check_params(self):
+            if getattr(self, "armed", False):
+                raise SystemExit("check_params exits")
+
+    s = BadCheck()
+    s.armed = True
+    sol = run(s, qp)
+    assert sol.status == Status.ERROR and "SystemExit" in sol.message
+
+
 def test_keyboard_interrupt_still_stops(qp):
     cls = type("E", (Exits,), {"exc": KeyboardInterrupt()})
     with pytest.raises(KeyboardInterrupt):

@@ -78,7 +78,7 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
     Without it, to the tolerance the solver declares. ``progress(stage, seconds)`` is called as
     each stage (setup, solve, certify) finishes.
 
-    Nothing the plugin says about itself is trusted (docs/plugins.md, section 1.6):
+    Nothing the plugin says about itself is trusted (docs/plugins.md, sections 1.1-1.3):
 
     * its declared ``tolerance`` (a finite number in (0, 1)) and ``exact`` are checked before
       ``setup`` (InputError) and read once: a plugin that changes them during the run is an ``error``;
@@ -108,10 +108,11 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
     returned: Any = None
     why: str | None = None
     status = Status.ERROR
+    declared = (float("nan"), True)
     with plugin_output():
-        solver.check_params()          # again: a plugin may override __init__ or change params after it
-        declared = check_declared(solver)  # tolerance in (0, 1), exact a bool (InputError otherwise)
         try:
+            solver.check_params()      # again: a plugin may override __init__ or change params after it
+            declared = check_declared(solver)  # tolerance in (0, 1), exact a bool (InputError otherwise)
             reason = solver.missing() or solver.skip(view)
             if reason:
                 why, status = str(reason), Status.SKIPPED
