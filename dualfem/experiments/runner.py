@@ -217,8 +217,9 @@ def _checked_solution(returned: Any, qp: QP, name: str) -> tuple[Solution | None
     times = returned.time_s if isinstance(returned.time_s, dict) else {}
     sol = Solution(
         solver=name, status=status, x=arrays["x"], multipliers=arrays["multipliers"],
-        iterations={str(k): v for k, v in returned.iterations.items()
-                    if isinstance(v, (int, np.integer)) and not isinstance(v, bool)}
+        iterations={str(k): int(v) for k, v in returned.iterations.items()       # counters: whole numbers
+                    if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+                    and np.isfinite(v) and float(v) == int(v)}
         if isinstance(returned.iterations, dict) else {},
         history=list(returned.history) if isinstance(returned.history, list) else [],
         time_s={str(k): float(v) for k, v in times.items()
