@@ -92,19 +92,28 @@ def _cfg_list(p):
 
 @command("list", "list problems, scenes and solvers (and whether each is installed)")(_cfg_list)
 def cmd_list(args) -> int:
+    from dualfem.core.quiet import plugin_output
     from dualfem.core.registry import entry_point_errors, problems, solvers
-    from dualfem.core.scene import describe, library, presets
+    from dualfem.core.scene import describe, library, preset_conflicts, presets
 
-    sol = {n: {"installed": c.missing() is None, "missing": c.missing(), "description": c.description,
-               "exact": c.exact, "parameters": c.defaults, "allowed": c.allowed(),
-               "renamed": dict(getattr(c, "renamed", {}))} for n, c in sorted(solvers().items())}
-    prb = {n: {"description": c.description, "installed": c.missing() is None, "missing": c.missing(),
-               "parameters": {k: str(v) for k, v in c.defaults.items()}} for n, c in sorted(problems().items())}
+    def describe_solver(c) -> dict:
+        return {"installed": c.missing() is None, "missing": c.missing(), "description": c.description,
+                "exact": c.exact, "parameters": c.defaults, "allowed": c.allowed(),
+                "renamed": dict(getattr(c, "renamed", {}))}
+
+    def describe_problem(c) -> dict:
+        return {"description": c.description, "installed": c.missing() is None, "missing": c.missing(),
+                "parameters": {k: str(v) for k, v in c.defaults.items()}}
+
+    with plugin_output():                 # a plugin's classmethods may print: --json stays one object
+        sol = {n: _plugin_info(describe_solver, c) for n, c in sorted(solvers().items())}
+        prb = {n: _plugin_info(describe_problem, c) for n, c in sorted(problems().items())}
     scn = {n: {"problem": pn, **{k: str(v) for k, v in prm.items()}} for n, (pn, prm) in sorted(presets().items())}
     lib = {n: {"file": str(p), "description": describe(p)} for n, p in library().items()}
+    errors = entry_point_errors() + preset_conflicts()
     if args.json:
         print(dumps({"problems": prb, "scenes": scn, "scene_library": lib, "solvers": sol,
-                     "plugin_errors": entry_point_errors()}))
+                     "plugin_errors": errors}))
         return 0
     print("problems:")
     for n, d in prb.items():
@@ -121,7 +130,22 @@ def cmd_list(args) -> int:
         print(f"  {n:14s} {state:10s} {d['description']}")
     for e in entry_point_errors():
         print(f"  plugin failed to load: {e}")
+    for e in preset_conflicts():
+        print(f"  plugin preset refused: {e}")
     return 0
+
+
+def _plugin_info(describe: Callable[[Any], dict], cls: Any) -> dict:
+    """``describe(cls)``, or, when a plugin's classmethod raises (anything but a real Ctrl-C), a record
+    saying so: ``dualfem list`` shows every other plugin."""
+    try:
+        return describe(cls)
+    except BaseException as exc:  # noqa: BLE001 - a third-party plugin's bug
+        if type(exc) is KeyboardInterrupt:
+            raise
+        why = f"plugin error: {type(exc).__name__}: {exc}"
+        return {"installed": False, "missing": why, "description": str(getattr(cls, "description", "")),
+                "parameters": {}}
 
 
 # ------------------------------------------------------------------------- export
@@ -164,10 +188,10 @@ def _cfg_solve(p):
 def cmd_solve(args) -> int:
     from dualfem.core.scene import parse_set
     from dualfem.core.solution import Status
-    from dualfem.experiments.runner import make_solver, run, summary
+    from dualfem.experiments.runner import make_solver, missing_reason, run, summary
 
     solver = make_solver(args.solver, parse_set(args.param, "-p"))  # validate before the (slow) assembly
-    missing = solver.missing()
+    missing = missing_reason(solver)
     if missing:
         raise MissingDependency(missing)
     if args.vtk or args.xdmf:
@@ -185,7 +209,9 @@ def cmd_solve(args) -> int:
     t0 = time.perf_counter()
     problem = scene_from_args(args)
     t1 = time.perf_counter()
-    qp = problem.build()
+    from dualfem.core.scene import build_qp
+
+    qp = build_qp(problem)           # contained: a problem plugin's prints, exceptions, a non-QP
     t2 = time.perf_counter()
     stages("assembly (mesh, matrices)", t2 - t1)
     hint = missing_fast_backend_hint(qp.n)
@@ -271,13 +297,22 @@ def _import_commands() -> None:
             importlib.import_module(f"dualfem.cli.{info.name}")
 
 
+#: exit status of ``--json`` with a closed standard output (``dualfem solve ... --json >&-``)
+EXIT_NO_STDOUT = 2
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point; returns the exit status."""
+    closed = _open_std_streams()
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:
-        return int(exc.code or 0)
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    if "stdout" in closed and getattr(args, "json", False):
+        print(f"dualfem {args.command}: error: the standard output is closed: nowhere to write the JSON "
+              f"object of --json", file=sys.stderr)
+        return EXIT_NO_STDOUT
     run = _COMMANDS[args.command][2]
     try:
         rc = run(args)
@@ -306,6 +341,32 @@ def main(argv: list[str] | None = None) -> int:
                else f"{what} (writing the standard output or an output file)")
         print(f"dualfem {args.command}: error: {msg}", file=sys.stderr)
         return 2
+
+
+def _open_std_streams() -> list[str]:
+    """Reopen a closed stdout or stderr (``>&-``, ``2>&-``) on /dev/null, at the descriptor level (so
+    that no file dualfem opens later takes descriptor 1 or 2 and receives a library's prints) and at
+    Python's (``sys.stdout`` is None then: ``print`` would drop, ``flush`` would raise). Returns the
+    names of the streams that were closed."""
+    import os
+
+    closed = []
+    for fd, name in ((1, "stdout"), (2, "stderr")):
+        try:
+            os.fstat(fd)
+            fd_open = True
+        except OSError:
+            fd_open = False
+        if not fd_open:
+            null = os.open(os.devnull, os.O_WRONLY)
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+        if not fd_open or getattr(sys, name) is None:
+            closed.append(name)
+            if getattr(sys, name) is None:
+                setattr(sys, name, open(os.devnull, "w", encoding="utf-8"))  # noqa: SIM115 - for the process
+    return closed
 
 
 def _drop_stdout() -> bool:

@@ -37,8 +37,12 @@ DISTRIBUTION = "dualfem"
 
 
 def _register(kind: str, reg: dict, cls):
-    if not cls.name:
-        raise ValueError(f"{kind} class {cls.__name__} has no name")
+    if not isinstance(getattr(cls, "name", None), str) or not cls.name:
+        raise InputError(f"{kind} plugin {cls.__module__}.{cls.__qualname__} has no name (a non-empty string)")
+    if kind == "solver":
+        from dualfem.core.solver import check_declared
+
+        check_declared(cls)           # tolerance in (0, 1), exact a bool: else the plugin is refused
     old = reg.get(cls.name)
     if _LOADING_BUILTIN:
         _BUILTIN[kind].add(cls.name)
@@ -71,11 +75,22 @@ def _load_entry_point(obj, reg) -> None:
 
 
 def _load() -> None:
-    global _LOADED, _LOADING_BUILTIN
+    global _LOADED
     if _LOADED:
         return
     _LOADED = True
+    from dualfem.core.quiet import plugin_output
+
     groups = (("dualfem.solvers", register_solver), ("dualfem.problems", register_problem))
+    with plugin_output():                   # a plugin printing at import time must not corrupt --json
+        _load_groups(groups)
+    if not _BUILTIN["solver"]:
+        raise RuntimeError("dualfem's built-in plugins were not found through their entry points: "
+                           "install dualfem (pip install -e .) so that its entry points exist")
+
+
+def _load_groups(groups) -> None:
+    global _LOADING_BUILTIN
     for builtin in (True, False):           # dualfem's own plugins first: their names are reserved
         for group, reg in groups:
             for ep in entry_points(group=group):
@@ -85,15 +100,12 @@ def _load() -> None:
                 _LOADING_BUILTIN = builtin
                 try:
                     _load_entry_point(ep.load(), reg)
-                except Exception as exc:  # a broken third-party plugin must not break dualfem
-                    if builtin:
+                except BaseException as exc:  # a broken third-party plugin (even SystemExit) must not break dualfem
+                    if builtin or type(exc) is KeyboardInterrupt:    # a real Ctrl-C still stops
                         raise
-                    _ENTRY_POINT_ERRORS.append(f"{group}:{ep.name}: {exc}")
+                    _ENTRY_POINT_ERRORS.append(f"{group}:{ep.name}: {type(exc).__name__}: {exc}")
                 finally:
                     _LOADING_BUILTIN = False
-    if not _BUILTIN["solver"]:
-        raise RuntimeError("dualfem's built-in plugins were not found through their entry points: "
-                           "install dualfem (pip install -e .) so that its entry points exist")
 
 
 def solvers() -> dict[str, type[Solver]]:
@@ -106,6 +118,12 @@ def problems() -> dict[str, type[Problem]]:
     """All registered problem classes by name."""
     _load()
     return dict(_PROBLEMS)
+
+
+def builtin_names(kind: str) -> set[str]:
+    """The names registered by dualfem's own plugins (``kind``: "solver" or "problem"): reserved."""
+    _load()
+    return set(_BUILTIN[kind])
 
 
 def entry_point_errors() -> list[str]:

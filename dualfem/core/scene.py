@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 import tomllib
+import warnings
 from pathlib import Path
 from typing import Any
 
 from dualfem.core.errors import InputError
 from dualfem.core.problem import Problem
-from dualfem.core.registry import get_problem, problems
+from dualfem.core.qp import QP
+from dualfem.core.registry import builtin_names, get_problem, problems
 
 #: the scene the framework uses when it needs one and none is given (probes, crafted test files,
 #: the default of a study): a preset of the thin_defect problem plugin (the paper's f2 load). The
@@ -16,13 +18,51 @@ from dualfem.core.registry import get_problem, problems
 DEFAULT_SCENE = "f2"
 
 
+class PresetConflictWarning(UserWarning):
+    """A third-party problem plugin declares a scene name that belongs to a built-in scene (ignored)."""
+
+
 def presets() -> dict[str, tuple[str, dict[str, Any]]]:
-    """Built-in scene names -> (problem name, parameters)."""
+    """Scene names -> (problem name, parameters): every problem plugin's ``presets``.
+
+    Built-in names win: the presets of dualfem's own problem plugins and the scene library's names are
+    reserved, so a third-party plugin's preset named ``f2`` (or ``curved``) is ignored, never taking over
+    ``dualfem solve f2``; so is a name an earlier third-party plugin took. :func:`preset_conflicts`
+    names both sides of each refusal (``dualfem list`` shows them).
+    """
+    return _presets()[0]
+
+
+def preset_conflicts() -> list[str]:
+    """One message per ignored third-party preset (see :func:`presets`), naming both plugins."""
+    return _presets()[1]
+
+
+def _presets() -> tuple[dict[str, tuple[str, dict[str, Any]]], list[str]]:
     out: dict[str, tuple[str, dict[str, Any]]] = {}
-    for pname, cls in problems().items():
-        for sname, params in cls.presets.items():
+    owner: dict[str, str] = {}
+    conflicts: list[str] = []
+    reg = problems()
+    builtin = builtin_names("problem")
+    lib = library()
+    for pname, cls in sorted(reg.items(), key=lambda kv: kv[0] not in builtin):   # built-ins first (stable)
+        who = f"problem plugin {pname!r} ({cls.__module__}.{cls.__qualname__})"
+        items = cls.presets.items() if isinstance(cls.presets, dict) else ()
+        for sname, params in items:
+            if not isinstance(sname, str) or not isinstance(params, dict):
+                conflicts.append(f"{who} declares the preset {sname!r} with {type(params).__name__} parameters "
+                                 f"(a dict of scene parameters is needed): ignored")
+                continue
+            if pname not in builtin and (sname in out or sname in lib):
+                taken = owner.get(sname) or f"the scene library's {sname!r} ({lib[sname]})"
+                conflicts.append(f"{who} may not take the scene name {sname!r} of {taken}: its preset is "
+                                 f"ignored ('dualfem solve {sname}' runs the built-in); choose another name")
+                continue
+            if sname in out:
+                continue
             out[sname] = (pname, dict(params))
-    return out
+            owner[sname] = f"the {'built-in ' if pname in builtin else ''}{who}"
+    return out, conflicts
 
 
 def library() -> dict[str, Path]:
@@ -72,8 +112,11 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
     plugin (default ``thin_defect``) and ``scene = "f2"`` starts from a built-in preset.
     """
     overrides = dict(overrides or {})
-    pre = presets()
+    pre, conflicts = _presets()
     lib = library()
+    for msg in conflicts:
+        if f"scene name {spec!r} " in msg:
+            warnings.warn(msg, PresetConflictWarning, stacklevel=2)
     if spec in lib and spec not in pre and not Path(spec).exists():
         spec = str(lib[spec])
     if spec in pre:
@@ -107,4 +150,43 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
                          f"library ({', '.join(sorted(lib)) or 'none installed'}) or a path to a .toml scene file "
                          f"or a .npz/.mat QP file")
     params.update(overrides)
-    return get_problem(pname)(**params)
+    cls = get_problem(pname)
+    from dualfem.core.quiet import plugin_output
+
+    with plugin_output():              # a problem plugin printing in __init__ must not corrupt --json
+        if pname in builtin_names("problem"):
+            return cls(**params)
+        try:
+            return cls(**params)
+        except InputError:
+            raise
+        except BaseException as exc:   # noqa: BLE001 - a third-party plugin's bug (even SystemExit): say so
+            if type(exc) is KeyboardInterrupt:     # a real Ctrl-C still stops
+                raise
+            raise InputError(f"problem plugin {pname!r} ({cls.__module__}.{cls.__qualname__}) failed to "
+                             f"create the scene: {type(exc).__name__}: {exc}") from None
+
+
+def build_qp(problem: Problem) -> QP:
+    """``problem.build()``, contained: a problem plugin's prints go to stderr (``--json`` stays one
+    object); a third-party plugin that raises (anything but a real Ctrl-C) or returns something else
+    than a :class:`~dualfem.core.qp.QP` is refused with an InputError naming it."""
+    from dualfem.core.quiet import plugin_output
+
+    name = getattr(problem, "name", type(problem).__name__)
+    who = f"problem plugin {name!r} ({type(problem).__module__}.{type(problem).__qualname__})"
+    with plugin_output():
+        if name in builtin_names("problem"):
+            qp = problem.build()
+        else:
+            try:
+                qp = problem.build()
+            except InputError:
+                raise
+            except BaseException as exc:   # noqa: BLE001 - a third-party plugin's bug (even SystemExit)
+                if type(exc) is KeyboardInterrupt:
+                    raise
+                raise InputError(f"{who} failed to build the QP: {type(exc).__name__}: {exc}") from None
+    if not isinstance(qp, QP):
+        raise InputError(f"{who}: build() returned {type(qp).__name__}, not a dualfem QP")
+    return qp

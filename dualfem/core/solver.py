@@ -90,6 +90,7 @@ class Solver:
         self.params: dict[str, Any] = merged
         self.check_params()
         self.validate()
+        check_declared(self)          # validate() may set an instance tolerance (cvxpy: per backend)
         self.qp: QP | None = None
 
     @classmethod
@@ -112,8 +113,12 @@ class Solver:
                 for k, spec in cls.param_ranges().items() if spec is not None}
 
     def check_params(self) -> None:
-        """Raise InputError for the first parameter outside its declared range (see :func:`check_value`)."""
+        """Raise InputError for the first parameter outside its declared range (see :func:`check_value`),
+        or for a declared ``tolerance`` / ``exact`` outside the contract (:func:`check_declared`)."""
+        check_declared(self)
         params = getattr(self, "params", None) or {}      # a plugin may override __init__
+        if not isinstance(params, dict):
+            raise InputError(f"solver {self.name!r}: params must be a dict of parameters, got {type(params).__name__}")
         for key, spec in self.param_ranges().items():
             if key in params:
                 check_value(key, params[key], spec, self.defaults[key], self.name)
@@ -147,6 +152,35 @@ class Solver:
     def solve(self) -> Solution:  # pragma: no cover - abstract
         """Solve the QP given to :meth:`setup` (timed as solve)."""
         raise NotImplementedError
+
+
+def declared_tolerance(solver: Solver | type[Solver]) -> float:
+    """The ``tolerance`` a solver (class or instance) declares, checked: a finite number in (0, 1).
+
+    Raises InputError otherwise, naming the solver and the value: the runner certifies ``solved``
+    claims against this number, so NaN (every comparison false), inf or 10 would certify anything.
+    """
+    tol = getattr(solver, "tolerance", None)
+    if isinstance(tol, (bool, np.bool_)) or not isinstance(tol, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(tol) or not 0 < tol < 1:
+        raise InputError(f"solver plugin {_who(solver)} declares tolerance = {tol!r}: the declared tolerance "
+                         f"must be a finite number in (0, 1) (the relative accuracy its 'solved' answers promise)")
+    return float(tol)
+
+
+def check_declared(solver: Solver | type[Solver]) -> tuple[float, bool]:
+    """(tolerance, exact) as declared by a solver class or instance, checked (InputError otherwise):
+    ``tolerance`` a finite number in (0, 1), ``exact`` a bool."""
+    tol = declared_tolerance(solver)
+    exact = getattr(solver, "exact", None)
+    if not isinstance(exact, (bool, np.bool_)):
+        raise InputError(f"solver plugin {_who(solver)} declares exact = {exact!r}: it must be True or False")
+    return tol, bool(exact)
+
+
+def _who(solver: Any) -> str:
+    cls = solver if isinstance(solver, type) else type(solver)
+    return f"{getattr(solver, 'name', '?')!r} ({cls.__module__}.{cls.__qualname__})"
 
 
 COMMON_RANGES: dict[str, Any] = {"tol": "(0, inf)", "max_iter": "[1, inf)", "time_limit": "(0, inf)",

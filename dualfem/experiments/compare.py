@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from dualfem.core import evaluator
+from dualfem.core.errors import InputError
 from dualfem.core.qp import QP
 from dualfem.core.registry import get_solver
 from dualfem.core.registry import solvers as registered
@@ -94,6 +95,8 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     for nm, inst in insts.items():
         t0 = time.perf_counter()
         row, sols[nm] = _run_one(qp, nm, inst, ksolve)
+        if sols[nm].info.get("qp_changed"):     # the runner's fingerprint: every later run would be void
+            raise InputError(f"{sols[nm].message}; the comparison is stopped")
         rows.append(row)
         if progress:
             progress(f"{nm}: {row.status} in {time.perf_counter() - t0:.2f} s")
@@ -114,15 +117,16 @@ def _run_one(qp: QP, nm: str, inst, ksolve) -> tuple[Row, Solution]:
     """Solve with one solver; its row (not yet graded, no difference to a reference) and its solution."""
     from dualfem.experiments.runner import run
 
-    sol = run(inst, qp)
+    sol = run(inst, qp)           # hands the plugin a read-only view and checks qp's fingerprint afterwards
     finite = sol.residuals is not None and sol.residuals.get("finite", False)
-    tol = float(getattr(inst, "tolerance", get_solver(nm).tolerance))
+    declared = sol.info.get("declared") or {}     # what the runner read and checked, not what the plugin says now
+    tol = float(declared.get("tolerance", get_solver(nm).tolerance))
     row = Row(kind="compare", run_id=f"compare:{nm}", scene=qp.name, n_unknowns=qp.n, n_constraints=qp.m,
               solver=nm, variant=nm, solver_params=jsonable_params(sol.params), tol=tol, status=str(sol.status),
               claimed_status=sol.info.get("claimed_status", str(sol.status)), message=sol.message,
               iterations=dict(sol.iterations), setup_s=sol.time_s.get("setup"), solve_s=sol.time_s.get("solve"),
               total_s=sum(v for k, v in sol.time_s.items() if k in ("setup", "solve")),
-              exact=bool(getattr(inst, "exact", True)), third_party=bool(get_solver(nm).requires))
+              exact=bool(declared.get("exact", get_solver(nm).exact)), third_party=bool(get_solver(nm).requires))
     row.set_residuals(sol.residuals if finite else None, tol)
     if not finite and str(sol.status) == str(Status.SOLVED):
         row.kkt_error = float("inf")      # claims success without a finite answer: the evaluator flags it

@@ -13,23 +13,59 @@ the plugin's own claim stays in ``Solution.info["claimed_status"]``.
 """
 from __future__ import annotations
 
+import copy
+import dataclasses
 import time
+import zlib
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 
 from dualfem.core import evaluator
 from dualfem.core.errors import InputError
-from dualfem.core.qp import QP
-from dualfem.core.registry import get_solver
+from dualfem.core.qp import QP, Maps
+from dualfem.core.quiet import plugin_output
+from dualfem.core.registry import builtin_names, get_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver
+from dualfem.core.solver import Solver, check_declared
+
+#: ``Solution.info`` keys that belong to the runner: whatever a plugin puts there is dropped
+RUNNER_INFO = ("claimed_status", "certified_tol", "certificate", "declared", "qp_changed")
 
 
 def make_solver(name: str, params: dict[str, Any] | None = None) -> Solver:
-    """Instantiate the registered solver ``name`` with ``params`` (validated)."""
-    return get_solver(name)(**(params or {}))
+    """Instantiate the registered solver ``name`` with ``params`` (validated).
+
+    A third-party plugin's ``__init__`` runs with its stdout contained (:func:`plugin_output`); any
+    exception of it other than InputError (even SystemExit) becomes an InputError naming the plugin."""
+    cls = get_solver(name)
+    with plugin_output():
+        if name in builtin_names("solver"):
+            return cls(**(params or {}))
+        try:
+            return cls(**(params or {}))
+        except InputError:
+            raise
+        except BaseException as exc:  # noqa: BLE001 - a plugin's bug, whatever it raises
+            if type(exc) is KeyboardInterrupt:     # a real Ctrl-C (exactly this class) still stops
+                raise
+            raise InputError(f"solver plugin {name!r} ({cls.__module__}.{cls.__qualname__}) could not be created: "
+                             f"{type(exc).__name__}: {exc}") from None
+
+
+def missing_reason(solver: Solver) -> str | None:
+    """``solver.missing()`` (an install hint, or None), contained: its prints go to stderr, and if the
+    plugin's ``missing`` raises (anything but a real Ctrl-C), the reason says so."""
+    with plugin_output():
+        try:
+            reason = solver.missing()
+        except BaseException as exc:  # noqa: BLE001 - a plugin's bug
+            if type(exc) is KeyboardInterrupt:
+                raise
+            return f"solver plugin {_name(solver)!r}: missing() raised {type(exc).__name__}: {exc}"
+    return None if reason is None else str(reason)
 
 
 def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, tol: float | None = None,
@@ -41,39 +77,252 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
     benchmark tier means that tier's accuracy, whatever the solver declares by default).
     Without it, to the tolerance the solver declares. ``progress(stage, seconds)`` is called as
     each stage (setup, solve, certify) finishes.
+
+    Nothing the plugin says about itself is trusted (docs/plugins.md, sections 1.1-1.3):
+
+    * its declared ``tolerance`` (a finite number in (0, 1)) and ``exact`` are checked before
+      ``setup`` (InputError) and read once: a plugin that changes them during the run is an ``error``;
+    * the QP it gets is a read-only view of ``qp`` (:func:`guarded_view`: every array read-only,
+      attribute changes stay on the view), and ``qp``'s :func:`fingerprint` is compared after the run:
+      a changed QP makes the run an ``error`` (``info["qp_changed"]`` names the parts);
+    * any exception it raises, SystemExit and other BaseExceptions included (not KeyboardInterrupt:
+      Ctrl-C still stops), makes the run an ``error`` with the message; its prints go to stderr;
+    * what ``solve()`` returns is checked (:func:`_checked_solution`): not a Solution, an unknown
+      status, x or multipliers of the wrong shape or not real numbers give an ``error``; NaN or inf
+      is never ``solved``; residuals, certificates and the claimed status are the runner's own.
     """
     tick = progress or (lambda stage, seconds: None)
     if isinstance(solver, str):
         solver = make_solver(solver, params)
-    solver.check_params()          # again: a plugin may override __init__ or change params after it
-    reason = solver.missing() or solver.skip(qp)
-    if reason:
-        return Solution(solver=solver.name, status=Status.SKIPPED, message=reason, params=dict(solver.params))
-    t0 = time.perf_counter()
-    try:
-        solver.setup(qp)
-        t1 = time.perf_counter()
-        tick("setup (factorization)", t1 - t0)
-        sol = solver.solve()
-        t2 = time.perf_counter()
-        tick("solve (iterations)", t2 - t1)
-    except InputError:
-        raise
-    except Exception as exc:  # the solver broke: say so, never hide it
-        return Solution(solver=solver.name, status=Status.ERROR, params=dict(solver.params),
-                        message=f"{type(exc).__name__}: {exc}",
-                        time_s={"setup": 0.0, "solve": time.perf_counter() - t0})
-    sol.time_s = {"setup": t1 - t0, "solve": t2 - t1, **{k: v for k, v in sol.time_s.items()
-                                                         if k not in ("setup", "solve")}}
-    sol.params = dict(solver.params)
+    name = _name(solver)
+
+    def failed(message: str, status: Status = Status.ERROR, **times: float) -> Solution:
+        sol = Solution(solver=name, status=status, message=message, params=_params(solver),
+                       time_s={"setup": 0.0, "solve": 0.0, **times})
+        sol.info["claimed_status"] = str(status)
+        return sol
+
+    before = fingerprint(qp)
+    view = guarded_view(qp)
+    t0 = t1 = t2 = time.perf_counter()
+    returned: Any = None
+    why: str | None = None
+    status = Status.ERROR
+    declared = (float("nan"), True)
+    with plugin_output():
+        try:
+            solver.check_params()      # again: a plugin may override __init__ or change params after it
+            declared = check_declared(solver)  # tolerance in (0, 1), exact a bool (InputError otherwise)
+            reason = solver.missing() or solver.skip(view)
+            if reason:
+                why, status = str(reason), Status.SKIPPED
+            else:
+                t0 = time.perf_counter()
+                solver.setup(view)
+                t1 = t2 = time.perf_counter()
+                tick("setup (factorization)", t1 - t0)
+                returned = solver.solve()
+                t2 = time.perf_counter()
+                tick("solve (iterations)", t2 - t1)
+        except InputError:
+            raise
+        except BaseException as exc:   # noqa: BLE001 - the solver broke (even SystemExit): say so, never hide it
+            if type(exc) is KeyboardInterrupt:     # a real Ctrl-C (exactly this class) still stops the program
+                raise
+            why, t2 = f"{type(exc).__name__}: {exc}", time.perf_counter()
+        if why is None:
+            try:
+                if check_declared(solver) != declared:
+                    why = (f"solver plugin {name!r} changed its declared tolerance/exact during the run "
+                           f"(from {declared[0]:g}/{declared[1]} to {solver.tolerance!r}/{solver.exact!r})")
+            except InputError as exc:
+                why = f"{exc} (changed during the run)"
+        reduction = _reduction_of(solver, view, qp) if why is None else None
+    after = fingerprint(qp)            # whatever happened: did the plugin write into the caller's QP?
+    changed = [k for k in before if after.get(k) != before[k]]
+    if changed:
+        why, status = (f"solver {name!r} changed the QP it was given ({', '.join(changed)}): its answer is "
+                       f"discarded, and any later run on this QP is unreliable"), Status.ERROR
+    sol, problem = _checked_solution(returned, qp, name) if why is None else (None, None)
+    if sol is None or problem:
+        out = failed(why or problem or "", status, setup=t1 - t0, solve=t2 - t1)
+        if isinstance(returned, Solution) and str(getattr(returned, "status", "")) in set(map(str, Status)):
+            out.info["claimed_status"] = str(returned.status)
+        if changed:
+            out.info["qp_changed"] = changed
+        return out
+    sol.time_s = {"setup": t1 - t0, "solve": t2 - t1, **sol.time_s}
+    sol.params = _params(solver)
+    sol.info["declared"] = {"tolerance": declared[0], "exact": declared[1]}
     attach_residuals(qp, sol)
     t3 = time.perf_counter()
     asked = None if tol is None or not np.isfinite(tol) else float(tol)
-    declared = float(solver.tolerance) if asked is None else asked
-    certify_status(qp, sol, declared, bool(solver.exact), reduction=getattr(solver, "reduction", None))
+    certify_status(qp, sol, declared[0] if asked is None else asked, declared[1], reduction=reduction)
+    bad = [k for k in (*evaluator.RESIDUALS, "energy") if sol.residuals is not None
+           and not np.isfinite(sol.residuals.get(k, np.nan))]
+    if sol.status == Status.SOLVED and bad:     # e.g. x = 1e308: K x overflows, NaN > tol is False
+        sol.status = Status.NUMERICAL_ERROR
+        sol.message = (sol.message + "; " if sol.message else "") + \
+            f"not certified: the evaluator's {', '.join(bad)} is not finite (NaN/inf)"
     sol.time_s["certify"] = time.perf_counter() - t3
     tick("certification", sol.time_s["certify"])
     return sol
+
+
+def _name(solver: Any) -> str:
+    name = getattr(solver, "name", None)
+    return name if isinstance(name, str) and name else type(solver).__name__
+
+
+def _params(solver: Any) -> dict:
+    p = getattr(solver, "params", None)
+    return dict(p) if isinstance(p, dict) else {}
+
+
+def _checked_solution(returned: Any, qp: QP, name: str) -> tuple[Solution | None, str | None]:
+    """A fresh Solution made of what the plugin returned, checked; (solution, None) or (_, the problem).
+
+    Only x, multipliers, status, iterations, message, history and the plugin's own ``info`` keys are
+    taken; ``residuals`` and the runner's info keys (:data:`RUNNER_INFO`) are the runner's.
+    """
+    empty = Solution(solver=name, status=Status.ERROR)
+    if not isinstance(returned, Solution):
+        return empty, f"solve() of solver {name!r} returned {type(returned).__name__}, not a Solution"
+    try:
+        status = Status(str(returned.status))
+    except ValueError:
+        return empty, (f"solver {name!r} returned the unknown status {returned.status!r} "
+                       f"(one of {', '.join(str(s) for s in Status)})")
+    arrays = {}
+    for field, size, what in (("x", qp.n, "unknowns"), ("multipliers", qp.m, "constraints")):
+        a = getattr(returned, field)
+        if a is None:
+            arrays[field] = None
+            continue
+        try:
+            v = np.asarray(a)
+            ok_kind = v.dtype.kind in "fiu" and v.dtype != object
+            v = np.array(v, dtype=float) if ok_kind else v
+        except (TypeError, ValueError):
+            ok_kind = False
+        if not ok_kind:
+            return empty, f"solver {name!r} returned a {field} that is not an array of real numbers"
+        if v.shape != (size,):
+            return empty, (f"solver {name!r} returned {field} of shape {v.shape}; the QP has {size} {what}, "
+                           f"so it must have shape ({size},)")
+        arrays[field] = v
+    if status == Status.SOLVED and arrays["x"] is None:
+        return empty, f"solver {name!r} claims 'solved' without returning x"
+    info = returned.info if isinstance(returned.info, dict) else {}
+    times = returned.time_s if isinstance(returned.time_s, dict) else {}
+    sol = Solution(
+        solver=name, status=status, x=arrays["x"], multipliers=arrays["multipliers"],
+        iterations={str(k): int(v) for k, v in returned.iterations.items()       # counters: whole numbers
+                    if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+                    and np.isfinite(v) and float(v) == int(v)}
+        if isinstance(returned.iterations, dict) else {},
+        history=list(returned.history) if isinstance(returned.history, list) else [],
+        time_s={str(k): float(v) for k, v in times.items()
+                if k not in ("setup", "solve", "certify") and isinstance(v, (int, float)) and np.isfinite(v)},
+        message=str(returned.message) if returned.message is not None else "",
+        info={k: v for k, v in info.items() if k not in RUNNER_INFO})
+    finite = all(a is None or np.all(np.isfinite(a)) for a in arrays.values())
+    if not finite and status == Status.SOLVED:     # never 'solved' (attach_residuals says so too)
+        sol.status = Status.NUMERICAL_ERROR
+        sol.message = (sol.message + "; " if sol.message else "") + "solution contains NaN/inf"
+        sol.info["claimed_status"] = str(Status.SOLVED)
+    return sol, None
+
+
+def _reduction_of(solver: Any, view: QP, qp: QP) -> Any:
+    """The solver's LocalReduction of the view it was given, rebound to ``qp`` (same arrays), else None."""
+    from dualfem.numerics.linalg import LocalReduction
+
+    try:
+        red = getattr(solver, "reduction", None)
+    except Exception:  # noqa: BLE001 - a property that raises: no reduction to reuse
+        return None
+    if type(red) is not LocalReduction or red.qp is not view or not _view_intact(view, qp):
+        return None
+    red = copy.copy(red)
+    red.qp = qp
+    return red
+
+
+def _ro(a: Any) -> Any:
+    if not isinstance(a, np.ndarray):
+        return a
+    v = a.view()
+    v.flags.writeable = False
+    return v
+
+
+def _ro_sparse(M: Any) -> Any:
+    if not sp.issparse(M) or not hasattr(M, "indptr"):
+        return M
+    V = copy.copy(M)                         # shares the arrays; then read-only views of them
+    V.data, V.indices, V.indptr = _ro(M.data), _ro(M.indices), _ro(M.indptr)
+    return V
+
+
+def guarded_view(qp: QP) -> QP:
+    """The QP a plugin gets: a shallow copy of ``qp`` whose arrays (F, weights, the sparse matrices'
+    data/indices/indptr, the parts' and maps' arrays) are read-only views of ``qp``'s (no copy: free at
+    any size), sharing ``qp``'s factorization store. An in-place write raises ValueError ("assignment
+    destination is read-only"); assigning an attribute changes the view only."""
+    from dualfem.numerics.linalg import store_of
+
+    store = store_of(qp)                     # created on the original: shared with the certification
+    view = copy.copy(qp)
+    d = view.__dict__
+    d["K"], d["B"] = _ro_sparse(qp.K), _ro_sparse(qp.B)
+    d["F"], d["weights"] = _ro(qp.F), _ro(qp.weights)
+    d["params"] = copy.deepcopy(qp.params)
+    maps = qp.maps
+    promoted = getattr(maps, "_promoted", None)
+    if isinstance(maps, Maps):
+        d["maps"] = Maps({k: _ro(v) for k, v in maps.items()}, {k: _ro(v) for k, v in (promoted or {}).items()})
+    elif isinstance(maps, dict):
+        d["maps"] = {k: _ro(v) for k, v in maps.items()}
+    if qp.local is not None:
+        d["local"] = dataclasses.replace(qp.local, K_fixed=_ro_sparse(qp.local.K_fixed), dofs=_ro(qp.local.dofs))
+    if qp.shift is not None:
+        d["shift"] = dataclasses.replace(qp.shift, x=_ro(qp.shift.x))
+    if qp.geometry is not None:
+        g = qp.geometry
+        d["geometry"] = dataclasses.replace(g, nodes=_ro(g.nodes), cells=_ro(g.cells), node_dofs=_ro(g.node_dofs))
+    d["store"] = store
+    view._guarded = {k: d[k] for k in ("K", "F", "B", "weights", "local", "shift")}   # type: ignore[attr-defined]
+    return view
+
+
+def _view_intact(view: QP, qp: QP) -> bool:
+    """The view still holds the arrays it was given (no attribute of its data replaced)."""
+    held = getattr(view, "_guarded", None)
+    return isinstance(held, dict) and all(view.__dict__.get(k) is v for k, v in held.items())
+
+
+def fingerprint(qp: QP) -> dict[str, int]:
+    """A cheap checksum (CRC-32 of the bytes, shapes and dtypes) of each part of ``qp`` a solver reads:
+    K, F, B, weights, local (K_fixed, dofs), shift. About 40 ms at N = 512 (172 MB); compare, bench and
+    :func:`run` compare it before and after every run."""
+    def crc(*arrays: Any) -> int:
+        c = 0
+        for a in arrays:
+            if sp.issparse(a):
+                c = crc(a.data, a.indices, a.indptr) ^ zlib.crc32(repr((a.format, a.shape)).encode(), c)
+                continue
+            a = np.ascontiguousarray(a)
+            c = zlib.crc32(repr((a.shape, a.dtype.str)).encode(), c)
+            c = zlib.crc32(memoryview(a).cast("B"), c)
+        return c
+
+    out = {"K": crc(qp.K), "F": crc(qp.F), "B": crc(qp.B), "weights": crc(qp.weights)}
+    if qp.local is not None:
+        out["local"] = crc(qp.local.K_fixed, qp.local.dofs)
+    if qp.shift is not None:
+        out["shift"] = crc(qp.shift.x, np.array([qp.shift.objective], dtype=float))
+    return out
 
 
 def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: Any = None) -> Solution:
