@@ -12,6 +12,7 @@ from __future__ import annotations
 from dualfem.cli.main import add_factor_arg, add_scene_args, apply_factor, command, dumps, scene_from_args
 from dualfem.core.errors import InputError
 from dualfem.core.quiet import c_stdout_to_stderr
+from dualfem.core.scene import build_qp
 
 
 def _cfg(p):
@@ -59,7 +60,7 @@ def cmd_compare(args) -> int:
     params = parse_solver_params(args.param, names)
     problem = scene_from_args(args)
     with c_stdout_to_stderr():
-        qp = problem.build()
+        qp = build_qp(problem)
         result = compare_solvers(qp, names, params, progress=stderr_progress())
     if args.json:
         print(dumps(result))

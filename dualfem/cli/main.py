@@ -159,11 +159,12 @@ def cmd_export(args) -> int:
     from pathlib import Path
 
     from dualfem.core.io import check_output_path
+    from dualfem.core.scene import build_qp
 
     if Path(args.output).suffix not in (".npz", ".mat"):
         raise InputError(f"-o must name a .npz or .mat file, got {args.output!r}")
     check_output_path(args.output, "-o")
-    qp = scene_from_args(args).build()
+    qp = build_qp(scene_from_args(args))
     qp.save(args.output)
     print(f"wrote {args.output}: n={qp.n} unknowns, m={qp.m} constraints", file=sys.stderr)
     return 0
