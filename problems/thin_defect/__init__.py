@@ -126,6 +126,14 @@ class ThinDefect(Problem):
                                  f"size: delta * E / max(width, height) = {ratio:.1e} must be "
                                  f">= {MIN_DELTA_E_OVER_L:g} "
                                  f"(below it the defect is glued to double precision)")
+        if p["mesh"] == "gmsh":        # every size-driving key (mesh_size, tip_size, N, width, height) bounded
+            from dualfem.problems.gmsh_mesh import check_size
+
+            h = p["mesh_size"] or min(p["width"], p["height"]) / p["N"]
+            label = f"mesh_size={h:g}" if p["mesh_size"] else \
+                f"mesh_size=0 (min(width, height)/N = {h:g} with N={p['N']})"
+            tip = p["tip_size"] if 0 < p["tip_size"] < h else None
+            check_size(p["width"], p["height"], h, tip, 2 * len(self._defects), label)
         with np.errstate(all="ignore"):  # a NaN-producing expression is refused below, without warnings
             self._traction = resolve_load(p["load"], p["width"])
 
@@ -134,9 +142,13 @@ class ThinDefect(Problem):
         p = self.params
         if p["mesh"] == "structured":
             return 2 * (p["N"] + 1) ** 2, f"N={p['N']}"
+        from dualfem.problems.gmsh_mesh import estimate_triangles
+
         h = p["mesh_size"] or min(p["width"], p["height"]) / p["N"]
-        nodes = 1.2 * p["width"] * p["height"] / (0.5 * 3 ** 0.5 / 2 * h * h) / 2 + 1   # equilateral triangles
-        return int(2 * nodes), f"mesh_size={h:g}"
+        tip = p["tip_size"] if 0 < p["tip_size"] < h else None
+        tri = estimate_triangles(p["width"], p["height"], h, tip, 2 * len(getattr(self, "_defects", ())))
+        nodes = 1.2 * tri / 2 + 1          # about 2 triangles per node, 20 % margin (doubled defect nodes)
+        return int(2 * nodes), f"mesh_size={h:g}" + (f", tip_size={tip:g}" if tip else "")
 
     # ----------------------------------------------------------------- mesh
     def _reference_mesh(self) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
