@@ -17,7 +17,9 @@ from dualfem.core import limits
 from dualfem.core.errors import InputError
 from dualfem.core.qp import QP
 from dualfem.core.scene import load_scene
+from dualfem.experiments import spec as spec_mod
 from dualfem.experiments.compare import compare_solvers
+from dualfem.experiments.tasks import expand_scenes, expand_tasks, floor_tasks
 
 
 # ------------------------------------------------------------------ the memory guard
@@ -265,3 +267,50 @@ def test_maps_the_vtk_writer_needs_are_checked_at_vtk(tmp_path, capsys, maps, ne
     rc, err = _solve(_export_with(tmp_path, **maps), capsys, "--vtk", str(tmp_path / "out.vtu"))
     assert rc == 2 and re.search(needle, err), err
     assert not (tmp_path / "out.vtu").exists()
+
+
+# ------------------------------------------------------------------ bench specs: sizes bounded
+
+
+def _spec(**over) -> dict:
+    d = {"name": "t", "repeats": 1, "warmup": False, "scenes": [{"scene": "f2", "N": 8}],
+         "solvers": [{"name": "pdas"}]}
+    d.update(over)
+    return d
+
+
+@pytest.mark.parametrize("over, needle", [
+    ({"repeats": 1e9}, r"repeats must be an integer in \[1, 1000\]"),
+    ({"floor": {"repeats": 10**6}}, r"floor.repeats must be an integer in \[1, 1000\]"),
+    ({"scenes": [{"scene": "f2", "N": 8, "repeats": 5000}]}, r"repeats in \[\[scenes\]\] block 1 .* \[1, 1000\]"),
+    ({"solvers": [{"name": "pdas", "repeats": 10**9}]}, r"repeats of solver 'pdas' .* \[1, 1000\]"),
+    ({"scenes": [{"scene": "f2", "N": 8, "delta": [1e-3] * 200, "load_scale": [1.0] * 200}]},
+     r"\[\[scenes\]\] block 1 makes 40,000 scenes \(delta \(200\) x load_scale \(200\)\); the limit is 10,000"),
+    ({"solvers": [{"name": "osqp", "grid": {"max_iter": list(range(1, 101)), "scaling": list(range(20))}}]},
+     r"grid of solver 'osqp' makes 2,000 variants .* the limit is 1,000"),
+    ({"scenes": [{"scene": "f2", "N": 8, "delta": [1e-3] * 100, "load_scale": [1.0] * 100}],
+      "solvers": [{"name": "osqp", "grid": {"max_iter": list(range(1, 31))}}]},
+     r"the spec makes up to 300,000 runs .* the limit is 100,000"),
+])
+def test_spec_sizes_are_bounded_before_expanding(over, needle):
+    with pytest.raises(InputError, match=needle):
+        spec_mod.parse_spec(_spec(**over))
+
+
+def test_spec_file_size_is_bounded(tmp_path):
+    deltas = ", ".join(["1e-3"] * 300_000)
+    path = tmp_path / "s.toml"
+    path.write_text(f'name = "d"\n[[scenes]]\nscene = "f2"\ndelta = [{deltas}]\n[[solvers]]\nname = "pdas"\n')
+    with pytest.raises(InputError, match=r"is 1,8\d\d,\d+ bytes; the limit is 1,000,000"):
+        spec_mod.load_spec(path)
+
+
+def test_bench_tasks_that_would_not_fit_are_skipped_with_the_reason(monkeypatch):
+    spec = spec_mod.parse_spec(_spec(scenes=[{"scene": "f2", "N": [8, 256]}]))
+    monkeypatch.setattr(limits, "available_bytes", lambda: 150 * 2**20)      # 150 MB: N = 8 fits, N = 256 not
+    scenes = expand_scenes(spec)
+    tasks = {t["label"]: t for t in expand_tasks(spec, scenes)}
+    assert tasks["f2 N=8"]["skip"] is None
+    why = tasks["f2 N=256"]["skip"]
+    assert why.startswith("not run: N=256") and "GB of memory" in why and "ulimit -v" in why
+    assert [f["label"] for f in floor_tasks(spec, scenes)] == ["floor N=8"]
