@@ -110,6 +110,16 @@ class ThinDefect(Problem):
         rot = p["rotate_deg"]
         if not isinstance(rot, (int, float)) or not np.isfinite(rot):
             raise InputError(f"rotate_deg must be a finite number (degrees), got {rot!r}")
+        if p["mesh"] == "gmsh":        # every size-driving key (mesh_size, tip_size, N, width, height) bounded
+            tables = p["defects"]        # before the defects are parsed: the size is the first thing to know
+            n_defects = len(tables) if isinstance(tables, (list, tuple)) and len(tables) else 1
+            from dualfem.problems.gmsh_mesh import check_size
+
+            h = p["mesh_size"] or min(p["width"], p["height"]) / p["N"]
+            label = f"mesh_size={h:g}" if p["mesh_size"] else \
+                f"mesh_size=0 (min(width, height)/N = {h:g} with N={p['N']})"
+            tip = p["tip_size"] if 0 < p["tip_size"] < h else None
+            check_size(p["width"], p["height"], h, tip, 2 * n_defects, label)
         p["defect"] = parse_defect(p["defect"])
         default_defect = np.asarray(self.defaults["defect"], dtype=float)
         tables = p["defects"]
@@ -126,14 +136,6 @@ class ThinDefect(Problem):
                                  f"size: delta * E / max(width, height) = {ratio:.1e} must be "
                                  f">= {MIN_DELTA_E_OVER_L:g} "
                                  f"(below it the defect is glued to double precision)")
-        if p["mesh"] == "gmsh":        # every size-driving key (mesh_size, tip_size, N, width, height) bounded
-            from dualfem.problems.gmsh_mesh import check_size
-
-            h = p["mesh_size"] or min(p["width"], p["height"]) / p["N"]
-            label = f"mesh_size={h:g}" if p["mesh_size"] else \
-                f"mesh_size=0 (min(width, height)/N = {h:g} with N={p['N']})"
-            tip = p["tip_size"] if 0 < p["tip_size"] < h else None
-            check_size(p["width"], p["height"], h, tip, 2 * len(self._defects), label)
         with np.errstate(all="ignore"):  # a NaN-producing expression is refused below, without warnings
             self._traction = resolve_load(p["load"], p["width"])
 
