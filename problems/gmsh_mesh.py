@@ -35,6 +35,9 @@ from dualfem.core.errors import InputError, MissingDependency, check_positive
 CURVES = ("polyline", "spline")
 SIDES = ("bottom", "top", "left", "right")
 MAX_TRIANGLES = 5_000_000
+#: defect points checked for crossings and self-intersection (pairwise: the cost grows with the square);
+#: a polyline counts its points, a spline SAMPLES_PER_SPAN per span: 2048 are checked in about 2 s
+MAX_SAMPLES = 2048
 SAMPLES_PER_SPAN = 64          # spline samples per span between two given points (validation only)
 _TOL_REL = 1e-9                # "touching" tolerance, relative to max(width, height)
 _GRADE = 0.3                   # growth of the element size per unit distance away from a tip
@@ -261,6 +264,11 @@ def validate(width: float, height: float, defects: list[dict], mesh_size: float,
     check_size(width, height, mesh_size, tip_size, 2 * len(defects))
     tol = _TOL_REL * max(width, height)
     parsed = [_check_defect(i, d) for i, d in enumerate(defects)]
+    counts = [len(P) if c == "polyline" or len(P) == 2 else (len(P) - 1) * SAMPLES_PER_SPAN + 1 for P, c in parsed]
+    if sum(counts) > MAX_SAMPLES:
+        raise InputError(f"defects: {len(parsed)} defects with {sum(len(P) for P, _ in parsed)} points give "
+                         f"{sum(counts):,} curve points to check for crossings (a spline counts {SAMPLES_PER_SPAN} "
+                         f"per span); the limit is {MAX_SAMPLES:,}: use fewer points (a spline needs few)")
     samples = [sample_defect(P, c) for P, c in parsed]
     for i, (P, _) in enumerate(parsed):
         _check_one(i, P, samples[i], width, height, tol)

@@ -314,3 +314,16 @@ def test_bench_tasks_that_would_not_fit_are_skipped_with_the_reason(monkeypatch)
     why = tasks["f2 N=256"]["skip"]
     assert why.startswith("not run: N=256") and "GB of memory" in why and "ulimit -v" in why
     assert [f["label"] for f in floor_tasks(spec, scenes)] == ["floor N=8"]
+
+
+def test_defect_geometry_checks_are_bounded():
+    """The crossing checks are pairwise: many points, splines or defects are refused before they run."""
+    x = np.linspace(0.1, 0.9, 300)
+    wavy = np.c_[x, 0.5 + 0.01 * np.sin(50 * x)].tolist()
+    with pytest.raises(InputError, match=r"defects: 1 defects with 300 points give 19,137 curve points .* 2,048"):
+        load_scene("f2", {"mesh": "gmsh", "defects": [{"points": wavy, "curve": "spline"}]}).build()
+    with pytest.raises(InputError, match=r"defects\[0\]\.points has 5000 points; the limit is 4096"):
+        load_scene("f2", {"defects": [{"points": [[0.5, 0.5]] * 5000}]})
+    many = [{"points": [[0.1 + 0.8 * i / 100, 0.2], [0.1 + 0.8 * i / 100, 0.8]]} for i in range(100)]
+    with pytest.raises(InputError, match=r"defects: 100 \[\[defects\]\] tables; the limit is 64"):
+        load_scene("f2", {"mesh": "gmsh", "defects": many})

@@ -6,6 +6,9 @@ import numpy as np
 from dualfem.core.errors import InputError, check_positive
 
 CURVES = ("polyline", "spline")
+#: defects of one scene, and points of one defect (the geometric checks are pairwise)
+MAX_DEFECTS = 64
+MAX_POINTS = 4096
 
 
 def _numbers(value):
@@ -56,9 +59,13 @@ def parse_defect(value) -> np.ndarray:
 
 
 def _points(key: str, value) -> np.ndarray:
+    if isinstance(value, (list, tuple, np.ndarray)) and len(value) > MAX_POINTS:
+        raise InputError(f"{key} has {len(value)} points; the limit is {MAX_POINTS} per defect")
     arr = _point_list(key, value, "a list of at least two points [[x, y], ...]")
     if arr.shape[0] < 2:
         raise InputError(f"{key} must be at least two points [[x, y], ...], got {value!r}")
+    if arr.shape[0] > MAX_POINTS:
+        raise InputError(f"{key} has {arr.shape[0]} points; the limit is {MAX_POINTS} per defect")
     return arr
 
 
@@ -88,6 +95,8 @@ def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height
     if not isinstance(tables, (list, tuple)) or not all(isinstance(t, dict) for t in tables):
         raise InputError("defects must be a list of tables ([[defects]] in TOML) with points = [[x, y], ...], "
                          f"optional curve and delta; got {tables!r}")
+    if len(tables) > MAX_DEFECTS:
+        raise InputError(f"defects: {len(tables)} [[defects]] tables; the limit is {MAX_DEFECTS}")
     out = []
     for k, tab in enumerate(tables):
         key = f"defects[{k}]"
