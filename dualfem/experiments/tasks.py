@@ -61,8 +61,10 @@ class SceneSpec:
 def expand_scenes(spec: Spec) -> list[SceneSpec]:
     """Every scene of the spec's grids (validated by constructing the problem)."""
     from dualfem.core.scene import load_scene
+    from dualfem.numerics.memory import available_bytes
 
     out: dict[str, SceneSpec] = {}
+    have: int | None = None
     for blk in spec.scenes:
         reps = int(blk.get("repeats", spec.repeats))
         warm = bool(blk.get("warmup", spec.warmup))
@@ -73,13 +75,15 @@ def expand_scenes(spec: Spec) -> list[SceneSpec]:
             resolved = _canon(prob.params)
             key = _hash({"scene": name, "params": resolved})
             if key not in out:
-                out[key] = SceneSpec(name, combo, resolved, key, reps, warm, too_big=_too_big(prob))
+                if have is None:
+                    have = available_bytes()        # read once per sweep (it reads /proc and the cgroups)
+                out[key] = SceneSpec(name, combo, resolved, key, reps, warm, too_big=_too_big(prob, have))
     return list(out.values())
 
 
-def _too_big(problem) -> str | None:
-    """Why a scene cannot be run here (the memory guard's estimate against the memory available to a
-    worker: machine, ulimit -v, cgroups), before any worker allocates it; None when it fits."""
+def _too_big(problem, have: int) -> str | None:
+    """Why a scene cannot be run here (the memory guard's estimate against ``have``, the memory available
+    to a worker: machine, ulimit -v, cgroups), before any worker allocates it; None when it fits."""
     from dualfem.numerics.factor import get_default
     from dualfem.numerics.memory import SAFETY, fits
 
@@ -88,7 +92,7 @@ def _too_big(problem) -> str | None:
         return None
     n, label = est
     backend = get_default()
-    ok, need, have = fits(n, backend)
+    ok, need, have = fits(n, backend, have)
     if ok:
         return None
     return (f"not run: {label} ({n / 1e6:.3g} M unknowns) needs about {need / 1e9:.3g} GB of memory with the "
