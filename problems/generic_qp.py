@@ -10,7 +10,11 @@ File layout (array names; ``h`` may be omitted, meaning 0):
 * ``.mat`` (``scipy.io.savemat`` / MATLAB ``save -v7``): ``P``, ``q``, ``G``, ``h``, dense or sparse.
 * A file written by ``dualfem export`` (arrays ``K_*``, ``F``, ``B_*``, ...) is read as that QP.
 
-Validation (each failure is an :class:`~dualfem.errors.InputError` naming the array): shapes
+Validation (each failure is an :class:`~dualfem.errors.InputError` naming the array): before
+anything is decompressed, the shapes the file's headers declare must fit in the available memory
+(:func:`dualfem.core.qp.read_arrays`); no complex array (never read as its real part); a matrix
+given both as ``M`` and as triplets ``M_*`` is ambiguous; declared COO shapes must agree with q
+and fit in memory; n >= 1 (m = 0, no constraint, is allowed); shapes
 (``P`` n x n, ``q`` length n, ``G`` m x n, ``h`` length m), NaN/inf, symmetry of P (relative to
 ``max|P|``, threshold ``symmetry_rtol``; a file holding only one triangle of P, as OSQP does, is
 read with ``p_storage = "upper"`` or ``"lower"``), positive diagonal, and, if ``check_definite``,

@@ -30,6 +30,12 @@ A sweep is described by a TOML spec (see ``benchmarks/default.toml``)::
                            # third-party solver show how far it gets on a big scene
     repeats = 1            # this block's own timed repeats (default: the scene block's)
     optional = false       # true: a solver that is not registered is skipped, not an error
+
+Sizes are bounded before anything is expanded (each refusal names the key and the limit): the
+file <= MAX_SPEC_BYTES, every ``repeats`` <= MAX_REPEATS, one [[scenes]] grid <= MAX_SCENES
+scenes, one solver grid <= MAX_VARIANTS variants, the sweep <= MAX_TASKS runs. A scene whose
+estimated peak memory exceeds the memory available to a worker is not run: its runs are skipped
+rows with the reason (:func:`dualfem.experiments.tasks.expand_scenes`).
 """
 from __future__ import annotations
 
