@@ -218,6 +218,10 @@ class QPFile(Problem):
         where = f"QP file {str(path)!r}"
         d = _read(path)
         if ("K_data" in d or "K" in d) and ("F" in d):
+            letters = [k for k in ("P", "q", "G", "h", "P_data", "G_data") if k in d]
+            if letters:
+                raise InputError(f"{where} holds both an exported QP (K, F, B) and the arrays {', '.join(letters)} "
+                                 f"of min 1/2 x'Px + q'x s.t. Gx >= h: ambiguous, keep one")
             qp = QP.load(path)           # a file written by `dualfem export` / QP.save
             qp.name = f"qp_file[{path.stem}]"
             qp.params = {**qp.params, **{k: str(v) for k, v in p.items()}}

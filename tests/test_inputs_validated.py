@@ -327,3 +327,10 @@ def test_defect_geometry_checks_are_bounded():
     many = [{"points": [[0.1 + 0.8 * i / 100, 0.2], [0.1 + 0.8 * i / 100, 0.8]]} for i in range(100)]
     with pytest.raises(InputError, match=r"defects: 100 \[\[defects\]\] tables; the limit is 64"):
         load_scene("f2", {"mesh": "gmsh", "defects": many})
+
+
+def test_exported_qp_beside_qpsolvers_letters_is_ambiguous(tmp_path, capsys):
+    d = load_scene("f2", {"N": 8}).build().to_dict()
+    np.savez(tmp_path / "qp.npz", **d, q=np.zeros(d["F"].size))
+    rc, err = _solve(tmp_path / "qp.npz", capsys)
+    assert rc == 2 and "both an exported QP" in err and "q" in err, err

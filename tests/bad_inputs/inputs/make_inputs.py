@@ -53,3 +53,5 @@ np.savez_compressed("map_defect_id.npz", **{**d, "map_defect_id": np.full_like(d
 np.savez_compressed("map_upper_oob.npz", **{**d, "map_defect_upper": d["map_defect_upper"] - 10**6})
 np.savez_compressed("map_node_dofs_1row.npz", **{**d, "map_node_dofs": d["map_node_dofs"][1:]})
 np.savez_compressed("map_normals_short.npz", **{**d, "map_defect_normals": d["map_defect_normals"][:, :1]})
+# an exported QP (K, F, B) with a q beside it: which objective is meant?
+np.savez_compressed("export_and_letters.npz", **d, q=-d["F"])
