@@ -10,7 +10,11 @@ File layout (array names; ``h`` may be omitted, meaning 0):
 * ``.mat`` (``scipy.io.savemat`` / MATLAB ``save -v7``): ``P``, ``q``, ``G``, ``h``, dense or sparse.
 * A file written by ``dualfem export`` (arrays ``K_*``, ``F``, ``B_*``, ...) is read as that QP.
 
-Validation (each failure is an :class:`~dualfem.errors.InputError` naming the array): shapes
+Validation (each failure is an :class:`~dualfem.errors.InputError` naming the array): before
+anything is decompressed, the shapes the file's headers declare must fit in the available memory
+(:func:`dualfem.core.qp.read_arrays`); no complex array (never read as its real part); a matrix
+given both as ``M`` and as triplets ``M_*`` is ambiguous; declared COO shapes must agree with q
+and fit in memory; n >= 1 (m = 0, no constraint, is allowed); shapes
 (``P`` n x n, ``q`` length n, ``G`` m x n, ``h`` length m), NaN/inf, symmetry of P (relative to
 ``max|P|``, threshold ``symmetry_rtol``; a file holding only one triangle of P, as OSQP does, is
 read with ``p_storage = "upper"`` or ``"lower"``), positive diagonal, and, if ``check_definite``,
@@ -44,7 +48,7 @@ import scipy.sparse.linalg as sla
 from dualfem.core.errors import InputError, check_positive
 from dualfem.core.parts import ShiftPart
 from dualfem.core.problem import Problem
-from dualfem.core.qp import QP, coo_from_arrays
+from dualfem.core.qp import QP, check_dims, coo_from_arrays, declared_arrays, read_arrays
 from dualfem.core.registry import register_problem
 
 STORAGE = ("full", "upper", "lower")
@@ -53,27 +57,35 @@ STORAGE = ("full", "upper", "lower")
 def _read(path: Path) -> dict:
     if not path.is_file():
         raise InputError(f"QP file {str(path)!r} does not exist")
+    if path.suffix not in (".npz", ".mat"):
+        raise InputError(f"parameter 'path' must name a .npz or .mat file, got {str(path)!r}")
     try:
-        if path.suffix == ".npz":
-            with np.load(path, allow_pickle=False) as z:
-                return {k: z[k] for k in z.files}
-        if path.suffix == ".mat":
-            import scipy.io
-
-            return {k: v for k, v in scipy.io.loadmat(path).items() if not k.startswith("__")}
+        return read_arrays(path, f"QP file {str(path)!r}")   # declared sizes checked before decompressing
+    except InputError:
+        raise
     except NotImplementedError as exc:  # scipy.io cannot read MATLAB v7.3 (HDF5) files
         raise InputError(f"cannot read QP file {str(path)!r}: {exc}; save it from MATLAB with "
                          f"save(..., '-v7') instead") from None
     except Exception as exc:  # corrupt or not a numpy/MATLAB file
         raise InputError(f"cannot read QP file {str(path)!r}: {type(exc).__name__}: {exc}") from None
-    raise InputError(f"parameter 'path' must name a .npz or .mat file, got {str(path)!r}")
 
 
-def _matrix(d: dict, name: str, where: str, required: bool = True):
-    """A sparse matrix from a dense/sparse array ``name`` or COO triplets ``name_*``."""
+def _matrix(d: dict, name: str, where: str, required: bool = True, rows: int | None = None,
+            cols: int | None = None):
+    """A sparse matrix from a dense/sparse array ``name`` or COO triplets ``name_*`` (not both: ambiguous).
+
+    ``rows``/``cols``: the sizes implied by the other arrays (q's length), checked against the
+    declared shape before anything of that shape is allocated."""
+    keys = [f"{name}_{s}" for s in ("data", "row", "col", "shape")]
+    if name in d and any(k in d for k in keys):
+        raise InputError(f"{where} holds both the matrix {name!r} and the triplets "
+                         f"{', '.join(k for k in keys if k in d)}: ambiguous, keep one")
     if name in d:
         a = d[name]
         if sp.issparse(a):
+            if a.dtype.kind not in "biuf":
+                raise InputError(f"matrix {name!r} in {where} must be real numbers, got dtype {a.dtype}")
+            check_dims(name, a.shape, where)        # a MATLAB sparse matrix's row count is only declared
             return sp.csc_matrix(a, dtype=float)
         a = np.asarray(a)
         if a.dtype.kind not in "biuf":
@@ -81,13 +93,19 @@ def _matrix(d: dict, name: str, where: str, required: bool = True):
         if a.ndim != 2:
             raise InputError(f"array {name!r} in {where} must be 2-D, got shape {a.shape}")
         return sp.csc_matrix(a.astype(float))
-    keys = [f"{name}_{s}" for s in ("data", "row", "col", "shape")]
     if all(k in d for k in keys):
-        return sp.csc_matrix(coo_from_arrays(d, name, where))
+        return sp.csc_matrix(coo_from_arrays(d, name, where, rows=rows, cols=cols, against="the length of q"))
+    if any(k in d for k in keys):
+        raise InputError(f"{where} holds only part of the triplets of {name!r}: it needs all of {', '.join(keys)}")
     if required:
         raise InputError(f"{where} lacks the matrix {name!r} (a 2-D array {name!r} or the COO triplets "
                          f"{', '.join(keys)})")
     return None
+
+
+def _length(d: dict, name: str) -> int | None:
+    """The length of the vector ``name`` if the file has one (an array of any shape: its size)."""
+    return int(np.size(d[name])) if name in d and not sp.issparse(d[name]) else None
 
 
 def _vector(d: dict, name: str, where: str, n: int, what: str, required: bool = True):
@@ -181,24 +199,44 @@ class QPFile(Problem):
             raise InputError(f"p_storage must be one of {', '.join(STORAGE)}, got {p['p_storage']!r}")
         p["symmetry_rtol"] = check_positive("symmetry_rtol", p["symmetry_rtol"])
 
+    def size_estimate(self) -> tuple[int, str] | None:
+        """Unknowns declared by the file's headers (q or F: nothing decompressed), for the memory guard."""
+        path = Path(self.params["path"])
+        try:
+            decl = declared_arrays(path)
+        except Exception:  # noqa: BLE001 - unreadable: build() says why, in one line
+            return None
+        for name in ("q", "F"):
+            if name in decl and decl[name][1] != "sparse":
+                n = int(np.prod(decl[name][0]))
+                return (n, f"QP file {path.name!r} (n = {n})") if n >= 1 else None
+        return None
+
     def build(self) -> QP:
         p = self.params
         path = Path(p["path"])
         where = f"QP file {str(path)!r}"
         d = _read(path)
         if ("K_data" in d or "K" in d) and ("F" in d):
+            letters = [k for k in ("P", "q", "G", "h", "P_data", "G_data") if k in d]
+            if letters:
+                raise InputError(f"{where} holds both an exported QP (K, F, B) and the arrays {', '.join(letters)} "
+                                 f"of min 1/2 x'Px + q'x s.t. Gx >= h: ambiguous, keep one")
             qp = QP.load(path)           # a file written by `dualfem export` / QP.save
             qp.name = f"qp_file[{path.stem}]"
             qp.params = {**qp.params, **{k: str(v) for k, v in p.items()}}
             if p["check_definite"]:
                 check_definite(qp.K, where)
             return qp
-        P = _matrix(d, "P", where)
+        nq = _length(d, "q")          # the size every declared shape must agree with
+        P = _matrix(d, "P", where, rows=nq, cols=nq)
         n = P.shape[0]
         if P.shape != (n, n):
             raise InputError(f"P in {where} must be square, got shape {P.shape}")
+        if n == 0:
+            raise InputError(f"P in {where} has shape (0, 0): a QP needs at least one unknown (n >= 1)")
         q = _vector(d, "q", where, n, "the size of P")
-        G = _matrix(d, "G", where, required=False)
+        G = _matrix(d, "G", where, required=False, cols=n)
         if G is None:
             raise InputError(f"{where} lacks the constraint matrix 'G' (use a G of shape (0, {n}) for no constraints)")
         if G.shape[1] != n:

@@ -35,6 +35,9 @@ from dualfem.core.errors import InputError, MissingDependency, check_positive
 CURVES = ("polyline", "spline")
 SIDES = ("bottom", "top", "left", "right")
 MAX_TRIANGLES = 5_000_000
+#: defect points checked for crossings and self-intersection (pairwise: the cost grows with the square);
+#: a polyline counts its points, a spline SAMPLES_PER_SPAN per span: 2048 are checked in about 2 s
+MAX_SAMPLES = 2048
 SAMPLES_PER_SPAN = 64          # spline samples per span between two given points (validation only)
 _TOL_REL = 1e-9                # "touching" tolerance, relative to max(width, height)
 _GRADE = 0.3                   # growth of the element size per unit distance away from a tip
@@ -187,17 +190,55 @@ def _check_one(i: int, P: np.ndarray, S: np.ndarray, width: float, height: float
 
 
 def estimate_triangles(width: float, height: float, mesh_size: float, tip_size: float | None, n_tips: int) -> int:
-    """Rough triangle count: equilateral triangles of the local size, tips' discs added."""
-    count = _TRI_PER_AREA * width * height / mesh_size ** 2
-    if tip_size is not None and tip_size < mesh_size:
-        d_min, d_max = _tip_distances(mesh_size, tip_size)
-        r = np.linspace(d_min, d_max, 401)
-        size = tip_size + (mesh_size - tip_size) * (r - d_min) / (d_max - d_min)
-        f = 2 * np.pi * r * (1 / size ** 2 - 1 / mesh_size ** 2)
-        ring = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(r)))
-        disc = np.pi * d_min ** 2 * (1 / tip_size ** 2 - 1 / mesh_size ** 2)
-        count += n_tips * _TRI_PER_AREA * (ring + disc)
+    """Rough triangle count: equilateral triangles of the local size, tips' discs added.
+
+    Overflow-safe: a tiny size gives a huge count (capped at 1e30), never an exception."""
+    with np.errstate(all="ignore"):
+        count = _TRI_PER_AREA * (float(width) / mesh_size) * (float(height) / mesh_size)
+        if tip_size is not None and tip_size < mesh_size:
+            d_min, d_max = _tip_distances(mesh_size, tip_size)
+            r = np.linspace(d_min, d_max, 401)
+            size = tip_size + (mesh_size - tip_size) * (r - d_min) / (d_max - d_min)
+            f = 2 * np.pi * r * (1 / size ** 2 - 1 / mesh_size ** 2)
+            ring = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(r)))
+            disc = float(np.pi * d_min ** 2 * (1 / np.float64(tip_size) ** 2 - 1 / np.float64(mesh_size) ** 2))
+            count += n_tips * _TRI_PER_AREA * (ring + disc)
+    if not count < 1e30:          # inf or NaN from an overflow: as large as we count
+        count = 1e30
     return int(math.ceil(count))
+
+
+def check_size(width: float, height: float, mesh_size: float, tip_size: float | None, n_tips: int,
+               label: str = "") -> int:
+    """The estimated triangle count; InputError naming mesh_size (or tip_size) and its allowed range
+    when it exceeds :data:`MAX_TRIANGLES`, before anything is meshed. ``label`` says where mesh_size
+    comes from (e.g. "mesh_size = 0: min(width, height)/N = 0.0156")."""
+    est = estimate_triangles(width, height, mesh_size, tip_size, n_tips)
+    if est <= MAX_TRIANGLES:
+        return est
+    top = min(width, height)
+    lo = math.sqrt(_TRI_PER_AREA * width * height / MAX_TRIANGLES)      # mesh_size alone
+    what = label or f"mesh_size={mesh_size:g}"
+    body = f"the {width:g} x {height:g} body"
+    n = f"{est:,}" if est < 1e15 else f"{est:.3g}"
+    if lo > top:
+        raise InputError(f"width={width:g}, height={height:g}: {body} needs about {n} triangles with {what} "
+                         f"and at least {_TRI_PER_AREA * width * height / top ** 2:.3g} with any mesh_size <= "
+                         f"min(width, height) (limit {MAX_TRIANGLES:,}): its aspect ratio max/min must be <= "
+                         f"{MAX_TRIANGLES / _TRI_PER_AREA:.3g}")
+    if estimate_triangles(width, height, mesh_size, None, 0) > MAX_TRIANGLES:
+        raise InputError(f"{what} gives about {n} triangles (limit {MAX_TRIANGLES:,}) on {body}: "
+                         f"mesh_size must be in [{lo:.3g}, {top:g}]")
+    # the tips' refinement is what makes it too big: the smallest tip_size that fits (count falls with it)
+    a, b = math.log(tip_size or mesh_size), math.log(mesh_size)
+    for _ in range(60):
+        mid = 0.5 * (a + b)
+        if estimate_triangles(width, height, mesh_size, math.exp(mid), n_tips) > MAX_TRIANGLES:
+            a = mid
+        else:
+            b = mid
+    raise InputError(f"{what}, tip_size={tip_size:g} gives about {n} triangles (limit {MAX_TRIANGLES:,}) on "
+                     f"{body}: tip_size must be in [{math.exp(b):.3g}, {mesh_size:g}]")
 
 
 def _tip_distances(mesh_size: float, tip_size: float) -> tuple[float, float]:
@@ -220,12 +261,14 @@ def validate(width: float, height: float, defects: list[dict], mesh_size: float,
             raise InputError(f"tip_size must be in (0, mesh_size] = (0, {mesh_size:g}], got {tip_size:g}")
     if not isinstance(defects, (list, tuple)):
         raise InputError(f"defects must be a list of tables {{points, curve}}, got {type(defects).__name__}")
-    est = estimate_triangles(width, height, mesh_size, tip_size, 2 * len(defects))
-    if est > MAX_TRIANGLES:
-        raise InputError(f"mesh_size={mesh_size:g}" + (f", tip_size={tip_size:g}" if tip_size else "")
-                         + f" gives about {est:,} triangles (limit {MAX_TRIANGLES:,}); use a larger size")
+    check_size(width, height, mesh_size, tip_size, 2 * len(defects))
     tol = _TOL_REL * max(width, height)
     parsed = [_check_defect(i, d) for i, d in enumerate(defects)]
+    counts = [len(P) if c == "polyline" or len(P) == 2 else (len(P) - 1) * SAMPLES_PER_SPAN + 1 for P, c in parsed]
+    if sum(counts) > MAX_SAMPLES:
+        raise InputError(f"defects: {len(parsed)} defects with {sum(len(P) for P, _ in parsed)} points give "
+                         f"{sum(counts):,} curve points to check for crossings (a spline counts {SAMPLES_PER_SPAN} "
+                         f"per span); the limit is {MAX_SAMPLES:,}: use fewer points (a spline needs few)")
     samples = [sample_defect(P, c) for P, c in parsed]
     for i, (P, _) in enumerate(parsed):
         _check_one(i, P, samples[i], width, height, tol)

@@ -223,7 +223,13 @@ def test_bad_defects_are_refused(defects, message):
     ({"mesh_size": float("nan")}, "mesh_size must be a finite number > 0"),
     ({"mesh_size": 0.6, "height": 0.5}, r"mesh_size must be in \(0, min\(width, height\)\] = \(0, 0.5\]"),
     ({"mesh_size": 1e-4}, r"gives about 230,9\d\d,\d\d\d triangles \(limit 5,000,000\)"),
-    ({"mesh_size": 5e-4, "tip_size": 1e-4}, r"mesh_size=0.0005, tip_size=0.0001 gives about 9,2\d\d,\d\d\d triangles"),
+    ({"mesh_size": 5e-4, "tip_size": 1e-4},
+     r"mesh_size=0.0005 gives about 9,2\d\d,\d\d\d triangles .*mesh_size must be in \[0.00068, 1\]"),
+    # the tips' refinement alone too fine: the allowed range of tip_size is named
+    ({"tip_size": 1e-12}, r"mesh_size=0.05, tip_size=1e-12 gives about .* tip_size must be in \[1.2\de-09, 0.05\]"),
+    # sizes that overflow a float estimate are refused, not a ZeroDivisionError
+    ({"mesh_size": 1e-200}, r"mesh_size=1e-200 gives about 1e\+30 triangles .*mesh_size must be in"),
+    ({"tip_size": 1e-300}, r"tip_size=1e-300 gives about .*tip_size must be in"),
     ({"tip_size": 0.06}, r"tip_size must be in \(0, mesh_size\] = \(0, 0.05\]"),
     ({"tip_size": 0.0}, "tip_size must be a finite number > 0"),
     ({"width": -1.0}, "width must be a finite number > 0"),

@@ -86,6 +86,8 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     """
     from dualfem.experiments.runner import make_solver
 
+    if qp.n == 0:       # nothing to solve or cross-check (m = 0, no constraint, is an ordinary QP)
+        raise InputError(f"compare needs a QP with at least one unknown; {qp.name!r} has n = 0")
     names = list(names) if names is not None else default_solvers()
     params = params or {}
     insts = {nm: make_solver(nm, params.get(nm)) for nm in names}  # validate all before solving

@@ -30,6 +30,12 @@ A sweep is described by a TOML spec (see ``benchmarks/default.toml``)::
                            # third-party solver show how far it gets on a big scene
     repeats = 1            # this block's own timed repeats (default: the scene block's)
     optional = false       # true: a solver that is not registered is skipped, not an error
+
+Sizes are bounded before anything is expanded (each refusal names the key and the limit): the
+file <= MAX_SPEC_BYTES, every ``repeats`` <= MAX_REPEATS, one [[scenes]] grid <= MAX_SCENES
+scenes, one solver grid <= MAX_VARIANTS variants, the sweep <= MAX_TASKS runs. A scene whose
+estimated peak memory exceeds the memory available to a worker is not run: its runs are skipped
+rows with the reason (:func:`dualfem.experiments.tasks.expand_scenes`).
 """
 from __future__ import annotations
 
@@ -57,6 +63,15 @@ REFERENCE_KEYS = {"solvers", "tol", "certify", "time_limit", "params"}
 
 
 FLOOR_KEYS = {"enabled", "ignore", "repeats", "cholmod", "warmup"}
+
+#: size bounds, checked before anything is expanded, constructed or written (a hostile spec must not
+#: hang the command or fill the disk): the spec file's size, timed repeats of a run, scenes of one
+#: [[scenes]] grid, variants of one solver grid, and runs of the whole sweep
+MAX_SPEC_BYTES = 1_000_000
+MAX_REPEATS = 1000
+MAX_SCENES = 10_000
+MAX_VARIANTS = 1000
+MAX_TASKS = 100_000
 
 
 @dataclass
@@ -89,13 +104,34 @@ class Spec:
         return time_limit * self.guard_factor + self.guard_slack
 
 
-def _num(where: str, v: Any, *, lo: float = 0.0, integer: bool = False, allow_zero: bool = False) -> float:
+def _num(where: str, v: Any, *, lo: float = 0.0, integer: bool = False, allow_zero: bool = False,
+         hi: float | None = None) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
-            or v < lo or (v == lo and not allow_zero) or (integer and v != int(v)):
+            or v < lo or (v == lo and not allow_zero) or (integer and v != int(v)) or (hi is not None and v > hi):
         kind = "an integer" if integer else "a finite number"
-        rng = f">= {lo}" if allow_zero else f"> {lo}"
+        if hi is not None:
+            rng = f"in [{lo:g}, {hi:g}]" if allow_zero else f"in ({lo:g}, {hi:g}]"
+        else:
+            rng = f">= {lo}" if allow_zero else f"> {lo}"
         raise InputError(f"{where} must be {kind} {rng}, got {v!r}")
     return int(v) if integer else float(v)
+
+
+def _repeats(where: str, v: Any) -> int:
+    return int(_num(where, v, lo=1, integer=True, allow_zero=True, hi=MAX_REPEATS))
+
+
+def _grid_size(where: str, lists: dict[str, Any], limit: int, what: str) -> int:
+    """The number of points of a grid (the product of its list lengths), refused above ``limit``
+    before any of them is made."""
+    size = 1
+    for v in lists.values():
+        size *= len(v) if isinstance(v, list) else 1
+    if size > limit:
+        dims = " x ".join(f"{k} ({len(v)})" for k, v in lists.items() if isinstance(v, list) and len(v) > 1)
+        raise InputError(f"{where} makes {size:,} {what} ({dims}); the limit is {limit:,}: split the sweep "
+                         f"into several specs")
+    return size
 
 
 def _bool(where: str, v: Any) -> bool:
@@ -123,6 +159,10 @@ def load_spec(path: str | Path) -> Spec:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"spec file {str(path)!r} does not exist")
+    size = path.stat().st_size
+    if size > MAX_SPEC_BYTES:
+        raise InputError(f"spec {str(path)!r} is {size:,} bytes; the limit is {MAX_SPEC_BYTES:,} (a sweep spec "
+                         f"lists grids, not data)")
     try:
         text = path.read_text(encoding="utf-8")
         data = tomllib.loads(text)
@@ -143,12 +183,24 @@ def parse_spec(data: dict, path: str = "<spec>", text: str = "") -> Spec:
     _parse_floor(s, data)
     _parse_scenes(s, data)
     _parse_solvers(s, data)
+    _check_task_count(s)
     return s
+
+
+def _check_task_count(s: Spec) -> None:
+    """Runs of the sweep (scenes x solver variants x tiers, an upper bound: before min/max filters and
+    duplicates) refused above MAX_TASKS before anything is expanded."""
+    scenes = sum(_grid_size("", {k: v for k, v in b.items() if k not in ("repeats", "warmup")}, MAX_SCENES, "")
+                 for b in s.scenes)
+    runs = sum(scenes * _grid_size("", b["grid"], MAX_VARIANTS, "") * max(len(b["tiers"]), 1) for b in s.solvers)
+    if runs > MAX_TASKS:
+        raise InputError(f"the spec makes up to {runs:,} runs ({scenes:,} scenes x the solver variants x tiers); "
+                         f"the limit is {MAX_TASKS:,}: split the sweep into several specs")
 
 
 def _parse_top(s: Spec, data: dict) -> None:
     if "repeats" in data:
-        s.repeats = _num("repeats", data["repeats"], lo=1, integer=True, allow_zero=True)
+        s.repeats = _repeats("repeats", data["repeats"])
     if "warmup" in data:
         s.warmup = _bool("warmup", data["warmup"])
     for k in ("time_limit", "guard_factor", "build_limit"):
@@ -189,7 +241,7 @@ def _parse_floor(s: Spec, data: dict) -> None:
     s.floor = {
         "enabled": _bool("floor.enabled", fl.get("enabled", True)),
         "ignore": [str(k) for k in _as_list(fl.get("ignore", ["load", "load_scale", "delta"]))],
-        "repeats": _num("floor.repeats", fl.get("repeats", s.repeats), lo=1, integer=True, allow_zero=True),
+        "repeats": _repeats("floor.repeats", fl.get("repeats", s.repeats)),
         "cholmod": _bool("floor.cholmod", fl.get("cholmod", True)),
         "warmup": _bool("floor.warmup", fl.get("warmup", s.warmup)),
     }
@@ -204,12 +256,14 @@ def _parse_scenes(s: Spec, data: dict) -> None:
         if "scene" not in blk:
             raise InputError(f"[[scenes]] block {i + 1} needs scene = \"f1\" (or a list of scenes)")
         if "repeats" in blk:
-            _num(f"repeats in [[scenes]] block {i + 1}", blk["repeats"], lo=1, integer=True, allow_zero=True)
+            _repeats(f"repeats in [[scenes]] block {i + 1}", blk["repeats"])
         if "warmup" in blk:
             _bool(f"warmup in [[scenes]] block {i + 1}", blk["warmup"])
         for k, v in blk.items():
             if isinstance(v, list) and not v:
                 raise InputError(f"{k} in [[scenes]] block {i + 1} is an empty list")
+        grid = {k: v for k, v in blk.items() if k not in ("repeats", "warmup")}
+        _grid_size(f"[[scenes]] block {i + 1}", grid, MAX_SCENES, "scenes")
         s.scenes.append(blk)
 
 
@@ -241,6 +295,7 @@ def _parse_solver_block(s: Spec, i: int, blk: dict) -> dict:
     for k, v in grid.items():
         if not isinstance(v, list) or not v:
             raise InputError(f"grid.{k} of solver {name!r} must be a non-empty list")
+    _grid_size(f"grid of solver {name!r}", grid, MAX_VARIANTS, "variants")
     for bound in ("max", "min"):
         for k, v in _table(f"{bound} of solver {name!r}", blk.get(bound, {})).items():
             _num(f"{bound}.{k} of solver {name!r}", v, lo=-math.inf)
@@ -248,8 +303,7 @@ def _parse_solver_block(s: Spec, i: int, blk: dict) -> dict:
         for combo in _grid(grid):
             reg[name](**{**params, **combo})
     tl = (_num(f"time_limit of solver {name!r}", blk["time_limit"]) if "time_limit" in blk else None)
-    reps = (_num(f"repeats of solver {name!r}", blk["repeats"], lo=1, integer=True, allow_zero=True)
-            if "repeats" in blk else None)
+    reps = _repeats(f"repeats of solver {name!r}", blk["repeats"]) if "repeats" in blk else None
     return {"name": name, "tiers": tiers_, "params": params, "grid": grid, "max": blk.get("max", {}),
             "min": blk.get("min", {}), "optional": optional, "label": blk.get("label"), "time_limit": tl,
             "repeats": reps}

@@ -50,6 +50,8 @@ class SceneSpec:
     key: str                        # hash of (scene, resolved)
     repeats: int
     warmup: bool
+    too_big: str | None = None      # why its runs are not attempted: it would not fit in memory
+
 
     @property
     def label(self) -> str:
@@ -59,8 +61,10 @@ class SceneSpec:
 def expand_scenes(spec: Spec) -> list[SceneSpec]:
     """Every scene of the spec's grids (validated by constructing the problem)."""
     from dualfem.core.scene import load_scene
+    from dualfem.numerics.memory import available_bytes
 
     out: dict[str, SceneSpec] = {}
+    have: int | None = None
     for blk in spec.scenes:
         reps = int(blk.get("repeats", spec.repeats))
         warm = bool(blk.get("warmup", spec.warmup))
@@ -70,8 +74,30 @@ def expand_scenes(spec: Spec) -> list[SceneSpec]:
             prob = load_scene(name, combo)          # InputError for a bad scene or parameter
             resolved = _canon(prob.params)
             key = _hash({"scene": name, "params": resolved})
-            out.setdefault(key, SceneSpec(name, combo, resolved, key, reps, warm))
+            if key not in out:
+                if have is None:
+                    have = available_bytes()        # read once per sweep (it reads /proc and the cgroups)
+                out[key] = SceneSpec(name, combo, resolved, key, reps, warm, too_big=_too_big(prob, have))
     return list(out.values())
+
+
+def _too_big(problem, have: int) -> str | None:
+    """Why a scene cannot be run here (the memory guard's estimate against ``have``, the memory available
+    to a worker: machine, ulimit -v, cgroups), before any worker allocates it; None when it fits."""
+    from dualfem.numerics.factor import get_default
+    from dualfem.numerics.memory import SAFETY, fits
+
+    est = problem.size_estimate() if hasattr(problem, "size_estimate") else None
+    if est is None:
+        return None
+    n, label = est
+    backend = get_default()
+    ok, need, have = fits(n, backend, have)
+    if ok:
+        return None
+    return (f"not run: {label} ({n / 1e6:.3g} M unknowns) needs about {need / 1e9:.3g} GB of memory with the "
+            f"{backend} factorization (estimate x {SAFETY:g}), available: {have / 1e9:.3g} GB (machine, ulimit -v, "
+            f"cgroup limits)")
 
 
 def expand_tasks(spec: Spec, scenes: list[SceneSpec] | None = None) -> list[dict]:
@@ -119,7 +145,7 @@ def expand_tasks(spec: Spec, scenes: list[SceneSpec] | None = None) -> list[dict
                     if cls is None:
                         reason = f"solver {name!r} is not registered (optional in the spec)"
                     else:
-                        reason = cls.missing()
+                        reason = cls.missing() or sc.too_big
                     task["skip"] = reason
                     tasks.append(task)
     return tasks
@@ -153,6 +179,8 @@ def floor_tasks(spec: Spec, scenes: list[SceneSpec]) -> list[dict]:
         return []
     out: dict[str, dict] = {}
     for sc in scenes:
+        if sc.too_big:           # its runs are skipped rows: no floor either
+            continue
         group = {k: v for k, v in sc.resolved.items() if k not in spec.floor["ignore"]}
         ident = {"floor": group, "repeats": spec.floor["repeats"], "cholmod": spec.floor["cholmod"],
                  "warmup": spec.floor["warmup"]}

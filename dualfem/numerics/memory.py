@@ -26,6 +26,7 @@ import functools
 
 import numpy as np
 
+from dualfem.core import limits
 from dualfem.core.errors import InputError
 from dualfem.numerics.factor import get_default
 
@@ -89,17 +90,10 @@ def estimate_peak_bytes(n_unknowns: int, backend: str = "pardiso", analysis: dic
 
 
 def available_bytes() -> int:
-    """Memory available for a new process now (Linux ``MemAvailable``; else total physical)."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    import os
-
-    return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    """Memory available for a new process now: the smallest of the machine's ``MemAvailable``, the
+    address space left under ``ulimit -v`` and the room in the process's memory cgroups (v1 and v2):
+    :func:`dualfem.core.limits.available_bytes`."""
+    return limits.available_bytes()
 
 
 def fits(n_unknowns: int, backend: str = "pardiso", limit_bytes: int | None = None,

@@ -33,6 +33,7 @@ import numpy as np
 
 from dualfem.core.errors import InputError, MissingDependency
 from dualfem.core.io import atomic_write, check_output_path
+from dualfem.core.qp import check_maps
 from dualfem.post.fields import Post, defect_stretches
 
 SUFFIXES = {"vtu": (".vtu",), "xdmf": (".xdmf", ".xmf")}
@@ -58,9 +59,30 @@ def check_path(path: str | os.PathLike, kind: str) -> Path:
     return path
 
 
+def check_qp(qp) -> None:
+    """Everything the writer reads, validated (InputError naming the array; never an IndexError later):
+    a 2-D mesh (``qp.geometry``: nodes (2, n_nodes), triangles, node_dofs with one row per displacement
+    component) and the defect maps (:func:`dualfem.core.qp.check_maps`)."""
+    g = getattr(qp, "geometry", None)
+    if g is None:
+        raise InputError("--vtk/--xdmf need the mesh of the QP (qp.geometry: nodes, cells, node_dofs): "
+                         "solve a scene, or a file exported with its map_ arrays")
+    if g.dim != 2 or g.cells.shape[0] != 3:
+        raise InputError(f"--vtk/--xdmf write 2-D triangle meshes; the QP's geometry has dim {g.dim} and cells "
+                         f"of {g.cells.shape[0]} nodes")
+    if g.node_dofs.shape[0] != 2:
+        raise InputError(f"--vtk/--xdmf write 2-D displacements: geometry.node_dofs (map_node_dofs) must have 2 rows "
+                         f"(one per component), got shape {g.node_dofs.shape}")
+    check_maps(qp.maps, qp.m, g.nodes.shape[1], "the QP")
+    if "defect_upper" in qp.maps and not ("defect_lower" in qp.maps and "defect_s" in qp.maps):
+        raise InputError("the defect maps of the QP need defect_upper, defect_lower and defect_s together")
+
+
 def to_meshio(qp, sol=None, *, post: Post | None = None):
     """The meshio.Mesh described in the module docstring."""
     import meshio
+
+    check_qp(qp)
 
     p = post if post is not None else Post(qp, sol)
     nodes = p.nodes
@@ -165,6 +187,7 @@ def write_outputs(qp, sol, *, vtk: str | None = None, xdmf: str | None = None) -
         return []
     if sol.x is None:
         raise InputError(f"no solution to write (solver status {sol.status}: {sol.message})")
+    check_qp(qp)
     post = Post(qp, sol)
     out = []
     if vtk:

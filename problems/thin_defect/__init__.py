@@ -110,6 +110,16 @@ class ThinDefect(Problem):
         rot = p["rotate_deg"]
         if not isinstance(rot, (int, float)) or not np.isfinite(rot):
             raise InputError(f"rotate_deg must be a finite number (degrees), got {rot!r}")
+        if p["mesh"] == "gmsh":        # every size-driving key (mesh_size, tip_size, N, width, height) bounded
+            tables = p["defects"]        # before the defects are parsed: the size is the first thing to know
+            n_defects = len(tables) if isinstance(tables, (list, tuple)) and len(tables) else 1
+            from dualfem.problems.gmsh_mesh import check_size
+
+            h = p["mesh_size"] or min(p["width"], p["height"]) / p["N"]
+            label = f"mesh_size={h:g}" if p["mesh_size"] else \
+                f"mesh_size=0 (min(width, height)/N = {h:g} with N={p['N']})"
+            tip = p["tip_size"] if 0 < p["tip_size"] < h else None
+            check_size(p["width"], p["height"], h, tip, 2 * n_defects, label)
         p["defect"] = parse_defect(p["defect"])
         default_defect = np.asarray(self.defaults["defect"], dtype=float)
         tables = p["defects"]
@@ -134,9 +144,13 @@ class ThinDefect(Problem):
         p = self.params
         if p["mesh"] == "structured":
             return 2 * (p["N"] + 1) ** 2, f"N={p['N']}"
+        from dualfem.problems.gmsh_mesh import estimate_triangles
+
         h = p["mesh_size"] or min(p["width"], p["height"]) / p["N"]
-        nodes = 1.2 * p["width"] * p["height"] / (0.5 * 3 ** 0.5 / 2 * h * h) / 2 + 1   # equilateral triangles
-        return int(2 * nodes), f"mesh_size={h:g}"
+        tip = p["tip_size"] if 0 < p["tip_size"] < h else None
+        tri = estimate_triangles(p["width"], p["height"], h, tip, 2 * len(getattr(self, "_defects", ())))
+        nodes = 1.2 * tri / 2 + 1          # about 2 triangles per node, 20 % margin (doubled defect nodes)
+        return int(2 * nodes), f"mesh_size={h:g}" + (f", tip_size={tip:g}" if tip else "")
 
     # ----------------------------------------------------------------- mesh
     def _reference_mesh(self) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:

@@ -6,6 +6,9 @@ import numpy as np
 from dualfem.core.errors import InputError, check_positive
 
 CURVES = ("polyline", "spline")
+#: defects of one scene, and points of one defect (the geometric checks are pairwise)
+MAX_DEFECTS = 64
+MAX_POINTS = 4096
 
 
 def _numbers(value):
@@ -17,28 +20,52 @@ def _numbers(value):
     return value
 
 
+def _point_list(key: str, value, form: str) -> np.ndarray:
+    """``value`` as an (k, 2) float array: a list of [x, y] pairs, or a string of 2 k numbers.
+
+    Refused (naming ``key``): a point with other than 2 coordinates (a 3-D point is not read as a
+    2-D one), a TOML boolean or string for a coordinate, non-finite numbers.
+    """
+    if isinstance(value, str):
+        flat = _numbers(value)
+        if not flat or len(flat) % 2:
+            raise InputError(f"{key} must be {form}, got {value!r}")
+        arr = np.asarray(flat, dtype=float).reshape(-1, 2)
+    else:
+        if not isinstance(value, (list, tuple, np.ndarray)) or not len(value):
+            raise InputError(f"{key} must be {form}, got {value!r}")
+        for i, pt in enumerate(value):
+            if not isinstance(pt, (list, tuple, np.ndarray)):
+                raise InputError(f"{key} must be {form}, got {value!r}")
+            if len(pt) != 2:
+                raise InputError(f"{key}: point {i} must have exactly 2 coordinates [x, y] (the scene is 2-D), "
+                                 f"got {pt!r} ({len(pt)} coordinates)")
+            for c in pt:
+                if isinstance(c, (bool, np.bool_)) or not isinstance(c, (int, float, np.integer, np.floating)):
+                    raise InputError(f"{key}: point {i} coordinates must be numbers, got {pt!r}")
+        arr = np.asarray(value, dtype=float).reshape(-1, 2)
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{key} coordinates must be finite, got {value!r}")
+    return arr
+
+
 def parse_defect(value) -> np.ndarray:
     """The single-segment key ``defect = [[x1, y1], [x2, y2]]`` (or ``"x1,y1,x2,y2"``) as a (2, 2) array."""
-    value = _numbers(value)
-    try:
-        arr = np.asarray(value, dtype=float).reshape(2, 2)
-    except (ValueError, TypeError):
-        raise InputError(f"defect must be two points [[x1, y1], [x2, y2]] (or 'x1,y1,x2,y2'), got {value!r}") from None
-    if not np.all(np.isfinite(arr)):
-        raise InputError(f"defect coordinates must be finite, got {value!r}")
+    form = "two points [[x1, y1], [x2, y2]] (or 'x1,y1,x2,y2')"
+    arr = _point_list("defect", value, form)
+    if arr.shape != (2, 2):
+        raise InputError(f"defect must be {form}, got {value!r}")
     return arr
 
 
 def _points(key: str, value) -> np.ndarray:
-    try:
-        arr = np.asarray(_numbers(value), dtype=float)
-        arr = arr.reshape(-1, 2)
-    except (ValueError, TypeError):
-        raise InputError(f"{key} must be a list of points [[x, y], ...], got {value!r}") from None
-    if arr.shape[0] < 2 or arr.size != np.asarray(_numbers(value), dtype=float).size:
+    if isinstance(value, (list, tuple, np.ndarray)) and len(value) > MAX_POINTS:
+        raise InputError(f"{key} has {len(value)} points; the limit is {MAX_POINTS} per defect")
+    arr = _point_list(key, value, "a list of at least two points [[x, y], ...]")
+    if arr.shape[0] < 2:
         raise InputError(f"{key} must be at least two points [[x, y], ...], got {value!r}")
-    if not np.all(np.isfinite(arr)):
-        raise InputError(f"{key} coordinates must be finite, got {value!r}")
+    if arr.shape[0] > MAX_POINTS:
+        raise InputError(f"{key} has {arr.shape[0]} points; the limit is {MAX_POINTS} per defect")
     return arr
 
 
@@ -68,6 +95,8 @@ def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height
     if not isinstance(tables, (list, tuple)) or not all(isinstance(t, dict) for t in tables):
         raise InputError("defects must be a list of tables ([[defects]] in TOML) with points = [[x, y], ...], "
                          f"optional curve and delta; got {tables!r}")
+    if len(tables) > MAX_DEFECTS:
+        raise InputError(f"defects: {len(tables)} [[defects]] tables; the limit is {MAX_DEFECTS}")
     out = []
     for k, tab in enumerate(tables):
         key = f"defects[{k}]"
@@ -83,7 +112,11 @@ def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height
         if curve == "spline" and mesh != "gmsh":
             raise InputError(f"{key}.curve = 'spline' needs mesh = 'gmsh' (the structured grid carries "
                              f"only defects along its edges)")
-        d = check_positive(f"{key}.delta", tab.get("delta", delta))
+        dv = tab.get("delta", delta)
+        if isinstance(dv, (bool, np.bool_)) or not isinstance(dv, (int, float, np.integer, np.floating)):
+            raise InputError(f"{key}.delta must be a number > 0 (a TOML number, not {type(dv).__name__}), "
+                             f"got {dv!r}")
+        d = check_positive(f"{key}.delta", dv)
         _check_inside(f"{key}.points", pts, width, height)
         out.append({"points": pts, "curve": curve, "delta": d})
     return out
