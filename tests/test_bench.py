@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from dualfem.core.errors import InputError
-from dualfem.experiments import bench, harness, store
+from dualfem.experiments import bench, harness, store, stress
 from dualfem.experiments.progress import Progress
 from dualfem.experiments.spec import load_spec
 from dualfem.experiments.tasks import expand_scenes, expand_tasks
@@ -365,29 +365,31 @@ def test_dask_executor_on_local_cluster(serial_par, tmp_path):
     assert s.skipped_done == 0 and s.ran == 12 and _statuses(tmp_path / "out") == expected
 
 
-def test_dask_bad_address_is_input_error(tmp_path, monkeypatch):
-    """A scheduler address nobody listens on is an InputError naming --dask.
+def test_dask_bad_address_is_input_error(tmp_path, capsys):
+    """A scheduler address nobody listens on is refused: an InputError naming --dask, within the
+    ``connect_timeout`` given (harness default 20 s), before anything is written; on the command
+    line (``--dask-timeout``) one error line and exit 2. A malformed address too."""
+    pytest.importorskip("distributed")
+    from dualfem.cli.main import main
 
-    The harness waits ``timeout="20s"`` for the scheduler (``dualfem.experiments.harness._execute_dask``)
-    and offers no parameter or environment variable to shorten it, so this test wraps dask's own
-    ``Client`` to connect with a 1 s timeout (same code path, same refusal, 20 s less waiting). The
-    wrapper records its calls: if the harness stops going through ``distributed.Client``, the test fails
-    instead of silently waiting 20 s again."""
-    distributed = pytest.importorskip("distributed")
-    real, calls = distributed.Client, []
-
-    def short_client(address, *args, **kwargs):
-        calls.append((address, kwargs.get("timeout")))
-        return real(address, *args, **{**kwargs, "timeout": "1s"})
-
-    monkeypatch.setattr(distributed, "Client", short_client)
     spec = load_spec(write(tmp_path, PAR))                   # no sweep needed: the connection fails first
     t0 = time.monotonic()
-    with pytest.raises(InputError, match="dask"):
+    with pytest.raises(InputError, match="--dask.*within 1 s"):
         bench.run_sweep(spec, tmp_path / "out", dask="tcp://127.0.0.1:9", progress=False,
-                        stream=open(os.devnull, "w"))
-    assert calls and calls[0][0] == "tcp://127.0.0.1:9", calls
-    assert time.monotonic() - t0 < 15, "the 1 s connect timeout did not reach dask"
+                        stream=open(os.devnull, "w"), connect_timeout=1.0)
+    assert time.monotonic() - t0 < 10, "the 1 s connect timeout did not reach dask"
+    assert not (tmp_path / "out").exists()                   # refused before anything is written
+    with pytest.raises(InputError, match="--dask"):
+        stress.run_grid([], tmp_path / "grid", dask="tcp://127.0.0.1:9", connect_timeout=1.0)
+    assert not (tmp_path / "grid").exists()
+    capsys.readouterr()
+    for addr in ("tcp://127.0.0.1:9", "tcp://127.0.0.1:notaport"):
+        t0 = time.monotonic()
+        rc = main(["bench", str(tmp_path / "spec.toml"), "--dask", addr, "--dask-timeout", "1",
+                   "--out", str(tmp_path / "cli")])
+        err = capsys.readouterr().err
+        assert rc == 2 and err.count("\n") == 1 and err.startswith("dualfem bench: error: --dask"), err
+        assert time.monotonic() - t0 < 10 and not (tmp_path / "cli").exists()
 
 
 # ------------------------------------------------------------------ progress

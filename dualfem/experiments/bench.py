@@ -24,7 +24,7 @@ import numpy as np
 
 from dualfem.core.errors import InputError
 from dualfem.core.io import atomic_write_text
-from dualfem.experiments.harness import execute_all
+from dualfem.experiments.harness import DASK_CONNECT_TIMEOUT, check_dask, execute_all
 from dualfem.experiments.machine import loadavg, machine_info, utc_now
 from dualfem.experiments.progress import Progress
 from dualfem.experiments.row import Row
@@ -251,7 +251,7 @@ class SweepSummary:
 def run_tasks(tasks: list[dict], store: ResultStore, *, jobs: int = 1, dask: str | None = None,
               gate: Callable[[dict, dict[str, dict]], str | None] | None = None,
               on_row: Callable[[dict, Any], None] | None = None,
-              order: Callable[[dict], Any] | None = None) -> int:
+              order: Callable[[dict], Any] | None = None, connect_timeout: float = DASK_CONNECT_TIMEOUT) -> int:
     """The one scheduler of every sweep (``dualfem bench`` and ``dualfem stress``); returns the rows written.
 
     ``tasks``: dicts with ``kind`` (a handler of :data:`dualfem.experiments.harness.HANDLERS`),
@@ -264,6 +264,7 @@ def run_tasks(tasks: list[dict], store: ResultStore, *, jobs: int = 1, dask: str
     e.g. a predicted time or memory over the budget); a gate may also adjust the task. Tasks whose
     dependency never finishes get a skipped row. ``order`` sorts each wave (e.g. biggest first).
     Every row is written to ``store`` (after ``on_row(row, payload)``, e.g. to cache a reference).
+    ``connect_timeout``: seconds to wait for the ``dask`` scheduler.
     """
     from dualfem.experiments.harness import error_row
 
@@ -305,7 +306,7 @@ def run_tasks(tasks: list[dict], store: ResultStore, *, jobs: int = 1, dask: str
                 to_run.append(t)
         if order is not None:
             to_run.sort(key=order)
-        for row, payload in execute_all(to_run, jobs, dask):
+        for row, payload in execute_all(to_run, jobs, dask, connect_timeout):
             finish(row, payload)
         pending = waiting
     return written
@@ -352,7 +353,7 @@ def _begin(spec: Spec, store: ResultStore, out: Path, jobs: int, dask: str | Non
 
 
 def _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream,
-                           progress) -> tuple[dict, int, int]:
+                           progress, connect_timeout=DASK_CONNECT_TIMEOUT) -> tuple[dict, int, int]:
     """Phase 1: certified references (for scenes with pending runs) and floors; returns (refs, aux, n_refs)."""
     need = {t["scene_key"] for t in pending if not t["skip"]}
     refs: dict[str, dict | None] = {}
@@ -374,7 +375,7 @@ def _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, st
         n_refs += row["kind"] == "reference"
         bar.update(_describe(row))
 
-    aux = run_tasks(tasks, store, jobs=jobs, dask=dask, on_row=on_row)
+    aux = run_tasks(tasks, store, jobs=jobs, dask=dask, on_row=on_row, connect_timeout=connect_timeout)
     return refs, aux, n_refs
 
 
@@ -384,7 +385,8 @@ def _size(t: dict) -> float:
     return float(n) if isinstance(n, (int, float)) else 0.0
 
 
-def _runs(pending, refs, store, jobs, dask, stream, progress, title) -> tuple[dict[str, int], int]:
+def _runs(pending, refs, store, jobs, dask, stream, progress, title,
+          connect_timeout=DASK_CONNECT_TIMEOUT) -> tuple[dict[str, int], int]:
     """Phase 2: the runs (skipped ones are written directly); returns (status counts, runs executed)."""
     statuses: dict[str, int] = {}
     tasks = [t if t["skip"] else {**t, "ref": refs.get(t["scene_key"])} for t in pending]
@@ -400,19 +402,21 @@ def _runs(pending, refs, store, jobs, dask, stream, progress, title) -> tuple[di
             ran += 1
             bar.update(_describe(row))
 
-    run_tasks(tasks, store, jobs=jobs, dask=dask, on_row=on_row, order=lambda t: -_size(t))
+    run_tasks(tasks, store, jobs=jobs, dask=dask, on_row=on_row, order=lambda t: -_size(t),
+              connect_timeout=connect_timeout)
     return statuses, ran
 
 
 def run_sweep(spec: Spec | str | Path, out: str | Path, *, jobs: int = 1, dask: str | None = None,
               command: str = "", progress: bool = True, stream=None, retry_failed: bool = False,
-              force: bool = False) -> SweepSummary:
+              force: bool = False, connect_timeout: float = DASK_CONNECT_TIMEOUT) -> SweepSummary:
     """Run (or resume) a sweep; returns a summary. Files: see :class:`ResultStore`.
 
     Everything is validated before anything is written; the folder is locked for the run and must
     belong to this spec (``force`` adds the rows of another spec to it). Finished rows are never
     redone (``retry_failed``: those whose status is not solved/inaccurate are). The tasks go
-    through the one engine, :func:`run_tasks`: references and floors, then the runs.
+    through the one engine, :func:`run_tasks`: references and floors, then the runs. A ``dask``
+    scheduler that does not answer within ``connect_timeout`` s is refused before anything is written.
     """
     if not isinstance(spec, Spec):
         spec = load_spec(spec)
@@ -421,14 +425,18 @@ def run_sweep(spec: Spec | str | Path, out: str | Path, *, jobs: int = 1, dask: 
     scenes = expand_scenes(spec)          # every scene validated before anything is written
     tasks = expand_tasks(spec, scenes)
     out = Path(out)
+    if dask:
+        check_dask(dask, connect_timeout)
     store = open_store(out, spec.name, spec.text or json.dumps(_canon(spec.__dict__)), force=force)
     try:
-        return _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, stream, retry_failed)
+        return _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, stream, retry_failed,
+                      connect_timeout)
     finally:
         store.close()
 
 
-def _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, stream, retry_failed) -> SweepSummary:
+def _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, stream, retry_failed,
+           connect_timeout=DASK_CONNECT_TIMEOUT) -> SweepSummary:
     meta = _begin(spec, store, out, jobs, dask, command)
     stream = stream or sys.stderr
 
@@ -446,8 +454,9 @@ def _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, strea
     store.keep = lambda r: (r.get("run_id") in run_ids or r.get("run_id") in floor_ids
                             or (r.get("kind") == "reference" and r.get("scene_key") in scene_keys)
                             or r.get("spec") not in (None, spec.name))
-    refs, aux, n_refs = _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream, progress)
-    statuses, ran = _runs(pending, refs, store, jobs, dask, stream, progress, spec.name)
+    refs, aux, n_refs = _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream, progress,
+                                               connect_timeout)
+    statuses, ran = _runs(pending, refs, store, jobs, dask, stream, progress, spec.name, connect_timeout)
     store.write_csv()
     meta["finished_utc"] = utc_now()
     atomic_write_text(store.out / "sweep.json", json.dumps(meta, indent=1, sort_keys=True))

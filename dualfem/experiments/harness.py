@@ -6,7 +6,8 @@ child announces each phase and its budget), or that dies on its own (segmentatio
 memory): the parent then makes an error row, never loses the task and never hangs. Children
 volunteer to the kernel's OOM killer, die with their parent (no orphans after ``kill -9`` or
 SIGTERM of a sweep: PDEATHSIG and a watch of the parent's pid in every child, and in every loky
-worker a watch of the sweep process, :func:`watch_parent`) and report their peak resident memory with every row (``peak_rss_mb``).
+worker a watch of the sweep process, :func:`watch_parent`) and report their peak resident memory
+with every row (``peak_rss_mb``).
 
 The child dispatches on ``task["kind"]`` to the handlers in :data:`HANDLERS` (``bench`` runs,
 references and floors; ``stress`` runs). Executors: the calling thread (``jobs = 1``),
@@ -345,7 +346,12 @@ def _close_local_worker() -> None:
         _LOCAL.worker = None
 
 
-def _execute_dask(tasks: list[dict], address: str) -> Iterable[tuple[dict, Any]]:
+#: seconds to wait for a dask scheduler before refusing its address
+DASK_CONNECT_TIMEOUT = 20.0
+
+
+def _execute_dask(tasks: list[dict], address: str,
+                  connect_timeout: float = DASK_CONNECT_TIMEOUT) -> Iterable[tuple[dict, Any]]:
     from dualfem.core.errors import InputError, MissingDependency
 
     try:
@@ -353,9 +359,15 @@ def _execute_dask(tasks: list[dict], address: str) -> Iterable[tuple[dict, Any]]
     except ImportError:
         raise MissingDependency("--dask needs dask.distributed: pip install 'dualfem[parallel]'") from None
     try:
-        client = Client(address, timeout="20s")
+        client = Client(address, timeout=f"{float(connect_timeout)}s")
     except (OSError, TimeoutError) as exc:
-        raise InputError(f"--dask: cannot connect to the scheduler at {address!r}: {exc}") from None
+        raise InputError(f"--dask: cannot connect to the scheduler at {address!r} within {connect_timeout:g} s: "
+                         f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+    except ValueError as exc:         # not an address at all (e.g. "tcp://host:port:x")
+        raise InputError(f"--dask: {address!r} is not a scheduler address: {exc}") from None
+    if not tasks:
+        client.close()
+        return
     try:
         futs = client.map(run_guarded, tasks, pure=False)
         for fut in as_completed(futs):
@@ -367,12 +379,21 @@ def _execute_dask(tasks: list[dict], address: str) -> Iterable[tuple[dict, Any]]
         client.close()
 
 
-def execute_all(tasks: list[dict], jobs: int = 1, dask: str | None = None) -> Iterable[tuple[dict, Any]]:
-    """Yield (row, payload) for every task as it finishes."""
+def check_dask(address: str, connect_timeout: float = DASK_CONNECT_TIMEOUT) -> None:
+    """InputError (one line) unless a dask scheduler answers at ``address`` within ``connect_timeout`` s
+    (called before a sweep writes anything)."""
+    for _ in _execute_dask([], address, connect_timeout):
+        pass
+
+
+def execute_all(tasks: list[dict], jobs: int = 1, dask: str | None = None,
+                connect_timeout: float = DASK_CONNECT_TIMEOUT) -> Iterable[tuple[dict, Any]]:
+    """Yield (row, payload) for every task as it finishes (``connect_timeout``: seconds to wait for
+    the ``dask`` scheduler)."""
     if not tasks:
         return
     if dask:
-        yield from _execute_dask(tasks, dask)
+        yield from _execute_dask(tasks, dask, connect_timeout)
     elif jobs > 1:
         try:
             from joblib import Parallel, delayed
