@@ -563,3 +563,93 @@ def test_method_text_follows_the_specs_warmup(tmp_path):
     assert "after one untimed warm-up run." in text('[[scenes]]\nscene = "f1"\n')
     assert "in some scene blocks, none in others" in text(
         '[[scenes]]\nscene = "f1"\n[[scenes]]\nscene = "f2"\nwarmup = false\n')
+
+
+def _clone(out: Path, dest: Path) -> Path:
+    """results.csv and spec.toml of a sweep (a fresh clone: no rows/, no refs/)."""
+    import shutil
+
+    dest.mkdir()
+    shutil.copy(out / "results.csv", dest / "results.csv")
+    shutil.copy(out / "spec.toml", dest / "spec.toml")
+    return dest
+
+
+def test_a_damaged_results_csv_loses_no_readable_row(small_sweep, tmp_path, capsys):
+    """A results.csv cut by a kill (or with a damaged line, undecodable bytes) is read without a
+    traceback by read_results, dualfem.results.load and dualfem report bench (a warning naming the
+    lines, nothing changed on disk); a sweep resumed on it keeps every readable row, keeps the damaged
+    file aside under a new name (an earlier one untouched) and redoes only the runs of the bad lines."""
+    from dualfem.cli.main import main
+
+    spec, out, _ = small_sweep
+    good = store.read_results(out)
+    clone = _clone(out, tmp_path / "clone")
+    text = (clone / "results.csv").read_bytes()
+    lines = text.splitlines(keepends=True)
+    k = next(i for i, r in enumerate(good) if r["kind"] == "run") + 1      # a run's line; the last is a run too
+    damaged_id = good[k - 1]["run_id"]
+    damaged = lines[:k] + [lines[k][:40] + b"\n"] + lines[k + 1:-1] + [lines[-1][: len(lines[-1]) // 2]]
+    (clone / "results.csv").write_bytes(b"".join(damaged))
+    (clone / "results.csv.corrupt-20200101T000000Z").write_text("an earlier copy kept aside\n")
+    before_csv = (clone / "results.csv").read_bytes()
+    rows = store.read_results(clone)
+    err = capsys.readouterr().err
+    assert len(rows) == len(good) - 2 and "2 unreadable line(s)" in err and f"lines {k + 1}.." in err
+    assert damaged_id not in {r["run_id"] for r in rows}
+    pytest.importorskip("pandas")
+    from dualfem import results
+
+    assert len(results.load(clone)) == len(good) - 2
+    assert main(["report", "bench", str(clone), "--md", str(tmp_path / "rep" / "b.md")]) == 0
+    assert "unreadable line" in capsys.readouterr().err
+    assert (clone / "results.csv").read_bytes() == before_csv            # reading changes nothing
+    # the sweep resumed on it: readable rows kept, damaged file kept aside, the two bad runs redone
+    warned = []
+    st = store.ResultStore(clone, warn=warned.append).open()
+    st.close()
+    assert len(warned) == 1 and "kept as" in warned[0]
+    asides = sorted(p.name for p in clone.glob("results.csv.corrupt-*"))
+    assert len(asides) == 2 and (clone / "results.csv.corrupt-20200101T000000Z").read_text().startswith("an earlier")
+    kept_aside = next(clone / n for n in asides if not n.endswith("20200101T000000Z"))
+    assert kept_aside.read_bytes() == before_csv
+    assert {r["run_id"] for r in store.read_results(clone)} == {r["run_id"] for r in rows}
+    s = bench.run_sweep(spec, clone, progress=False, stream=open(os.devnull, "w"))
+    assert s.ran + s.aux <= 4                                # only the runs of the damaged lines
+    after = {r["run_id"]: r for r in store.read_results(clone)}
+    assert {r["run_id"] for r in good} <= set(after)
+    for r in rows:          # every readable row kept as it was (a reference of refs/, not cloned, is recomputed)
+        if r["kind"] == "reference":
+            continue
+        assert (after[r["run_id"]]["status"], after[r["run_id"]]["total_s"]) == (r["status"], r["total_s"]), r
+
+
+@pytest.mark.parametrize("garbage", [b"", b"run_id\n", b"\xff\xfe\x00\x00garbage", b"name,age\nada,36\n"])
+def test_results_csv_without_a_header_is_moved_aside_not_a_traceback(tmp_path, garbage):
+    (tmp_path / "results.csv").write_bytes(garbage)
+    with pytest.raises(InputError, match="results.csv"):
+        store.read_results(tmp_path)
+    warned = []
+    st = store.ResultStore(tmp_path / ".", warn=warned.append).open()
+    st.close()
+    assert not (tmp_path / "results.csv").exists() and len(warned) == 1
+    assert [p.read_bytes() for p in tmp_path.glob("results.csv.corrupt-*")] == [garbage]
+
+
+def test_set_aside_and_backup_names_never_collide(tmp_path):
+    """Two copies kept aside in one second get two names; an existing one is never replaced."""
+    from dualfem.core.io import backup, move_aside, write_aside
+
+    p = tmp_path / "results.csv"
+    names = []
+    for i in range(3):
+        p.write_text(f"version {i}\n")
+        names.append(backup(p, "bak"))
+    for i in range(3):
+        p.write_text(f"moved {i}\n")
+        names.append(move_aside(p, "corrupt"))
+        names.append(write_aside(p, "corrupt", f"lines {i}\n"))
+    assert len(set(names)) == 9 and all(n.parent == tmp_path for n in names)
+    texts = sorted(n.read_text() for n in names)
+    assert texts == sorted([f"version {i}\n" for i in range(3)] + [f"moved {i}\n" for i in range(3)]
+                           + [f"lines {i}\n" for i in range(3)])

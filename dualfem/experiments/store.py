@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 import sys
 import time
 import zipfile
@@ -17,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from dualfem.core.errors import InputError
-from dualfem.core.io import atomic_write, atomic_write_text
+from dualfem.core.errors import InputError, OutputError
+from dualfem.core.io import atomic_write, atomic_write_text, move_aside
 from dualfem.experiments.row import COLUMNS, Row
 
 #: statuses of a run that are final (a resumed sweep does not redo them, ``--retry-failed`` redoes
@@ -57,22 +58,34 @@ class ResultStore:
             if p.is_file():
                 p.unlink()
         self.rows: dict[str, dict] = {}
-        if (self.out / "results.csv").is_file():
+        csv_path = self.out / "results.csv"
+        bad: list = []
+        if csv_path.is_file():
             try:
-                for r in read_results(self.out / "results.csv"):
-                    rid = r.get("run_id")
-                    if rid and not (self.rows_dir / f"{rid}.json").exists():
-                        # a row kept only in the (committed) CSV: give it its own file again
-                        self.rows[rid] = Row.from_dict(r).to_dict()
-                        atomic_write_text(self.rows_dir / f"{rid}.json", json.dumps(self.rows[rid], sort_keys=True))
-            except (InputError, csv.Error, ValueError) as exc:
-                self._move_aside(self.out / "results.csv", f"unreadable results.csv ({exc})")
+                kept, bad = read_results_checked(csv_path)
+            except InputError as exc:
+                kept, bad = [], []
+                self._move_aside(csv_path, f"unreadable results.csv ({exc})")
+            for r in kept:
+                rid = r["run_id"]
+                if not (self.rows_dir / f"{rid}.json").exists():
+                    # a row kept only in the (committed) CSV: give it its own file again
+                    self.rows[rid] = Row.from_dict(r).to_dict()
+                    atomic_write_text(self.rows_dir / f"{rid}.json", json.dumps(self.rows[rid], sort_keys=True))
+            if bad:
+                # the readable rows are in rows/ now; keep the damaged lines (and the file as it was)
+                dest = move_aside(csv_path, "corrupt")
+                self.warn(f"{len(bad)} unreadable line(s) of results.csv ({_lines(bad)}: a cut or damaged write?): "
+                          f"the file as it was is kept as {str(dest)!r}; its {len(kept)} readable row(s) are kept, "
+                          f"the runs of the unreadable lines are redone")
         for p in sorted(self.rows_dir.glob("[!.]*.json")):
             try:
                 r = json.loads(p.read_text(encoding="utf-8"))
                 self.rows[r["run_id"]] = r
             except (OSError, ValueError, KeyError, TypeError):
                 self._move_aside(p, "unreadable row file; its run is redone")
+        if bad:        # results.csv again at once: every readable row (the damaged file is kept aside)
+            write_csv(csv_path, list(self.rows.values()))
         self._last_csv = 0.0
         self.keep: Callable[[dict], bool] | None = None
         return self
@@ -87,11 +100,10 @@ class ResultStore:
             self._lock = None
 
     def _move_aside(self, p: Path, why: str) -> None:
-        dest = p.with_name(p.name + ".corrupt")
         try:
-            p.replace(dest)
+            dest = move_aside(p, "corrupt")         # a new name: never replaces an earlier one
             self.warn(f"{why}: moved {str(p)!r} to {str(dest)!r}")
-        except OSError:
+        except (OSError, OutputError):
             self.warn(f"{why}: {str(p)!r} ignored")
 
     def claim(self, name: str, text: str, force: bool = False) -> None:
@@ -238,30 +250,104 @@ TEXT_COLUMNS = {"run_id", "kind", "spec", "scene", "scene_key", "label", "solver
                 "platform", "versions", "axis", "solver_params", "iterations", "coords"}
 
 
-def read_results(path: str | Path) -> list[dict]:
-    """Rows of a results.csv (or of the results.csv inside a directory), numbers parsed."""
+def read_results(path: str | Path, warn: Callable[[str], None] | None = None) -> list[dict]:
+    """Rows of a results.csv (or of the results.csv inside a directory), numbers parsed.
+
+    A damaged file (cut by a kill or a full disk, or edited by hand) gives its readable rows: every
+    unreadable line is skipped with one warning (``warn``, default a ``dualfem: warning:`` line on
+    stderr); nothing is changed on disk (:class:`ResultStore` moves the bad part aside). A file that
+    is not a results.csv at all (no header with run_id, kind, status) is an InputError.
+    """
+    rows, bad = read_results_checked(path)
+    if bad:
+        (warn or _warn_stderr)(f"{len(bad)} unreadable line(s) of {str(_csv_path(path))!r} skipped (a cut or "
+                               f"damaged write?): {_lines(bad)}; every other row is read")
+    return rows
+
+
+#: a run id names its file in rows/: letters, digits and ``_.:=+,@-``, no path separator, not starting with "."
+_SAFE_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.:=+,@-]{0,199}")
+
+
+def _warn_stderr(msg: str) -> None:
+    print(f"dualfem: warning: {msg}", file=sys.stderr)
+
+
+def _lines(bad: list[tuple[int, str]]) -> str:
+    nums = [n for n, _ in bad]
+    return f"line {nums[0]}" if len(nums) == 1 else f"lines {nums[0]}..{nums[-1]}"
+
+
+def _csv_path(path: str | Path) -> Path:
     path = Path(path)
-    if path.is_dir():
-        path = path / "results.csv"
+    return path / "results.csv" if path.is_dir() else path
+
+
+def read_results_checked(path: str | Path) -> tuple[list[dict], list[tuple[int, str]]]:
+    """(rows, bad) of a results.csv: the readable rows, and (line number, raw text) of every unreadable
+    record (a cut last line, a wrong number of fields, no run id, undecodable bytes, NUL bytes)."""
+    path = _csv_path(path)
     if not path.is_file():
         raise InputError(f"results file {str(path)!r} does not exist")
-    out = []
     try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            reader = csv.DictReader(fh)
-            missing = {"run_id", "kind", "status"} - set(reader.fieldnames or [])
-            if missing:
-                raise InputError(f"{str(path)!r} is not a dualfem bench results.csv (no column "
-                                 f"{', '.join(sorted(missing))})")
-            for r in reader:
-                out.append({k: (v if k in TEXT_COLUMNS else _parse(v)) for k, v in r.items()})
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise InputError(f"{str(path)!r} is not a readable results.csv: {exc}") from None
-    return out
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from None
+    try:
+        text, tail = data.decode("utf-8"), ""
+    except UnicodeDecodeError as exc:      # keep what decodes; the rest is damaged
+        text = data[:exc.start].decode("utf-8")
+        cut = text.rfind("\n") + 1
+        text, tail = text[:cut], data[cut:].decode("utf-8", errors="replace")
+    lines = text.splitlines(keepends=True)
+    if not lines:
+        raise InputError(f"{str(path)!r} is not a dualfem bench results.csv (empty)")
+    reader = csv.reader(io.StringIO(text.replace("\0", "")) if "\0" not in lines[0] else io.StringIO(""))
+    try:
+        header = next(reader)
+    except (StopIteration, csv.Error):
+        header = []
+    missing = {"run_id", "kind", "status"} - set(header)
+    if missing:
+        raise InputError(f"{str(path)!r} is not a dualfem bench results.csv (no column {', '.join(sorted(missing))})")
+    rows: list[dict] = []
+    bad: list[tuple[int, str]] = []
+    done = reader.line_num
+    while True:
+        try:
+            rec = next(reader)
+        except StopIteration:
+            break
+        except csv.Error:
+            bad.append((done + 1, "".join(lines[done:])))
+            done = len(lines)
+            break
+        raw = "".join(lines[done:reader.line_num])
+        first, done = done + 1, reader.line_num
+        if not rec:
+            continue
+        complete = raw.endswith("\n") and "\0" not in raw     # write_csv ends every record with a newline
+        if not complete or len(rec) != len(header):
+            bad.append((first, raw))
+            continue
+        try:
+            r = {k: (v if k in TEXT_COLUMNS else _parse(v)) for k, v in zip(header, rec)}
+        except (TypeError, ValueError):
+            bad.append((first, raw))
+            continue
+        if not r.get("kind") or not _SAFE_ID.fullmatch(str(r.get("run_id") or "")) or ".." in r["run_id"]:
+            bad.append((first, raw))      # no run id, or one that cannot name a file in rows/
+            continue
+        rows.append(r)
+    if done < len(lines):
+        bad.append((done + 1, "".join(lines[done:])))
+    if tail:
+        bad.append((len(lines) + 1, tail))
+    return rows, bad
 
 
-def _parse(v: str) -> Any:
-    if v == "":
+def _parse(v: str | None) -> Any:
+    if v is None or v == "":
         return None
     if v in ("True", "False"):
         return v == "True"
