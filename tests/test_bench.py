@@ -210,7 +210,10 @@ def test_failed_reference_is_never_cached(tmp_path):
     out = tmp_path / "out"
     for reps in (2, 1):    # the 2nd sweep has new runs on the same scene
         spec = load_spec(write(tmp_path, text.replace("repeats = 2", f"repeats = {reps}")))
-        s = bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+        if reps == 1:      # the same name, other contents: refused without --force
+            with pytest.raises(InputError, match="other contents"):
+                bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+        s = bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"), force=reps == 1)
         assert s.refs == 1                                  # the failed reference is tried again every time
         assert not list((out / "refs").glob("*.npz"))
         rows = store.read_results(out)
@@ -218,7 +221,7 @@ def test_failed_reference_is_never_cached(tmp_path):
         assert len(ref) == 1 and ref[0]["status"] == "error" and "no certified reference" in ref[0]["message"]
         assert "max_iter" in ref[0]["message"]
         runs = [r for r in rows if r["kind"] == "run" and r["status"] == "solved"]
-        assert len(runs) == 3        # results.csv holds the rows of the current spec only
+        assert len(runs) == 3 * (3 - reps)     # results.csv keeps the rows of the first version too
         assert all(r["err_x_energy"] is None and "no certified reference" in r["message"] for r in runs)
 
 
@@ -653,3 +656,36 @@ def test_set_aside_and_backup_names_never_collide(tmp_path):
     texts = sorted(n.read_text() for n in names)
     assert texts == sorted([f"version {i}\n" for i in range(3)] + [f"moved {i}\n" for i in range(3)]
                            + [f"lines {i}\n" for i in range(3)])
+
+
+def test_a_spec_of_the_same_name_with_other_contents_is_refused(small_sweep, tmp_path, capsys):
+    """Same-name bench spec (issue 26, item 5): a spec whose name matches the folder's but whose contents
+    differ (another spec, or an edited one) is refused before anything is written; --force adds its rows
+    and keeps every earlier row and the earlier spec.toml (a new backup name each time). The same spec
+    with other comments or spacing is the same spec."""
+    from dualfem.cli.main import main
+
+    spec, out, _ = small_sweep
+    clone = _clone(out, tmp_path / "clone")
+    first = {r["run_id"] for r in store.read_results(clone)}
+    before = {p.name: p.read_bytes() for p in clone.iterdir()}
+    other = write(tmp_path, PAR.replace('name = "t"', 'name = "t"  # same name').replace('"f3"', '"f2"'), "o.toml")
+    with pytest.raises(InputError, match="named 't' with other contents.*--force"):
+        bench.run_sweep(load_spec(other), clone, progress=False, stream=open(os.devnull, "w"))
+    capsys.readouterr()
+    assert main(["bench", str(other), "--out", str(clone), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "other contents" in err
+    assert {p.name: p.read_bytes() for p in clone.iterdir()} == before          # nothing written
+    # the same spec, reformatted, is accepted (nothing to do)
+    same = write(tmp_path, "# a comment\n" + SMALL.replace("repeats = 2", "repeats   =   2"), "same.toml")
+    s = bench.run_sweep(load_spec(same), clone, progress=False, stream=open(os.devnull, "w"))
+    assert s.ran == 0 and not list(clone.glob("spec.toml.*"))
+    # --force: every row kept, the old spec.toml kept under a new name (twice in one second: two names)
+    for i in range(2):
+        bench.run_sweep(load_spec(other if i == 0 else same), clone, progress=False, stream=open(os.devnull, "w"),
+                        force=True)
+    kept = sorted(clone.glob("spec.toml.replaced-*"))
+    assert len(kept) == 2 and {p.read_text() for p in kept} == {(clone / "spec.toml").read_text(),
+                                                                other.read_text()}
+    assert first <= {r["run_id"] for r in store.read_results(clone)}

@@ -23,13 +23,13 @@ from typing import Any
 import numpy as np
 
 from dualfem.core.errors import InputError
-from dualfem.core.io import atomic_write_text
+from dualfem.core.io import atomic_write_text, backup
 from dualfem.experiments.harness import DASK_CONNECT_TIMEOUT, check_dask, execute_all
 from dualfem.experiments.machine import loadavg, machine_info, utc_now
 from dualfem.experiments.progress import Progress
 from dualfem.experiments.row import Row
 from dualfem.experiments.spec import Spec, load_spec
-from dualfem.experiments.store import ResultStore
+from dualfem.experiments.store import ResultStore, same_spec
 from dualfem.experiments.tasks import _canon, expand_scenes, expand_tasks, floor_tasks, reference_task
 
 
@@ -312,19 +312,25 @@ def run_tasks(tasks: list[dict], store: ResultStore, *, jobs: int = 1, dask: str
     return written
 
 
-def open_store(out: str | Path, name: str, text: str, *, force: bool = False,
+def open_store(out: str | Path, name: str, text: str, *, force: bool = False, same_name: bool = False,
                warn: Callable[[str], None] | None = None) -> ResultStore:
     """The results folder ``out`` for the sweep ``name`` (spec ``text``), validated, claimed and locked.
 
-    A folder belongs to one spec (``force``: add this sweep's rows to a folder of another spec;
-    nothing in it is dropped); ``spec.toml`` is replaced by ``text``. Close it when done.
+    A folder belongs to one spec: one of another name, or of this name with other contents, is
+    refused (``force``: add this sweep's rows to it; ``same_name``: a folder of this name accepts
+    other contents, as stress grids do); nothing in it is dropped. ``spec.toml`` is replaced by
+    ``text``, the one it replaces (other contents) kept as ``spec.toml.replaced-<time>``. Close it when done.
     """
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out must be a directory, {str(out)!r} is a file")
     store = ResultStore(out, warn)
-    store.claim(name, text, force)
+    store.claim(name, text, force, same_name)
     store.open()
+    prev = store.out / "spec.toml"
+    if prev.is_file() and not same_spec(prev.read_text(encoding="utf-8", errors="replace"), text):
+        kept = backup(prev, "replaced")          # a new name every time: never replaces an earlier backup
+        store.warn(f"the folder's spec.toml (other contents) is kept as {str(kept)!r}")
     atomic_write_text(store.out / "spec.toml", text)
     return store
 
@@ -446,14 +452,8 @@ def _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, strea
         return not (retry_failed and store.rows[rid].get("status") not in ("solved", "inaccurate"))
 
     pending = [t for t in tasks if not is_done(t["run_id"])]
-    run_ids = {t["run_id"] for t in tasks}
-    floor_ids = {t["run_id"] for t in floor_tasks(spec, scenes)}
-    scene_keys = {sc.key for sc in scenes}
-    # results.csv: this spec's rows, and every row of another spec (a folder shared with --force);
-    # rows of this spec's runs that are no longer in it stay in rows/
-    store.keep = lambda r: (r.get("run_id") in run_ids or r.get("run_id") in floor_ids
-                            or (r.get("kind") == "reference" and r.get("scene_key") in scene_keys)
-                            or r.get("spec") not in (None, spec.name))
+    # results.csv lists every row of the folder: this spec's, and (a folder shared with --force) those
+    # of other specs or other versions of this one; nothing finished is ever dropped from it
     refs, aux, n_refs = _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream, progress,
                                                connect_timeout)
     statuses, ran = _runs(pending, refs, store, jobs, dask, stream, progress, spec.name, connect_timeout)

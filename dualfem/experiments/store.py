@@ -106,18 +106,30 @@ class ResultStore:
         except (OSError, OutputError):
             self.warn(f"{why}: {str(p)!r} ignored")
 
-    def claim(self, name: str, text: str, force: bool = False) -> None:
-        """Refuse a folder that holds the results of a spec of another name (unless ``force``)."""
+    def claim(self, name: str, text: str, force: bool = False, same_name: bool = False) -> None:
+        """Refuse a folder that holds the results of another spec (unless ``force``).
+
+        Another spec is one of another name, or of the same name with other contents (an edited
+        spec, or another spec that happens to share the name: its rows would be mixed with this
+        one's); ``same_name`` accepts the latter (a stress grid: any grid adds its rows to a grid
+        folder). Nothing is written here (:func:`dualfem.experiments.bench.open_store` keeps the
+        replaced spec.toml as a backup).
+        """
         prev = self.out / "spec.toml"
         if force or not prev.is_file():
             return
         old = prev.read_text(encoding="utf-8", errors="replace")
-        if old.strip() == text.strip() or _spec_name(old) == name:
+        if same_spec(old, text):
             return
+        if _spec_name(old) == name:
+            if same_name:
+                return
+            raise InputError(f"--out {str(self.out)!r} holds the results of a spec named {name!r} with other "
+                             f"contents (its spec.toml differs from this one); choose another --out, or pass "
+                             f"--force to add this spec's rows to it (nothing is dropped, the old spec.toml is kept)")
         raise InputError(f"--out {str(self.out)!r} holds the results of another spec "
                          f"({_spec_name(old) or 'unnamed'!r}, not {name!r}); choose another --out, "
                          f"or pass --force to add this spec's rows to it")
-
 
     def done(self, run_id: str) -> bool:
         r = self.rows.get(run_id)
@@ -202,6 +214,20 @@ USER_RESULTS = Path("dualfem-results")
 def default_out(kind: str, name: str) -> Path:
     """``dualfem-results/<kind>/<name>`` in the working directory (name checked by :func:`safe_name`)."""
     return USER_RESULTS / kind / safe_name(name)
+
+
+def same_spec(a: str, b: str) -> bool:
+    """Whether two spec texts define the same sweep (parsed TOML or JSON equal; else the same text)."""
+    import tomllib
+
+    if a.strip() == b.strip():
+        return True
+    for parse in (tomllib.loads, json.loads):
+        try:
+            return parse(a) == parse(b)
+        except ValueError:
+            continue
+    return False
 
 
 def _spec_name(text: str) -> str | None:

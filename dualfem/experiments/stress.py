@@ -313,7 +313,7 @@ def run_grid(tasks: list[Task], out: str | Path, *, jobs: int = 1, resume: bool 
     connect_timeout = DASK_CONNECT_TIMEOUT if connect_timeout is None else connect_timeout
     if dask:
         check_dask(dask, connect_timeout)
-    store = open_store(out, GRID_NAME, grid_text(tasks, meta), force=force,
+    store = open_store(out, GRID_NAME, grid_text(tasks, meta), force=force, same_name=True,
                        warn=lambda msg: print(f"dualfem stress: warning: {msg}", file=sys.stderr, flush=True))
     try:
         legacy = (out / "runs.jsonl").is_file()
