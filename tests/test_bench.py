@@ -689,3 +689,111 @@ def test_a_spec_of_the_same_name_with_other_contents_is_refused(small_sweep, tmp
     assert len(kept) == 2 and {p.read_text() for p in kept} == {(clone / "spec.toml").read_text(),
                                                                 other.read_text()}
     assert first <= {r["run_id"] for r in store.read_results(clone)}
+
+
+# ------------------------------------------------------------------ cached references are checked
+REFCHECK = """
+name = "refcheck"
+repeats = 1
+warmup = false
+time_limit = 60
+[tiers]
+low = 1e-3
+high = 1e-8
+[floor]
+enabled = false
+[[scenes]]
+scene = "f1"
+N = 8
+delta = 1e-3
+[[solvers]]
+name = "osqp"
+[[solvers]]
+name = "pdas"
+"""
+
+
+def _forget_runs(out: Path) -> None:
+    """Drop the run rows (rows/ and results.csv) so that the next sweep runs them again."""
+    keep = [r for r in store.read_results(out) if r["kind"] != "run"]
+    for p in (out / "rows").glob("*.json"):
+        if json.loads(p.read_text())["kind"] == "run":
+            p.unlink()
+    store.write_csv(out / "results.csv", keep)
+
+
+@pytest.mark.parametrize("attack", ["content", "forged_hash", "forged_bound", "other_qp"])
+def test_a_tampered_cached_reference_never_changes_a_grade(tmp_path, attack):
+    """refs/*.npz is checked before anything is graded against it: its content hash (in the parent),
+    then its KKT error and certified error recomputed against the scene's QP (in a worker). A file
+    that fails is moved aside (a new name, with a warning) and the reference recomputed: the grades
+    and errors are those of the untampered sweep."""
+    import numpy as np
+
+    spec = load_spec(write(tmp_path, REFCHECK))
+    out = tmp_path / "out"
+    bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+    graded = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "run"}
+    assert len(graded) == 4 and all(r["err_x_energy"] is not None for r in graded.values())
+    (ref_file,) = (out / "refs").glob("*.npz")
+    st = store.ResultStore(out)
+    ref = st.load_ref(ref_file.stem)
+    ref["params"] = ref.get("params", "{}")
+    if attack == "content":                  # the numbers changed, the hash not
+        ref["x"] = ref["x"] * 1.01
+        digest = ref["sha256"]
+    elif attack == "forged_hash":            # the numbers changed and the hash recomputed to match
+        ref["x"] = ref["x"] * 1.01
+        digest = store.ref_hash(ref)
+    elif attack == "forged_bound":           # a huge certified bound: every run would grade correct
+        ref["bound"], ref["kkt"] = 1e3, 1e-20
+        ref["x"] = ref["x"] * 1.01
+        digest = store.ref_hash(ref)
+    else:                                    # a reference of another QP under this scene's name
+        ref["qp_key"] = "0123456789abcdef"
+        digest = store.ref_hash(ref)
+    with open(ref_file, "wb") as fh:
+        np.savez(fh, x=ref["x"], multipliers=ref["multipliers"], qp_key=np.array(ref["qp_key"]),
+                 solver=np.array(ref["solver"]), kkt=np.array(ref["kkt"]), bound=np.array(ref["bound"]),
+                 params=np.array(ref["params"]), sha256=np.array(digest))
+    tampered = ref_file.read_bytes()
+    _forget_runs(out)
+    warned = []
+    bench_store = bench.ResultStore
+
+    class Recording(bench_store):
+        def __init__(self, out, warn=None):
+            super().__init__(out, warn=warned.append)
+
+    try:
+        bench.ResultStore = Recording
+        s = bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+    finally:
+        bench.ResultStore = bench_store
+    assert s.refs == 1 and s.ran == 4                       # the reference was recomputed
+    assert warned and any("recomputed" in w for w in warned), warned
+    again = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "run"}
+    for rid, r in graded.items():
+        assert again[rid]["grade"] == r["grade"], (rid, r["grade"], again[rid]["grade"])
+        assert again[rid]["err_x_energy"] == pytest.approx(r["err_x_energy"], rel=1e-3, abs=1e-12)
+        assert again[rid]["ref_bound"] == pytest.approx(r["ref_bound"], rel=1e-3, abs=1e-15)
+    # the tampered file is kept aside, never overwritten; the new one passes its own check
+    aside = [p for p in (out / "refs").iterdir() if p.name.startswith(ref_file.name + ".")]
+    assert [p.read_bytes() for p in aside] == [tampered]
+    assert store.ResultStore(out).load_ref(ref_file.stem) is not None
+
+
+def test_a_good_cached_reference_is_checked_not_recomputed(tmp_path):
+    spec = load_spec(write(tmp_path, REFCHECK))
+    out = tmp_path / "out"
+    bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+    graded = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "run"}
+    refs_before = {p.name: p.read_bytes() for p in (out / "refs").iterdir()}
+    ref_rows = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "reference"}
+    _forget_runs(out)
+    s = bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+    assert s.refs == 0 and s.ran == 4 and s.aux == 0
+    assert {p.name: p.read_bytes() for p in (out / "refs").iterdir()} == refs_before
+    assert {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "reference"} == ref_rows
+    again = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "run"}
+    assert {k: r["grade"] for k, r in again.items()} == {k: r["grade"] for k, r in graded.items()}

@@ -109,13 +109,47 @@ def _execute_run(task: dict, qp, row: Row, tick) -> Row:
     return row
 
 
+def check_reference(qp, ref: dict, kkt_max: float) -> tuple[str | None, float, float]:
+    """(None if ``ref`` is a trusted reference of ``qp``, else why not; its KKT error; its certified
+    error), all recomputed from (x, multipliers) against the QP itself (the cached numbers are not
+    believed): the policy of :func:`dualfem.experiments.reference.trusted` with ``kkt_max``."""
+    from dualfem.core import evaluator
+    from dualfem.experiments import reference
+
+    if ref.get("qp_key") != qp.key():
+        return "it belongs to another QP (the scene's QP changed)", float("nan"), float("nan")
+    x, mu = np.asarray(ref["x"], dtype=float), np.asarray(ref["multipliers"], dtype=float)
+    if x.shape != (qp.n,) or mu.shape != (qp.m,):
+        return f"its shapes {x.shape}, {mu.shape} are not the QP's ({qp.n},), ({qp.m},)", float("nan"), float("nan")
+    try:
+        res = evaluator.residuals(qp, x, mu)
+        kkt = evaluator.kkt_error(res) if res.get("finite", True) else float("nan")
+        bound = reference.certificate(qp, x, mu) if math.isfinite(kkt) else float("nan")
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        return f"it cannot be checked ({type(exc).__name__}: {exc})", float("nan"), float("nan")
+    ok, why = reference.trusted("solved", True, kkt, bound, kkt_max=kkt_max)
+    return (None if ok else why), kkt, bound
+
+
 def _execute_reference(task: dict, qp, row: Row, tick) -> tuple[Row, Any]:
     from dualfem.experiments import reference
 
     spec = task["reference"]
+    cached = task.get("verify")
+    rejected = None
+    if cached is not None:          # a cached reference: checked against the QP, recomputed if it fails
+        tick("check reference", task["hard_limit"])
+        rejected, kkt, bound = check_reference(qp, cached, spec["certify"])
+        if rejected is None:
+            row.update(status="solved", kkt_error=kkt, ref_bound=bound)
+            return row, {"verified": True, "kkt": kkt, "bound": bound}
+        rejected = f"the cached reference failed its check against the QP: {rejected}"
     tick("reference", task["hard_limit"])
     ref, tried = reference.compute(qp, kkt_max=spec["certify"], time_limit=spec["time_limit"], tol=spec["tol"],
                                    params=spec["params"], only=tuple(spec["solvers"]))
+    if rejected:
+        row["ref_rejected"] = rejected
+        tried.insert(0, rejected + ", recomputed")
     if ref is None:
         row.update(status="error", solver="none", grade="failed", message="no certified reference: " + "; ".join(tried))
         return row, None
@@ -263,7 +297,8 @@ def run_tasks(tasks: list[dict], store: ResultStore, *, jobs: int = 1, dask: str
     rows)`` then returns None (run it) or a reason (a ``skipped`` row marked ``skip_budget``,
     e.g. a predicted time or memory over the budget); a gate may also adjust the task. Tasks whose
     dependency never finishes get a skipped row. ``order`` sorts each wave (e.g. biggest first).
-    Every row is written to ``store`` (after ``on_row(row, payload)``, e.g. to cache a reference).
+    Every row is written to ``store`` after ``on_row(row, payload)`` (e.g. to cache a reference),
+    unless ``on_row`` returns False (a check that adds no row).
     ``connect_timeout``: seconds to wait for the ``dask`` scheduler.
     """
     from dualfem.experiments.harness import error_row
@@ -274,8 +309,8 @@ def run_tasks(tasks: list[dict], store: ResultStore, *, jobs: int = 1, dask: str
 
     def finish(row: dict, payload: Any = None) -> None:
         nonlocal written
-        if on_row is not None:
-            on_row(row, payload)
+        if on_row is not None and on_row(row, payload) is False:
+            return          # a check whose row is already stored (e.g. a cached reference that holds)
         store.add(row)
         finished[row["run_id"]] = store.rows[row["run_id"]]
         written += 1
@@ -366,20 +401,35 @@ def _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, st
     tasks = []
     for sc in scenes:
         if sc.key in need:
-            refs[sc.key] = store.load_ref(sc.key)
-            if refs[sc.key] is None:
-                tasks.append(reference_task(spec, sc))
+            refs[sc.key] = store.load_ref(sc.key)       # None if absent, unreadable or failing its hash
+            cached = refs[sc.key]
+            # a cached reference is checked against the scene's QP before anything is graded against it
+            tasks.append(reference_task(spec, sc) if cached is None else
+                         {**reference_task(spec, sc), "verify": {k: cached[k] for k in ("x", "multipliers", "qp_key")}})
     tasks += [t for t in floor_tasks(spec, scenes) if not is_done(t["run_id"])]
     n_refs = 0
     bar = Progress(len(tasks), "references+floor", stream, None if progress else False) if tasks else None
 
-    def on_row(row: dict, payload: Any) -> None:
+    def on_row(row: dict, payload: Any) -> bool:
         nonlocal n_refs
+        key = row.get("scene_key")
+        if row["kind"] == "reference" and isinstance(payload, dict) and payload.get("verified"):
+            # the cached reference holds: graded against with the errors recomputed now; no row written
+            refs[key] = {**refs[key], "kkt": payload["kkt"], "bound": payload["bound"]}
+            bar.update(f"reference {row.get('label')}: cached, checked against the QP")
+            return False
+        if row["kind"] == "reference" and row.get("ref_rejected"):
+            store.warn(f"{row['ref_rejected']} ({str(store.ref_path(key))!r}); it was recomputed"
+                       + ("" if payload is not None else " and no certified reference was found"))
+            if store.ref_path(key).exists():
+                store._move_aside(store.ref_path(key), "rejected reference file")
+            refs[key] = None
         if row["kind"] == "reference" and payload is not None:
-            store.save_ref(row["scene_key"], payload)       # only certified references are cached
-            refs[row["scene_key"]] = store.load_ref(row["scene_key"])
+            store.save_ref(key, payload)       # only certified references are cached
+            refs[key] = store.load_ref(key)
         n_refs += row["kind"] == "reference"
         bar.update(_describe(row))
+        return True
 
     aux = run_tasks(tasks, store, jobs=jobs, dask=dask, on_row=on_row, connect_timeout=connect_timeout)
     return refs, aux, n_refs

@@ -159,28 +159,59 @@ class ResultStore:
         return self.refs_dir / f"{scene_key}.npz"
 
     def load_ref(self, scene_key: str) -> dict | None:
+        """The cached reference of a scene, or None (absent; unreadable or failing its content hash:
+        moved aside under a new name with a warning, and recomputed). The sweep checks it against
+        the scene's QP before grading (:func:`dualfem.experiments.bench.check_reference`)."""
         p = self.ref_path(scene_key)
         if not p.exists():
             return None
         try:
             with np.load(p, allow_pickle=False) as d:
-                return {"x": d["x"], "multipliers": d["multipliers"], "qp_key": str(d["qp_key"]),
-                        "solver": str(d["solver"]), "kkt": float(d["kkt"]),
-                        "bound": float(d["bound"]) if "bound" in d else None}
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+                ref = {"x": np.asarray(d["x"], dtype=float), "multipliers": np.asarray(d["multipliers"], dtype=float),
+                       "qp_key": str(d["qp_key"]), "solver": str(d["solver"]), "kkt": float(d["kkt"]),
+                       "bound": float(d["bound"]) if "bound" in d else None,
+                       "params": str(d["params"]) if "params" in d else "{}",
+                       "sha256": str(d["sha256"]) if "sha256" in d else None}
+        except (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile):
             self._move_aside(p, "unreadable reference file; the reference is recomputed")
             return None
+        if ref["sha256"] != ref_hash(ref):
+            why = "no content hash (written by an earlier version)" if ref["sha256"] is None else \
+                "its content does not match its hash (changed after it was written)"
+            self._move_aside(p, f"reference file {why}; the reference is recomputed")
+            return None
+        return ref
 
     def save_ref(self, scene_key: str, payload: dict) -> None:
+        """Cache a certified reference (atomically, with the hash of its content); a file it replaces
+        (one that failed its check) is moved aside first, never overwritten."""
+        p = self.ref_path(scene_key)
+        if p.exists():
+            self._move_aside(p, "replaced reference file")
+        digest = ref_hash(payload)
+
         def write(tmp):
             with open(tmp, "wb") as fh:
                 np.savez(fh, x=payload["x"], multipliers=payload["multipliers"], qp_key=np.array(payload["qp_key"]),
                          solver=np.array(payload["solver"]), kkt=np.array(payload["kkt"]),
-                         bound=np.array(payload.get("bound", np.nan)),
-                         params=np.array(payload["params"]))
-        atomic_write(self.ref_path(scene_key), write)
+                         bound=np.array(np.nan if payload.get("bound") is None else float(payload["bound"])),
+                         params=np.array(payload["params"]), sha256=np.array(digest))
+        atomic_write(p, write)
 
 
+def ref_hash(ref: dict) -> str:
+    """SHA-256 of a reference's content (solution, multipliers, QP key, solver, KKT error, bound, params)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for k in ("x", "multipliers"):
+        a = np.ascontiguousarray(np.asarray(ref[k], dtype=float))
+        h.update(repr(a.shape).encode() + a.tobytes())
+    bound = ref.get("bound")
+    bound = float("nan") if bound is None else float(bound)
+    for v in (ref["qp_key"], ref["solver"], repr(float(ref["kkt"])), repr(bound), str(ref.get("params", "{}"))):
+        h.update(str(v).encode() + b"\0")
+    return h.hexdigest()
 
 
 def lock_folder(out: Path):
