@@ -331,8 +331,9 @@ def _warn_stderr(msg: str) -> None:
 
 
 def _lines(bad: list[tuple[int, str]]) -> str:
-    nums = [n for n, _ in bad]
-    return f"line {nums[0]}" if len(nums) == 1 else f"lines {nums[0]}..{nums[-1]}"
+    nums = [str(n) for n, _ in bad]
+    more = f" and {len(nums) - 5} more" if len(nums) > 5 else ""
+    return ("line " if len(nums) == 1 else "lines ") + ", ".join(nums[:5]) + more
 
 
 def _csv_path(path: str | Path) -> Path:
@@ -350,12 +351,7 @@ def read_results_checked(path: str | Path) -> tuple[list[dict], list[tuple[int, 
         data = path.read_bytes()
     except OSError as exc:
         raise InputError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from None
-    try:
-        text, tail = data.decode("utf-8"), ""
-    except UnicodeDecodeError as exc:      # keep what decodes; the rest is damaged
-        text = data[:exc.start].decode("utf-8")
-        cut = text.rfind("\n") + 1
-        text, tail = text[:cut], data[cut:].decode("utf-8", errors="replace")
+    text = data.decode("utf-8", errors="surrogateescape")    # a line with undecodable bytes is a bad line
     lines = text.splitlines(keepends=True)
     if not lines:
         raise InputError(f"{str(path)!r} is not a dualfem bench results.csv (empty)")
@@ -364,7 +360,7 @@ def read_results_checked(path: str | Path) -> tuple[list[dict], list[tuple[int, 
         header = next(reader)
     except (StopIteration, csv.Error):
         header = []
-    missing = {"run_id", "kind", "status"} - set(header)
+    missing = {"run_id", "kind", "status"} - {h for h in header if _utf8(h)}
     if missing:
         raise InputError(f"{str(path)!r} is not a dualfem bench results.csv (no column {', '.join(sorted(missing))})")
     rows: list[dict] = []
@@ -384,7 +380,7 @@ def read_results_checked(path: str | Path) -> tuple[list[dict], list[tuple[int, 
         if not rec:
             continue
         complete = raw.endswith("\n") and "\0" not in raw     # write_csv ends every record with a newline
-        if not complete or len(rec) != len(header):
+        if not complete or not _utf8(raw) or len(rec) != len(header):
             bad.append((first, raw))
             continue
         try:
@@ -398,9 +394,15 @@ def read_results_checked(path: str | Path) -> tuple[list[dict], list[tuple[int, 
         rows.append(r)
     if done < len(lines):
         bad.append((done + 1, "".join(lines[done:])))
-    if tail:
-        bad.append((len(lines) + 1, tail))
     return rows, bad
+
+
+def _utf8(text: str) -> bool:
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def _parse(v: str | None) -> Any:
