@@ -153,19 +153,28 @@ def write_aside(path: str | Path, tag: str, text: str) -> Path:
 
 
 def backup(path: str | Path, tag: str = "bak") -> Path | None:
-    """A copy of ``path`` (if it exists) under a new, unique name beside it (``NAME.TAG-<time>[-k]``);
-    never replaces an existing backup. Returns the backup's path."""
+    """A copy of ``path`` (if it exists) under a new, unique name beside it (``NAME.TAG-<time>[-k]``),
+    complete or absent (copied to a temporary file, then linked to a name that must be free); never
+    replaces an existing backup. Returns the backup's path."""
     import shutil
 
     path = Path(path)
     if not path.is_file():
         return None
-    for dest in _aside_names(path, tag):
-        try:
-            fd = os.open(dest, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
-        except FileExistsError:
-            continue
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
         with os.fdopen(fd, "wb") as out, open(path, "rb") as src:
             shutil.copyfileobj(src, out)
-        return dest
-    raise OutputError(f"cannot back up {str(path)!r}: no free name")  # pragma: no cover
+        os.chmod(tmp, 0o644)
+        for dest in _aside_names(path, tag):
+            try:
+                os.link(tmp, dest)
+            except FileExistsError:
+                continue
+            return dest
+        raise OutputError(f"cannot back up {str(path)!r}: no free name")  # pragma: no cover
+    except OSError as exc:
+        raise OutputError(f"cannot back up {str(path)!r}: {exc.strerror or exc}") from exc
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)

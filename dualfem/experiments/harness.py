@@ -112,7 +112,7 @@ def watch_parent(parent: int, interval: float = 0.1) -> None:
     Started once per process (later calls with the same parent are no-ops).
     """
     global _WATCHING
-    if _WATCHING == parent:
+    if _WATCHING == parent or os.getppid() != parent:     # watching already, or not a child of ``parent``
         return
     _WATCHING = parent
 
