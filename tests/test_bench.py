@@ -617,8 +617,12 @@ def test_a_damaged_results_csv_loses_no_readable_row(small_sweep, tmp_path, caps
     kept_aside = next(clone / n for n in asides if not n.endswith("20200101T000000Z"))
     assert kept_aside.read_bytes() == before_csv
     assert {r["run_id"] for r in store.read_results(clone)} == {r["run_id"] for r in rows}
+    cut_log = '{"invocations": [{"command": "dualfem bench'
+    (clone / "sweep.json").write_text(cut_log)                          # the invocation log cut too
     s = bench.run_sweep(spec, clone, progress=False, stream=open(os.devnull, "w"))
     assert s.ran + s.aux <= 4                                # only the runs of the damaged lines
+    assert [p.read_text() for p in clone.glob("sweep.json.corrupt-*")] == [cut_log]
+    assert len(json.loads((clone / "sweep.json").read_text())["invocations"]) == 1
     after = {r["run_id"]: r for r in store.read_results(clone)}
     assert {r["run_id"] for r in good} <= set(after)
     for r in rows:          # every readable row kept as it was (a reference of refs/, not cloned, is recomputed)

@@ -328,7 +328,10 @@ def test_resume_with_a_narrower_grid_keeps_every_row(tmp_path, capsys):
     files = {p.name: p.read_bytes() for p in (out / "rows").glob("*.json")}
     assert len(first) == len(files) == 10
     capsys.readouterr()
+    (out / "meta.json").write_text('{"quick": true, "solv')                # cut by a kill: kept aside
     assert main(["stress", "--quick", "--axes", "nu", "--solvers", "pdas", "--out", str(out), "--resume"]) == 0
+    assert [p.read_text() for p in out.glob("meta.json.corrupt-*")] == ['{"quick": true, "solv']
+    assert json.loads((out / "meta.json").read_text())["solvers"] == ["pdas"]
     err = capsys.readouterr().err
     assert "[1/" not in err                                       # nothing ran again
     after = {r["run_id"]: r for r in store.read_results(out)}

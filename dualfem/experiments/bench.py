@@ -372,11 +372,14 @@ def open_store(out: str | Path, name: str, text: str, *, force: bool = False, sa
 
 def log_invocation(store: ResultStore, meta: dict) -> dict:
     """Write the sweep's invocation log (sweep.json: ``meta`` plus every earlier invocation)."""
+    path = store.out / "sweep.json"
     try:   # a resumed sweep keeps the list of every invocation that wrote into this directory
-        prev = json.loads((store.out / "sweep.json").read_text(encoding="utf-8"))
+        prev = json.loads(path.read_text(encoding="utf-8"))
         meta["invocations"] = list(prev.get("invocations", []))
-    except (OSError, ValueError):
+    except (OSError, ValueError, AttributeError, TypeError):
         meta["invocations"] = []
+        if path.is_file():          # unreadable: kept aside (a new name), never overwritten
+            store._move_aside(path, "unreadable sweep.json; a new invocation log is started")
     meta["invocations"].append({"command": meta.get("command"), "started_utc": meta.get("started_utc")})
     atomic_write_text(store.out / "sweep.json", json.dumps(meta, indent=1, sort_keys=True))
     return meta
