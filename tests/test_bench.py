@@ -801,3 +801,24 @@ def test_a_good_cached_reference_is_checked_not_recomputed(tmp_path):
     assert {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "reference"} == ref_rows
     again = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "run"}
     assert {k: r["grade"] for k, r in again.items()} == {k: r["grade"] for k, r in graded.items()}
+
+
+def test_a_cut_row_file_is_recovered_from_results_csv(small_sweep, tmp_path):
+    """A row file cut by a kill whose row results.csv still holds: the row is kept (not redone),
+    the cut file kept aside; two cut in a row get two names."""
+    import shutil
+
+    spec, out, _ = small_sweep
+    clone = _clone(out, tmp_path / "clone")
+    shutil.copytree(out / "rows", clone / "rows")
+    done = next(r for r in store.read_results(out) if r["kind"] == "run" and r["status"] == "solved")
+    row_file = clone / "rows" / f"{done['run_id']}.json"
+    for i in range(2):
+        row_file.write_text(row_file.read_text()[:25] if i == 0 else "{")
+        warned = []
+        st = store.ResultStore(clone, warn=warned.append).open()
+        st.close()
+        assert st.done(done["run_id"]) and st.rows[done["run_id"]]["status"] == "solved"
+        assert len(warned) == 1 and "unreadable row file" in warned[0]
+    assert len(list((clone / "rows").glob(f"{done['run_id']}.json.corrupt-*"))) == 2
+    assert json.loads(row_file.read_text())["run_id"] == done["run_id"]

@@ -58,6 +58,12 @@ class ResultStore:
             if p.is_file():
                 p.unlink()
         self.rows: dict[str, dict] = {}
+        for p in sorted(self.rows_dir.glob("[!.]*.json")):
+            try:
+                r = json.loads(p.read_text(encoding="utf-8"))
+                self.rows[r["run_id"]] = r
+            except (OSError, ValueError, KeyError, TypeError):
+                self._move_aside(p, "unreadable row file; its run is redone unless results.csv holds it")
         csv_path = self.out / "results.csv"
         bad: list = []
         if csv_path.is_file():
@@ -68,24 +74,17 @@ class ResultStore:
                 self._move_aside(csv_path, f"unreadable results.csv ({exc})")
             for r in kept:
                 rid = r["run_id"]
-                if not (self.rows_dir / f"{rid}.json").exists():
+                if rid not in self.rows:
                     # a row kept only in the (committed) CSV: give it its own file again
                     self.rows[rid] = Row.from_dict(r).to_dict()
                     atomic_write_text(self.rows_dir / f"{rid}.json", json.dumps(self.rows[rid], sort_keys=True))
             if bad:
-                # the readable rows are in rows/ now; keep the damaged lines (and the file as it was)
+                # the readable rows are in rows/ now; keep the file as it was (with its damaged lines)
                 dest = move_aside(csv_path, "corrupt")
                 self.warn(f"{len(bad)} unreadable line(s) of results.csv ({_lines(bad)}: a cut or damaged write?): "
                           f"the file as it was is kept as {str(dest)!r}; its {len(kept)} readable row(s) are kept, "
                           f"the runs of the unreadable lines are redone")
-        for p in sorted(self.rows_dir.glob("[!.]*.json")):
-            try:
-                r = json.loads(p.read_text(encoding="utf-8"))
-                self.rows[r["run_id"]] = r
-            except (OSError, ValueError, KeyError, TypeError):
-                self._move_aside(p, "unreadable row file; its run is redone")
-        if bad:        # results.csv again at once: every readable row (the damaged file is kept aside)
-            write_csv(csv_path, list(self.rows.values()))
+                write_csv(csv_path, list(self.rows.values()))     # at once: every readable row
         self._last_csv = 0.0
         self.keep: Callable[[dict], bool] | None = None
         return self
