@@ -119,8 +119,9 @@ def test_corrupt_row_and_reference_files_are_moved_aside(tmp_path):
         assert store.load_ref("k") is None
     finally:
         store.close()
-    assert (out / "rows" / "r1.json.corrupt").read_text() == "{not json"
-    assert (out / "refs" / "k.npz.corrupt").exists() and not (out / "refs" / "k.npz").exists()
+    # kept under a new name (r1.json.corrupt-<time>[-k]: never replacing an earlier copy)
+    assert [p.read_text() for p in (out / "rows").glob("r1.json.corrupt-*")] == ["{not json"]
+    assert len(list((out / "refs").glob("k.npz.corrupt-*"))) == 1 and not (out / "refs" / "k.npz").exists()
     assert len(warnings) == 2 and all("moved" in w for w in warnings)
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from dualfem.core.errors import InputError
-from dualfem.experiments import bench, harness, store
+from dualfem.experiments import bench, harness, store, stress
 from dualfem.experiments.progress import Progress
 from dualfem.experiments.spec import load_spec
 from dualfem.experiments.tasks import expand_scenes, expand_tasks
@@ -210,7 +210,10 @@ def test_failed_reference_is_never_cached(tmp_path):
     out = tmp_path / "out"
     for reps in (2, 1):    # the 2nd sweep has new runs on the same scene
         spec = load_spec(write(tmp_path, text.replace("repeats = 2", f"repeats = {reps}")))
-        s = bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+        if reps == 1:      # the same name, other contents: refused without --force
+            with pytest.raises(InputError, match="other contents"):
+                bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+        s = bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"), force=reps == 1)
         assert s.refs == 1                                  # the failed reference is tried again every time
         assert not list((out / "refs").glob("*.npz"))
         rows = store.read_results(out)
@@ -218,7 +221,7 @@ def test_failed_reference_is_never_cached(tmp_path):
         assert len(ref) == 1 and ref[0]["status"] == "error" and "no certified reference" in ref[0]["message"]
         assert "max_iter" in ref[0]["message"]
         runs = [r for r in rows if r["kind"] == "run" and r["status"] == "solved"]
-        assert len(runs) == 3        # results.csv holds the rows of the current spec only
+        assert len(runs) == 3 * (3 - reps)     # results.csv keeps the rows of the first version too
         assert all(r["err_x_energy"] is None and "no certified reference" in r["message"] for r in runs)
 
 
@@ -365,29 +368,31 @@ def test_dask_executor_on_local_cluster(serial_par, tmp_path):
     assert s.skipped_done == 0 and s.ran == 12 and _statuses(tmp_path / "out") == expected
 
 
-def test_dask_bad_address_is_input_error(tmp_path, monkeypatch):
-    """A scheduler address nobody listens on is an InputError naming --dask.
+def test_dask_bad_address_is_input_error(tmp_path, capsys):
+    """A scheduler address nobody listens on is refused: an InputError naming --dask, within the
+    ``connect_timeout`` given (harness default 20 s), before anything is written; on the command
+    line (``--dask-timeout``) one error line and exit 2. A malformed address too."""
+    pytest.importorskip("distributed")
+    from dualfem.cli.main import main
 
-    The harness waits ``timeout="20s"`` for the scheduler (``dualfem.experiments.harness._execute_dask``)
-    and offers no parameter or environment variable to shorten it, so this test wraps dask's own
-    ``Client`` to connect with a 1 s timeout (same code path, same refusal, 20 s less waiting). The
-    wrapper records its calls: if the harness stops going through ``distributed.Client``, the test fails
-    instead of silently waiting 20 s again."""
-    distributed = pytest.importorskip("distributed")
-    real, calls = distributed.Client, []
-
-    def short_client(address, *args, **kwargs):
-        calls.append((address, kwargs.get("timeout")))
-        return real(address, *args, **{**kwargs, "timeout": "1s"})
-
-    monkeypatch.setattr(distributed, "Client", short_client)
     spec = load_spec(write(tmp_path, PAR))                   # no sweep needed: the connection fails first
     t0 = time.monotonic()
-    with pytest.raises(InputError, match="dask"):
+    with pytest.raises(InputError, match="--dask.*within 1 s"):
         bench.run_sweep(spec, tmp_path / "out", dask="tcp://127.0.0.1:9", progress=False,
-                        stream=open(os.devnull, "w"))
-    assert calls and calls[0][0] == "tcp://127.0.0.1:9", calls
-    assert time.monotonic() - t0 < 15, "the 1 s connect timeout did not reach dask"
+                        stream=open(os.devnull, "w"), connect_timeout=1.0)
+    assert time.monotonic() - t0 < 10, "the 1 s connect timeout did not reach dask"
+    assert not (tmp_path / "out").exists()                   # refused before anything is written
+    with pytest.raises(InputError, match="--dask"):
+        stress.run_grid([], tmp_path / "grid", dask="tcp://127.0.0.1:9", connect_timeout=1.0)
+    assert not (tmp_path / "grid").exists()
+    capsys.readouterr()
+    for addr in ("tcp://127.0.0.1:9", "tcp://127.0.0.1:notaport"):
+        t0 = time.monotonic()
+        rc = main(["bench", str(tmp_path / "spec.toml"), "--dask", addr, "--dask-timeout", "1",
+                   "--out", str(tmp_path / "cli")])
+        err = capsys.readouterr().err
+        assert rc == 2 and err.count("\n") == 1 and err.startswith("dualfem bench: error: --dask"), err
+        assert time.monotonic() - t0 < 10 and not (tmp_path / "cli").exists()
 
 
 # ------------------------------------------------------------------ progress
@@ -561,3 +566,259 @@ def test_method_text_follows_the_specs_warmup(tmp_path):
     assert "after one untimed warm-up run." in text('[[scenes]]\nscene = "f1"\n')
     assert "in some scene blocks, none in others" in text(
         '[[scenes]]\nscene = "f1"\n[[scenes]]\nscene = "f2"\nwarmup = false\n')
+
+
+def _clone(out: Path, dest: Path) -> Path:
+    """results.csv and spec.toml of a sweep (a fresh clone: no rows/, no refs/)."""
+    import shutil
+
+    dest.mkdir()
+    shutil.copy(out / "results.csv", dest / "results.csv")
+    shutil.copy(out / "spec.toml", dest / "spec.toml")
+    return dest
+
+
+def test_a_damaged_results_csv_loses_no_readable_row(small_sweep, tmp_path, capsys):
+    """A results.csv cut by a kill (or with a damaged line, undecodable bytes) is read without a
+    traceback by read_results, dualfem.results.load and dualfem report bench (a warning naming the
+    lines, nothing changed on disk); a sweep resumed on it keeps every readable row, keeps the damaged
+    file aside under a new name (an earlier one untouched) and redoes only the runs of the bad lines."""
+    from dualfem.cli.main import main
+
+    spec, out, _ = small_sweep
+    good = store.read_results(out)
+    clone = _clone(out, tmp_path / "clone")
+    text = (clone / "results.csv").read_bytes()
+    lines = text.splitlines(keepends=True)
+    k = next(i for i, r in enumerate(good) if r["kind"] == "run") + 1      # a run's line; the last is a run too
+    damaged_id = good[k - 1]["run_id"]
+    damaged = lines[:k] + [lines[k][:40] + b"\n"] + lines[k + 1:-1] + [lines[-1][: len(lines[-1]) // 2]]
+    (clone / "results.csv").write_bytes(b"".join(damaged))
+    (clone / "results.csv.corrupt-20200101T000000Z").write_text("an earlier copy kept aside\n")
+    before_csv = (clone / "results.csv").read_bytes()
+    rows = store.read_results(clone)
+    err = capsys.readouterr().err
+    assert len(rows) == len(good) - 2 and "2 unreadable line(s)" in err and f"lines {k + 1}, " in err
+    assert damaged_id not in {r["run_id"] for r in rows}
+    pytest.importorskip("pandas")
+    from dualfem import results
+
+    assert len(results.load(clone)) == len(good) - 2
+    assert main(["report", "bench", str(clone), "--md", str(tmp_path / "rep" / "b.md")]) == 0
+    assert "unreadable line" in capsys.readouterr().err
+    assert (clone / "results.csv").read_bytes() == before_csv            # reading changes nothing
+    # the sweep resumed on it: readable rows kept, damaged file kept aside, the two bad runs redone
+    warned = []
+    st = store.ResultStore(clone, warn=warned.append).open()
+    st.close()
+    assert len(warned) == 1 and "kept as" in warned[0]
+    asides = sorted(p.name for p in clone.glob("results.csv.corrupt-*"))
+    assert len(asides) == 2 and (clone / "results.csv.corrupt-20200101T000000Z").read_text().startswith("an earlier")
+    kept_aside = next(clone / n for n in asides if not n.endswith("20200101T000000Z"))
+    assert kept_aside.read_bytes() == before_csv
+    assert {r["run_id"] for r in store.read_results(clone)} == {r["run_id"] for r in rows}
+    cut_log = '{"invocations": [{"command": "dualfem bench'
+    (clone / "sweep.json").write_text(cut_log)                          # the invocation log cut too
+    s = bench.run_sweep(spec, clone, progress=False, stream=open(os.devnull, "w"))
+    assert s.ran + s.aux <= 4                                # only the runs of the damaged lines
+    assert [p.read_text() for p in clone.glob("sweep.json.corrupt-*")] == [cut_log]
+    assert len(json.loads((clone / "sweep.json").read_text())["invocations"]) == 1
+    after = {r["run_id"]: r for r in store.read_results(clone)}
+    assert {r["run_id"] for r in good} <= set(after)
+    for r in rows:          # every readable row kept as it was (a reference of refs/, not cloned, is recomputed)
+        if r["kind"] == "reference":
+            continue
+        assert (after[r["run_id"]]["status"], after[r["run_id"]]["total_s"]) == (r["status"], r["total_s"]), r
+
+
+@pytest.mark.parametrize("garbage", [b"", b"run_id\n", b"\xff\xfe\x00\x00garbage", b"name,age\nada,36\n"])
+def test_results_csv_without_a_header_is_moved_aside_not_a_traceback(tmp_path, garbage):
+    (tmp_path / "results.csv").write_bytes(garbage)
+    with pytest.raises(InputError, match="results.csv"):
+        store.read_results(tmp_path)
+    warned = []
+    st = store.ResultStore(tmp_path / ".", warn=warned.append).open()
+    st.close()
+    assert not (tmp_path / "results.csv").exists() and len(warned) == 1
+    assert [p.read_bytes() for p in tmp_path.glob("results.csv.corrupt-*")] == [garbage]
+
+
+def test_set_aside_and_backup_names_never_collide(tmp_path):
+    """Two copies kept aside in one second get two names; an existing one is never replaced."""
+    from dualfem.core.io import backup, move_aside, write_aside
+
+    p = tmp_path / "results.csv"
+    names = []
+    for i in range(3):
+        p.write_text(f"version {i}\n")
+        names.append(backup(p, "bak"))
+    for i in range(3):
+        p.write_text(f"moved {i}\n")
+        names.append(move_aside(p, "corrupt"))
+        names.append(write_aside(p, "corrupt", f"lines {i}\n"))
+    assert len(set(names)) == 9 and all(n.parent == tmp_path for n in names)
+    texts = sorted(n.read_text() for n in names)
+    assert texts == sorted([f"version {i}\n" for i in range(3)] + [f"moved {i}\n" for i in range(3)]
+                           + [f"lines {i}\n" for i in range(3)])
+
+
+def test_a_spec_of_the_same_name_with_other_contents_is_refused(small_sweep, tmp_path, capsys):
+    """Same-name bench spec (issue 26, item 5): a spec whose name matches the folder's but whose contents
+    differ (another spec, or an edited one) is refused before anything is written; --force adds its rows
+    and keeps every earlier row and the earlier spec.toml (a new backup name each time). The same spec
+    with other comments or spacing is the same spec."""
+    from dualfem.cli.main import main
+
+    spec, out, _ = small_sweep
+    clone = _clone(out, tmp_path / "clone")
+    first = {r["run_id"] for r in store.read_results(clone)}
+    before = {p.name: p.read_bytes() for p in clone.iterdir()}
+    other = write(tmp_path, PAR.replace('name = "t"', 'name = "t"  # same name').replace('"f3"', '"f2"'), "o.toml")
+    with pytest.raises(InputError, match="named 't' with other contents.*--force"):
+        bench.run_sweep(load_spec(other), clone, progress=False, stream=open(os.devnull, "w"))
+    capsys.readouterr()
+    assert main(["bench", str(other), "--out", str(clone), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "other contents" in err
+    assert {p.name: p.read_bytes() for p in clone.iterdir()} == before          # nothing written
+    # the same spec, reformatted, is accepted (nothing to do)
+    same = write(tmp_path, "# a comment\n" + SMALL.replace("repeats = 2", "repeats   =   2"), "same.toml")
+    s = bench.run_sweep(load_spec(same), clone, progress=False, stream=open(os.devnull, "w"))
+    assert s.ran == 0 and not list(clone.glob("spec.toml.*"))
+    # --force: every row kept, the old spec.toml kept under a new name (twice in one second: two names)
+    for i in range(2):
+        bench.run_sweep(load_spec(other if i == 0 else same), clone, progress=False, stream=open(os.devnull, "w"),
+                        force=True)
+    kept = sorted(clone.glob("spec.toml.replaced-*"))
+    assert len(kept) == 2 and {p.read_text() for p in kept} == {(clone / "spec.toml").read_text(),
+                                                                other.read_text()}
+    assert first <= {r["run_id"] for r in store.read_results(clone)}
+
+
+# ------------------------------------------------------------------ cached references are checked
+REFCHECK = """
+name = "refcheck"
+repeats = 1
+warmup = false
+time_limit = 60
+[tiers]
+low = 1e-3
+high = 1e-8
+[floor]
+enabled = false
+[[scenes]]
+scene = "f1"
+N = 8
+delta = 1e-3
+[[solvers]]
+name = "osqp"
+[[solvers]]
+name = "pdas"
+"""
+
+
+def _forget_runs(out: Path) -> None:
+    """Drop the run rows (rows/ and results.csv) so that the next sweep runs them again."""
+    keep = [r for r in store.read_results(out) if r["kind"] != "run"]
+    for p in (out / "rows").glob("*.json"):
+        if json.loads(p.read_text())["kind"] == "run":
+            p.unlink()
+    store.write_csv(out / "results.csv", keep)
+
+
+@pytest.mark.parametrize("attack", ["content", "forged_hash", "forged_bound", "other_qp"])
+def test_a_tampered_cached_reference_never_changes_a_grade(tmp_path, attack):
+    """refs/*.npz is checked before anything is graded against it: its content hash (in the parent),
+    then its KKT error and certified error recomputed against the scene's QP (in a worker). A file
+    that fails is moved aside (a new name, with a warning) and the reference recomputed: the grades
+    and errors are those of the untampered sweep."""
+    import numpy as np
+
+    spec = load_spec(write(tmp_path, REFCHECK))
+    out = tmp_path / "out"
+    bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+    graded = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "run"}
+    assert len(graded) == 4 and all(r["err_x_energy"] is not None for r in graded.values())
+    (ref_file,) = (out / "refs").glob("*.npz")
+    st = store.ResultStore(out)
+    ref = st.load_ref(ref_file.stem)
+    ref["params"] = ref.get("params", "{}")
+    if attack == "content":                  # the numbers changed, the hash not
+        ref["x"] = ref["x"] * 1.01
+        digest = ref["sha256"]
+    elif attack == "forged_hash":            # the numbers changed and the hash recomputed to match
+        ref["x"] = ref["x"] * 1.01
+        digest = store.ref_hash(ref)
+    elif attack == "forged_bound":           # a huge certified bound: every run would grade correct
+        ref["bound"], ref["kkt"] = 1e3, 1e-20
+        ref["x"] = ref["x"] * 1.01
+        digest = store.ref_hash(ref)
+    else:                                    # a reference of another QP under this scene's name
+        ref["qp_key"] = "0123456789abcdef"
+        digest = store.ref_hash(ref)
+    with open(ref_file, "wb") as fh:
+        np.savez(fh, x=ref["x"], multipliers=ref["multipliers"], qp_key=np.array(ref["qp_key"]),
+                 solver=np.array(ref["solver"]), kkt=np.array(ref["kkt"]), bound=np.array(ref["bound"]),
+                 params=np.array(ref["params"]), sha256=np.array(digest))
+    tampered = ref_file.read_bytes()
+    _forget_runs(out)
+    warned = []
+    bench_store = bench.ResultStore
+
+    class Recording(bench_store):
+        def __init__(self, out, warn=None):
+            super().__init__(out, warn=warned.append)
+
+    try:
+        bench.ResultStore = Recording
+        s = bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+    finally:
+        bench.ResultStore = bench_store
+    assert s.refs == 1 and s.ran == 4                       # the reference was recomputed
+    assert warned and any("recomputed" in w for w in warned), warned
+    again = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "run"}
+    for rid, r in graded.items():
+        assert again[rid]["grade"] == r["grade"], (rid, r["grade"], again[rid]["grade"])
+        assert again[rid]["err_x_energy"] == pytest.approx(r["err_x_energy"], rel=1e-3, abs=1e-12)
+        assert again[rid]["ref_bound"] == pytest.approx(r["ref_bound"], rel=1e-3, abs=1e-15)
+    # the tampered file is kept aside, never overwritten; the new one passes its own check
+    aside = [p for p in (out / "refs").iterdir() if p.name.startswith(ref_file.name + ".")]
+    assert [p.read_bytes() for p in aside] == [tampered]
+    assert store.ResultStore(out).load_ref(ref_file.stem) is not None
+
+
+def test_a_good_cached_reference_is_checked_not_recomputed(tmp_path):
+    spec = load_spec(write(tmp_path, REFCHECK))
+    out = tmp_path / "out"
+    bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+    graded = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "run"}
+    refs_before = {p.name: p.read_bytes() for p in (out / "refs").iterdir()}
+    ref_rows = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "reference"}
+    _forget_runs(out)
+    s = bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+    assert s.refs == 0 and s.ran == 4 and s.aux == 0
+    assert {p.name: p.read_bytes() for p in (out / "refs").iterdir()} == refs_before
+    assert {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "reference"} == ref_rows
+    again = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "run"}
+    assert {k: r["grade"] for k, r in again.items()} == {k: r["grade"] for k, r in graded.items()}
+
+
+def test_a_cut_row_file_is_recovered_from_results_csv(small_sweep, tmp_path):
+    """A row file cut by a kill whose row results.csv still holds: the row is kept (not redone),
+    the cut file kept aside; two cut in a row get two names."""
+    import shutil
+
+    spec, out, _ = small_sweep
+    clone = _clone(out, tmp_path / "clone")
+    shutil.copytree(out / "rows", clone / "rows")
+    done = next(r for r in store.read_results(out) if r["kind"] == "run" and r["status"] == "solved")
+    row_file = clone / "rows" / f"{done['run_id']}.json"
+    for i in range(2):
+        row_file.write_text(row_file.read_text()[:25] if i == 0 else "{")
+        warned = []
+        st = store.ResultStore(clone, warn=warned.append).open()
+        st.close()
+        assert st.done(done["run_id"]) and st.rows[done["run_id"]]["status"] == "solved"
+        assert len(warned) == 1 and "unreadable row file" in warned[0]
+    assert len(list((clone / "rows").glob(f"{done['run_id']}.json.corrupt-*"))) == 2
+    assert json.loads(row_file.read_text())["run_id"] == done["run_id"]

@@ -149,6 +149,8 @@ def test_resume_keeps_every_finished_row(tmp_path, capsys):
     now = {p.name: p.read_bytes() for p in (out / "rows").glob("*.json")}
     assert all(now[k] == v for k, v in files.items()) and len(now) == 3
     assert {r["run_id"] for r in store.read_results(out)} == {"nu:pdas:0.3", "nu:clarabel:0.3", "nu:pdas:0.45"}
+    # the grid's description (spec.toml) of the first grid is kept, not replaced
+    assert len(list(out.glob("spec.toml.replaced-*"))) == 1 and "other contents" in capsys.readouterr().err
     # the CLI: the same refusal, one line, exit 2
     assert main(["stress", "--out", str(out), "--axes", "nu", "--solvers", "pdas", "--quick"]) == 2
     err = capsys.readouterr().err
@@ -314,3 +316,28 @@ def test_parallel_workers_and_the_n_gate(tmp_path):
     for t in tasks:
         if t.after:
             assert seen.index(t.after) < seen.index(t.id)
+
+
+def test_resume_with_a_narrower_grid_keeps_every_row(tmp_path, capsys):
+    """The audit's case (issue 26, item 5): a grid, then ``--resume`` on the same folder with fewer
+    axes or solvers ran nothing and dropped the other rows (18 -> 6). Every row is kept, in rows/ and
+    results.csv, byte for byte; the first grid's spec.toml is kept beside the new one."""
+    out = tmp_path / "grid"
+    assert main(["stress", "--quick", "--axes", "nu", "--solvers", "pdas,clarabel", "--out", str(out)]) == 0
+    first = {r["run_id"]: r for r in store.read_results(out)}
+    files = {p.name: p.read_bytes() for p in (out / "rows").glob("*.json")}
+    assert len(first) == len(files) == 10
+    capsys.readouterr()
+    (out / "meta.json").write_text('{"quick": true, "solv')                # cut by a kill: kept aside
+    assert main(["stress", "--quick", "--axes", "nu", "--solvers", "pdas", "--out", str(out), "--resume"]) == 0
+    assert [p.read_text() for p in out.glob("meta.json.corrupt-*")] == ['{"quick": true, "solv']
+    assert json.loads((out / "meta.json").read_text())["solvers"] == ["pdas"]
+    err = capsys.readouterr().err
+    assert "[1/" not in err                                       # nothing ran again
+    after = {r["run_id"]: r for r in store.read_results(out)}
+    assert set(after) == set(first)
+    assert {p.name: p.read_bytes() for p in (out / "rows").glob("*.json")} == files
+    from dualfem.experiments.stress import load_results
+
+    assert len(load_results(out)[1]) == 10
+    assert len(list(out.glob("spec.toml.replaced-*"))) == 1

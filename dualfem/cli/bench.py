@@ -23,6 +23,8 @@ def _cfg(p):
                    help="parallel worker processes (joblib/loky); default 1 (timings are cleanest serially)")
     p.add_argument("--dask", metavar="ADDRESS", default=None,
                    help="send the tasks to this dask.distributed scheduler (e.g. tcp://10.0.0.1:8786)")
+    p.add_argument("--dask-timeout", metavar="SECONDS", default="20",
+                   help="seconds to wait for the --dask scheduler before refusing its address (default 20)")
     p.add_argument("--out", metavar="DIR", default=None,
                    help="results directory (default dualfem-results/bench/<spec name>); rerun to resume")
     p.add_argument("--resume", action="store_true",
@@ -48,6 +50,9 @@ def cmd_bench(args) -> int:
                          f"got {args.jobs}")
     if args.dask is not None and args.jobs != 1:
         raise InputError("--jobs and --dask exclude each other: the dask scheduler decides the parallelism")
+    from dualfem.core.errors import check_positive
+
+    dask_timeout = check_positive("--dask-timeout", args.dask_timeout)
     spec = load_spec(args.spec)
     out = Path(args.out) if args.out else default_out("bench", spec.name)
     if sys.argv[1:2] == ["bench"]:
@@ -56,7 +61,8 @@ def cmd_bench(args) -> int:
         command = f"dualfem bench {shlex.quote(args.spec)} --jobs {args.jobs}" + \
             (f" --dask {shlex.quote(args.dask)}" if args.dask else "") + (f" --out {shlex.quote(str(out))}")
     summary = run_sweep(spec, out, jobs=args.jobs, dask=args.dask, command=command,
-                        progress=not args.no_progress_bar, retry_failed=args.retry_failed, force=args.force)
+                        progress=not args.no_progress_bar, retry_failed=args.retry_failed, force=args.force,
+                        connect_timeout=dask_timeout)
     st = ", ".join(f"{k} {v}" for k, v in sorted(summary.statuses.items())) or "nothing to do"
     print(f"{summary.out}/results.csv: {summary.total} runs in the spec, {summary.skipped_done} already done, "
           f"{summary.ran} executed now ({st}); {summary.aux} reference/floor tasks", file=sys.stderr)

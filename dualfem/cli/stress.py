@@ -86,7 +86,7 @@ def cmd_stress(args) -> int:
         return 0
     refs = reference.candidates()
     meta = _meta(args, reg, names, axes, tasks, [r[0] for r in refs])
-    if args.resume:
+    if args.resume or args.force:      # the folder's meta.json is widened, never replaced
         meta = _merge_meta(out / "meta.json", meta)
     tty = sys.stderr.isatty()
     t0 = time.monotonic()
@@ -171,7 +171,15 @@ def _merge_meta(path: Path, new: dict) -> dict:
 
     try:
         prev = json.loads(path.read_text(encoding="utf-8"))
+        if not isinstance(prev, dict):
+            raise ValueError("not a JSON object")
     except (OSError, ValueError):
+        if path.is_file():          # unreadable: kept aside (a new name), never overwritten
+            from dualfem.core.io import move_aside
+
+            dest = move_aside(path, "corrupt")
+            print(f"dualfem stress: warning: unreadable {str(path)!r} moved to {str(dest)!r}; a new one is "
+                  f"written", file=sys.stderr)
         return new
     out = dict(prev)
     out["solvers"] = list(dict.fromkeys(list(prev.get("solvers", [])) + list(new["solvers"])))

@@ -105,3 +105,76 @@ def atomic_savefig(fig, path: str | Path, **savefig_kwargs) -> Path:
     """Save a matplotlib figure atomically (PNG unless ``format`` is given)."""
     savefig_kwargs.setdefault("format", "png")
     return atomic_write(path, lambda tmp: fig.savefig(tmp, **savefig_kwargs))
+
+
+def _aside_names(path: Path, tag: str):
+    """``NAME.TAG-<UTC time to the second>``, then ``...-2``, ``...-3``, ...: candidates for a kept copy."""
+    import time
+
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
+    base = f"{path.name}.{tag}-{stamp}"
+    yield path.with_name(base)
+    for i in range(2, 100000):
+        yield path.with_name(f"{base}-{i}")
+
+
+def move_aside(path: str | Path, tag: str) -> Path:
+    """Rename ``path`` to a new, unique ``NAME.TAG-<time>[-k]`` beside it; never replaces an existing
+    file (two in one second get two names: the name is reserved by a hard link, which fails if taken)."""
+    path = Path(path)
+    for dest in _aside_names(path, tag):
+        try:
+            os.link(path, dest)
+        except FileExistsError:
+            continue
+        except OSError:                  # no hard links here: reserve the name, then replace it
+            try:
+                os.close(os.open(dest, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+            except FileExistsError:
+                continue
+            os.replace(path, dest)
+            return dest
+        os.unlink(path)
+        return dest
+    raise OutputError(f"cannot move {str(path)!r} aside: no free name")  # pragma: no cover
+
+
+def write_aside(path: str | Path, tag: str, text: str) -> Path:
+    """Write ``text`` to a new, unique ``NAME.TAG-<time>[-k]`` beside ``path`` (never replacing a file)."""
+    path = Path(path)
+    for dest in _aside_names(path, tag):
+        try:
+            with open(dest, "x", encoding="utf-8") as fh:
+                fh.write(text)
+        except FileExistsError:
+            continue
+        return dest
+    raise OutputError(f"cannot keep a copy of {str(path)!r}: no free name")  # pragma: no cover
+
+
+def backup(path: str | Path, tag: str = "bak") -> Path | None:
+    """A copy of ``path`` (if it exists) under a new, unique name beside it (``NAME.TAG-<time>[-k]``),
+    complete or absent (copied to a temporary file, then linked to a name that must be free); never
+    replaces an existing backup. Returns the backup's path."""
+    import shutil
+
+    path = Path(path)
+    if not path.is_file():
+        return None
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as out, open(path, "rb") as src:
+            shutil.copyfileobj(src, out)
+        os.chmod(tmp, 0o644)
+        for dest in _aside_names(path, tag):
+            try:
+                os.link(tmp, dest)
+            except FileExistsError:
+                continue
+            return dest
+        raise OutputError(f"cannot back up {str(path)!r}: no free name")  # pragma: no cover
+    except OSError as exc:
+        raise OutputError(f"cannot back up {str(path)!r}: {exc.strerror or exc}") from exc
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)

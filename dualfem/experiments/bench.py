@@ -23,13 +23,13 @@ from typing import Any
 import numpy as np
 
 from dualfem.core.errors import InputError
-from dualfem.core.io import atomic_write_text
-from dualfem.experiments.harness import execute_all
+from dualfem.core.io import atomic_write_text, backup
+from dualfem.experiments.harness import DASK_CONNECT_TIMEOUT, check_dask, execute_all
 from dualfem.experiments.machine import loadavg, machine_info, utc_now
 from dualfem.experiments.progress import Progress
 from dualfem.experiments.row import Row
 from dualfem.experiments.spec import Spec, load_spec
-from dualfem.experiments.store import ResultStore
+from dualfem.experiments.store import ResultStore, same_spec
 from dualfem.experiments.tasks import _canon, expand_scenes, expand_tasks, floor_tasks, reference_task
 
 
@@ -109,13 +109,47 @@ def _execute_run(task: dict, qp, row: Row, tick) -> Row:
     return row
 
 
+def check_reference(qp, ref: dict, kkt_max: float) -> tuple[str | None, float, float]:
+    """(None if ``ref`` is a trusted reference of ``qp``, else why not; its KKT error; its certified
+    error), all recomputed from (x, multipliers) against the QP itself (the cached numbers are not
+    believed): the policy of :func:`dualfem.experiments.reference.trusted` with ``kkt_max``."""
+    from dualfem.core import evaluator
+    from dualfem.experiments import reference
+
+    if ref.get("qp_key") != qp.key():
+        return "it belongs to another QP (the scene's QP changed)", float("nan"), float("nan")
+    x, mu = np.asarray(ref["x"], dtype=float), np.asarray(ref["multipliers"], dtype=float)
+    if x.shape != (qp.n,) or mu.shape != (qp.m,):
+        return f"its shapes {x.shape}, {mu.shape} are not the QP's ({qp.n},), ({qp.m},)", float("nan"), float("nan")
+    try:
+        res = evaluator.residuals(qp, x, mu)
+        kkt = evaluator.kkt_error(res) if res.get("finite", True) else float("nan")
+        bound = reference.certificate(qp, x, mu) if math.isfinite(kkt) else float("nan")
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        return f"it cannot be checked ({type(exc).__name__}: {exc})", float("nan"), float("nan")
+    ok, why = reference.trusted("solved", True, kkt, bound, kkt_max=kkt_max)
+    return (None if ok else why), kkt, bound
+
+
 def _execute_reference(task: dict, qp, row: Row, tick) -> tuple[Row, Any]:
     from dualfem.experiments import reference
 
     spec = task["reference"]
+    cached = task.get("verify")
+    rejected = None
+    if cached is not None:          # a cached reference: checked against the QP, recomputed if it fails
+        tick("check reference", task["hard_limit"])
+        rejected, kkt, bound = check_reference(qp, cached, spec["certify"])
+        if rejected is None:
+            row.update(status="solved", kkt_error=kkt, ref_bound=bound)
+            return row, {"verified": True, "kkt": kkt, "bound": bound}
+        rejected = f"the cached reference failed its check against the QP: {rejected}"
     tick("reference", task["hard_limit"])
     ref, tried = reference.compute(qp, kkt_max=spec["certify"], time_limit=spec["time_limit"], tol=spec["tol"],
                                    params=spec["params"], only=tuple(spec["solvers"]))
+    if rejected:
+        row["ref_rejected"] = rejected
+        tried.insert(0, rejected + ", recomputed")
     if ref is None:
         row.update(status="error", solver="none", grade="failed", message="no certified reference: " + "; ".join(tried))
         return row, None
@@ -251,7 +285,7 @@ class SweepSummary:
 def run_tasks(tasks: list[dict], store: ResultStore, *, jobs: int = 1, dask: str | None = None,
               gate: Callable[[dict, dict[str, dict]], str | None] | None = None,
               on_row: Callable[[dict, Any], None] | None = None,
-              order: Callable[[dict], Any] | None = None) -> int:
+              order: Callable[[dict], Any] | None = None, connect_timeout: float = DASK_CONNECT_TIMEOUT) -> int:
     """The one scheduler of every sweep (``dualfem bench`` and ``dualfem stress``); returns the rows written.
 
     ``tasks``: dicts with ``kind`` (a handler of :data:`dualfem.experiments.harness.HANDLERS`),
@@ -263,7 +297,9 @@ def run_tasks(tasks: list[dict], store: ResultStore, *, jobs: int = 1, dask: str
     rows)`` then returns None (run it) or a reason (a ``skipped`` row marked ``skip_budget``,
     e.g. a predicted time or memory over the budget); a gate may also adjust the task. Tasks whose
     dependency never finishes get a skipped row. ``order`` sorts each wave (e.g. biggest first).
-    Every row is written to ``store`` (after ``on_row(row, payload)``, e.g. to cache a reference).
+    Every row is written to ``store`` after ``on_row(row, payload)`` (e.g. to cache a reference),
+    unless ``on_row`` returns False (a check that adds no row).
+    ``connect_timeout``: seconds to wait for the ``dask`` scheduler.
     """
     from dualfem.experiments.harness import error_row
 
@@ -273,8 +309,8 @@ def run_tasks(tasks: list[dict], store: ResultStore, *, jobs: int = 1, dask: str
 
     def finish(row: dict, payload: Any = None) -> None:
         nonlocal written
-        if on_row is not None:
-            on_row(row, payload)
+        if on_row is not None and on_row(row, payload) is False:
+            return          # a check whose row is already stored (e.g. a cached reference that holds)
         store.add(row)
         finished[row["run_id"]] = store.rows[row["run_id"]]
         written += 1
@@ -305,36 +341,45 @@ def run_tasks(tasks: list[dict], store: ResultStore, *, jobs: int = 1, dask: str
                 to_run.append(t)
         if order is not None:
             to_run.sort(key=order)
-        for row, payload in execute_all(to_run, jobs, dask):
+        for row, payload in execute_all(to_run, jobs, dask, connect_timeout):
             finish(row, payload)
         pending = waiting
     return written
 
 
-def open_store(out: str | Path, name: str, text: str, *, force: bool = False,
+def open_store(out: str | Path, name: str, text: str, *, force: bool = False, same_name: bool = False,
                warn: Callable[[str], None] | None = None) -> ResultStore:
     """The results folder ``out`` for the sweep ``name`` (spec ``text``), validated, claimed and locked.
 
-    A folder belongs to one spec (``force``: add this sweep's rows to a folder of another spec;
-    nothing in it is dropped); ``spec.toml`` is replaced by ``text``. Close it when done.
+    A folder belongs to one spec: one of another name, or of this name with other contents, is
+    refused (``force``: add this sweep's rows to it; ``same_name``: a folder of this name accepts
+    other contents, as stress grids do); nothing in it is dropped. ``spec.toml`` is replaced by
+    ``text``, the one it replaces (other contents) kept as ``spec.toml.replaced-<time>``. Close it when done.
     """
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out must be a directory, {str(out)!r} is a file")
     store = ResultStore(out, warn)
-    store.claim(name, text, force)
+    store.claim(name, text, force, same_name)
     store.open()
+    prev = store.out / "spec.toml"
+    if prev.is_file() and not same_spec(prev.read_text(encoding="utf-8", errors="replace"), text):
+        kept = backup(prev, "replaced")          # a new name every time: never replaces an earlier backup
+        store.warn(f"the folder's spec.toml (other contents) is kept as {str(kept)!r}")
     atomic_write_text(store.out / "spec.toml", text)
     return store
 
 
 def log_invocation(store: ResultStore, meta: dict) -> dict:
     """Write the sweep's invocation log (sweep.json: ``meta`` plus every earlier invocation)."""
+    path = store.out / "sweep.json"
     try:   # a resumed sweep keeps the list of every invocation that wrote into this directory
-        prev = json.loads((store.out / "sweep.json").read_text(encoding="utf-8"))
+        prev = json.loads(path.read_text(encoding="utf-8"))
         meta["invocations"] = list(prev.get("invocations", []))
-    except (OSError, ValueError):
+    except (OSError, ValueError, AttributeError, TypeError):
         meta["invocations"] = []
+        if path.is_file():          # unreadable: kept aside (a new name), never overwritten
+            store._move_aside(path, "unreadable sweep.json; a new invocation log is started")
     meta["invocations"].append({"command": meta.get("command"), "started_utc": meta.get("started_utc")})
     atomic_write_text(store.out / "sweep.json", json.dumps(meta, indent=1, sort_keys=True))
     return meta
@@ -352,29 +397,44 @@ def _begin(spec: Spec, store: ResultStore, out: Path, jobs: int, dask: str | Non
 
 
 def _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream,
-                           progress) -> tuple[dict, int, int]:
+                           progress, connect_timeout=DASK_CONNECT_TIMEOUT) -> tuple[dict, int, int]:
     """Phase 1: certified references (for scenes with pending runs) and floors; returns (refs, aux, n_refs)."""
     need = {t["scene_key"] for t in pending if not t["skip"]}
     refs: dict[str, dict | None] = {}
     tasks = []
     for sc in scenes:
         if sc.key in need:
-            refs[sc.key] = store.load_ref(sc.key)
-            if refs[sc.key] is None:
-                tasks.append(reference_task(spec, sc))
+            refs[sc.key] = store.load_ref(sc.key)       # None if absent, unreadable or failing its hash
+            cached = refs[sc.key]
+            # a cached reference is checked against the scene's QP before anything is graded against it
+            tasks.append(reference_task(spec, sc) if cached is None else
+                         {**reference_task(spec, sc), "verify": {k: cached[k] for k in ("x", "multipliers", "qp_key")}})
     tasks += [t for t in floor_tasks(spec, scenes) if not is_done(t["run_id"])]
     n_refs = 0
     bar = Progress(len(tasks), "references+floor", stream, None if progress else False) if tasks else None
 
-    def on_row(row: dict, payload: Any) -> None:
+    def on_row(row: dict, payload: Any) -> bool:
         nonlocal n_refs
+        key = row.get("scene_key")
+        if row["kind"] == "reference" and isinstance(payload, dict) and payload.get("verified"):
+            # the cached reference holds: graded against with the errors recomputed now; no row written
+            refs[key] = {**refs[key], "kkt": payload["kkt"], "bound": payload["bound"]}
+            bar.update(f"reference {row.get('label')}: cached, checked against the QP")
+            return False
+        if row["kind"] == "reference" and row.get("ref_rejected"):
+            store.warn(f"{row['ref_rejected']} ({str(store.ref_path(key))!r}); it was recomputed"
+                       + ("" if payload is not None else " and no certified reference was found"))
+            if store.ref_path(key).exists():
+                store._move_aside(store.ref_path(key), "rejected reference file")
+            refs[key] = None
         if row["kind"] == "reference" and payload is not None:
-            store.save_ref(row["scene_key"], payload)       # only certified references are cached
-            refs[row["scene_key"]] = store.load_ref(row["scene_key"])
+            store.save_ref(key, payload)       # only certified references are cached
+            refs[key] = store.load_ref(key)
         n_refs += row["kind"] == "reference"
         bar.update(_describe(row))
+        return True
 
-    aux = run_tasks(tasks, store, jobs=jobs, dask=dask, on_row=on_row)
+    aux = run_tasks(tasks, store, jobs=jobs, dask=dask, on_row=on_row, connect_timeout=connect_timeout)
     return refs, aux, n_refs
 
 
@@ -384,7 +444,8 @@ def _size(t: dict) -> float:
     return float(n) if isinstance(n, (int, float)) else 0.0
 
 
-def _runs(pending, refs, store, jobs, dask, stream, progress, title) -> tuple[dict[str, int], int]:
+def _runs(pending, refs, store, jobs, dask, stream, progress, title,
+          connect_timeout=DASK_CONNECT_TIMEOUT) -> tuple[dict[str, int], int]:
     """Phase 2: the runs (skipped ones are written directly); returns (status counts, runs executed)."""
     statuses: dict[str, int] = {}
     tasks = [t if t["skip"] else {**t, "ref": refs.get(t["scene_key"])} for t in pending]
@@ -400,19 +461,21 @@ def _runs(pending, refs, store, jobs, dask, stream, progress, title) -> tuple[di
             ran += 1
             bar.update(_describe(row))
 
-    run_tasks(tasks, store, jobs=jobs, dask=dask, on_row=on_row, order=lambda t: -_size(t))
+    run_tasks(tasks, store, jobs=jobs, dask=dask, on_row=on_row, order=lambda t: -_size(t),
+              connect_timeout=connect_timeout)
     return statuses, ran
 
 
 def run_sweep(spec: Spec | str | Path, out: str | Path, *, jobs: int = 1, dask: str | None = None,
               command: str = "", progress: bool = True, stream=None, retry_failed: bool = False,
-              force: bool = False) -> SweepSummary:
+              force: bool = False, connect_timeout: float = DASK_CONNECT_TIMEOUT) -> SweepSummary:
     """Run (or resume) a sweep; returns a summary. Files: see :class:`ResultStore`.
 
     Everything is validated before anything is written; the folder is locked for the run and must
     belong to this spec (``force`` adds the rows of another spec to it). Finished rows are never
     redone (``retry_failed``: those whose status is not solved/inaccurate are). The tasks go
-    through the one engine, :func:`run_tasks`: references and floors, then the runs.
+    through the one engine, :func:`run_tasks`: references and floors, then the runs. A ``dask``
+    scheduler that does not answer within ``connect_timeout`` s is refused before anything is written.
     """
     if not isinstance(spec, Spec):
         spec = load_spec(spec)
@@ -421,14 +484,18 @@ def run_sweep(spec: Spec | str | Path, out: str | Path, *, jobs: int = 1, dask: 
     scenes = expand_scenes(spec)          # every scene validated before anything is written
     tasks = expand_tasks(spec, scenes)
     out = Path(out)
+    if dask:
+        check_dask(dask, connect_timeout)
     store = open_store(out, spec.name, spec.text or json.dumps(_canon(spec.__dict__)), force=force)
     try:
-        return _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, stream, retry_failed)
+        return _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, stream, retry_failed,
+                      connect_timeout)
     finally:
         store.close()
 
 
-def _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, stream, retry_failed) -> SweepSummary:
+def _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, stream, retry_failed,
+           connect_timeout=DASK_CONNECT_TIMEOUT) -> SweepSummary:
     meta = _begin(spec, store, out, jobs, dask, command)
     stream = stream or sys.stderr
 
@@ -438,16 +505,11 @@ def _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, strea
         return not (retry_failed and store.rows[rid].get("status") not in ("solved", "inaccurate"))
 
     pending = [t for t in tasks if not is_done(t["run_id"])]
-    run_ids = {t["run_id"] for t in tasks}
-    floor_ids = {t["run_id"] for t in floor_tasks(spec, scenes)}
-    scene_keys = {sc.key for sc in scenes}
-    # results.csv: this spec's rows, and every row of another spec (a folder shared with --force);
-    # rows of this spec's runs that are no longer in it stay in rows/
-    store.keep = lambda r: (r.get("run_id") in run_ids or r.get("run_id") in floor_ids
-                            or (r.get("kind") == "reference" and r.get("scene_key") in scene_keys)
-                            or r.get("spec") not in (None, spec.name))
-    refs, aux, n_refs = _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream, progress)
-    statuses, ran = _runs(pending, refs, store, jobs, dask, stream, progress, spec.name)
+    # results.csv lists every row of the folder: this spec's, and (a folder shared with --force) those
+    # of other specs or other versions of this one; nothing finished is ever dropped from it
+    refs, aux, n_refs = _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream, progress,
+                                               connect_timeout)
+    statuses, ran = _runs(pending, refs, store, jobs, dask, stream, progress, spec.name, connect_timeout)
     store.write_csv()
     meta["finished_utc"] = utc_now()
     atomic_write_text(store.out / "sweep.json", json.dumps(meta, indent=1, sort_keys=True))

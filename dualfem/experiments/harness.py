@@ -4,8 +4,10 @@ A task is a dict with a ``kind``. It runs in a long-lived child Python process
 (:class:`GuardedWorker`) that the parent kills when a phase exceeds its wall-clock budget (the
 child announces each phase and its budget), or that dies on its own (segmentation fault, out of
 memory): the parent then makes an error row, never loses the task and never hangs. Children
-volunteer to the kernel's OOM killer, die with their parent (no orphans after ``kill -9`` of a
-sweep) and report their peak resident memory with every row (``peak_rss_mb``).
+volunteer to the kernel's OOM killer, die with their parent (no orphans after ``kill -9`` or
+SIGTERM of a sweep: PDEATHSIG and a watch of the parent's pid in every child, and in every loky
+worker a watch of the sweep process, :func:`watch_parent`) and report their peak resident memory
+with every row (``peak_rss_mb``).
 
 The child dispatches on ``task["kind"]`` to the handlers in :data:`HANDLERS` (``bench`` runs,
 references and floors; ``stress`` runs). Executors: the calling thread (``jobs = 1``),
@@ -93,6 +95,46 @@ def rss_mb(pid: int | str = "self") -> float:
         return 0.0
 
 
+#: guarded children started by this process (killed by :func:`watch_parent` when the sweep is gone)
+_CHILDREN: set[subprocess.Popen] = set()
+_WATCHING: int | None = None
+
+
+def watch_parent(parent: int, interval: float = 0.1) -> None:
+    """In an executor's worker process: exit as soon as the sweep process ``parent`` is gone.
+
+    PR_SET_PDEATHSIG alone does not make a tree die with its root: it fires when the *thread*
+    that forked a process exits, and a loky worker blocked in a task (waiting on its guarded
+    child) never notices that the sweep was killed (measured: 6 processes of a ``--jobs 2`` bench
+    alive 5 s after ``kill -9`` or SIGTERM of the sweep). A daemon thread polls ``os.getppid()``
+    (which changes when the parent process dies, whatever killed it), kills this worker's guarded
+    children and exits; the children die with it in any case (their own PDEATHSIG and watch).
+    Started once per process (later calls with the same parent are no-ops).
+    """
+    global _WATCHING
+    if _WATCHING == parent or os.getppid() != parent:     # watching already, or not a child of ``parent``
+        return
+    _WATCHING = parent
+
+    def loop() -> None:
+        while os.getppid() == parent:
+            time.sleep(interval)
+        for proc in list(_CHILDREN):
+            try:
+                proc.kill()
+            except OSError:
+                pass
+        os._exit(3)
+
+    threading.Thread(target=loop, name="dualfem-watch-parent", daemon=True).start()
+
+
+def run_in_worker(task: dict, parent: int) -> tuple[dict, Any]:
+    """:func:`run_guarded` in an executor's worker process that dies with the sweep ``parent``."""
+    watch_parent(parent)
+    return run_guarded(task)
+
+
 class _PeakWatch:
     """Samples this process's RSS (peak since :meth:`reset`) and exits if the parent is gone."""
 
@@ -123,7 +165,8 @@ def _child_main() -> None:  # pragma: no cover - runs in the child process
     die_with_parent()
     volunteer_for_oom_killer()
     os.environ.setdefault("MPLBACKEND", "Agg")
-    watch = _PeakWatch(os.getppid())
+    # the parent that started us (not os.getppid() now: it may already be gone, and we reparented)
+    watch = _PeakWatch(int(os.environ.get("DUALFEM_HARNESS_PARENT") or os.getppid()))
     out_fd = os.dup(1)
     devnull = os.open(os.devnull, os.O_WRONLY)
     os.dup2(devnull, 1)      # C libraries print to fd 1 (e.g. OSQP's polishing notes): drop it
@@ -182,13 +225,16 @@ class GuardedWorker:
     def _start(self) -> None:
         env = dict(os.environ)
         env.setdefault("MPLBACKEND", "Agg")
+        env["DUALFEM_HARNESS_PARENT"] = str(os.getpid())     # the child exits when this process is gone
         self.proc = subprocess.Popen([sys.executable, "-m", "dualfem.experiments.harness", "--child"],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=0)
+        _CHILDREN.add(self.proc)
         self.buf = b""
 
     def close(self) -> None:
         """Ask the child to exit (kill it if it does not within 5 s)."""
         if self.proc is not None:
+            _CHILDREN.discard(self.proc)
             try:
                 self.proc.stdin.close()
                 self.proc.wait(timeout=5)
@@ -200,6 +246,7 @@ class GuardedWorker:
     def kill(self) -> None:
         """Kill the child now (its task is lost; the caller makes the error row)."""
         if self.proc is not None:
+            _CHILDREN.discard(self.proc)
             self.proc.kill()
             self.proc.wait()
             self.proc = None
@@ -299,7 +346,12 @@ def _close_local_worker() -> None:
         _LOCAL.worker = None
 
 
-def _execute_dask(tasks: list[dict], address: str) -> Iterable[tuple[dict, Any]]:
+#: seconds to wait for a dask scheduler before refusing its address
+DASK_CONNECT_TIMEOUT = 20.0
+
+
+def _execute_dask(tasks: list[dict], address: str,
+                  connect_timeout: float = DASK_CONNECT_TIMEOUT) -> Iterable[tuple[dict, Any]]:
     from dualfem.core.errors import InputError, MissingDependency
 
     try:
@@ -307,9 +359,15 @@ def _execute_dask(tasks: list[dict], address: str) -> Iterable[tuple[dict, Any]]
     except ImportError:
         raise MissingDependency("--dask needs dask.distributed: pip install 'dualfem[parallel]'") from None
     try:
-        client = Client(address, timeout="20s")
+        client = Client(address, timeout=f"{float(connect_timeout)}s")
     except (OSError, TimeoutError) as exc:
-        raise InputError(f"--dask: cannot connect to the scheduler at {address!r}: {exc}") from None
+        raise InputError(f"--dask: cannot connect to the scheduler at {address!r} within {connect_timeout:g} s: "
+                         f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+    except ValueError as exc:         # not an address at all (e.g. "tcp://host:port:x")
+        raise InputError(f"--dask: {address!r} is not a scheduler address: {exc}") from None
+    if not tasks:
+        client.close()
+        return
     try:
         futs = client.map(run_guarded, tasks, pure=False)
         for fut in as_completed(futs):
@@ -321,12 +379,21 @@ def _execute_dask(tasks: list[dict], address: str) -> Iterable[tuple[dict, Any]]
         client.close()
 
 
-def execute_all(tasks: list[dict], jobs: int = 1, dask: str | None = None) -> Iterable[tuple[dict, Any]]:
-    """Yield (row, payload) for every task as it finishes."""
+def check_dask(address: str, connect_timeout: float = DASK_CONNECT_TIMEOUT) -> None:
+    """InputError (one line) unless a dask scheduler answers at ``address`` within ``connect_timeout`` s
+    (called before a sweep writes anything)."""
+    for _ in _execute_dask([], address, connect_timeout):
+        pass
+
+
+def execute_all(tasks: list[dict], jobs: int = 1, dask: str | None = None,
+                connect_timeout: float = DASK_CONNECT_TIMEOUT) -> Iterable[tuple[dict, Any]]:
+    """Yield (row, payload) for every task as it finishes (``connect_timeout``: seconds to wait for
+    the ``dask`` scheduler)."""
     if not tasks:
         return
     if dask:
-        yield from _execute_dask(tasks, dask)
+        yield from _execute_dask(tasks, dask, connect_timeout)
     elif jobs > 1:
         try:
             from joblib import Parallel, delayed
@@ -334,7 +401,8 @@ def execute_all(tasks: list[dict], jobs: int = 1, dask: str | None = None) -> It
             from dualfem.core.errors import MissingDependency
             raise MissingDependency("--jobs needs joblib: pip install 'dualfem[parallel]'") from None
         par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
-        yield from par(delayed(run_guarded)(t) for t in tasks)
+        me = os.getpid()          # each loky worker exits as soon as this process is gone
+        yield from par(delayed(run_in_worker)(t, me) for t in tasks)
     else:
         try:
             for t in tasks:

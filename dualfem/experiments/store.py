@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 import sys
 import time
 import zipfile
@@ -17,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from dualfem.core.errors import InputError
-from dualfem.core.io import atomic_write, atomic_write_text
+from dualfem.core.errors import InputError, OutputError
+from dualfem.core.io import atomic_write, atomic_write_text, move_aside
 from dualfem.experiments.row import COLUMNS, Row
 
 #: statuses of a run that are final (a resumed sweep does not redo them, ``--retry-failed`` redoes
@@ -57,22 +58,33 @@ class ResultStore:
             if p.is_file():
                 p.unlink()
         self.rows: dict[str, dict] = {}
-        if (self.out / "results.csv").is_file():
-            try:
-                for r in read_results(self.out / "results.csv"):
-                    rid = r.get("run_id")
-                    if rid and not (self.rows_dir / f"{rid}.json").exists():
-                        # a row kept only in the (committed) CSV: give it its own file again
-                        self.rows[rid] = Row.from_dict(r).to_dict()
-                        atomic_write_text(self.rows_dir / f"{rid}.json", json.dumps(self.rows[rid], sort_keys=True))
-            except (InputError, csv.Error, ValueError) as exc:
-                self._move_aside(self.out / "results.csv", f"unreadable results.csv ({exc})")
         for p in sorted(self.rows_dir.glob("[!.]*.json")):
             try:
                 r = json.loads(p.read_text(encoding="utf-8"))
                 self.rows[r["run_id"]] = r
             except (OSError, ValueError, KeyError, TypeError):
-                self._move_aside(p, "unreadable row file; its run is redone")
+                self._move_aside(p, "unreadable row file; its run is redone unless results.csv holds it")
+        csv_path = self.out / "results.csv"
+        bad: list = []
+        if csv_path.is_file():
+            try:
+                kept, bad = read_results_checked(csv_path)
+            except InputError as exc:
+                kept, bad = [], []
+                self._move_aside(csv_path, f"unreadable results.csv ({exc})")
+            for r in kept:
+                rid = r["run_id"]
+                if rid not in self.rows:
+                    # a row kept only in the (committed) CSV: give it its own file again
+                    self.rows[rid] = Row.from_dict(r).to_dict()
+                    atomic_write_text(self.rows_dir / f"{rid}.json", json.dumps(self.rows[rid], sort_keys=True))
+            if bad:
+                # the readable rows are in rows/ now; keep the file as it was (with its damaged lines)
+                dest = move_aside(csv_path, "corrupt")
+                self.warn(f"{len(bad)} unreadable line(s) of results.csv ({_lines(bad)}: a cut or damaged write?): "
+                          f"the file as it was is kept as {str(dest)!r}; its {len(kept)} readable row(s) are kept, "
+                          f"the runs of the unreadable lines are redone")
+                write_csv(csv_path, list(self.rows.values()))     # at once: every readable row
         self._last_csv = 0.0
         self.keep: Callable[[dict], bool] | None = None
         return self
@@ -87,25 +99,36 @@ class ResultStore:
             self._lock = None
 
     def _move_aside(self, p: Path, why: str) -> None:
-        dest = p.with_name(p.name + ".corrupt")
         try:
-            p.replace(dest)
+            dest = move_aside(p, "corrupt")         # a new name: never replaces an earlier one
             self.warn(f"{why}: moved {str(p)!r} to {str(dest)!r}")
-        except OSError:
+        except (OSError, OutputError):
             self.warn(f"{why}: {str(p)!r} ignored")
 
-    def claim(self, name: str, text: str, force: bool = False) -> None:
-        """Refuse a folder that holds the results of a spec of another name (unless ``force``)."""
+    def claim(self, name: str, text: str, force: bool = False, same_name: bool = False) -> None:
+        """Refuse a folder that holds the results of another spec (unless ``force``).
+
+        Another spec is one of another name, or of the same name with other contents (an edited
+        spec, or another spec that happens to share the name: its rows would be mixed with this
+        one's); ``same_name`` accepts the latter (a stress grid: any grid adds its rows to a grid
+        folder). Nothing is written here (:func:`dualfem.experiments.bench.open_store` keeps the
+        replaced spec.toml as a backup).
+        """
         prev = self.out / "spec.toml"
         if force or not prev.is_file():
             return
         old = prev.read_text(encoding="utf-8", errors="replace")
-        if old.strip() == text.strip() or _spec_name(old) == name:
+        if same_spec(old, text):
             return
+        if _spec_name(old) == name:
+            if same_name:
+                return
+            raise InputError(f"--out {str(self.out)!r} holds the results of a spec named {name!r} with other "
+                             f"contents (its spec.toml differs from this one); choose another --out, or pass "
+                             f"--force to add this spec's rows to it (nothing is dropped, the old spec.toml is kept)")
         raise InputError(f"--out {str(self.out)!r} holds the results of another spec "
                          f"({_spec_name(old) or 'unnamed'!r}, not {name!r}); choose another --out, "
                          f"or pass --force to add this spec's rows to it")
-
 
     def done(self, run_id: str) -> bool:
         r = self.rows.get(run_id)
@@ -135,28 +158,59 @@ class ResultStore:
         return self.refs_dir / f"{scene_key}.npz"
 
     def load_ref(self, scene_key: str) -> dict | None:
+        """The cached reference of a scene, or None (absent; unreadable or failing its content hash:
+        moved aside under a new name with a warning, and recomputed). The sweep checks it against
+        the scene's QP before grading (:func:`dualfem.experiments.bench.check_reference`)."""
         p = self.ref_path(scene_key)
         if not p.exists():
             return None
         try:
             with np.load(p, allow_pickle=False) as d:
-                return {"x": d["x"], "multipliers": d["multipliers"], "qp_key": str(d["qp_key"]),
-                        "solver": str(d["solver"]), "kkt": float(d["kkt"]),
-                        "bound": float(d["bound"]) if "bound" in d else None}
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+                ref = {"x": np.asarray(d["x"], dtype=float), "multipliers": np.asarray(d["multipliers"], dtype=float),
+                       "qp_key": str(d["qp_key"]), "solver": str(d["solver"]), "kkt": float(d["kkt"]),
+                       "bound": float(d["bound"]) if "bound" in d else None,
+                       "params": str(d["params"]) if "params" in d else "{}",
+                       "sha256": str(d["sha256"]) if "sha256" in d else None}
+        except (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile):
             self._move_aside(p, "unreadable reference file; the reference is recomputed")
             return None
+        if ref["sha256"] != ref_hash(ref):
+            why = "no content hash (written by an earlier version)" if ref["sha256"] is None else \
+                "its content does not match its hash (changed after it was written)"
+            self._move_aside(p, f"reference file {why}; the reference is recomputed")
+            return None
+        return ref
 
     def save_ref(self, scene_key: str, payload: dict) -> None:
+        """Cache a certified reference (atomically, with the hash of its content); a file it replaces
+        (one that failed its check) is moved aside first, never overwritten."""
+        p = self.ref_path(scene_key)
+        if p.exists():
+            self._move_aside(p, "replaced reference file")
+        digest = ref_hash(payload)
+
         def write(tmp):
             with open(tmp, "wb") as fh:
                 np.savez(fh, x=payload["x"], multipliers=payload["multipliers"], qp_key=np.array(payload["qp_key"]),
                          solver=np.array(payload["solver"]), kkt=np.array(payload["kkt"]),
-                         bound=np.array(payload.get("bound", np.nan)),
-                         params=np.array(payload["params"]))
-        atomic_write(self.ref_path(scene_key), write)
+                         bound=np.array(np.nan if payload.get("bound") is None else float(payload["bound"])),
+                         params=np.array(payload["params"]), sha256=np.array(digest))
+        atomic_write(p, write)
 
 
+def ref_hash(ref: dict) -> str:
+    """SHA-256 of a reference's content (solution, multipliers, QP key, solver, KKT error, bound, params)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for k in ("x", "multipliers"):
+        a = np.ascontiguousarray(np.asarray(ref[k], dtype=float))
+        h.update(repr(a.shape).encode() + a.tobytes())
+    bound = ref.get("bound")
+    bound = float("nan") if bound is None else float(bound)
+    for v in (ref["qp_key"], ref["solver"], repr(float(ref["kkt"])), repr(bound), str(ref.get("params", "{}"))):
+        h.update(str(v).encode() + b"\0")
+    return h.hexdigest()
 
 
 def lock_folder(out: Path):
@@ -190,6 +244,20 @@ USER_RESULTS = Path("dualfem-results")
 def default_out(kind: str, name: str) -> Path:
     """``dualfem-results/<kind>/<name>`` in the working directory (name checked by :func:`safe_name`)."""
     return USER_RESULTS / kind / safe_name(name)
+
+
+def same_spec(a: str, b: str) -> bool:
+    """Whether two spec texts define the same sweep (parsed TOML or JSON equal; else the same text)."""
+    import tomllib
+
+    if a.strip() == b.strip():
+        return True
+    for parse in (tomllib.loads, json.loads):
+        try:
+            return parse(a) == parse(b)
+        except ValueError:
+            continue
+    return False
 
 
 def _spec_name(text: str) -> str | None:
@@ -238,30 +306,106 @@ TEXT_COLUMNS = {"run_id", "kind", "spec", "scene", "scene_key", "label", "solver
                 "platform", "versions", "axis", "solver_params", "iterations", "coords"}
 
 
-def read_results(path: str | Path) -> list[dict]:
-    """Rows of a results.csv (or of the results.csv inside a directory), numbers parsed."""
+def read_results(path: str | Path, warn: Callable[[str], None] | None = None) -> list[dict]:
+    """Rows of a results.csv (or of the results.csv inside a directory), numbers parsed.
+
+    A damaged file (cut by a kill or a full disk, or edited by hand) gives its readable rows: every
+    unreadable line is skipped with one warning (``warn``, default a ``dualfem: warning:`` line on
+    stderr); nothing is changed on disk (:class:`ResultStore` moves the bad part aside). A file that
+    is not a results.csv at all (no header with run_id, kind, status) is an InputError.
+    """
+    rows, bad = read_results_checked(path)
+    if bad:
+        (warn or _warn_stderr)(f"{len(bad)} unreadable line(s) of {str(_csv_path(path))!r} skipped (a cut or "
+                               f"damaged write?): {_lines(bad)}; every other row is read")
+    return rows
+
+
+#: a run id names its file in rows/: letters, digits and ``_.:=+,@-``, no path separator, not starting with "."
+_SAFE_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.:=+,@-]{0,199}")
+
+
+def _warn_stderr(msg: str) -> None:
+    print(f"dualfem: warning: {msg}", file=sys.stderr)
+
+
+def _lines(bad: list[tuple[int, str]]) -> str:
+    nums = [str(n) for n, _ in bad]
+    more = f" and {len(nums) - 5} more" if len(nums) > 5 else ""
+    return ("line " if len(nums) == 1 else "lines ") + ", ".join(nums[:5]) + more
+
+
+def _csv_path(path: str | Path) -> Path:
     path = Path(path)
-    if path.is_dir():
-        path = path / "results.csv"
+    return path / "results.csv" if path.is_dir() else path
+
+
+def read_results_checked(path: str | Path) -> tuple[list[dict], list[tuple[int, str]]]:
+    """(rows, bad) of a results.csv: the readable rows, and (line number, raw text) of every unreadable
+    record (a cut last line, a wrong number of fields, no run id, undecodable bytes, NUL bytes)."""
+    path = _csv_path(path)
     if not path.is_file():
         raise InputError(f"results file {str(path)!r} does not exist")
-    out = []
     try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            reader = csv.DictReader(fh)
-            missing = {"run_id", "kind", "status"} - set(reader.fieldnames or [])
-            if missing:
-                raise InputError(f"{str(path)!r} is not a dualfem bench results.csv (no column "
-                                 f"{', '.join(sorted(missing))})")
-            for r in reader:
-                out.append({k: (v if k in TEXT_COLUMNS else _parse(v)) for k, v in r.items()})
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise InputError(f"{str(path)!r} is not a readable results.csv: {exc}") from None
-    return out
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read {str(path)!r}: {exc.strerror or exc}") from None
+    text = data.decode("utf-8", errors="surrogateescape")    # a line with undecodable bytes is a bad line
+    lines = text.splitlines(keepends=True)
+    if not lines:
+        raise InputError(f"{str(path)!r} is not a dualfem bench results.csv (empty)")
+    reader = csv.reader(io.StringIO(text.replace("\0", "")) if "\0" not in lines[0] else io.StringIO(""))
+    try:
+        header = next(reader)
+    except (StopIteration, csv.Error):
+        header = []
+    missing = {"run_id", "kind", "status"} - {h for h in header if _utf8(h)}
+    if missing:
+        raise InputError(f"{str(path)!r} is not a dualfem bench results.csv (no column {', '.join(sorted(missing))})")
+    rows: list[dict] = []
+    bad: list[tuple[int, str]] = []
+    done = reader.line_num
+    while True:
+        try:
+            rec = next(reader)
+        except StopIteration:
+            break
+        except csv.Error:
+            bad.append((done + 1, "".join(lines[done:])))
+            done = len(lines)
+            break
+        raw = "".join(lines[done:reader.line_num])
+        first, done = done + 1, reader.line_num
+        if not rec:
+            continue
+        complete = raw.endswith("\n") and "\0" not in raw     # write_csv ends every record with a newline
+        if not complete or not _utf8(raw) or len(rec) != len(header):
+            bad.append((first, raw))
+            continue
+        try:
+            r = {k: (v if k in TEXT_COLUMNS else _parse(v)) for k, v in zip(header, rec)}
+        except (TypeError, ValueError):
+            bad.append((first, raw))
+            continue
+        if not r.get("kind") or not _SAFE_ID.fullmatch(str(r.get("run_id") or "")) or ".." in r["run_id"]:
+            bad.append((first, raw))      # no run id, or one that cannot name a file in rows/
+            continue
+        rows.append(r)
+    if done < len(lines):
+        bad.append((done + 1, "".join(lines[done:])))
+    return rows, bad
 
 
-def _parse(v: str) -> Any:
-    if v == "":
+def _utf8(text: str) -> bool:
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
+
+
+def _parse(v: str | None) -> Any:
+    if v is None or v == "":
         return None
     if v in ("True", "False"):
         return v == "True"

@@ -290,16 +290,18 @@ def grid_text(tasks: list[Task], meta: dict | None = None) -> str:
 def run_grid(tasks: list[Task], out: str | Path, *, jobs: int = 1, resume: bool = False, force: bool = False,
              retry_failed: bool = False, dask: str | None = None,
              progress: Callable[[int, int, Row], None] | None = None, meta: dict | None = None,
-             command: str = "") -> list[Row]:
+             command: str = "", connect_timeout: float | None = None) -> list[Row]:
     """Run (or continue) ``tasks`` into the results folder ``out``; return the rows of ``tasks``.
 
     The one engine's meanings: ``resume`` continues a folder that holds results (finished rows
     are kept and not redone; ``retry_failed`` redoes those whose status is not solved/inaccurate);
     ``force`` writes into a folder that holds another spec's results (nothing in it is dropped);
     without either, a folder with results is refused. Rows of tasks not in ``tasks`` are always kept
-    (and listed in ``results.csv``). ``jobs``: parallel guarded workers (joblib), ``dask``: a scheduler.
+    (and listed in ``results.csv``). ``jobs``: parallel guarded workers (joblib), ``dask``: a scheduler
+    (refused before anything is written if it does not answer within ``connect_timeout`` s).
     """
     from dualfem.experiments.bench import log_invocation, open_store, run_tasks
+    from dualfem.experiments.harness import DASK_CONNECT_TIMEOUT, check_dask
     from dualfem.experiments.machine import utc_now
     from dualfem.experiments.store import FINAL_STATUSES
 
@@ -308,7 +310,10 @@ def run_grid(tasks: list[Task], out: str | Path, *, jobs: int = 1, resume: bool 
     if held and not (resume or force):       # refused before anything is written
         raise InputError(f"--out {str(out)!r} already holds results ({held}): pass --resume to continue it "
                          f"(finished runs are kept), or choose another --out")
-    store = open_store(out, GRID_NAME, grid_text(tasks, meta), force=force,
+    connect_timeout = DASK_CONNECT_TIMEOUT if connect_timeout is None else connect_timeout
+    if dask:
+        check_dask(dask, connect_timeout)
+    store = open_store(out, GRID_NAME, grid_text(tasks, meta), force=force, same_name=True,
                        warn=lambda msg: print(f"dualfem stress: warning: {msg}", file=sys.stderr, flush=True))
     try:
         legacy = (out / "runs.jsonl").is_file()
@@ -334,7 +339,7 @@ def run_grid(tasks: list[Task], out: str | Path, *, jobs: int = 1, resume: bool 
                 progress(finished, len(todo), Row.from_dict(row))
 
         run_tasks(todo, store, jobs=max(1, min(jobs, len(todo) or 1)), dask=dask, gate=gate, on_row=on_row,
-                  order=lambda t: _sid(t["scene"]))
+                  order=lambda t: _sid(t["scene"]), connect_timeout=connect_timeout)
         store.write_csv()
         ordered = [Row.from_dict(store.rows[t.id]) for t in tasks if t.id in store.rows]
         _write_meta(out, {**(meta or {}), "complete": len(ordered) == len(tasks), "n_tasks": len(tasks)})

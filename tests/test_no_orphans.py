@@ -1,0 +1,91 @@
+"""No orphans: after ``kill -9`` or SIGTERM of a ``--jobs 2`` sweep, no process of it is alive 5 s later.
+
+A real ``dualfem bench SPEC --jobs 2`` is started in its own session; once its loky workers and
+their guarded children run, the sweep process alone is killed and the session's live processes
+(loky workers, guarded harness children, resource trackers) are counted 5 s later. Before the
+fix (issue 26, item 6) 6 processes were left, for minutes.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("joblib")
+if not Path("/proc/self/stat").exists():  # pragma: no cover
+    pytest.skip("needs Linux /proc", allow_module_level=True)
+
+SPEC = """
+name = "orphans"
+repeats = 50
+warmup = false
+time_limit = 60
+[tiers]
+low = 1e-3
+[floor]
+enabled = false
+[[scenes]]
+scene = ["f1", "f2"]
+N = [16]
+delta = [1e-3, 1e-9]
+[[solvers]]
+name = "osqp"
+[[solvers]]
+name = "clarabel"
+"""
+
+
+def session_processes(sid: int) -> list[tuple[int, str]]:
+    """(pid, command line) of the live (not zombie) processes of session ``sid``."""
+    out = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            fields = (d / "stat").read_text().rsplit(")", 1)[1].split()
+            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except (OSError, IndexError):
+            continue
+        if fields[0] != "Z" and int(fields[3]) == sid:
+            out.append((int(d.name), cmd.strip()[-80:]))
+    return out
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
+def test_no_process_outlives_a_killed_parallel_sweep(tmp_path, sig):
+    spec = tmp_path / "spec.toml"
+    spec.write_text(SPEC, encoding="utf-8")
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "dualfem", "bench", str(spec), "--jobs", "2", "--out", str(out),
+                             "--no-progress-bar"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 180
+        while time.monotonic() < deadline and proc.poll() is None:
+            if sum("harness --child" in c for _, c in session_processes(proc.pid)) == 2:
+                time.sleep(1.0)                              # both workers are inside a task
+                break
+            time.sleep(0.1)
+        assert proc.poll() is None, "the sweep finished before it could be killed"
+        running = session_processes(proc.pid)
+        assert sum("harness --child" in c for _, c in running) == 2, running   # two guarded children
+        assert sum("loky" in c.lower() for _, c in running) >= 2, running         # under two loky workers
+        os.kill(proc.pid, sig)                               # the sweep alone, not its group
+        proc.wait(timeout=30)
+        time.sleep(5.0)
+        left = session_processes(proc.pid)
+        assert left == [], f"{len(left)} process(es) alive 5 s after {sig.name} of the sweep: {left}"
+    finally:
+        for pid, _ in session_processes(proc.pid):
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
