@@ -283,7 +283,7 @@ class QPFile(Problem):
         qp = QP(K=P, F=F, B=G, name=f"qp_file[{path.stem}]",
                 params={k: str(v) for k, v in p.items()},
                 maps={"constraint_rows": rows, "n_file_rows": np.array(m)},
-                shift=ShiftPart.make(x0, offset, load=-q, rhs=h) if np.any(h) else None)
+                shift=ShiftPart.make(x0, offset, load=-q, rhs=h))
         return qp
 
 
