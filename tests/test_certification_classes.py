@@ -253,3 +253,28 @@ def test_compare_json_carries_multiplier_errors(capsys):
     assert runs["mprgp"]["err_multipliers"] is not None and runs["mprgp"]["err_multipliers"] < 1e-8
     assert runs["dual_gradient"]["err_multipliers"] is not None
     assert runs["pdas"]["certificate"]["multipliers"] is not None
+
+
+def test_certification_leaves_the_qp_untouched():
+    """The rounding floors use |K| and |B| without sorting the QP's index arrays in place (a QP whose key
+    changed under a sweep made its reference 'stale')."""
+    import scipy.sparse as sp
+
+    from dualfem.core.qp import QP
+
+    qp0 = load_scene("f2", {"N": 8, "delta": 1e-12}).build()
+    B = qp0.B.tocsr()
+    perm = np.arange(B.indices.size)
+    for i in range(B.shape[0]):                     # reverse the column order inside every row
+        a, b = B.indptr[i], B.indptr[i + 1]
+        perm[a:b] = perm[a:b][::-1]
+    Bu = sp.csr_matrix((B.data[perm], B.indices[perm], B.indptr), shape=B.shape)
+    qp = QP(K=qp0.K, F=qp0.F, B=Bu, weights=qp0.weights, local=qp0.local)
+    assert not qp.B.has_sorted_indices
+    key = qp.key()
+    ref = run("pdas", qp0)
+    x = ref.x * (1 + 1e-9 * np.cos(np.arange(qp.n)))            # noisy rows: the floor is computed
+    sol = Solution(solver="t", status=Status.SOLVED, x=x, multipliers=ref.multipliers * 1.001)
+    attach_residuals(qp, sol)
+    certify_status(qp, sol, 1e-12, exact=True)
+    assert qp.key() == key

@@ -99,17 +99,24 @@ def user_frame(qp: QP, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return x + shift, Fu, hu
 
 
+def abs_product(M, v: np.ndarray) -> np.ndarray:
+    """|M| v for a sparse M without touching M (a new matrix on |data| and M's index arrays, used for
+    one product only: slicing or ``abs`` may sort M's indices in place or copy them)."""
+    import scipy.sparse as sp
+
+    M = sp.csr_matrix(M) if M.format not in ("csr", "csc") else M
+    cls = sp.csc_matrix if M.format == "csc" else sp.csr_matrix
+    return cls((np.abs(M.data), M.indices, M.indptr), shape=M.shape, copy=False) @ v
+
+
 def _beyond_floor(qp: QP, x, mu, F, r, fs) -> float:
     """max_i (r_i - c eps (|K||x| + |F| + |B'||mu|)_i)_+ for r = |Kx - F - B'mu|. Only the components with
-    r_i > 64 eps f_s are looked at (the others add at most 1.4e-14 f_s), so the floor costs a product with
-    |K| only on the noisy rows (K is symmetric: its columns, sliced from the CSC matrix)."""
+    r_i > 64 eps f_s are looked at (the others add at most 1.4e-14 f_s); a clean answer costs no product
+    with |K|."""
     rows = np.flatnonzero(r > 64.0 * EPS * fs)
     if rows.size == 0:
         return float(r.max(initial=0.0))
-    Kc = qp.K[:, rows] if rows.size < qp.n else qp.K
-    Kc = Kc.copy() if Kc is qp.K else Kc
-    Kc.data = np.abs(Kc.data)
-    s = Kc.T @ np.abs(x) + np.abs(F[rows]) + (abs(qp.B).T @ np.abs(mu))[rows]
+    s = (abs_product(qp.K, np.abs(x)) + np.abs(F) + abs_product(qp.B.T, np.abs(mu)))[rows]
     excess = np.maximum(r[rows] - ROUNDING_C * EPS * s, 0.0).max(initial=0.0)
     rest = np.delete(r, rows).max(initial=0.0) if rows.size < r.size else 0.0
     return float(max(excess, rest))

@@ -252,7 +252,7 @@ def multiplier_floor(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     known no better than this from the data in double precision (measured on the paper's scenes, N = 16:
     5-10 times the difference of pdas's refined multipliers to mu*: 3.6e-9 for 7.0e-10 on f2 at delta =
     1e-12, 2.5e-4 for 1.7e-5 with E = 1). One more solve with K; nan when there is no Delassus matrix."""
-    from dualfem.core.evaluator import ROUNDING_C
+    from dualfem.core.evaluator import ROUNDING_C, abs_product
 
     ksolve = ksolve or solver_for(qp)
     D = ksolve.delassus() if qp.m else None
@@ -262,9 +262,9 @@ def multiplier_floor(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     A = guess_active_set(D, mu, qp.B @ x)
     if not A.any():
         return 0.0
-    s = abs(qp.K) @ np.abs(x) + np.abs(qp.F) + abs(qp.B.T) @ np.abs(mu)
+    s = abs_product(qp.K, np.abs(x)) + np.abs(qp.F) + abs_product(qp.B.T, np.abs(mu))
     z = ksolve(ROUNDING_C * EPS * s)
-    rhs = np.abs(qp.B[A] @ z) + EPS * (abs(qp.B[A]) @ np.abs(x))
+    rhs = (np.abs(qp.B @ z) + EPS * abs_product(qp.B, np.abs(x)))[A]
     try:
         dm = sla.solve(D[np.ix_(A, A)], rhs, assume_a="pos")
     except (np.linalg.LinAlgError, ValueError):
