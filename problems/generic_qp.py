@@ -22,6 +22,16 @@ positive definiteness by a sparse LDL'-type factorization (SuperLU with symmetri
 pivoting; its pivots are the LDL' pivots, all > 0 iff P is SPD). This costs one factorization of P,
 the same as the cheapest solver's setup; turn it off for very large files.
 
+**Bounds that are not constraints.** A row with ``h_j <= -1e20`` or ``h_j = -inf`` can never bind
+(qpsolvers and OSQP read 1e20 and beyond as infinite): it is dropped before anything else
+(:func:`drop_free_rows`; ``qp.maps["constraint_rows"]`` are the rows kept, and the multiplier of a
+dropped row is 0: :func:`original_multipliers`). ``h_j = +inf`` or NaN is refused. A merely loose bound
+(h = -1e8) stays a constraint; its shift (below) costs precision (the file's x is ``z + x0`` with
+``|x0| ~ 1e8``), and that cost shows up honestly in the certified status (``inaccurate``), never as a
+wrong ``solved``: the evaluator certifies the answer in the file's own unknowns against the file's own
+``q`` and ``h`` (kept with the shift: ``qp.shift.load = -q``, ``qp.shift.rhs = h``), and reads no scale
+from the file.
+
 **Conventions and the h != 0 limitation.** dualfem's QP type is ``min 1/2 x'Kx - F'x s.t.
 Bx >= 0`` (a cone through the origin), so ``K = P``, ``F = -q``, ``B = G``. For ``h != 0`` the
 problem is shifted: find ``x0`` with ``G x0 = h`` (minimum-norm solution; needs ``h`` in the range
@@ -151,6 +161,39 @@ def check_definite(P: sp.spmatrix, where: str) -> None:
                          f"{scale:.3e}) in its LDL' factorization; dualfem needs a positive definite P")
 
 
+#: a row with ``h <= -FREE_BOUND`` (or ``-inf``) is "no constraint", as qpsolvers and OSQP read bounds
+#: beyond 1e20 as infinite: it is dropped, and its multiplier is 0 in everything reported
+FREE_BOUND = 1e20
+
+
+def drop_free_rows(G: sp.csr_matrix, h: np.ndarray, where: str) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
+    """(G, h) without the rows that can never bind (``h_j <= -FREE_BOUND`` or ``-inf``), and the indices
+    of the rows kept (into the file's rows). NaN or ``+inf`` in h is refused (``G_j x >= +inf`` has no
+    solution). A merely loose bound (h = -1e8) is kept: it is a constraint, and whatever precision its
+    shift costs shows up in the certified status."""
+    if np.any(np.isnan(h)):
+        raise InputError(f"array 'h' in {where} contains NaN entries")
+    if np.any(h == np.inf):
+        raise InputError(f"array 'h' in {where} contains +inf: G_j x >= +inf has no solution (use -inf or "
+                         f"h <= -{FREE_BOUND:g} for 'no constraint')")
+    keep = np.flatnonzero(h > -FREE_BOUND)
+    if keep.size == h.size:
+        return G, h, keep
+    return G[keep], h[keep], keep
+
+
+def original_multipliers(qp: QP, mu: np.ndarray) -> np.ndarray:
+    """The multipliers of the file's rows (length of the file's h): 0 for a row dropped as "no
+    constraint" (:func:`drop_free_rows`)."""
+    mu = np.asarray(mu, dtype=float)
+    rows = qp.maps.get("constraint_rows") if isinstance(qp.maps, dict) else None
+    if rows is None:
+        return mu
+    out = np.zeros(int(np.asarray(qp.maps["n_file_rows"])))
+    out[np.asarray(rows, dtype=np.int64)] = mu
+    return out
+
+
 def shift_for(G: sp.csr_matrix, h: np.ndarray, where: str) -> np.ndarray:
     """The minimum-norm ``x0`` with ``G x0 = h``; InputError if there is none."""
     n = G.shape[1]
@@ -244,9 +287,10 @@ class QPFile(Problem):
         m = G.shape[0]
         h = _vector(d, "h", where, m, "the number of rows of G", required=False)
         h = np.zeros(m) if h is None else h
-        for nm, arr in (("P", P.data), ("q", q), ("G", G.data), ("h", h)):
+        for nm, arr in (("P", P.data), ("q", q), ("G", G.data)):
             if not np.all(np.isfinite(arr)):
                 raise InputError(f"array {nm!r} in {where} contains NaN or infinite entries")
+        G, h, rows = drop_free_rows(sp.csr_matrix(G), h, where)
         if p["p_storage"] != "full":
             T = sp.triu(P, format="csc") if p["p_storage"] == "upper" else sp.tril(P, format="csc")
             if (P - T).count_nonzero() > 0:
@@ -272,9 +316,12 @@ class QPFile(Problem):
         x0 = shift_for(G, h, where)
         F = -(q + P @ x0)
         offset = float(0.5 * x0 @ (P @ x0) + q @ x0)
+        # the file's own q and h go with the shift: the evaluator certifies the answer in the file's
+        # unknowns against them (F above lost the digits of q below the rounding of P x0)
         qp = QP(K=P, F=F, B=G, name=f"qp_file[{path.stem}]",
                 params={k: str(v) for k, v in p.items()},
-                shift=ShiftPart.make(x0, offset))
+                maps={"constraint_rows": rows, "n_file_rows": np.array(m)},
+                shift=ShiftPart.make(x0, offset, load=-q, rhs=h))
         return qp
 
 
@@ -284,5 +331,12 @@ def original_x(qp: QP, x: np.ndarray) -> np.ndarray:
 
 
 def original_objective(qp: QP, x: np.ndarray) -> float:
-    """``1/2 x'Px + q'x`` of the file's QP at ``original_x(qp, x)``."""
-    return qp.energy(x) + (0.0 if qp.shift is None else qp.shift.objective)
+    """``1/2 x'Px + q'x`` of the file's QP at ``original_x(qp, x)``, computed from the file's unknowns
+    (not ``qp.energy(x) + shift.objective``, which cancels catastrophically when the shift is large)."""
+    from dualfem.core.evaluator import user_frame
+
+    uf = user_frame(qp, np.asarray(x, dtype=float))
+    if uf is None:
+        return qp.energy(x)
+    y, Fu, _ = uf
+    return float(0.5 * y @ (qp.K @ y) - Fu @ y)

@@ -220,7 +220,9 @@ def test_failed_reference_is_never_cached(tmp_path):
         ref = [r for r in rows if r["kind"] == "reference"]
         assert len(ref) == 1 and ref[0]["status"] == "error" and "no certified reference" in ref[0]["message"]
         assert "max_iter" in ref[0]["message"]
-        runs = [r for r in rows if r["kind"] == "run" and r["status"] == "solved"]
+        # (clarabel's `solved` at the 1e-8 tier is `inaccurate` since its multipliers are certified too:
+        # 1.2e-8 off on f1, N = 8, issue 26)
+        runs = [r for r in rows if r["kind"] == "run" and r["status"] in ("solved", "inaccurate")]
         assert len(runs) == 3 * (3 - reps)     # results.csv keeps the rows of the first version too
         assert all(r["err_x_energy"] is None and "no certified reference" in r["message"] for r in runs)
 

@@ -86,7 +86,10 @@ def test_paper_tables_iteration_counts(N):
             assert 0.95 * lo <= k <= 1.05 * hi, (d, f, k, (lo, hi))
     # the paper's delta = 1e-9 runs stop on a change of l that is not an error bound: ours say so
     assert res[(N, "strain", "f2", 1e-9, 2.0)]["status"] == "inaccurate"
-    assert res[(N, "strain", "f2", 1e-8, 2.0)]["status"] == "solved"
+    # at delta = 1e-8 x is certified, but the absolute test on l leaves the contact forces ~1e-5 off (9.9e-6
+    # relative at N = 16, certified against the exact multipliers of the verified set): since issue 26 the
+    # multipliers are certified too, so this is not `solved` against the declared 1e-6 either
+    assert res[(N, "strain", "f2", 1e-8, 2.0)]["status"] == "inaccurate"
 
 
 @pytest.mark.parametrize("load, delta", [("f2", 1e-8), ("f2", 1e-9), ("f1", 1e-8)])

@@ -107,4 +107,7 @@ def test_a_shift_is_undone_for_the_user(tmp_path):
     from dualfem.evaluator import size_max
 
     q = _tiny(shift=ShiftPart.make([5.0, 5.0, 5.0], 2.5))
-    assert size_max(q, np.zeros(3)) == 5.0          # x = 0 of a shifted QP still has a size
+    # x = 0 of a shifted QP still has a size: the load's length F'F / F'KF |F|_inf = 1/3 (issue 26: the
+    # size is never taken from the shift, which the input controls; a larger shift does not grow it)
+    assert size_max(q, np.zeros(3)) == pytest.approx(1.0 / 3.0)
+    assert size_max(_tiny(shift=ShiftPart.make([5e6, 5e6, 5e6], 2.5)), np.zeros(3)) == pytest.approx(1.0 / 3.0)

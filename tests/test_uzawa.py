@@ -21,7 +21,9 @@ def references():
         if key not in cache:
             _, qp = scene(name, 16, delta)
             clar = run("clarabel", qp)
-            assert clar.ok
+            # at delta = 1e-9 Clarabel's x is within its 1e-5 but its contact forces are 1e-3 off: certified
+            # since issue 26 (`inaccurate`, "multiplier"); its contact set is still right
+            assert clar.ok or (delta <= 1e-9 and "multiplier" in clar.message), clar.message
             xs, mus, ok = evaluator.certify(qp, clar.x)
             assert ok, "Clarabel's contact set does not certify"
             cache[key] = (clar, xs, mus)

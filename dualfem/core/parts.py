@@ -84,22 +84,40 @@ class LocalPart:
 
 @dataclass(frozen=True)
 class ShiftPart:
-    """The user's unknowns are ``x + x_shift`` and the user's objective ``Pi(x) + objective``."""
+    """The user's unknowns are ``x + x_shift`` and the user's objective ``Pi(x) + objective``.
+
+    Optional, the user's own data exactly as given (a QP file's ``-q`` and ``h``): ``load`` (length n,
+    the user's problem is ``min 1/2 y'Ky - load'y``) and ``rhs`` (length m, ``B y >= rhs``). The evaluator
+    certifies the answer in the user's unknowns against them; without them it uses ``F + K x`` and
+    ``B x`` (what the QP itself implies, which lost the digits of the user's load that are below the
+    rounding of ``K x`` for a large shift)."""
 
     x: np.ndarray
     objective: float = 0.0
+    load: np.ndarray | None = None
+    rhs: np.ndarray | None = None
 
     @classmethod
-    def make(cls, x, objective=0.0) -> ShiftPart:
+    def make(cls, x, objective=0.0, load=None, rhs=None) -> ShiftPart:
         return cls(np.asarray(x, dtype=float).ravel(), float(np.asarray(objective, dtype=float).reshape(-1)[0])
-                   if np.size(objective) else 0.0)
+                   if np.size(objective) else 0.0,
+                   None if load is None else np.asarray(load, dtype=float).ravel(),
+                   None if rhs is None else np.asarray(rhs, dtype=float).ravel())
 
-    def validate(self, n: int) -> None:
+    def validate(self, n: int, m: int | None = None) -> None:
         if self.x.shape != (n,):
             raise InputError(f"shift.x must have length {n} (the number of unknowns), got {self.x.shape[0]}")
         _finite(self.x, "shift.x")
         if not np.isfinite(self.objective):
             raise InputError(f"shift.objective must be finite, got {self.objective!r}")
+        if self.load is not None:
+            if self.load.shape != (n,):
+                raise InputError(f"shift.load must have length {n} (the number of unknowns), got {self.load.size}")
+            _finite(self.load, "shift.load")
+        if self.rhs is not None:
+            if m is not None and self.rhs.shape != (m,):
+                raise InputError(f"shift.rhs must have length {m} (the rows of B), got {self.rhs.size}")
+            _finite(self.rhs, "shift.rhs")
 
 
 @dataclass(frozen=True)

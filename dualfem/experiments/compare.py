@@ -57,7 +57,8 @@ from dualfem.numerics.certify import certified_error, solver_for
 #: fields of each run record (stable JSON interface of ``dualfem compare --json``; ``verdict`` is a
 #: deprecated alias of ``grade``)
 RUN_FIELDS = ("solver", "status", "grade", "verdict", "exact", "tolerance", "iterations", "energy", "time_s",
-              "residuals", "kkt_error", "error_bound", "certificate", "diff", "n_contact", "message", "params")
+              "residuals", "kkt_error", "error_bound", "certificate", "diff", "n_contact", "message", "params",
+              "err_x_energy", "err_multipliers")
 #: the deprecated ``verdict`` of each grade (see the module docstring)
 VERDICT_OF_GRADE = {"correct": "ok", "flagged": "wrong", "silent_wrong": "wrong", "failed": "failed",
                     "unverified": "unchecked", "skipped": "skipped", "timeout": "failed", "crashed": "failed"}
@@ -132,7 +133,7 @@ def _run_one(qp: QP, nm: str, inst, ksolve) -> tuple[Row, Solution]:
     row.set_residuals(sol.residuals if finite else None, tol)
     if not finite and str(sol.status) == str(Status.SOLVED):
         row.kkt_error = float("inf")      # claims success without a finite answer: the evaluator flags it
-    row.update(energy=sol.residuals["energy"] if finite else None,
+    row.update(energy=sol.residuals.get("objective", sol.residuals["energy"]) if finite else None,
                time_s={**sol.time_s, "total": row.total_s}, error_bound=None, certificate=None, diff=None,
                n_contact=int(evaluator.contact_set(qp, sol.x).sum()) if finite else None)
     if finite:
@@ -160,6 +161,9 @@ def record(row: Row, ref: dict | None = None) -> dict[str, Any]:
         "kkt_error": row.kkt_error if finite else None, "error_bound": row.get("error_bound"),
         "certificate": row.get("certificate"), "n_contact": row.get("n_contact"), "message": row.message,
         "params": row.solver_params, "diff": row.get("diff"),
+        # errors against the reference (None without one): x in the energy norm, the multipliers
+        # |mu - mu_ref|_inf / max(|mu_ref|_inf, |F|_inf)
+        "err_x_energy": row.err_x_energy, "err_multipliers": row.err_multipliers,
     }
 
 

@@ -5,9 +5,13 @@
 its message, and the residuals always come from :mod:`dualfem.core.evaluator`.
 
 **Certification** (:func:`certify_status`), for every plugin: a ``solved`` claim stands only if
-the evaluator's scale-free KKT residuals, recomputed from (x, mu) and the QP, are within the
+the evaluator's scale-free KKT residuals, recomputed from (x, mu) and the QP (the stationarity
+residual beyond its measured rounding floor, :data:`dualfem.core.evaluator.ROUNDING_C`; for a shifted
+QP in the QP's own and in the user's unknowns, :mod:`dualfem.core.evaluator`), are within the
 tolerance the solver instance declares, and, for exact solvers, the a-posteriori energy-norm
-error certificate (:func:`dualfem.numerics.certify.certified_error`) is too where it applies.
+error certificate (:func:`dualfem.numerics.certify.certified_error`) is too where it applies, and
+so is the certified error of the multipliers (against the exact multipliers of the verified active
+set: the contact forces are certified, not only x).
 Otherwise the status becomes ``inaccurate`` with a message naming the residual and by how much;
 the plugin's own claim stays in ``Solution.info["claimed_status"]``.
 """
@@ -341,18 +345,29 @@ def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: An
     if res[worst] > tol:
         why = f"evaluator residual {worst} = {res[worst]:.1e} exceeds the declared tolerance {tol:g}"
     elif exact:
-        from dualfem.numerics.certify import KSolver, certified_error
+        from dualfem.numerics.certify import KSolver, certified_error, multiplier_floor
 
         try:
-            sol.info["certificate"] = certified_error(qp, sol.x, sol.multipliers, KSolver(qp, reduction=reduction))
+            ks = KSolver(qp, reduction=reduction)
+            sol.info["certificate"] = certified_error(qp, sol.x, sol.multipliers, ks)
+            cm = sol.info["certificate"].get("multipliers", float("nan"))
+            if np.isfinite(cm) and cm > tol:      # only then: the rounding floor of mu* costs one more solve
+                sol.info["certificate"]["multipliers_floor"] = multiplier_floor(qp, sol.x, sol.multipliers, ks)
         except (np.linalg.LinAlgError, ValueError, RuntimeError) as exc:
             sol.info["certificate"] = {"bound": float("nan"), "active_set": float("nan"), "value": float("nan"),
                                        "error": f"{type(exc).__name__}: {exc}"}
             sol.message = f"{sol.message}; certificate unavailable ({type(exc).__name__}: {exc})".lstrip("; ")
         cert = sol.info["certificate"]["value"]
+        cmu = sol.info["certificate"].get("multipliers", float("nan"))
+        cfloor = sol.info["certificate"].get("multipliers_floor", 0.0)
+        cmu = cmu - (cfloor if np.isfinite(cfloor) else 0.0)      # beyond the rounding of mu* itself
         if np.isfinite(cert) and cert > tol:
             why = (f"certified energy-norm error bound {cert:.1e} exceeds the declared tolerance {tol:g} "
                    f"(residuals are within it)")
+        elif np.isfinite(cmu) and cmu > tol:
+            why = (f"certified multiplier error {cmu:.1e} (|mu - mu*|_inf against the exact multipliers of the "
+                   f"verified active set, relative to max(|mu*|, |F|), beyond their rounding floor "
+                   f"{cfloor:.1e}) exceeds the declared tolerance {tol:g}")
     if why:
         sol.status = Status.INACCURATE
         sol.message = f"{sol.message}; not certified: {why}" if sol.message else f"not certified: {why}"
@@ -389,13 +404,20 @@ def summary(qp: QP, sol: Solution) -> dict:
     if sol.x is not None and sol.multipliers is not None and sol.residuals is not None and sol.residuals["finite"]:
         jump = qp.B @ sol.x
         out.update({
-            "energy": sol.residuals["energy"] + (0.0 if qp.shift is None else qp.shift.objective),
+            # the user's objective, from the user's unknowns (a shifted QP: y = x + x_shift, not Pi(x) plus
+            # the shift's constant, which cancels catastrophically when the shift is large)
+            "energy": sol.residuals.get("objective", sol.residuals["energy"]),
             "max_jump": float(jump.max(initial=0.0)),
             "n_contact": int(evaluator.contact_set(qp, sol.x).sum()),
             "contact_rtol": evaluator.CONTACT_RTOL,
             "total_contact_force": float(np.sum(sol.multipliers)),
             "residuals": evaluator.kkt_residuals(sol.residuals),
+            "stationarity_raw": sol.residuals.get("stationarity_raw"),
         })
+        cert = sol.info.get("certificate")
+        if cert:
+            out["certificate"] = {k: v for k, v in cert.items()
+                                  if k in ("value", "bound", "active_set", "multipliers", "multipliers_floor")}
     else:
         out.update({"energy": None, "max_jump": None, "n_contact": None, "residuals": None})
     return out

@@ -32,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
-from dualfem.core.evaluator import size_energy, size_max
+from dualfem.core.evaluator import force_scale, size_energy, size_max
 from dualfem.core.qp import QP
 from dualfem.numerics.linalg import step_size
 
@@ -119,6 +119,12 @@ def solver_for(qp: QP) -> KSolver:
     return KSolver(qp)
 
 
+EPS = float(np.finfo(float).eps)
+
+#: the exact point of a guessed set certifies the multipliers when its signs hold beyond
+#: MU_ROUNDING x eps x cond(D_AA) times the step (the rounding of the step itself)
+MU_ROUNDING = 100.0
+
 #: x counts as feasible for the bound when max penetration <= FEAS_RTOL * |x|_inf (rounding level)
 FEAS_RTOL = 1e-12
 
@@ -159,7 +165,7 @@ def error_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve=None, _quad=None, 
     mu = np.maximum(np.asarray(mu, float), 0.0)
     t1 = (_quad or _residual_solve(qp, x, mu, ksolve or solver_for(qp), _Kx))[0]
     t2 = 2.0 * max(0.0, float(mu @ (qp.B @ x)))
-    nx = size_energy(qp, x, _Kx)      # |x|_K; for a shifted QP, of the user's unknowns x + x_shift
+    nx = size_energy(qp, x, _Kx)      # |x|_K (or the load's size); shifted QP: the smaller of both frames
     if nx == 0.0:
         return float("nan")
     return float(np.sqrt(max(t1, 0.0) + t2) / nx)
@@ -167,7 +173,19 @@ def error_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve=None, _quad=None, 
 
 def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None,
                      margin: float = 10.0, _quad=None, _Kx=None) -> float:
-    """Error |x - x*|_K / |x|_K through a verified active set; nan if the set is not verified.
+    """Error |x - x*|_K / |x|_K through a verified active set; nan if the set is not verified
+    (:func:`active_set_check` without the multipliers)."""
+    return active_set_check(qp, x, mu, ksolve, margin, _quad, _Kx)[0]
+
+
+def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None,
+                     margin: float = 10.0, _quad=None, _Kx=None) -> tuple[float, float]:
+    """(error of x, error of mu) through a verified active set; (nan, nan) if the set is not verified.
+
+    The error of x is |x - x*|_K / size (:func:`dualfem.core.evaluator.size_energy`), the error of the
+    multipliers |mu - mu*|_inf / :func:`dualfem.core.evaluator.force_scale` (mu* = mu_A + dmu, the exact
+    multipliers of the verified set: the contact forces are certified, not only x, whose sensitivity
+    to mu can be tiny, e.g. at delta = 1e-12 with a soft body).
 
     The active set is guessed by the primal-dual rule ``A = {mu_j - c gap_j > 0}`` (c = 1 / mean
     diag of the Delassus matrix D = B K^-1 B'; for an answer of an active-set method this is
@@ -180,15 +198,16 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     |dx|_K^2 = r'K^-1 r - 2 (Bz)'dmu + dmu'D dmu: one solve (shared with :func:`error_bound`
     when mu is already 0 off A).
     """
+    nan = (float("nan"), float("nan"))
     if not _finite(x, mu):
-        return float("nan")
+        return nan
     ksolve = ksolve or solver_for(qp)
     mu = np.asarray(mu, float)
     D = ksolve.delassus() if qp.m else np.zeros((0, 0))
     gap = qp.B @ x
     if D is None:                  # no Delassus matrix (large m, no reduction): only mu = 0 can be checked
         if np.any(mu != 0):
-            return float("nan")
+            return nan
         D, A = np.zeros((0, 0)), np.zeros(mu.size, bool)
     else:
         A = guess_active_set(D, mu, gap)
@@ -196,29 +215,67 @@ def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     same = np.array_equal(mu_A, np.maximum(mu, 0.0))
     rKr, Bz = (_quad if (_quad is not None and same) else None) or _residual_solve(qp, x, mu_A, ksolve, _Kx)
     dmu = np.zeros_like(mu)
+    kappa = 1.0
     if A.any():
         try:
-            dmu[A] = sla.solve(D[np.ix_(A, A)], -(gap[A] - Bz[A]), assume_a="pos")
+            L = sla.cho_factor(D[np.ix_(A, A)])
+            dmu[A] = sla.cho_solve(L, -(gap[A] - Bz[A]))
         except (np.linalg.LinAlgError, ValueError):
-            return float("nan")
+            return nan
+        dL = np.abs(np.diag(L[0]))
+        kappa = float((dL.max() / max(dL.min(), 1e-300)) ** 2)   # a cheap estimate of cond(D_AA)
     Ddmu = D @ dmu if A.any() else np.zeros_like(dmu)
     Bdx = -Bz + Ddmu
     gap1 = gap + Bdx
     mu1 = mu_A + dmu
     step_mu = max(np.abs(dmu).max(initial=0.0), np.abs(mu - mu_A).max(initial=0.0))
     step_gap = np.abs(Bdx).max(initial=0.0)
-    if A.any() and mu1[A].min() <= margin * step_mu:
-        return float("nan")
-    if (~A).any() and gap1[~A].min() <= margin * step_gap:
-        return float("nan")
+    err_mu = float(np.abs(mu - mu1).max(initial=0.0)) / force_scale(qp, mu1)
+    if (A.any() and mu1[A].min() <= margin * step_mu) or ((~A).any() and gap1[~A].min() <= margin * step_gap):
+        # not verified to first order (x's error is not |dx|); the multipliers of the set are still the
+        # exact ones if the exact point keeps the KKT signs beyond the rounding of the step itself
+        # (far-off multipliers with a right set: a large step, signs kept), then mu* = mu1
+        rnd = MU_ROUNDING * EPS * max(kappa, 1.0)
+        if (A.any() and mu1[A].min() <= rnd * step_mu) or ((~A).any() and gap1[~A].min() <= rnd * step_gap):
+            return nan
+        return float("nan"), err_mu
     nx = size_energy(qp, x, _Kx)
     if nx == 0.0:
+        return float("nan"), err_mu
+    return step_size(rKr, Bz, dmu, Ddmu) / nx, err_mu
+
+
+def multiplier_floor(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None) -> float:
+    """The rounding floor of the exact multipliers mu* of :func:`active_set_check`, relative like its error:
+    the stationarity residual's rounding floor ``c eps (|K||x| + |F| + |B'||mu|)`` (and ``eps |B||x|`` of
+    the gaps) carried through the exact step, ``D_AA^-1 (|B_A K^-1 floor| + eps |B_A||x|)``. mu* is
+    known no better than this from the data in double precision (measured on the paper's scenes, N = 16:
+    5-10 times the difference of pdas's refined multipliers to mu*: 3.6e-9 for 7.0e-10 on f2 at delta =
+    1e-12, 2.5e-4 for 1.7e-5 with E = 1). One more solve with K; nan when there is no Delassus matrix."""
+    from dualfem.core.evaluator import ROUNDING_C, abs_product
+
+    ksolve = ksolve or solver_for(qp)
+    D = ksolve.delassus() if qp.m else None
+    if D is None or not _finite(x, mu):
         return float("nan")
-    return step_size(rKr, Bz, dmu, Ddmu) / nx
+    mu = np.asarray(mu, float)
+    A = guess_active_set(D, mu, qp.B @ x)
+    if not A.any():
+        return 0.0
+    s = abs_product(qp.K, np.abs(x)) + np.abs(qp.F) + abs_product(qp.B.T, np.abs(mu))
+    z = ksolve(ROUNDING_C * EPS * s)
+    rhs = (np.abs(qp.B @ z) + EPS * abs_product(qp.B, np.abs(x)))[A]
+    try:
+        dm = sla.solve(D[np.ix_(A, A)], rhs, assume_a="pos")
+    except (np.linalg.LinAlgError, ValueError):
+        return float("nan")
+    return float(np.abs(dm).max()) / force_scale(qp, mu)
 
 
 def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None) -> dict:
-    """{"bound": duality-gap bound, "active_set": first-order estimate, "value": the smaller}.
+    """{"bound": duality-gap bound, "active_set": first-order estimate, "value": the smaller,
+    "multipliers": the error of mu against the exact multipliers of the verified active set (nan when
+    the set is not verified; :func:`active_set_check`)}.
 
     One solve with K in all: both parts share z = K^-1 r (through :meth:`KSolver.quad`), and one
     product K x.
@@ -230,6 +287,6 @@ def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | Non
         Kx = qp.K @ x
         quad = _residual_solve(qp, x, np.maximum(mu, 0.0), ksolve, Kx)
     b = error_bound(qp, x, mu, ksolve, _quad=quad, _Kx=Kx)
-    a = active_set_error(qp, x, mu, ksolve, _quad=quad, _Kx=Kx)
+    a, m = active_set_check(qp, x, mu, ksolve, _quad=quad, _Kx=Kx)
     vals = [v for v in (b, a) if np.isfinite(v)]
-    return {"bound": b, "active_set": a, "value": min(vals) if vals else float("nan")}
+    return {"bound": b, "active_set": a, "value": min(vals) if vals else float("nan"), "multipliers": m}
