@@ -6,6 +6,7 @@ import csv
 import json
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -719,6 +720,19 @@ name = "pdas"
 """
 
 
+@pytest.fixture(scope="module")
+def refcheck_base(tmp_path_factory) -> Path:
+    """One untampered REFCHECK sweep (its results folder), copied by each test that attacks it."""
+    base = tmp_path_factory.mktemp("refcheck")
+    bench.run_sweep(load_spec(write(base, REFCHECK)), base / "out", progress=False, stream=open(os.devnull, "w"))
+    return base / "out"
+
+
+def _refcheck_copy(base: Path, tmp_path: Path):
+    shutil.copytree(base, tmp_path / "out")
+    return load_spec(write(tmp_path, REFCHECK)), tmp_path / "out"
+
+
 def _forget_runs(out: Path) -> None:
     """Drop the run rows (rows/ and results.csv) so that the next sweep runs them again."""
     keep = [r for r in store.read_results(out) if r["kind"] != "run"]
@@ -729,16 +743,14 @@ def _forget_runs(out: Path) -> None:
 
 
 @pytest.mark.parametrize("attack", ["content", "forged_hash", "forged_bound", "other_qp"])
-def test_a_tampered_cached_reference_never_changes_a_grade(tmp_path, attack):
+def test_a_tampered_cached_reference_never_changes_a_grade(tmp_path, attack, refcheck_base):
     """refs/*.npz is checked before anything is graded against it: its content hash (in the parent),
     then its KKT error and certified error recomputed against the scene's QP (in a worker). A file
     that fails is moved aside (a new name, with a warning) and the reference recomputed: the grades
     and errors are those of the untampered sweep."""
     import numpy as np
 
-    spec = load_spec(write(tmp_path, REFCHECK))
-    out = tmp_path / "out"
-    bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+    spec, out = _refcheck_copy(refcheck_base, tmp_path)
     graded = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "run"}
     assert len(graded) == 4 and all(r["err_x_energy"] is not None for r in graded.values())
     (ref_file,) = (out / "refs").glob("*.npz")
@@ -789,10 +801,8 @@ def test_a_tampered_cached_reference_never_changes_a_grade(tmp_path, attack):
     assert store.ResultStore(out).load_ref(ref_file.stem) is not None
 
 
-def test_a_good_cached_reference_is_checked_not_recomputed(tmp_path):
-    spec = load_spec(write(tmp_path, REFCHECK))
-    out = tmp_path / "out"
-    bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+def test_a_good_cached_reference_is_checked_not_recomputed(tmp_path, refcheck_base):
+    spec, out = _refcheck_copy(refcheck_base, tmp_path)
     graded = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "run"}
     refs_before = {p.name: p.read_bytes() for p in (out / "refs").iterdir()}
     ref_rows = {r["run_id"]: r for r in store.read_results(out) if r["kind"] == "reference"}

@@ -77,7 +77,9 @@ def test_no_process_outlives_a_killed_parallel_sweep(tmp_path, sig):
         assert sum("loky" in c.lower() for _, c in running) >= 2, running         # under two loky workers
         os.kill(proc.pid, sig)                               # the sweep alone, not its group
         proc.wait(timeout=30)
-        time.sleep(5.0)
+        gone = time.monotonic() + 5.0                        # within 5 s; a tree that is gone cannot come back
+        while session_processes(proc.pid) and time.monotonic() < gone:
+            time.sleep(0.1)
         left = session_processes(proc.pid)
         assert left == [], f"{len(left)} process(es) alive 5 s after {sig.name} of the sweep: {left}"
     finally:
