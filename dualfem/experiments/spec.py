@@ -14,7 +14,7 @@ A sweep is described by a TOML spec (see ``benchmarks/default.toml``)::
     low = 1e-3
     high = 1e-9
     [reference]            # certified exact solve per scene, cached on disk
-    solvers = ["pdas", "clarabel"]
+    solvers = ["pdas", "clarabel"]  # default: the solvers declaring Solver.reference, by reference_rank
     [[scenes]]             # a grid: every list is a dimension of the cartesian product
     scene = ["f1", "f2"]
     N = [16, 32]
@@ -47,6 +47,7 @@ from pathlib import Path
 from typing import Any
 
 from dualfem.core.errors import InputError
+from dualfem.core.solver import reference_solvers
 
 SPEC_KEYS = {"name", "description", "repeats", "warmup", "time_limit", "guard_factor", "guard_slack",
              "build_limit", "cold_setup", "tiers", "reference", "floor", "scenes", "solvers"}
@@ -223,10 +224,15 @@ def _parse_tiers(s: Spec, data: dict) -> None:
         raise InputError("tier name 'any' is reserved (it marks solvers without tolerance options)")
 
 
+def _declared_references() -> list[str]:
+    """The solvers declaring the reference capability (``Solver.reference``), preferred first."""
+    return [n for n, _ in reference_solvers(installed=False)]
+
+
 def _parse_reference(s: Spec, data: dict) -> None:
     ref = _table("[reference]", data.get("reference", {}), REFERENCE_KEYS)
     s.reference = {
-        "solvers": [str(n) for n in _as_list(ref.get("solvers", ["pdas", "clarabel"]))],
+        "solvers": [str(n) for n in _as_list(ref.get("solvers", _declared_references()))],
         "tol": _num("reference.tol", ref.get("tol", 1e-10)),
         "certify": _num("reference.certify", ref.get("certify", 1e-8)),
         "time_limit": _num("reference.time_limit", ref.get("time_limit", max(s.time_limit, 600.0))),

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from dualfem.core.errors import InputError
+from dualfem.core.scene import DEFAULT_SCENE
 from dualfem.experiments.machine import mem_available_gb
 from dualfem.experiments.row import Row
 from dualfem.experiments.stress_grid import (  # noqa: F401  (re-exported: the grid's public names)
@@ -76,7 +77,7 @@ class _Cache:
     def key(scene: dict, scene_name: str) -> str:
         return json.dumps([scene_name, scene], sort_keys=True, default=str)
 
-    def qp(self, scene: dict, scene_name: str = "f2"):
+    def qp(self, scene: dict, scene_name: str = DEFAULT_SCENE):
         from dualfem.core.scene import load_scene
 
         k = self.key(scene, scene_name)
@@ -97,7 +98,7 @@ class _Cache:
         self.qps.move_to_end(k)
         return self.qps[k]
 
-    def ref(self, scene: dict, exclude: tuple[str, ...], scene_name: str = "f2"):
+    def ref(self, scene: dict, exclude: tuple[str, ...], scene_name: str = DEFAULT_SCENE):
         """(reference, None) of ``scene`` not computed by a solver in ``exclude``, or (None, reason)."""
         from dualfem.experiments import reference
 
