@@ -22,6 +22,7 @@ import dataclasses
 import time
 import zlib
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -99,69 +100,89 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
     if isinstance(solver, str):
         solver = make_solver(solver, params)
     name = _name(solver)
-
-    def failed(message: str, status: Status = Status.ERROR, **times: float) -> Solution:
-        sol = Solution(solver=name, status=status, message=message, params=_params(solver),
-                       time_s={"setup": 0.0, "solve": 0.0, **times})
-        sol.info["claimed_status"] = str(status)
-        return sol
-
     before = fingerprint(qp)
-    view = guarded_view(qp)
-    t0 = t1 = t2 = time.perf_counter()
+    att = _attempt(solver, guarded_view(qp), qp, tick)
+    after = fingerprint(qp)            # whatever happened: did the plugin write into the caller's QP?
+    changed = [k for k in before if after.get(k) != before[k]]
+    if changed:
+        att.why, att.status = (f"solver {name!r} changed the QP it was given ({', '.join(changed)}): its answer "
+                               f"is discarded, and any later run on this QP is unreliable"), Status.ERROR
+    sol, problem = _checked_solution(att.returned, qp, name) if att.why is None else (None, None)
+    if sol is None or problem:
+        out = Solution(solver=name, status=att.status, message=att.why or problem or "", params=_params(solver),
+                       time_s={"setup": att.setup_s, "solve": att.solve_s})
+        out.info["claimed_status"] = str(att.status)
+        if isinstance(att.returned, Solution) and str(getattr(att.returned, "status", "")) in set(map(str, Status)):
+            out.info["claimed_status"] = str(att.returned.status)
+        if changed:
+            out.info["qp_changed"] = changed
+        return out
+    sol.time_s = {"setup": att.setup_s, "solve": att.solve_s, **sol.time_s}
+    sol.params = _params(solver)
+    sol.info["declared"] = {"tolerance": att.declared[0], "exact": att.declared[1]}
+    return _certified(qp, sol, att, tol, tick)
+
+
+@dataclass
+class _Attempt:
+    """What the guarded calls of one run gave: the plugin's return value, or why there is none."""
+
     returned: Any = None
     why: str | None = None
-    status = Status.ERROR
-    declared = (float("nan"), True)
+    status: Status = Status.ERROR
+    declared: tuple[float, bool] = (float("nan"), True)
+    setup_s: float = 0.0
+    solve_s: float = 0.0
+    reduction: Any = None
+
+
+def _attempt(solver: Solver, view: QP, qp: QP, tick: Callable[[str, float], None]) -> _Attempt:
+    """check_params, the declared tolerance, missing/skip, setup and solve, contained (see :func:`run`)."""
+    att = _Attempt()
+    name = _name(solver)
     with plugin_output():
+        t0 = t1 = time.perf_counter()
         try:
             solver.check_params()      # again: a plugin may override __init__ or change params after it
-            declared = check_declared(solver)  # tolerance in (0, 1), exact a bool (InputError otherwise)
+            att.declared = check_declared(solver)  # tolerance in (0, 1), exact a bool (InputError otherwise)
             reason = solver.missing() or solver.skip(view)
             if reason:
-                why, status = str(reason), Status.SKIPPED
+                att.why, att.status = str(reason), Status.SKIPPED
             else:
                 t0 = time.perf_counter()
                 solver.setup(view)
-                t1 = t2 = time.perf_counter()
-                tick("setup (factorization)", t1 - t0)
-                returned = solver.solve()
-                t2 = time.perf_counter()
-                tick("solve (iterations)", t2 - t1)
+                t1 = time.perf_counter()
+                att.setup_s = t1 - t0
+                tick("setup (factorization)", att.setup_s)
+                att.returned = solver.solve()
+                att.solve_s = time.perf_counter() - t1
+                tick("solve (iterations)", att.solve_s)
         except InputError:
             raise
         except BaseException as exc:   # noqa: BLE001 - the solver broke (even SystemExit): say so, never hide it
             if type(exc) is KeyboardInterrupt:     # a real Ctrl-C (exactly this class) still stops the program
                 raise
-            why, t2 = f"{type(exc).__name__}: {exc}", time.perf_counter()
-        if why is None:
+            att.why = f"{type(exc).__name__}: {exc}"
+            if att.setup_s or t1 != t0:
+                att.solve_s = time.perf_counter() - t1
+        if att.why is None:
             try:
-                if check_declared(solver) != declared:
-                    why = (f"solver plugin {name!r} changed its declared tolerance/exact during the run "
-                           f"(from {declared[0]:g}/{declared[1]} to {solver.tolerance!r}/{solver.exact!r})")
+                if check_declared(solver) != att.declared:
+                    att.why = (f"solver plugin {name!r} changed its declared tolerance/exact during the run "
+                               f"(from {att.declared[0]:g}/{att.declared[1]} to {solver.tolerance!r}/"
+                               f"{solver.exact!r})")
             except InputError as exc:
-                why = f"{exc} (changed during the run)"
-        reduction = _reduction_of(solver, view, qp) if why is None else None
-    after = fingerprint(qp)            # whatever happened: did the plugin write into the caller's QP?
-    changed = [k for k in before if after.get(k) != before[k]]
-    if changed:
-        why, status = (f"solver {name!r} changed the QP it was given ({', '.join(changed)}): its answer is "
-                       f"discarded, and any later run on this QP is unreliable"), Status.ERROR
-    sol, problem = _checked_solution(returned, qp, name) if why is None else (None, None)
-    if sol is None or problem:
-        out = failed(why or problem or "", status, setup=t1 - t0, solve=t2 - t1)
-        if isinstance(returned, Solution) and str(getattr(returned, "status", "")) in set(map(str, Status)):
-            out.info["claimed_status"] = str(returned.status)
-        if changed:
-            out.info["qp_changed"] = changed
-        return out
-    sol.time_s = {"setup": t1 - t0, "solve": t2 - t1, **sol.time_s}
-    sol.params = _params(solver)
-    sol.info["declared"] = {"tolerance": declared[0], "exact": declared[1]}
+                att.why = f"{exc} (changed during the run)"
+        att.reduction = _reduction_of(solver, view, qp) if att.why is None else None
+    return att
+
+
+def _certified(qp: QP, sol: Solution, att: _Attempt, tol: float | None, tick: Callable[[str, float], None]) -> Solution:
+    """The evaluator's residuals and the certificate (to ``tol`` if asked, else the declared tolerance)."""
     attach_residuals(qp, sol)
     t3 = time.perf_counter()
     asked = None if tol is None or not np.isfinite(tol) else float(tol)
-    certify_status(qp, sol, declared[0] if asked is None else asked, declared[1], reduction=reduction)
+    certify_status(qp, sol, att.declared[0] if asked is None else asked, att.declared[1], reduction=att.reduction)
     bad = [k for k in (*evaluator.RESIDUALS, "energy") if sol.residuals is not None
            and not np.isfinite(sol.residuals.get(k, np.nan))]
     if sol.status == Status.SOLVED and bad:     # e.g. x = 1e308: K x overflows, NaN > tol is False
