@@ -12,7 +12,7 @@ File layout (array names; ``h`` may be omitted, meaning 0):
 
 Validation (each failure is an :class:`~dualfem.errors.InputError` naming the array): before
 anything is decompressed, the shapes the file's headers declare must fit in the available memory
-(:func:`dualfem.core.qp.read_arrays`); no complex array (never read as its real part); a matrix
+(:func:`dualfem.core.qpfile.read_arrays`); no complex array (never read as its real part); a matrix
 given both as ``M`` and as triplets ``M_*`` is ambiguous; declared COO shapes must agree with q
 and fit in memory; n >= 1 (m = 0, no constraint, is allowed); shapes
 (``P`` n x n, ``q`` length n, ``G`` m x n, ``h`` length m), NaN/inf, symmetry of P (relative to
@@ -58,7 +58,8 @@ import scipy.sparse.linalg as sla
 from dualfem.core.errors import InputError, check_positive
 from dualfem.core.parts import ShiftPart
 from dualfem.core.problem import Problem
-from dualfem.core.qp import QP, check_dims, coo_from_arrays, declared_arrays, read_arrays
+from dualfem.core.qp import QP
+from dualfem.core.qpfile import check_dims, coo_from_arrays, declared_arrays, read_arrays
 from dualfem.core.registry import register_problem
 
 STORAGE = ("full", "upper", "lower")

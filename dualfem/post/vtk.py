@@ -33,7 +33,7 @@ import numpy as np
 
 from dualfem.core.errors import InputError, MissingDependency
 from dualfem.core.io import atomic_write, check_output_path
-from dualfem.core.qp import check_maps
+from dualfem.core.qpfile import check_maps
 from dualfem.post.fields import Post, defect_stretches
 
 SUFFIXES = {"vtu": (".vtu",), "xdmf": (".xdmf", ".xmf")}
@@ -62,7 +62,7 @@ def check_path(path: str | os.PathLike, kind: str) -> Path:
 def check_qp(qp) -> None:
     """Everything the writer reads, validated (InputError naming the array; never an IndexError later):
     a 2-D mesh (``qp.geometry``: nodes (2, n_nodes), triangles, node_dofs with one row per displacement
-    component) and the defect maps (:func:`dualfem.core.qp.check_maps`)."""
+    component) and the defect maps (:func:`dualfem.core.qpfile.check_maps`)."""
     g = getattr(qp, "geometry", None)
     if g is None:
         raise InputError("--vtk/--xdmf need the mesh of the QP (qp.geometry: nodes, cells, node_dofs): "
