@@ -83,18 +83,6 @@ def loadavg() -> float | None:
 
 
 
-def mem_available_gb() -> float:
-    """MemAvailable of the machine in GB (Linux /proc/meminfo; inf elsewhere)."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) / 1e6
-    except (OSError, ValueError):
-        pass
-    return float("inf")
-
-
 def environment() -> dict:
     """Versions and machine facts recorded with the results."""
     import importlib.metadata as md

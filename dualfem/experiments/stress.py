@@ -32,7 +32,6 @@ import numpy as np
 
 from dualfem.core.errors import InputError
 from dualfem.core.scene import DEFAULT_SCENE
-from dualfem.experiments.machine import mem_available_gb
 from dualfem.experiments.row import Row
 from dualfem.experiments.stress_grid import (  # noqa: F401  (re-exported: the grid's public names)
     AXES,
@@ -50,6 +49,7 @@ from dualfem.experiments.stress_grid import (  # noqa: F401  (re-exported: the g
     scene_base,
     scene_in_units,
 )
+from dualfem.numerics.memory import available_bytes
 
 #: a reference is trusted when its own largest KKT residual is below this
 REF_KKT = 1e-7
@@ -260,11 +260,11 @@ def gate(task: dict, finished: dict[str, dict]) -> str | None:
     if prev.grade == "timeout" or prev.get("skip_budget"):
         return f"not attempted: N={pn} already exceeded the time or memory budget"
     mem = (prev.peak_rss_mb or 0.0) / 1e3 * MEM_GROWTH
-    avail = mem_available_gb()
+    avail = available_bytes() / 1e9          # the memory guard's figure: ulimit -v and cgroups included
     if mem > 0.8 * avail:
         return (f"not attempted: predicted peak memory {mem:.1f} GB (x{MEM_GROWTH:g} per doubling of N from "
                 f"{(prev.peak_rss_mb or 0) / 1e3:.1f} GB at N={pn}) exceeds 80% of the {avail:.1f} GB "
-                f"available on this machine now")
+                f"available to this process now")
     wall = (prev.setup_s or 0) + (prev.solve_s or 0)
     tl = float(task["time_limit"])
     if prev.status == "time_limit" or wall * GROWTH > tl:
