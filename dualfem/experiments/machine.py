@@ -82,7 +82,6 @@ def loadavg() -> float | None:
         return None
 
 
-
 def environment() -> dict:
     """Versions and machine facts recorded with the results."""
     import importlib.metadata as md
