@@ -379,7 +379,7 @@ def log_invocation(store: ResultStore, meta: dict) -> dict:
     except (OSError, ValueError, AttributeError, TypeError):
         meta["invocations"] = []
         if path.is_file():          # unreadable: kept aside (a new name), never overwritten
-            store._move_aside(path, "unreadable sweep.json; a new invocation log is started")
+            store.set_aside(path, "unreadable sweep.json; a new invocation log is started")
     meta["invocations"].append({"command": meta.get("command"), "started_utc": meta.get("started_utc")})
     atomic_write_text(store.out / "sweep.json", json.dumps(meta, indent=1, sort_keys=True))
     return meta
@@ -425,7 +425,7 @@ def _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, st
             store.warn(f"{row['ref_rejected']} ({str(store.ref_path(key))!r}); it was recomputed"
                        + ("" if payload is not None else " and no certified reference was found"))
             if store.ref_path(key).exists():
-                store._move_aside(store.ref_path(key), "rejected reference file")
+                store.set_aside(store.ref_path(key), "rejected reference file")
             refs[key] = None
         if row["kind"] == "reference" and payload is not None:
             store.save_ref(key, payload)       # only certified references are cached

@@ -63,7 +63,7 @@ class ResultStore:
                 r = json.loads(p.read_text(encoding="utf-8"))
                 self.rows[r["run_id"]] = r
             except (OSError, ValueError, KeyError, TypeError):
-                self._move_aside(p, "unreadable row file; its run is redone unless results.csv holds it")
+                self.set_aside(p, "unreadable row file; its run is redone unless results.csv holds it")
         csv_path = self.out / "results.csv"
         bad: list = []
         if csv_path.is_file():
@@ -71,7 +71,7 @@ class ResultStore:
                 kept, bad = read_results_checked(csv_path)
             except InputError as exc:
                 kept, bad = [], []
-                self._move_aside(csv_path, f"unreadable results.csv ({exc})")
+                self.set_aside(csv_path, f"unreadable results.csv ({exc})")
             for r in kept:
                 rid = r["run_id"]
                 if rid not in self.rows:
@@ -98,7 +98,7 @@ class ResultStore:
             self._lock.close()
             self._lock = None
 
-    def _move_aside(self, p: Path, why: str) -> None:
+    def set_aside(self, p: Path, why: str) -> None:
         try:
             dest = move_aside(p, "corrupt")         # a new name: never replaces an earlier one
             self.warn(f"{why}: moved {str(p)!r} to {str(dest)!r}")
@@ -172,12 +172,12 @@ class ResultStore:
                        "params": str(d["params"]) if "params" in d else "{}",
                        "sha256": str(d["sha256"]) if "sha256" in d else None}
         except (OSError, ValueError, KeyError, EOFError, TypeError, zipfile.BadZipFile):
-            self._move_aside(p, "unreadable reference file; the reference is recomputed")
+            self.set_aside(p, "unreadable reference file; the reference is recomputed")
             return None
         if ref["sha256"] != ref_hash(ref):
             why = "no content hash (written by an earlier version)" if ref["sha256"] is None else \
                 "its content does not match its hash (changed after it was written)"
-            self._move_aside(p, f"reference file {why}; the reference is recomputed")
+            self.set_aside(p, f"reference file {why}; the reference is recomputed")
             return None
         return ref
 
@@ -186,7 +186,7 @@ class ResultStore:
         (one that failed its check) is moved aside first, never overwritten."""
         p = self.ref_path(scene_key)
         if p.exists():
-            self._move_aside(p, "replaced reference file")
+            self.set_aside(p, "replaced reference file")
         digest = ref_hash(payload)
 
         def write(tmp):
