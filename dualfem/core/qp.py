@@ -34,17 +34,7 @@ import scipy.sparse as sp
 from dualfem.core.errors import InputError
 from dualfem.core.io import atomic_write
 from dualfem.core.parts import GeometryPart, LocalPart, MaterialPart, ShiftPart, UnitsPart
-from dualfem.core.qpfile import (  # noqa: F401  (re-exported: the file readers lived here)
-    BYTES_PER_DIM,
-    VECTOR_MAPS,
-    _export_matrix,
-    check_dims,
-    check_maps,
-    check_params,
-    coo_from_arrays,
-    declared_arrays,
-    read_arrays,
-)
+from dualfem.core.qpfile import VECTOR_MAPS, check_maps, check_params, coo_from_arrays, export_matrix, read_arrays  # noqa: F401  (they lived here: still importable)
 
 #: ``maps`` keys that became typed parts (read through ``maps`` with a DeprecationWarning for one release)
 PROMOTED_MAPS = {"x_shift": ("shift", "x"), "objective_offset": ("shift", "objective"),
@@ -302,7 +292,7 @@ class QP:
                 w = np.asarray(d["weights"]).ravel()
                 if w.dtype.kind not in "iuf":
                     raise InputError(f"array 'weights' in {where} must be numeric, got dtype {w.dtype}")
-            K, B = _export_matrix(d, "K", where, n, n), _export_matrix(d, "B", where, None if w is None else w.size, n)
+            K, B = export_matrix(d, "K", where, n, n), export_matrix(d, "B", where, None if w is None else w.size, n)
         except InputError:
             raise
         except KeyError as exc:

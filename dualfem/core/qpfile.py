@@ -137,7 +137,7 @@ def coo_from_arrays(d: dict, name: str, where: str, rows: int | None = None,
     return sp.coo_matrix((data.astype(float), (row.astype(np.int64), col.astype(np.int64))), shape=(nr, nc))
 
 
-def _export_matrix(d: dict, name: str, where: str, rows: int | None, cols: int) -> sp.spmatrix:
+def export_matrix(d: dict, name: str, where: str, rows: int | None, cols: int) -> sp.spmatrix:
     """K or B of an exported file: COO triplets ``name_*`` (checked before allocating) and/or, in a
     .mat file, the sparse matrix ``name``; both present must be the same matrix (else ambiguous)."""
     triplets = any(f"{name}_{s}" in d for s in ("data", "row", "col", "shape"))
