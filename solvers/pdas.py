@@ -1,8 +1,9 @@
 """Semismooth Newton / primal-dual active set (PDAS) on the complementarity form of the contact QP.
 
-Everything happens on the defect unknowns I (:class:`dualfem.numerics.linalg.LocalReduction`): the QP
-is exactly ``min 1/2 xI'S xI - g'xI  s.t.  BI xI >= 0`` with S dense and small. With one dense
-Cholesky factorization of S (setup) the multipliers' problem is the linear complementarity problem
+Everything happens on the contact dual through a :class:`dualfem.numerics.dual_operator.DualOperator`
+(``operator``: ``dense``, the exact reduction onto the defect unknowns with D a dense matrix;
+``matrix_free``, one sparse factorization of K and one solve per product D v; ``auto`` picks by size
+and memory). The multipliers' problem is the linear complementarity problem
 
     gap(mu) = D mu + b0 >= 0,   mu >= 0,   mu . gap = 0,     D = BI S^-1 BI',  b0 = BI S^-1 g,
 
@@ -29,8 +30,13 @@ Globalization (elasticity is not an M-matrix problem, so plain active-set steps 
 ``c`` (units force / length) defaults to 1 / mean(diag D), which puts mu and c*gap on one scale;
 it only affects damped steps (from a Newton point the next active set does not depend on c).
 
-Multipliers are the nodal contact forces mu >= 0 with ``K x - F = B' mu``; x is recovered from
-``xI = S^-1 (g + BI' mu)`` and one solve with the cached factor of K_fixed.
+The Newton systems ``D_AA mu_A = -b0_A`` are solved by a dense Cholesky factorization (dense
+operator) or by Jacobi-preconditioned CG with the operator, warm-started from the current forces
+(matrix-free; its iterations are counted in ``info["cg_iterations"]``).
+
+Multipliers are the nodal contact forces mu >= 0 with ``K x - F = B' mu``; x is recovered as
+``K^-1 (F + B'mu)`` (dense: ``xI = S^-1 (g + BI' mu)`` and one solve with the cached factor of K_fixed),
+then (dense operator) refined on the final active set.
 """
 from __future__ import annotations
 
@@ -38,17 +44,15 @@ import sys
 import time
 
 import numpy as np
-import scipy.linalg as sla
 
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.numerics.factor import from_param
+from dualfem.numerics.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics.polish import refine_on_active_set
-from dualfem.numerics.reduced_dual import ReducedDualSolver
 
 
 @register_solver
-class PDASSolver(ReducedDualSolver):
+class PDASSolver(DualOperatorSolver):
     """Semismooth Newton (primal-dual active set) on the reduced dual LCP, globalised."""
 
     name = "pdas"
@@ -72,15 +76,14 @@ class PDASSolver(ReducedDualSolver):
                                   # of the unrefined x; 1e-16: always, to the rounding floor, as the
                                   # reference does)
         "factor": "auto",         # K factorization: auto (--factor/DUALFEM_FACTOR/fastest) or a backend
+        "operator": "auto",       # dual operator: dense reduction, matrix_free (K-solves), auto (by size, memory)
         "time_limit": 600.0,      # seconds of solve time (checked once per Newton step)
         "verbose": False,         # print one line per Newton step to stderr
     }
 
     ranges = {"c": "[0, inf)", "globalize": ("armijo", "none"), "sigma": "(0, 0.5)", "max_backtracks": "[1, inf)",
-              "refine": "[0, inf)", "refine_tol": "(0, inf)", "factor": None}   # c = 0: automatic
-
-    def validate(self) -> None:
-        from_param(self)
+              "refine": "[0, inf)", "refine_tol": "(0, inf)", "factor": None,
+              "operator": OPERATORS}   # c = 0: automatic
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -98,8 +101,8 @@ class PDASSolver(ReducedDualSolver):
         a positive gradient are held; Newton on the rest, scaled gradient on the held ones, and an
         Armijo search along the projection arc. Returns (new mu, step, #free) or None.
         """
-        D, b0, p = self.D, self.b0, self.params
-        dD = np.diag(D)
+        op, p = self.op, self.params
+        dD = op.diagonal()
         w = np.linalg.norm(mu - np.maximum(mu - c * gap, 0.0))
         eps = min(w, 1e-3 * max(np.abs(mu).max(initial=0.0), 1e-300))
         held = (mu <= eps) & (gap > 0)
@@ -107,12 +110,12 @@ class PDASSolver(ReducedDualSolver):
         d = np.zeros_like(mu)
         d[held] = -gap[held] / dD[held]
         if free.any():
-            d[free] = sla.solve(D[np.ix_(free, free)], -gap[free], assume_a="pos")
-        q0 = 0.5 * mu @ (D @ mu) + b0 @ mu
+            d[free] = op.face_solve(free, -gap[free])
+        q0 = op.dual_energy(mu)
         t = 1.0
         for _ in range(int(p["max_backtracks"]) + 1):
             mt = np.maximum(mu + t * d, 0.0)
-            qt = 0.5 * mt @ (D @ mt) + b0 @ mt
+            qt = op.dual_energy(mt)
             dec = -t * gap[free] @ d[free] + gap[held] @ (mu[held] - mt[held])
             if q0 - qt >= p["sigma"] * dec and (q0 - qt > 0 or np.array_equal(mt, mu)):
                 return mt, t, int(free.sum())
@@ -122,7 +125,7 @@ class PDASSolver(ReducedDualSolver):
     def _refine(self, x, mu, steps):
         """Iterative refinement on the final active set (:func:`dualfem.numerics.polish.refine_on_active_set`)."""
 
-        return refine_on_active_set(self.qp, self.red, x, mu, steps, float(self.params["refine_tol"]))
+        return refine_on_active_set(self.qp, self.op.reduction, x, mu, steps, float(self.params["refine_tol"]))
 
     # ------------------------------------------------------------------ solve
     def _stop(self, res: float, k: int, deadline: float, projected: bool) -> tuple[Status, str] | None:
@@ -142,7 +145,7 @@ class PDASSolver(ReducedDualSolver):
         p, t = self.params, 1.0
         for _ in range(int(p["max_backtracks"]) + 1):
             mt = mu + t * d
-            Pt = phi(mt, self.D @ mt + self.b0)
+            Pt = phi(mt, self.op.apply(mt) + self.op.b0)
             if 0.5 * Pt @ Pt <= (1.0 - 2.0 * p["sigma"] * t) * theta:
                 return t, "full"
             t *= 0.5
@@ -153,26 +156,26 @@ class PDASSolver(ReducedDualSolver):
         A = (mu - c * gap) > 0
         mu_n = np.zeros(mu.size)
         if A.any():
-            mu_n[A] = sla.solve(self.D[np.ix_(A, A)], -self.b0[A], assume_a="pos")
+            mu_n[A] = self.op.face_solve(A, -self.op.b0[A], x0=mu[A])
         return mu_n, A
 
     def _polish(self, mu: np.ndarray) -> np.ndarray:
         """The exact Newton point of the converged active set, kept only if consistent (forces >= 0
         on the set, gaps >= 0 off it, to rounding); else mu clipped at 0."""
-        D, b0 = self.D, self.b0
+        op, b0 = self.op, self.op.b0
         A = mu > 0
         mu_p = np.zeros(b0.size)
         if A.any():
-            mu_p[A] = sla.solve(D[np.ix_(A, A)], -b0[A], assume_a="pos")
-        gap_p = D @ mu_p + b0
+            mu_p[A] = op.face_solve(A, -b0[A], x0=mu[A])
+        gap_p = op.apply(mu_p) + b0
         if np.all(mu_p >= 0) and np.all(gap_p[~A] >= -self.params["tol"] * max(np.abs(b0).max(initial=0.0), 1e-300)):
             return mu_p
         return np.maximum(mu, 0.0)
 
     def solve(self) -> Solution:
         p = self.params
-        D, b0 = self.D, self.b0
-        c = p["c"] if p["c"] > 0 else (1.0 / np.diag(D).mean() if b0.size else 1.0)
+        op, b0 = self.op, self.op.b0
+        c = p["c"] if p["c"] > 0 else (1.0 / op.diagonal().mean() if b0.size else 1.0)
         mu = np.zeros(b0.size)
         # scale of Phi for the stopping test: forces c*|gap| and |mu| at the unconstrained point
         scale0 = max(c * np.abs(b0).max(initial=0.0), 1e-300)
@@ -181,7 +184,7 @@ class PDASSolver(ReducedDualSolver):
             return np.minimum(mu_, c * gap_)
 
         def state(mu_):          # gaps, the complementarity function Phi and the merit 1/2 |Phi|^2 at mu_
-            g = D @ mu_ + b0
+            g = op.apply(mu_) + b0
             P = phi(mu_, g)
             return g, P, 0.5 * P @ P
 
@@ -247,11 +250,12 @@ class PDASSolver(ReducedDualSolver):
         """x from the contact forces (polished and refined when solved) and the Solution."""
         if status == Status.SOLVED:
             mu = self._polish(mu)
-        x = self.red.full(sla.cho_solve(self.cho, self.red.g + self.red.BI.T @ mu))
+        x = self.op.x_of(mu)
         refined = 0
-        if status == Status.SOLVED:
+        if status == Status.SOLVED and self.op.reduction is not None:
             x, mu, refined = self._refine(x, mu, int(self.params["refine"]))
         return Solution(solver=self.name, status=status, x=x, multipliers=mu,
                         iterations={"newton": k}, history=history, message=message,
                         info={"c": c, "refinement_steps": refined, "n_active": int((mu > 0).sum()),
-                              "n_local": int(self.red.I.size), "reduction_time_s": self.red.time_s})
+                              "n_local": int(self.qp.local_dofs.size), **self.op.info(),
+                              "reduction_time_s": getattr(self.op.reduction, "time_s", {})})

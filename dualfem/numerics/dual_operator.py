@@ -1,0 +1,420 @@
+"""The dual (Delassus) operator of the contact QP, with a dense and a matrix-free implementation.
+
+For ``min 1/2 x'Kx - F'x  s.t.  Bx >= 0`` (K SPD, m constraint rows) the contact forces mu >= 0
+solve the dual problem on
+
+    D = B K^-1 B'   (m x m, SPD: gaps per unit force),     b0 = B K^-1 F  (the gaps at mu = 0),
+
+and the displacements follow from ``x(mu) = K^-1 (F + B'mu)``. Every dual solver (pdas, mprgp,
+uzawa, penalty) needs only these, through one interface, :class:`DualOperator`:
+
+* ``apply(v)``: D v for v of shape (m,) or (m, k) (a block is one solve with k right-hand sides);
+* ``b0``, ``x_of(mu)``, ``k_solve(r)`` (K^-1 r), ``k_quad(r)`` (r'K^-1 r and B K^-1 r, for the
+  certificate);
+* ``diagonal()``: diag(D) (exact when dense, an estimate when matrix-free), ``norm_estimate()``;
+* ``face_solve(A, rhs, x0)``: D_AA^-1 rhs on a set A of rows (the Newton systems of the
+  active-set methods and of the certificate);
+* ``counters``: operator applications, K-solves, factorizations, face solves and their CG
+  iterations (PERMON-style: every result carries them).
+
+Two implementations:
+
+* :class:`DenseDualOperator` (``"dense"``): the exact reduction onto the local unknowns I
+  (:class:`dualfem.numerics.linalg.LocalReduction`: the Schur complement S_I, then D as a dense
+  m x m matrix): everything after the setup is dense linear algebra on m-sized blocks. Memory
+  ~ 8 (2 |I|^2 + |I| m + m^2) bytes on top of the factorization of K_fixed, so it stops at
+  :data:`dualfem.numerics.linalg.MAX_LOCAL` local unknowns.
+* :class:`MatrixFreeDualOperator` (``"matrix_free"``): one sparse factorization of the whole K
+  (the QP's :class:`~dualfem.numerics.linalg.FactorStore`, shared with the certificate); each
+  product D v is one solve. No m x m matrix exists; D_AA^-1 is applied by preconditioned CG
+  (Jacobi, warm-started), whose iterations are counted.
+
+:func:`make_operator` builds the one asked for; ``"auto"`` picks by size and memory
+(:func:`choose_operator`): dense while the local unknowns are at most :data:`CROSSOVER_LOCAL`
+and the dense blocks fit in memory, matrix-free otherwise; a refusal names the sizes, the
+estimates, the memory available and the other operator.
+"""
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import scipy.linalg as sla
+
+from dualfem.core.errors import InputError
+from dualfem.core.qp import QP
+
+#: the operator names of the dual solvers' ``operator`` parameter
+OPERATORS = ("auto", "dense", "matrix_free")
+#: ``auto`` takes the dense reduction up to this many local unknowns (|I|), matrix-free above.
+#: Measured on fractured scenes (benchmarks/operator_crossover.py): see reports/fractured.md
+CROSSOVER_LOCAL = 6000
+
+
+def check_operator(value, solver: str) -> str:
+    """The operator name of a solver parameter (``matrixfree``, the old spelling, is accepted)."""
+    v = str(value).strip().lower()
+    if v == "matrixfree":
+        v = "matrix_free"
+    if v not in OPERATORS:
+        raise InputError(f"parameter 'operator' of solver {solver!r} must be one of {', '.join(OPERATORS)}, "
+                         f"got {value!r}")
+    return v
+
+
+@dataclass
+class OperatorCounters:
+    """Work done through an operator (PERMON-style counters; every result reports them)."""
+
+    applications: int = 0      #: products D v (a block of k vectors counts k)
+    solves: int = 0            #: solves with a factorization of K (a block of k counts k)
+    factorizations: int = 0    #: numeric factorizations made for this operator
+    face_solves: int = 0       #: D_AA^-1 rhs computed
+    cg_iterations: int = 0     #: CG iterations of the matrix-free face solves
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+class DualOperator(ABC):
+    """The dual operator D = B K^-1 B' of a QP and what dual methods need with it (module docstring)."""
+
+    kind: str = "?"
+
+    def __init__(self, qp: QP):
+        self.qp = qp
+        self.m = int(qp.m)
+        self.counters = OperatorCounters()
+        self.time_s: dict[str, float] = {}
+        self._norm: float | None = None
+
+    # -------------------------------------------------------------- interface
+    @property
+    @abstractmethod
+    def b0(self) -> np.ndarray:
+        """The gaps B x at zero contact force: B K^-1 F (m,)."""
+
+    @abstractmethod
+    def apply(self, v: np.ndarray) -> np.ndarray:
+        """D v for v of shape (m,) or (m, k)."""
+
+    @abstractmethod
+    def x_of(self, mu: np.ndarray) -> np.ndarray:
+        """The displacements of the contact forces mu: K^-1 (F + B'mu)."""
+
+    @abstractmethod
+    def k_solve(self, r: np.ndarray) -> np.ndarray:
+        """K^-1 r."""
+
+    @abstractmethod
+    def k_quad(self, r: np.ndarray) -> tuple[float, np.ndarray]:
+        """(r'K^-1 r, B K^-1 r)."""
+
+    @abstractmethod
+    def diagonal(self) -> np.ndarray:
+        """diag(D) (m,): exact (dense) or an estimate (matrix-free)."""
+
+    @abstractmethod
+    def face_solve(self, A: np.ndarray, rhs: np.ndarray, x0: np.ndarray | None = None,
+                   rtol: float = 1e-13) -> np.ndarray:
+        """D_AA^-1 rhs for a boolean mask A of the m rows (rhs of size A.sum()); ``x0`` a start (CG only).
+        Raises numpy.linalg.LinAlgError when D_AA is not positive definite (or CG fails)."""
+
+    #: the exact LocalReduction (dense operator) for refinement and the certificate, else None
+    reduction = None
+    #: why this operator was chosen (set by :func:`make_operator`)
+    chosen_because: str = ""
+
+    # -------------------------------------------------------------- shared
+    def norm_estimate(self, iters: int = 20) -> float:
+        """|D|_2 from power iterations (a lower estimate; cached)."""
+        if self._norm is None:
+            v = np.ones(self.m) / np.sqrt(max(self.m, 1))
+            lam = 0.0
+            for _ in range(iters if self.m else 0):
+                w = self.apply(v)
+                lam = float(np.linalg.norm(w))
+                if lam == 0.0:
+                    break
+                v = w / lam
+            self._norm = lam
+        return self._norm
+
+    def dual_energy(self, mu: np.ndarray, Dmu: np.ndarray | None = None) -> float:
+        """q(mu) = 1/2 mu'D mu + b0'mu (the negative dual function up to a constant)."""
+        Dmu = self.apply(mu) if Dmu is None else Dmu
+        return float(0.5 * mu @ Dmu + self.b0 @ mu)
+
+    def info(self) -> dict:
+        """The operator's kind, counters and setup times (for ``Solution.info``)."""
+        return {"operator": self.kind, "operator_chosen_because": self.chosen_because, **self.counters.as_dict(),
+                "operator_time_s": dict(self.time_s)}
+
+
+# --------------------------------------------------------------------------- dense
+class DenseDualOperator(DualOperator):
+    """D as a dense matrix from the exact reduction onto the local unknowns (see the module docstring)."""
+
+    kind = "dense"
+
+    def __init__(self, qp: QP, factor=None, store=None, reduction=None):
+        super().__init__(qp)
+        from dualfem.numerics.linalg import LocalReduction
+
+        t0 = time.perf_counter()
+        before = _factorizations(qp, store)
+        self.red = self.reduction = reduction if reduction is not None else LocalReduction(qp, factor, store)
+        self.D, self._b0 = self.red.dual()
+        self.counters.factorizations = _factorizations(qp, store) - before
+        self.time_s["setup"] = time.perf_counter() - t0
+
+    @property
+    def b0(self) -> np.ndarray:
+        return self._b0
+
+    def apply(self, v):
+        self.counters.applications += 1 if np.ndim(v) == 1 else np.shape(v)[1]
+        return self.D @ v
+
+    def x_of(self, mu):
+        red = self.red
+        return red.full(sla.cho_solve(red.S_cho, red.g + red.BI.T @ mu))
+
+    def k_solve(self, r):
+        self.counters.solves += 1
+        return self.red.k_solve(r)
+
+    def k_quad(self, r):
+        self.counters.solves += 1
+        q, zI = self.red.k_quad(r)
+        return q, self.red.BI @ zI
+
+    def diagonal(self):
+        return np.diag(self.D).copy()
+
+    def face_solve(self, A, rhs, x0=None, rtol=1e-13):
+        self.counters.face_solves += 1
+        return sla.solve(self.D[np.ix_(A, A)], rhs, assume_a="pos")
+
+
+# --------------------------------------------------------------------------- matrix-free
+class MatrixFreeDualOperator(DualOperator):
+    """D v = B K^-1 B'v through one sparse factorization of K; no m x m matrix (module docstring)."""
+
+    kind = "matrix_free"
+
+    def __init__(self, qp: QP, factor=None, store=None):
+        super().__init__(qp)
+        t0 = time.perf_counter()
+        before = _factorizations(qp, store)
+        self.fact = factor_whole(qp, factor, store)
+        self.counters.factorizations = _factorizations(qp, store) - before
+        self.B = qp.B.tocsr()
+        self.BT = self.B.T.tocsr()
+        self._xF: np.ndarray | None = None
+        self._b0: np.ndarray | None = None
+        self._diag: np.ndarray | None = None
+        self.time_s["setup"] = time.perf_counter() - t0
+
+    def _solve(self, b: np.ndarray) -> np.ndarray:
+        self.counters.solves += 1 if b.ndim == 1 else b.shape[1]
+        return self.fact.solve(b)
+
+    @property
+    def b0(self) -> np.ndarray:
+        if self._b0 is None:
+            self._xF = self._solve(np.asarray(self.qp.F, float))
+            self._b0 = self.B @ self._xF
+        return self._b0
+
+    def apply(self, v):
+        v = np.asarray(v, float)
+        self.counters.applications += 1 if v.ndim == 1 else v.shape[1]
+        if self.m == 0:
+            return np.zeros_like(v)
+        return self.B @ self._solve(self.BT @ v)
+
+    def x_of(self, mu):
+        return self._solve(self.qp.F + self.BT @ np.asarray(mu, float))
+
+    def k_solve(self, r):
+        return self._solve(np.asarray(r, float))
+
+    def k_quad(self, r):
+        z = self._solve(np.asarray(r, float))
+        return float(r @ z), self.B @ z
+
+    def diagonal(self) -> np.ndarray:
+        """An estimate of diag(D): the lumped values |b_j|^4 / (b_j'K b_j) (lower bounds of D_jj, by
+        Cauchy-Schwarz), calibrated by the exact D_jj of up to 16 rows spread over the constraints
+        (one block solve): their median ratio multiplies the lumped values."""
+        if self._diag is None:
+            B, K = self.B, self.qp.K
+            bb = np.asarray(B.multiply(B).sum(axis=1)).ravel()
+            bKb = np.asarray((B @ K).multiply(B).sum(axis=1)).ravel()
+            lumped = np.where(bKb > 0, bb ** 2 / np.where(bKb > 0, bKb, 1.0), 0.0)
+            if self.m:
+                rows = np.unique(np.linspace(0, self.m - 1, min(16, self.m)).astype(int))
+                E = np.zeros((self.m, rows.size))
+                E[rows, np.arange(rows.size)] = 1.0
+                exact = self.apply(E)[rows, np.arange(rows.size)]
+                ok = lumped[rows] > 0
+                ratio = float(np.median(exact[ok] / lumped[rows][ok])) if ok.any() else 1.0
+                lumped = lumped * max(ratio, 1.0)
+                lumped[rows] = exact
+            pos = lumped[lumped > 0]
+            self._diag = np.where(lumped > 0, lumped, pos.mean() if pos.size else 1.0)
+        return self._diag
+
+    def face_solve(self, A, rhs, x0=None, rtol=1e-13):
+        """D_AA^-1 rhs by Jacobi-preconditioned CG (one K-solve per iteration), from ``x0``."""
+        self.counters.face_solves += 1
+        A = np.asarray(A, bool)
+        idx = np.flatnonzero(A)
+        if idx.size == 0:
+            return np.zeros(0)
+        v = np.zeros(self.m)
+
+        def mv(w):
+            v[:] = 0.0
+            v[idx] = w
+            return self.apply(v)[idx]
+
+        sol, its = pcg(mv, np.asarray(rhs, float), 1.0 / self.diagonal()[idx], x0=x0, rtol=rtol,
+                       max_iter=max(50, 4 * idx.size))
+        self.counters.cg_iterations += its
+        return sol
+
+
+def pcg(matvec, rhs: np.ndarray, inv_diag: np.ndarray, x0: np.ndarray | None = None, rtol: float = 1e-13,
+        max_iter: int = 1000) -> tuple[np.ndarray, int]:
+    """Jacobi-preconditioned CG for an SPD operator: (x, iterations) with |r| <= rtol |rhs|.
+
+    Raises numpy.linalg.LinAlgError when a curvature p'Ap <= 0 shows the operator is not positive
+    definite or the iteration cap is reached.
+    """
+    nb = float(np.linalg.norm(rhs))
+    if nb == 0.0:
+        return np.zeros_like(rhs), 0
+    x = np.zeros_like(rhs) if x0 is None else np.array(x0, float)
+    r = rhs - matvec(x) if x0 is not None and np.any(x) else rhs.copy()
+    z = inv_diag * r
+    p = z.copy()
+    rz = float(r @ z)
+    for k in range(max_iter + 1):
+        if np.linalg.norm(r) <= rtol * nb:
+            return x, k
+        if k == max_iter:
+            break
+        Ap = matvec(p)
+        pAp = float(p @ Ap)
+        if not pAp > 0:
+            raise np.linalg.LinAlgError("CG: the operator is not positive definite on the face")
+        a = rz / pAp
+        x += a * p
+        r -= a * Ap
+        z = inv_diag * r
+        rz, rz_old = float(r @ z), rz
+        p = z + (rz / rz_old) * p
+    raise np.linalg.LinAlgError(f"CG on the face did not reach {rtol:g} in {max_iter} iterations "
+                                f"(relative residual {np.linalg.norm(r) / nb:.1e})")
+
+
+# --------------------------------------------------------------------------- factorization of K
+def factor_whole(qp: QP, factor=None, store=None):
+    """The factorization of the whole K (no Schur set), kept by the QP's store (or ``store``)."""
+    from dualfem.numerics.factor import choose as choose_backend
+    from dualfem.numerics.linalg import FixedFactor, store_of
+    from dualfem.numerics.threads import ensure_threads
+
+    backend = choose_backend(factor)
+    ensure_threads()
+    store = store_of(qp) if store is None else store
+    K = qp.K if qp.K.format in ("csr", "csc") else qp.K.tocsr()
+    key = store.key((K.indptr, K.indices, K.data), f":{K.format}:whole:{backend.name}")
+    ff = store.get(key)
+    if ff is None:
+        t0 = time.perf_counter()
+        fact = backend.factor(K.tocsr())
+        ff = FixedFactor(n=K.shape[0], local=np.zeros(0, np.int64), fact=fact, S_fixed=np.zeros((0, 0)),
+                         time_s={"factorize": time.perf_counter() - t0})
+        store.put(key, ff)
+        store.factorizations += 1
+    return ff.fact
+
+
+def _factorizations(qp: QP, store) -> int:
+    from dualfem.numerics.linalg import store_of
+
+    return (store_of(qp) if store is None else store).factorizations
+
+
+# --------------------------------------------------------------------------- choice and memory
+def dense_extra_bytes(n_local: int, m: int) -> int:
+    """Memory of the dense path beyond the factorization: S_I and its Cholesky factor (|I|^2 each),
+    V = L^-1 B_I' (|I| m) and D (m^2), 8 bytes each."""
+    return 8 * (2 * n_local * n_local + n_local * m + m * m)
+
+
+def estimates(qp: QP, backend: str | None = None) -> dict:
+    """Peak-memory estimates (bytes) of both operators for this QP: {"dense": ..., "matrix_free": ...}."""
+    from dualfem.numerics.factor import get_default
+    from dualfem.numerics.memory import SAFETY, estimate_peak_bytes
+
+    backend = backend or get_default()
+    base = estimate_peak_bytes(max(qp.n, 1), backend)
+    nI = int(np.asarray(qp.local_dofs).size)
+    return {"dense": int(SAFETY * (base + dense_extra_bytes(nI, qp.m))),
+            "matrix_free": int(SAFETY * (base + 8 * 8 * qp.n))}
+
+
+def choose_operator(qp: QP, asked: str = "auto", limit_bytes: int | None = None,
+                    backend: str | None = None) -> tuple[str, str]:
+    """(operator, why) for ``asked`` in :data:`OPERATORS`.
+
+    ``auto``: dense while |I| <= :data:`CROSSOVER_LOCAL` (and <= MAX_LOCAL) and its estimate fits the
+    memory available, else matrix-free if that fits. InputError when the asked one (or, for auto,
+    neither) fits, naming the sizes, the estimates, the memory and the other operator.
+    """
+    from dualfem.numerics.linalg import MAX_LOCAL
+    from dualfem.numerics.memory import available_bytes
+
+    asked = check_operator(asked, "?") if asked not in OPERATORS else asked
+    nI = int(np.asarray(qp.local_dofs).size)
+    est = estimates(qp, backend)
+    have = available_bytes() if limit_bytes is None else int(limit_bytes)
+    sizes = f"n = {qp.n} unknowns, {nI} local unknowns, m = {qp.m}"
+
+    def refuse(kind: str, other: str) -> InputError:
+        return InputError(f"operator={kind}: {sizes}: needs about {est[kind] / 1e9:.1f} GB, available "
+                          f"{have / 1e9:.1f} GB; operator={other} needs about {est[other] / 1e9:.1f} GB")
+
+    if asked == "dense":
+        if nI > MAX_LOCAL:
+            raise InputError(f"operator=dense: {sizes}: the dense reduced matrix would exceed {MAX_LOCAL}^2 "
+                             f"(about {est['dense'] / 1e9:.1f} GB); use operator=matrix_free "
+                             f"(about {est['matrix_free'] / 1e9:.1f} GB)")
+        if est["dense"] > have:
+            raise refuse("dense", "matrix_free")
+        return "dense", "asked"
+    if asked == "matrix_free":
+        if est["matrix_free"] > have:
+            raise refuse("matrix_free", "dense")
+        return "matrix_free", "asked"
+    if nI <= min(CROSSOVER_LOCAL, MAX_LOCAL) and est["dense"] <= have:
+        return "dense", f"auto: {nI} local unknowns <= {CROSSOVER_LOCAL}"
+    if est["matrix_free"] <= have:
+        return "matrix_free", f"auto: {nI} local unknowns > {CROSSOVER_LOCAL}" if nI > CROSSOVER_LOCAL \
+            else "auto: the dense blocks do not fit in memory"
+    raise InputError(f"operator=auto: {sizes}: neither operator fits: dense about {est['dense'] / 1e9:.1f} GB, "
+                     f"matrix_free about {est['matrix_free'] / 1e9:.1f} GB, available {have / 1e9:.1f} GB")
+
+
+def make_operator(qp: QP, operator: str = "auto", factor=None, store=None) -> DualOperator:
+    """The dual operator of ``qp`` (``operator`` in :data:`OPERATORS`; see :func:`choose_operator`)."""
+    kind, why = choose_operator(qp, operator, backend=getattr(factor, "name", factor))
+    op = DenseDualOperator(qp, factor, store) if kind == "dense" else MatrixFreeDualOperator(qp, factor, store)
+    op.chosen_because = why
+    return op

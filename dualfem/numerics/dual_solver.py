@@ -1,0 +1,40 @@
+"""Base class of the solver plugins that work on the contact dual through a :class:`DualOperator`.
+
+:class:`DualOperatorSolver` adds the parameters ``operator`` (``auto`` | ``dense`` | ``matrix_free``,
+:data:`dualfem.numerics.dual_operator.OPERATORS`) and ``factor`` (the factorization backend) to a
+:class:`~dualfem.core.solver.Solver`; ``skip`` answers with the operator choice's refusal (a QP for
+which no operator fits the memory), ``setup`` builds ``self.op`` (:func:`make_operator`) and
+publishes the dense path's :class:`~dualfem.numerics.linalg.LocalReduction` as ``self.reduction``
+(the runner's certification reuses it; the matrix-free path's factorization of K is found by the
+certificate in the QP's store). Plugins import it from here, never from each other.
+"""
+from __future__ import annotations
+
+from dualfem.core.errors import InputError
+from dualfem.core.solver import Solver
+from dualfem.numerics.dual_operator import OPERATORS, DualOperator, check_operator, choose_operator, make_operator
+from dualfem.numerics.factor import from_param
+
+__all__ = ["DualOperatorSolver", "OPERATORS"]
+
+
+class DualOperatorSolver(Solver):
+    """A solver on the dual operator D = B K^-1 B' (dense or matrix-free, chosen by ``operator``)."""
+
+    op: DualOperator
+
+    def validate(self) -> None:
+        from_param(self)
+        self.params["operator"] = check_operator(self.params["operator"], self.name)
+
+    def skip(self, qp) -> str | None:
+        try:
+            choose_operator(qp, self.params["operator"], backend=from_param(self))
+        except InputError as exc:
+            return str(exc)
+        return None
+
+    def setup(self, qp) -> None:
+        self.qp = qp
+        self.op = make_operator(qp, self.params["operator"], factor=from_param(self))
+        self.reduction = self.op.reduction
