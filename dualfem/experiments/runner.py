@@ -37,6 +37,8 @@ from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver, check_declared
 
 #: ``Solution.info`` keys that belong to the runner: whatever a plugin puts there is dropped
+#: the work counters a solver may report in Solution.info, copied to the JSON record's ``counters``
+COUNTERS = ("operator", "applications", "solves", "factorizations", "face_solves", "cg_iterations")
 RUNNER_INFO = ("claimed_status", "certified_tol", "certificate", "declared", "qp_changed")
 
 
@@ -421,6 +423,8 @@ def summary(qp: QP, sol: Solution) -> dict:
         "iterations": sol.iterations,
         "time_s": sol.time_s,
         "params": jsonable_params(sol.params),
+        # PERMON-style work counters of the dual solvers (dualfem.numerics.dual_operator.OperatorCounters)
+        "counters": {k: sol.info[k] for k in COUNTERS if k in sol.info},
     }
     if sol.x is not None and sol.multipliers is not None and sol.residuals is not None and sol.residuals["finite"]:
         jump = qp.B @ sol.x

@@ -32,6 +32,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
+from dualfem.core.errors import InputError
 from dualfem.core.evaluator import force_scale, size_energy, size_max
 from dualfem.core.qp import QP
 from dualfem.numerics.linalg import step_size
@@ -69,21 +70,35 @@ class _SparseK:
 
 
 class KSolver:
-    """r -> K^-1 r (the local reduction when possible, else a sparse LU), and the Delassus
-    matrix D = B K^-1 B' (dense, from the reduction, or by m solves for small m).
+    """r -> K^-1 r and the dual operator D = B K^-1 B' of a QP, for the certificate.
 
-    ``reduction``: a solver's LocalReduction of this very QP, reused as is; otherwise a new reduction
-    takes the factorization of K_fixed from the QP's store (``QP.store``,
-    :func:`dualfem.numerics.linalg.store_of`), where the solvers that ran on the QP left it."""
+    Three ways, by size: the exact local reduction (D dense; ``reduction``: a solver's LocalReduction
+    of this very QP, reused as is, else a new one from the factorization of K_fixed in the QP's store,
+    ``QP.store``, :func:`dualfem.numerics.linalg.store_of`); the matrix-free operator
+    (:class:`dualfem.numerics.dual_operator.MatrixFreeDualOperator`: one factorization of the whole K,
+    found in the same store when a matrix-free solver made it, D_AA^-1 by preconditioned CG) when the
+    dense reduction does not fit (:func:`dualfem.numerics.dual_operator.choose_operator`); a plain sparse
+    factorization of K (D by m solves for m <= 2000) when the QP has no usable local structure."""
 
     def __init__(self, qp: QP, factor=None, reduction=None):
+        from dualfem.numerics.dual_operator import MatrixFreeDualOperator, choose_operator
         from dualfem.numerics.linalg import LocalReduction
 
         self.qp = qp
         self.red = None
+        self.op: MatrixFreeDualOperator | None = None
         self._D: np.ndarray | None = None
         if reduction is not None and type(reduction) is LocalReduction and reduction.qp is qp:
             self.red = reduction          # a solver's reduction of this very QP: same factorization, reused
+            return
+        kind = "dense"
+        if qp.m:
+            try:
+                kind = choose_operator(qp, "auto", backend=getattr(factor, "name", factor))[0]
+            except InputError as exc:     # neither operator fits: the certificate is unavailable, said so
+                raise RuntimeError(str(exc)) from exc
+        if kind == "matrix_free":
+            self.op = MatrixFreeDualOperator(qp, factor)
             return
         try:
             self.red = LocalReduction(qp, factor=factor)
@@ -91,10 +106,14 @@ class KSolver:
             self._lu = _SparseK(qp, factor)
 
     def __call__(self, r: np.ndarray) -> np.ndarray:
+        if self.op is not None:
+            return self.op.k_solve(r)
         return self.red.k_solve(r) if self.red is not None else self._lu.solve(r)
 
     def quad(self, r: np.ndarray) -> tuple[float, np.ndarray]:
         """(r'K^-1 r, B K^-1 r): one solve of K_fixed with the reduction, one of K otherwise."""
+        if self.op is not None:
+            return self.op.k_quad(r)
         if self.red is not None:
             q, zI = self.red.k_quad(r)
             return q, self.red.BI @ zI
@@ -102,7 +121,10 @@ class KSolver:
         return float(r @ z), self.qp.B @ z
 
     def delassus(self) -> np.ndarray | None:
+        """D as a dense matrix, or None (matrix-free, or no reduction and m > 2000)."""
         if self._D is None:
+            if self.op is not None:
+                return None
             if self.red is not None:
                 self._D = self.red.delassus()          # symmetric already
             elif self.qp.m <= 2000:
@@ -129,12 +151,43 @@ MU_ROUNDING = 100.0
 FEAS_RTOL = 1e-12
 
 
-def guess_active_set(D: np.ndarray, mu: np.ndarray, gap: np.ndarray) -> np.ndarray:
+def guess_active_set(D: np.ndarray, mu: np.ndarray, gap: np.ndarray, diagonal: np.ndarray | None = None) -> np.ndarray:
     """The primal-dual active-set guess ``{mu_j - c gap_j > 0}``, c = 1 / mean diag of the Delassus
-    matrix D (so that c gap is a force); for an active-set answer this is {mu > 0}."""
-    dD = np.diag(D)
+    matrix D (so that c gap is a force); for an active-set answer this is {mu > 0}. ``diagonal``: diag(D)
+    when D itself is not formed (matrix-free; D is then unused)."""
+    dD = np.diag(D) if diagonal is None else np.asarray(diagonal)
     c = 1.0 / dD.mean() if dD.size and dD.mean() > 0 else 1.0
     return (np.asarray(mu, float) - c * gap) > 0
+
+
+class _Face:
+    """D_AA^-1 for one set A: a dense Cholesky factor (``rtol`` 0: exact to rounding, ``kappa`` from its
+    diagonal) or the matrix-free operator's CG (``rtol`` its tolerance, ``kappa`` its Lanczos estimate)."""
+
+    def __init__(self, D: np.ndarray | None, op, A: np.ndarray, rtol: float):
+        self.D, self.op, self.A, self.rtol = D, op, A, 0.0
+        if D is not None:
+            self.L = sla.cho_factor(D[np.ix_(A, A)])
+            dL = np.abs(np.diag(self.L[0]))
+            self.kappa = float((dL.max() / max(dL.min(), 1e-300)) ** 2)   # a cheap estimate of cond(D_AA)
+        else:
+            self.kappa, self.cg_rtol = 1.0, rtol
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        if self.D is not None:
+            return sla.cho_solve(self.L, rhs)
+        out = self.op.face_solve(self.A, rhs, rtol=self.cg_rtol)
+        self.kappa = max(self.kappa, self.op.last_face.get("kappa", 1.0))
+        self.rtol = self.cg_rtol
+        return out
+
+    def apply(self, v: np.ndarray) -> np.ndarray:
+        """D v (all rows)."""
+        return self.D @ v if self.D is not None else self.op.apply(v)
+
+
+#: relative tolerance of the matrix-free certificate's CG on D_AA (its error enters the rounding margin)
+CG_RTOL = 1e-11
 
 
 def _finite(x, mu) -> bool:
@@ -203,28 +256,27 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
         return nan
     ksolve = ksolve or solver_for(qp)
     mu = np.asarray(mu, float)
+    op = getattr(ksolve, "op", None)
     D = ksolve.delassus() if qp.m else np.zeros((0, 0))
     gap = qp.B @ x
-    if D is None:                  # no Delassus matrix (large m, no reduction): only mu = 0 can be checked
+    if D is None and op is None:   # no Delassus matrix (large m, no reduction): only mu = 0 can be checked
         if np.any(mu != 0):
             return nan
         D, A = np.zeros((0, 0)), np.zeros(mu.size, bool)
     else:
-        A = guess_active_set(D, mu, gap)
+        A = guess_active_set(D, mu, gap, None if D is not None else op.diagonal())
     mu_A = np.where(A, mu, 0.0)
     same = np.array_equal(mu_A, np.maximum(mu, 0.0))
     rKr, Bz = (_quad if (_quad is not None and same) else None) or _residual_solve(qp, x, mu_A, ksolve, _Kx)
     dmu = np.zeros_like(mu)
-    kappa = 1.0
+    face = None
     if A.any():
         try:
-            L = sla.cho_factor(D[np.ix_(A, A)])
-            dmu[A] = sla.cho_solve(L, -(gap[A] - Bz[A]))
+            face = _Face(D, op, A, CG_RTOL)
+            dmu[A] = face.solve(-(gap[A] - Bz[A]))
         except (np.linalg.LinAlgError, ValueError):
             return nan
-        dL = np.abs(np.diag(L[0]))
-        kappa = float((dL.max() / max(dL.min(), 1e-300)) ** 2)   # a cheap estimate of cond(D_AA)
-    Ddmu = D @ dmu if A.any() else np.zeros_like(dmu)
+    Ddmu = face.apply(dmu) if face is not None else np.zeros_like(dmu)
     Bdx = -Bz + Ddmu
     gap1 = gap + Bdx
     mu1 = mu_A + dmu
@@ -234,8 +286,10 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     if (A.any() and mu1[A].min() <= margin * step_mu) or ((~A).any() and gap1[~A].min() <= margin * step_gap):
         # not verified to first order (x's error is not |dx|); the multipliers of the set are still the
         # exact ones if the exact point keeps the KKT signs beyond the rounding of the step itself
-        # (far-off multipliers with a right set: a large step, signs kept), then mu* = mu1
-        rnd = MU_ROUNDING * EPS * max(kappa, 1.0)
+        # (far-off multipliers with a right set: a large step, signs kept), then mu* = mu1; with CG the
+        # step is known to its tolerance times the condition CG saw, not to rounding
+        kappa, rtol = (face.kappa, face.rtol) if face is not None else (1.0, 0.0)
+        rnd = MU_ROUNDING * max(EPS, rtol) * max(kappa, 1.0)
         if (A.any() and mu1[A].min() <= rnd * step_mu) or ((~A).any() and gap1[~A].min() <= rnd * step_gap):
             return nan
         return float("nan"), err_mu
@@ -255,18 +309,20 @@ def multiplier_floor(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     from dualfem.core.evaluator import ROUNDING_C, abs_product
 
     ksolve = ksolve or solver_for(qp)
+    op = getattr(ksolve, "op", None)
     D = ksolve.delassus() if qp.m else None
-    if D is None or not _finite(x, mu):
+    if (D is None and op is None) or not qp.m or not _finite(x, mu):
         return float("nan")
     mu = np.asarray(mu, float)
-    A = guess_active_set(D, mu, qp.B @ x)
+    A = guess_active_set(D, mu, qp.B @ x, None if D is not None else op.diagonal())
     if not A.any():
         return 0.0
     s = abs_product(qp.K, np.abs(x)) + np.abs(qp.F) + abs_product(qp.B.T, np.abs(mu))
     z = ksolve(ROUNDING_C * EPS * s)
     rhs = (np.abs(qp.B @ z) + EPS * abs_product(qp.B, np.abs(x)))[A]
     try:
-        dm = sla.solve(D[np.ix_(A, A)], rhs, assume_a="pos")
+        dm = sla.solve(D[np.ix_(A, A)], rhs, assume_a="pos") if D is not None else \
+            op.face_solve(A, rhs, rtol=CG_RTOL)
     except (np.linalg.LinAlgError, ValueError):
         return float("nan")
     return float(np.abs(dm).max()) / force_scale(qp, mu)

@@ -216,6 +216,8 @@ class MatrixFreeDualOperator(DualOperator):
         self._xF: np.ndarray | None = None
         self._b0: np.ndarray | None = None
         self._diag: np.ndarray | None = None
+        #: the last face solve: CG iterations, the Lanczos condition estimate, the tolerance
+        self.last_face: dict = {}
         self.time_s["setup"] = time.perf_counter() - t0
 
     def _solve(self, b: np.ndarray) -> np.ndarray:
@@ -282,21 +284,28 @@ class MatrixFreeDualOperator(DualOperator):
             v[idx] = w
             return self.apply(v)[idx]
 
+        stats: dict = {}
         sol, its = pcg(mv, np.asarray(rhs, float), 1.0 / self.diagonal()[idx], x0=x0, rtol=rtol,
-                       max_iter=max(50, 4 * idx.size))
+                       max_iter=max(50, 4 * idx.size), stats=stats)
         self.counters.cg_iterations += its
+        self.last_face = {"iterations": its, "kappa": stats["kappa"], "rtol": rtol}
         return sol
 
 
 def pcg(matvec, rhs: np.ndarray, inv_diag: np.ndarray, x0: np.ndarray | None = None, rtol: float = 1e-13,
-        max_iter: int = 1000) -> tuple[np.ndarray, int]:
+        max_iter: int = 1000, stats: dict | None = None) -> tuple[np.ndarray, int]:
     """Jacobi-preconditioned CG for an SPD operator: (x, iterations) with |r| <= rtol |rhs|.
 
+    ``stats``, if given, receives ``kappa``: the condition number of the preconditioned operator
+    estimated from the Lanczos tridiagonal matrix of the CG coefficients (a lower estimate).
     Raises numpy.linalg.LinAlgError when a curvature p'Ap <= 0 shows the operator is not positive
     definite or the iteration cap is reached.
     """
     nb = float(np.linalg.norm(rhs))
+    alphas: list[float] = []
+    betas: list[float] = []
     if nb == 0.0:
+        _lanczos_kappa(alphas, betas, stats)
         return np.zeros_like(rhs), 0
     x = np.zeros_like(rhs) if x0 is None else np.array(x0, float)
     r = rhs - matvec(x) if x0 is not None and np.any(x) else rhs.copy()
@@ -305,6 +314,7 @@ def pcg(matvec, rhs: np.ndarray, inv_diag: np.ndarray, x0: np.ndarray | None = N
     rz = float(r @ z)
     for k in range(max_iter + 1):
         if np.linalg.norm(r) <= rtol * nb:
+            _lanczos_kappa(alphas, betas, stats)
             return x, k
         if k == max_iter:
             break
@@ -317,9 +327,28 @@ def pcg(matvec, rhs: np.ndarray, inv_diag: np.ndarray, x0: np.ndarray | None = N
         r -= a * Ap
         z = inv_diag * r
         rz, rz_old = float(r @ z), rz
+        alphas.append(a)
+        betas.append(rz / rz_old)
         p = z + (rz / rz_old) * p
     raise np.linalg.LinAlgError(f"CG on the face did not reach {rtol:g} in {max_iter} iterations "
                                 f"(relative residual {np.linalg.norm(r) / nb:.1e})")
+
+
+def _lanczos_kappa(alphas: list[float], betas: list[float], stats: dict | None) -> None:
+    """stats["kappa"]: extreme eigenvalues of the CG Lanczos matrix T (T_kk = 1/a_k + b_(k-1)/a_(k-1),
+    T_k,k+1 = sqrt(b_k)/a_k): the condition of the preconditioned operator seen by CG (1 if none)."""
+    if stats is None:
+        return
+    k = len(alphas)
+    if k == 0:
+        stats["kappa"] = 1.0
+        return
+    a, b = np.array(alphas), np.array(betas)
+    diag = 1.0 / a
+    diag[1:] += b[:-1] / a[:-1]
+    off = np.sqrt(b[:-1]) / a[:-1]
+    ev = sla.eigvalsh_tridiagonal(diag, off) if k > 1 else diag
+    stats["kappa"] = float(ev.max() / max(ev.min(), 1e-300))
 
 
 # --------------------------------------------------------------------------- factorization of K
