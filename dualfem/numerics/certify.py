@@ -187,10 +187,10 @@ class _Face:
 
 
 #: relative tolerance of the matrix-free certificate's CG on D_AA. The step (dx, dmu) it computes is a
-#: correction: a relative error e of dmu changes the measured distance |dx|_K by the factor (1 +- e) and
-#: moves mu1 = mu_A + dmu by e |dmu|, far below the margins (10 |dmu|); the unverified branch widens its
-#: rounding margin to CG_RTOL x the condition CG saw
-CG_RTOL = 1e-8
+#: correction: a relative error e of dmu changes the measured distance |dx|_K by a relative O(e) (an
+#: error estimate known to 1e-6 of itself) and moves mu1 = mu_A + dmu by e |dmu|, far below the margins
+#: (10 |dmu|); the unverified branch widens its rounding margin to CG_RTOL x the condition CG saw
+CG_RTOL = 1e-6
 
 
 def _finite(x, mu) -> bool:

@@ -51,6 +51,8 @@ OPERATORS = ("auto", "dense", "matrix_free")
 #: ``auto`` takes the dense reduction up to this many local unknowns (|I|), matrix-free above.
 #: Measured on fractured scenes (benchmarks/operator_crossover.py): see reports/fractured.md
 CROSSOVER_LOCAL = 6000
+#: rows whose exact D_jj calibrates the matrix-free diagonal estimate (one block solve with this many columns)
+DIAG_SAMPLES = 8
 
 
 def check_operator(value, solver: str) -> str:
@@ -250,15 +252,15 @@ class MatrixFreeDualOperator(DualOperator):
 
     def diagonal(self) -> np.ndarray:
         """An estimate of diag(D): the lumped values |b_j|^4 / (b_j'K b_j) (lower bounds of D_jj, by
-        Cauchy-Schwarz), calibrated by the exact D_jj of up to 16 rows spread over the constraints
-        (one block solve): their median ratio multiplies the lumped values."""
+        Cauchy-Schwarz), calibrated by the exact D_jj of up to :data:`DIAG_SAMPLES` rows spread over the
+        constraints (one block solve): their median ratio multiplies the lumped values."""
         if self._diag is None:
             B, K = self.B, self.qp.K
             bb = np.asarray(B.multiply(B).sum(axis=1)).ravel()
             bKb = np.asarray((B @ K).multiply(B).sum(axis=1)).ravel()
             lumped = np.where(bKb > 0, bb ** 2 / np.where(bKb > 0, bKb, 1.0), 0.0)
             if self.m:
-                rows = np.unique(np.linspace(0, self.m - 1, min(16, self.m)).astype(int))
+                rows = np.unique(np.linspace(0, self.m - 1, min(DIAG_SAMPLES, self.m)).astype(int))
                 E = np.zeros((self.m, rows.size))
                 E[rows, np.arange(rows.size)] = 1.0
                 exact = self.apply(E)[rows, np.arange(rows.size)]
