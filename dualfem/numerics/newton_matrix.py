@@ -19,7 +19,7 @@ the slots are MKL's ``maxfct`` factors of one analyzed structure (one handle, on
 with another backend each slot is a Factorization of its own, analyzed when first used (SuperLU's
 analysis is only an ordering). When the backend reports the factor's size at analysis (PARDISO),
 ``keep`` is lowered to what half the available memory holds. The counters
-(:attr:`NewtonMatrix.counters`) say what was done: analyses, numeric factorizations, reuses of a
+(``NewtonMatrix.counters``, a :class:`NewtonCounters`) say what was done: analyses, numeric factorizations, reuses of a
 kept factor, solves, seconds per phase.
 
 Memory: one factor of K + B'B per slot, about the size of K's (B couples only the unknowns of the two
