@@ -80,9 +80,12 @@ memory, so the method runs at every size and is never skipped for its number of 
   factorization of K + B'B per active set met (each about as costly as K's), one sparse solve per
   Newton step; memory: two sparse factors. Measured on a 269 k-unknown many-crack scene (400 cracks,
   m = 3,200, 12,800 local unknowns, beyond the dense path; delta = 1e-5, load f1, 2 shared cores),
-  setup + solve against the floor (one factorization + solve of K, 2.8 s in the same runs):
-  ``uzawa_auto`` 5 outer / 11 Newton steps, 1 analysis + 5 numeric factorizations, 71 Lanczos
-  products, 17-21 s = 6-7.6x the floor; ``uzawa`` (r = 1e7) 23 / 53, 13 factorizations, 40-56 s.
+  setup + solve against the floor (one factorization + solve of K in the same process, 1.6-2.8 s
+  with the machine's load): ``uzawa_auto`` 5 outer / 11 Newton steps, 1 analysis + 5 numeric
+  factorizations, 71 Lanczos products (2.9-5.5 s of it), 8-21 s = 4.8-7.6x the floor (four runs);
+  ``uzawa`` (r = 1e7) 23 / 53, 13 factorizations (17 with ``keep_factors=1``), 10-25 s = 5.8-9.2x.
+  On a 25 k-unknown scene (64 cracks, 1,536 local unknowns) the dense path is faster (uzawa_auto
+  0.66 s against 1.2 s): ``auto`` keeps it there.
   ``info`` reports the counters (``newton_*``, ``applications``, ``mu_min_applications``).
   mu_min (``r_rule="auto"``, and the honest-stop bound of every run that stops) is estimated by
   Lanczos (ARPACK ``eigsh``, which="SA", relative tolerance ``eig_tol`` = 1e-2) on products
