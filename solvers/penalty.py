@@ -139,7 +139,7 @@ class _SparseSpace:
         self.qp, self.op = qp, op
         self.Q, self.q, self.B = qp.K.tocsr(), np.asarray(qp.F, float), op.B
         self.nm = NewtonMatrix(qp.K, qp.B, factor, keep=keep)
-        self.I = np.asarray(qp.local_dofs)
+        self.I = np.asarray(qp.local_dofs) if np.size(qp.local_dofs) else slice(None)
         self.refinements = 0
 
     @property
