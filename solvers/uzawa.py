@@ -60,13 +60,49 @@ method); with E or the length unit scaled by any factor, the iterates scale with
 status stays the same. A QP without scene units (a QP file) uses r as given, and says so in
 ``info["r_units"]``. ``r_rule="fixed"`` uses r as given always (``report paper`` asks for it).
 
-Linear algebra (``linalg``): ``"reduced"`` (default) works on the local unknowns only via the
-exact Schur reduction of :class:`dualfem.numerics.linalg.LocalReduction` (K_fixed factorized once,
-reused across delta, loads and solvers); each generalized Hessian is a small dense SPD matrix
-whose Cholesky factor is cached by active set. ``"full"`` is the textbook path: it refactorizes
-the sparse 2n x 2n Hessian at every Newton step. Both compute the same iterates: every iterate
-after the first is exactly optimal in the non-local unknowns, so the Newton steps, Armijo tests
-and stop tests are the same numbers, computed in a smaller space.
+Linear algebra (``linalg``, ``operator``): ``linalg="reduced"`` (default) runs on the contact dual
+operator that ``operator`` names (:mod:`dualfem.numerics.dual_operator`; ``auto`` picks by size and
+memory, so the method runs at every size and is never skipped for its number of defect unknowns):
+
+* ``operator="dense"``: the exact Schur reduction onto the local unknowns I
+  (:class:`dualfem.numerics.linalg.LocalReduction`, K_fixed factorized once, reused across delta,
+  loads and solvers); each generalized Hessian is applied by Woodbury on the dense Delassus matrix
+  with one |A| x |A| Cholesky factor per active set (cached). Cost: the factorization of K_fixed and
+  its Schur complement, then O(|I|^2 m) to form D once (memory 8 (2 |I|^2 + |I| m + m^2) bytes);
+  every Newton step is dense work on |I|-sized blocks. mu_min (``r_rule="auto"``) by a dense
+  eigensolver on the m x m matrix, O(m^3).
+* ``operator="matrix_free"``: all unknowns, sparse. The Newton matrices
+  H = K + r B' diag(w * active) B have one sparsity pattern, that of K + B'B (inactive rows stored as
+  zeros): :class:`dualfem.numerics.newton_matrix.NewtonMatrix` analyzes it once and factorizes it
+  numerically once per new active set (the last ``keep_factors`` kept by active set; counted in
+  ``info["factorizations"]``); the start K^-1 F is one solve with the operator's factorization of K
+  (shared with the certificate). Cost: one factorization of K, one analysis, one numeric
+  factorization of K + B'B per active set met (each about as costly as K's), one sparse solve per
+  Newton step; memory: two sparse factors. Measured on a 269 k-unknown many-crack scene (400 cracks,
+  m = 3,200, 12,800 local unknowns, beyond the dense path; delta = 1e-5, load f1, 2 shared cores),
+  setup + solve against the floor (one factorization + solve of K in the same process, 1.6-2.8 s
+  with the machine's load): ``uzawa_auto`` 5 outer / 11 Newton steps, 1 analysis + 5 numeric
+  factorizations, 71 Lanczos products (2.9-5.5 s of it), 8-21 s = 4.8-7.6x the floor (four runs);
+  ``uzawa`` (r = 1e7) 23 / 53, 13 factorizations (17 with ``keep_factors=1``), 10-25 s = 5.8-9.2x.
+  On a 25 k-unknown scene (64 cracks, 1,536 local unknowns) the dense path is faster (uzawa_auto
+  0.66 s against 1.2 s): ``auto`` keeps it there.
+  ``info`` reports the counters (``newton_*``, ``applications``, ``mu_min_applications``).
+  mu_min (``r_rule="auto"``, and the honest-stop bound of every run that stops) is estimated by
+  Lanczos (ARPACK ``eigsh``, which="SA", relative tolerance ``eig_tol`` = 1e-2) on products
+  W^1/2 D W^1/2 v, one K-solve each (about 70-80 products on the many-crack scenes). An estimate is
+  enough: a Ritz value is an upper bound of mu_min, so r = r_factor / mu_min comes out slightly
+  smaller than the exact rule's and the slowest dual mode contracts by 1 / (1 + r mu_min), slightly
+  slower than 1 / (1 + r_factor) (a 1 % error costs nothing measurable); r only sets the speed of
+  the proximal-point iteration, never its fixed point, and the outer stop test (the relative dual
+  change, with the error estimates above) guards the accuracy whatever r is. The honest-stop bound
+  change / (r mu_min) is then at most that 1 % optimistic.
+
+The two operators compute the same iterates: every iterate after the first is exactly optimal in the
+non-local unknowns, so the Newton steps, Armijo tests and stop tests (gradient'step, d'Qd, the
+energy norm x'Kx) are the same numbers, computed in the smaller space or the whole one (tested: the
+same steps, answers within 1e-10 in the energy norm). ``linalg="full"`` is the textbook path (it
+ignores ``operator``): it refactorizes the sparse Hessian at every Newton step, no analysis reused,
+and allows ``inner_norm="euclidean"``.
 """
 from __future__ import annotations
 
@@ -81,10 +117,13 @@ from dualfem.core.errors import InputError
 from dualfem.core.parts import UnitsPart
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver
+from dualfem.numerics.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics.factor import from_param
-from dualfem.numerics.linalg import LocalReduction, sparse_factor, too_many_local
+from dualfem.numerics.linalg import LocalReduction, sparse_factor
+from dualfem.numerics.newton_matrix import NewtonMatrix
 
+#: the matrix-free path computes mu_min densely (one block of m products) up to this many rows
+DENSE_EIG_MAX = 32
 #: the paper's unit system (Zhiltsov & Maksimova 2023, section 5): E in MPa, the unit square
 PAPER_E = 69000.0
 PAPER_WIDTH = 1.0
@@ -122,12 +161,14 @@ class _ReducedSpace:
     C_A^-1 + D_AA is symmetric positive definite and its conditioning is D's, however large C_A.
     """
 
-    def __init__(self, qp, norm: str, factor: str | None = None):
+    kind = "dense"
+
+    def __init__(self, qp, norm: str, factor: str | None = None, reduction: LocalReduction | None = None):
 
         if norm != "energy":
             raise InputError("parameter 'inner_norm' of solver 'uzawa' must be 'energy' with "
                              "linalg='reduced' ('euclidean' needs linalg='full')")
-        self.red = red = LocalReduction(qp, factor=factor)
+        self.red = red = reduction if reduction is not None else LocalReduction(qp, factor=factor)
         self.Q, self.q, self.B = red.S, red.g, red.BI
         self.c0 = red.c0
         self._chol_S = red.S_cho
@@ -140,6 +181,13 @@ class _ReducedSpace:
     def dual_compliance(self, w: np.ndarray) -> np.ndarray:
         """G W with G = B K^-1 B' (jump per nodal force): the Hessian of the dual in l."""
         return self.red.delassus() * w[None, :]
+
+    def mu_min(self, w: np.ndarray) -> tuple[float, dict]:
+        """(smallest eigenvalue of W^1/2 G W^1/2, how): a dense symmetric eigensolver on the m x m matrix."""
+        GW = self.dual_compliance(w)
+        sw = np.sqrt(w)
+        sym = (GW / w[None, :]) * sw[:, None] * sw[None, :]   # W^1/2 G W^1/2
+        return float(np.linalg.eigvalsh(0.5 * (sym + sym.T)).min()), {"mu_min_method": "dense eigvalsh"}
 
     def qgrad(self, z):
         return self.Q @ z - self.q
@@ -177,6 +225,8 @@ class _ReducedSpace:
 class _FullSpace:
     """Textbook sparse linear algebra on all unknowns (refactorizes every Newton step)."""
 
+    kind = "full"
+
     def __init__(self, qp, norm: str, factor: str | None = None):
         self.Q, self.q, self.B = qp.K.tocsr(), qp.F, qp.B.tocsr()
         self.qp, self.norm, self.factor = qp, norm, factor
@@ -203,12 +253,82 @@ class _FullSpace:
     def full(self, z):
         return z
 
-    def dual_compliance(self, w):
-        return _ReducedSpace(self.qp, "energy", self.factor).dual_compliance(w)
+    def mu_min(self, w):
+        return _ReducedSpace(self.qp, "energy", self.factor).mu_min(w)
+
+
+class _SparseSpace:
+    """Sparse linear algebra on all unknowns with one analysis (the matrix-free operator's path).
+
+    The Newton matrices K + B' diag(coef) B share the pattern of K + B'B
+    (:class:`dualfem.numerics.newton_matrix.NewtonMatrix`): analyzed once, one numeric factorization
+    per new active set (``keep`` factors kept). The start K^-1 F and the products D v of the
+    Lanczos estimate of mu_min use the operator's factorization of K (shared with the certificate
+    through the QP's store). Every quantity of the inner and outer tests is the full-space one,
+    equal to the reduced space's (module docstring), so the iterates are the dense path's to rounding.
+    """
+
+    kind = "matrix_free"
+
+    def __init__(self, qp, op, factor: str | None = None, keep: int = 4):
+        self.qp, self.op = qp, op
+        self.Q, self.q, self.B = qp.K.tocsr(), np.asarray(qp.F, float), op.B
+        self.nm = NewtonMatrix(qp.K, qp.B, factor, keep=keep)
+
+    @property
+    def factorizations(self) -> int:
+        return self.nm.counters.factorizations
+
+    def start(self):
+        return self.op.k_solve(self.q)
+
+    def qgrad(self, z):
+        return self.Q @ z - self.q
+
+    def qform(self, d):
+        return float(d @ (self.Q @ d))
+
+    def norm2(self, z):
+        return float(z @ (self.Q @ z))
+
+    def newton(self, coef, rhs):
+        return self.nm.solve(coef, rhs)
+
+    def full(self, z):
+        return z
+
+    def mu_min(self, w, tol: float = 1e-2):
+        """(estimate of the smallest eigenvalue of W^1/2 D W^1/2, how): Lanczos (ARPACK ``eigsh``,
+        which="SA") on products with the matrix-free operator, each one K-solve. Its Ritz value is an
+        upper bound of mu_min, accurate to about ``tol`` relative (module docstring: why that is enough)."""
+        from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
+
+        op, m = self.op, self.qp.m
+        sw = np.sqrt(w)
+        before = op.counters.applications
+        t0 = time.perf_counter()
+        if m <= DENSE_EIG_MAX:      # a few rows: the whole matrix is one block of m products
+            sym = sw[:, None] * op.apply(sw[:, None] * np.eye(m))
+            mu = float(np.linalg.eigvalsh(0.5 * (sym + sym.T)).min())
+            how = f"dense eigvalsh (m <= {DENSE_EIG_MAX})"
+        else:
+            A = LinearOperator((m, m), matvec=lambda v: sw * op.apply(sw * np.ravel(v)), dtype=float)
+            v0 = np.ones(m) / np.sqrt(m)
+            how = f"Lanczos (eigsh SA, tol {tol:g})"
+            try:
+                mu = float(eigsh(A, k=1, which="SA", tol=tol, v0=v0, return_eigenvectors=False,
+                                 maxiter=max(1000, 10 * m))[0])
+            except ArpackNoConvergence as exc:   # a Ritz value is still an upper bound of mu_min
+                if not np.size(exc.eigenvalues):
+                    raise
+                mu = float(np.min(exc.eigenvalues))
+                how += ", not converged: the last Ritz value"
+        return mu, {"mu_min_method": how, "mu_min_applications": op.counters.applications - before,
+                    "mu_min_time_s": time.perf_counter() - t0}
 
 
 @register_solver
-class Uzawa(Solver):
+class Uzawa(DualOperatorSolver):
     """Uzawa on the modified Lagrangian + generalized Newton-Armijo (the paper's method)."""
 
     name = "uzawa"
@@ -228,8 +348,12 @@ class Uzawa(Solver):
         "max_inner": 200,         # Newton steps per outer iteration
         "max_backtracks": 80,
         "l0": 0.0,                # starting pressure l^0 (same at every defect node)
-        "linalg": "reduced",      # "reduced" (fast, exact) or "full" (textbook)
+        "linalg": "reduced",      # "reduced" (fast, exact: on the dual operator) or "full" (textbook)
+        "operator": "auto",       # with linalg="reduced": dense (reduction onto the defect unknowns),
+                                  # matrix_free (sparse Newton matrices, one analysis), auto (by size, memory)
         "factor": "auto",         # K factorization: auto (--factor/DUALFEM_FACTOR/fastest) or a backend
+        "keep_factors": 4,        # matrix_free: numeric factorizations of Newton matrices kept (by active set)
+        "eig_tol": 1e-2,          # matrix_free, r_rule="auto": relative tolerance of the Lanczos estimate of mu_min
         "inner_norm": "energy",   # norm of the inner stop test
         "shortcut": True,         # return the unconstrained minimizer when it is admissible
         "stall_window": 1000,     # stop with 'stagnation' if the dual change has not improved for this many outer its
@@ -242,11 +366,12 @@ class Uzawa(Solver):
               "tol_mode": ("relative", "absolute"),
               "tol_inner": "(0, inf)", "step_factor": "(1, inf)", "armijo_c": "(0, 1)", "max_inner": "[1, inf)",
               "max_backtracks": "[1, inf)", "l0": "[0, inf)", "linalg": ("reduced", "full"),
+              "operator": OPERATORS, "keep_factors": "[1, inf)", "eig_tol": "(0, 1)",
               "factor": None, "inner_norm": ("energy", "euclidean"), "shortcut": bool, "stall_window": "[1, inf)",
               "error_factor": "(0, inf)"}
 
     def validate(self) -> None:
-        from_param(self)
+        super().validate()
         p = self.params
         if p["inner_norm"] == "euclidean" and p["linalg"] != "full":
             raise InputError(f"parameter 'inner_norm' of solver '{self.name}' must be 'energy' with "
@@ -257,33 +382,38 @@ class Uzawa(Solver):
         return {"tol": tol * 10.0, "tol_inner": tol * 1e-2}
 
     def skip(self, qp) -> str | None:
-        if self.params["linalg"] == "reduced":
-
-            return too_many_local(qp)
-        return None
+        # linalg="reduced": refused only when no operator fits the memory (operator=auto switches
+        # to matrix_free above the dense sizes: the paper's method runs at every size)
+        return super().skip(qp) if self.params["linalg"] == "reduced" else None
 
     def setup(self, qp) -> None:
-        self.qp = qp
-        space = _ReducedSpace if self.params["linalg"] == "reduced" else _FullSpace
-        self.space = space(qp, self.params["inner_norm"], from_param(self))
-        self.reduction = getattr(self.space, "red", None)
+        p = self.params
+        self.qp, self.op, self.reduction = qp, None, None
+        self._mu, self._mu_info = None, {}
+        if p["linalg"] == "reduced":
+            super().setup(qp)            # self.op (dense or matrix_free), self.reduction (dense only)
+            if self.op.kind == "dense":
+                self.space = _ReducedSpace(qp, p["inner_norm"], reduction=self.op.reduction)
+            else:
+                self.space = _SparseSpace(qp, self.op, from_param(self), keep=int(p["keep_factors"]))
+        else:
+            self.space = _FullSpace(qp, p["inner_norm"], from_param(self))
         self.r, self.r_units = paper_r_in_scene_units(float(self.params["r"]), qp.units) \
             if self.params["r_rule"] == "scaled" else (float(self.params["r"]), "as given")
-        self._mu = None
         if self.params["r_rule"] == "auto" and qp.m:
             self.r = float(self.params["r_factor"] / self._mu_min())
             self.r_units = "r_factor / min dual compliance"
 
     def _mu_min(self) -> float:
-        """Smallest eigenvalue of the dual compliance G W (computed once, when first needed)."""
+        """Smallest eigenvalue of the dual compliance G W (computed once, when first needed): exact
+        (dense eigvalsh) on the dense and full paths, a Lanczos estimate on the matrix-free one."""
         if self._mu is None:
             if self.qp.m == 0:
                 self._mu = np.inf
             else:
-                GW = self.space.dual_compliance(self.qp.weights)
-                w = np.sqrt(self.qp.weights)
-                sym = (GW / self.qp.weights[None, :]) * w[:, None] * w[None, :]   # W^1/2 G W^1/2
-                self._mu = float(max(np.linalg.eigvalsh(0.5 * (sym + sym.T)).min(), 1e-300))
+                kw = {"tol": float(self.params["eig_tol"])} if self.space.kind == "matrix_free" else {}
+                mu, self._mu_info = self.space.mu_min(self.qp.weights, **kw)
+                self._mu = float(max(mu, 1e-300))
         return self._mu
 
     def solve(self) -> Solution:
@@ -298,10 +428,13 @@ class Uzawa(Solver):
 
         def result(status, msg=""):
             x = sp_.full(z)
+            info = {**self.op.info()} if self.op is not None else {"operator": "none (linalg='full')"}
+            if sp_.kind == "matrix_free":
+                info.update(sp_.nm.info())
+            info.update({"factorizations": sp_.factorizations, "operator_factorizations": info.get("factorizations", 0),
+                         "r": r, "r_units": self.r_units, "linalg": p["linalg"], **self._mu_info})
             return Solution(solver=self.name, status=status, x=x, multipliers=w * l,
-                            iterations={"outer": k, "inner": m_total}, history=history, message=msg,
-                            info={"factorizations": sp_.factorizations, "r": r, "r_units": self.r_units,
-                                  "linalg": p["linalg"]})
+                            iterations={"outer": k, "inner": m_total}, history=history, message=msg, info=info)
 
         if p["shortcut"] and p["l0"] == 0.0 and np.all(sp_.B @ z >= 0):
             k, m_total = 1, 1
