@@ -71,17 +71,23 @@ def test_auto_never_picks_what_does_not_fit(monkeypatch):
     assert kind == "matrix_free"
 
 
+@pytest.mark.parametrize("newton", ["cg", "factor"])
 @pytest.mark.parametrize("delta", [1e-5, 1e-9])
-def test_pdas_same_answer_on_both_operators(delta):
+def test_pdas_same_answer_on_both_operators(delta, newton):
     qp = _qp(delta, N=48)
     a = run("pdas", qp, {"operator": "dense"})
-    b = run("pdas", qp, {"operator": "matrix_free"})
+    b = run("pdas", qp, {"operator": "matrix_free", "newton": newton})
     assert str(a.status) == str(b.status) == "solved"
     assert a.info["operator"] == "dense" and b.info["operator"] == "matrix_free"
     dx = a.x - b.x
     assert np.sqrt(dx @ (qp.K @ dx) / (a.x @ (qp.K @ a.x))) < 1e-10
     assert _rel(b.multipliers, a.multipliers) < 1e-10
-    assert b.info["cg_iterations"] > 0 and b.info["applications"] > 0
+    assert b.info["applications"] > 0 and b.info["face_method"] == newton
+    if newton == "cg":
+        assert b.info["cg_iterations"] > 0 and b.info["al_steps"] == 0
+    else:                  # one factorization of K + B_A'C B_A per active set, analyzed once
+        assert b.info["al_steps"] > 0          # (and a few CG steps in the operator's own representation)
+        assert b.info["newton_analyses"] == 1 and b.info["newton_factorizations"] >= 1
     assert np.isfinite(b.info["certificate"]["value"]) and b.info["certificate"]["value"] < 1e-9
 
 

@@ -51,6 +51,13 @@ OPERATORS = ("auto", "dense", "matrix_free")
 #: ``auto`` takes the dense reduction up to this many local unknowns (|I|), matrix-free above.
 #: Measured on fractured scenes (benchmarks/operator_crossover.py): see reports/fractured.md
 CROSSOVER_LOCAL = 6000
+#: how the matrix-free operator applies D_AA^-1 (MatrixFreeDualOperator.face)
+FACE_METHODS = ("cg", "factor")
+#: the factorized face solve's penalty C = AL_SCALE / diag(D): each step divides the error by ~ 1 + AL_SCALE
+#: lambda_min (lambda_min of the Jacobi-scaled D_AA, ~0.1 on fractured scenes), at a conditioning of
+#: K + B_A'C B_A ~ AL_SCALE times K's; the steps are residual-based, so only the rate depends on it
+AL_SCALE = 1e4
+AL_MAX_STEPS = 30
 #: rows whose exact D_jj calibrates the matrix-free diagonal estimate (one block solve with this many columns)
 DIAG_SAMPLES = 8
 
@@ -75,6 +82,7 @@ class OperatorCounters:
     factorizations: int = 0    #: numeric factorizations made for this operator
     face_solves: int = 0       #: D_AA^-1 rhs computed
     cg_iterations: int = 0     #: CG iterations of the matrix-free face solves
+    al_steps: int = 0          #: augmented-Lagrangian steps of the factorized face solves
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -207,8 +215,15 @@ class MatrixFreeDualOperator(DualOperator):
 
     kind = "matrix_free"
 
-    def __init__(self, qp: QP, factor=None, store=None):
+    def __init__(self, qp: QP, factor=None, store=None, face: str = "cg"):
         super().__init__(qp)
+        if face not in FACE_METHODS:
+            raise InputError(f"face solve method must be one of {', '.join(FACE_METHODS)}, got {face!r}")
+        #: how D_AA^-1 is applied: "cg" (preconditioned CG, one K-solve per iteration) or "factor" (one
+        #: factorization of K + B_A' C B_A per set, augmented-Lagrangian refinement: a few solves)
+        self.face = face
+        self._factor_name = factor
+        self._newton = None
         t0 = time.perf_counter()
         before = _factorizations(qp, store)
         self.fact = factor_whole(qp, factor, store)
@@ -273,12 +288,21 @@ class MatrixFreeDualOperator(DualOperator):
         return self._diag
 
     def face_solve(self, A, rhs, x0=None, rtol=1e-13):
-        """D_AA^-1 rhs by Jacobi-preconditioned CG (one K-solve per iteration), from ``x0``."""
+        """D_AA^-1 rhs: by Jacobi-preconditioned CG (one K-solve per iteration) from ``x0`` (``face="cg"``),
+        or by one factorization of K + B_A' C B_A and augmented-Lagrangian steps (``face="factor"``)."""
         self.counters.face_solves += 1
         A = np.asarray(A, bool)
         idx = np.flatnonzero(A)
         if idx.size == 0:
             return np.zeros(0)
+        if self.face == "factor":
+            return self._face_by_factor(A, np.asarray(rhs, float), rtol)
+        sol, its, kappa = self._face_cg(idx, np.asarray(rhs, float), x0, rtol)
+        self.last_face = {"iterations": its, "kappa": kappa, "rtol": rtol}
+        return sol
+
+    def _face_cg(self, idx: np.ndarray, rhs: np.ndarray, x0, rtol: float) -> tuple[np.ndarray, int, float]:
+        """(D_AA^-1 rhs by Jacobi-PCG from x0, its iterations, the Lanczos condition estimate)."""
         v = np.zeros(self.m)
 
         def mv(w):
@@ -287,11 +311,64 @@ class MatrixFreeDualOperator(DualOperator):
             return self.apply(v)[idx]
 
         stats: dict = {}
-        sol, its = pcg(mv, np.asarray(rhs, float), 1.0 / self.diagonal()[idx], x0=x0, rtol=rtol,
-                       max_iter=max(50, 4 * idx.size), stats=stats)
+        sol, its = pcg(mv, rhs, 1.0 / self.diagonal()[idx], x0=x0, rtol=rtol, max_iter=max(50, 4 * idx.size),
+                       stats=stats)
         self.counters.cg_iterations += its
-        self.last_face = {"iterations": its, "kappa": stats["kappa"], "rtol": rtol}
-        return sol
+        return sol, its, stats["kappa"]
+
+    def newton_matrix(self):
+        """The :class:`dualfem.numerics.newton_matrix.NewtonMatrix` of K and B (made on first use)."""
+        if self._newton is None:
+            from dualfem.numerics.newton_matrix import NewtonMatrix
+
+            self._newton = NewtonMatrix(self.qp.K, self.B, self._factor_name, keep=2)
+        return self._newton
+
+    def _face_by_factor(self, A: np.ndarray, g: np.ndarray, rtol: float) -> np.ndarray:
+        """D_AA^-1 g from the KKT system K x = B_A'y, B_A x = g by the augmented Lagrangian on H = K +
+        B_A' C B_A, C = AL_SCALE / diag(D) on A (so every mode of D_AA contracts by 1 / (1 + AL_SCALE
+        lambda) per step, lambda >= the Jacobi-scaled D_AA's smallest eigenvalue): x = H^-1 B_A'(y + C g),
+        y <- y - C (B_A x - g). Each step is one solve and is computed from the residual (iterative
+        refinement), so the factor's rounding does not accumulate. Stops at |B_A x - g| <= rtol |g|."""
+        nm = self.newton_matrix()
+        idx = np.flatnonzero(A)
+        c = np.zeros(self.m)
+        c[idx] = AL_SCALE / self.diagonal()[idx]
+        gn = float(np.linalg.norm(g))
+        y = np.zeros(idx.size)
+        if gn == 0.0:
+            return y
+        full = np.zeros(self.m)
+        before = nm.counters.factorizations
+        res, steps = gn, 0
+        while steps < AL_MAX_STEPS:
+            steps += 1
+            full[:] = 0.0
+            full[idx] = y + c[idx] * g
+            x = nm.solve(c, self.BT @ full)
+            self.counters.solves += 1
+            r = (self.B @ x)[idx] - g
+            y = y - c[idx] * r
+            res = float(np.linalg.norm(r))
+            if res <= rtol * gn:
+                break
+        if res > rtol * gn:
+            raise np.linalg.LinAlgError(f"augmented Lagrangian on the face did not reach {rtol:g} in "
+                                        f"{AL_MAX_STEPS} steps (relative residual {res / gn:.1e})")
+        self.counters.factorizations += nm.counters.factorizations - before
+        self.counters.al_steps += steps
+        # the same system in the operator's own representation (products through the factorization of K,
+        # whose rounding differs by ~1e-12): a few CG steps from y, so that D y + b0 is consistent to rtol
+        y, its, kappa = self._face_cg(idx, g, y, rtol)
+        self.last_face = {"iterations": steps, "cg_iterations": its, "kappa": kappa, "rtol": rtol}
+        return y
+
+    def info(self) -> dict:
+        out = super().info()
+        out["face_method"] = self.face
+        if self._newton is not None:
+            out.update(self._newton.info())
+        return out
 
 
 def pcg(matvec, rhs: np.ndarray, inv_diag: np.ndarray, x0: np.ndarray | None = None, rtol: float = 1e-13,
