@@ -28,10 +28,13 @@ load) gives mu = 0 at once.
 exact reduction onto the defect unknowns, D a dense m x m matrix (a product costs 2 m^2 flops);
 ``matrix_free`` never forms D: one sparse factorization of K, and each product ``D v = B K^-1 B'v``
 is one forward/backward solve with it; ``auto`` (default) picks by size and memory. So in the
-matrix-free case **an iteration costs one K-solve** (an expansion two), plus ``power_iter``
-solves for |D| in the setup, one block solve of 16 right-hand sides for the diagonal estimate
-(when preconditioned), one for ``b0`` and one for x; ``info`` reports every count (``applications``,
-``solves``, ...) next to MPRGP's own (``iterations``: cg / expansion / proportioning).
+matrix-free case **an iteration costs one K-solve** (an expansion two) on top of the one
+factorization of K, plus fixed costs: ``power_iter`` solves for |D| in the setup, one block solve
+of 16 right-hand sides for the diagonal estimate (used by the polish's Jacobi-PCG and by
+precond=jacobi), the polish's CG iterations (a few: it starts from the MPRGP forces), one solve
+each for ``b0`` and x. ``info`` reports every count (``applications``: products D v, a block of k
+counting k; ``solves``; ``cg_iterations`` of the polish; ``factorizations``) next to MPRGP's own
+(``iterations``: cg / expansion / proportioning).
 
 **Preconditioner** (``precond``, :mod:`dualfem.numerics.dual_precond`; none costs a K-solve):
 

@@ -134,3 +134,14 @@ def test_precond_none_keeps_the_former_iterations():
     """The dense operator without preconditioner: the iterations of the former implementation."""
     sol = solve(f2(32, 1e-5), operator="dense", precond="none")
     assert sol.iterations == {"cg": 6, "expansion": 1, "proportioning": 1}
+
+
+def test_dirichlet_blocks_dense_and_sparse_agree(monkeypatch):
+    """A long crack's layer is factorized by a sparse LU (DENSE_LAYER): the same blocks."""
+    from dualfem.numerics import dual_precond
+
+    qp = f2(32, 1e-5)
+    dense = dirichlet_inverse(qp, 4).toarray()
+    monkeypatch.setattr(dual_precond, "DENSE_LAYER", 0)
+    sparse = dirichlet_inverse(qp, 4).toarray()
+    assert np.abs(dense - sparse).max() <= 1e-10 * np.abs(dense).max()

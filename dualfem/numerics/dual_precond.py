@@ -27,6 +27,8 @@ import scipy.sparse as sp
 
 #: the preconditioner names of the ``precond`` parameter of mprgp
 PRECONDS = ("none", "jacobi", "lumped", "dirichlet")
+#: a crack's layer up to this many unknowns is factorized dense, a larger one by a sparse LU
+DENSE_LAYER = 1500
 
 
 def jacobi_scaling(op) -> np.ndarray:
@@ -142,13 +144,20 @@ def _dirichlet_block(B, K, w, r, layers, pos, rows, cols, vals) -> None:
     Bc = B[r]
     Ic = np.unique(Bc.indices)
     U = _grow(K, Ic, int(layers))
-    KU = _block(K, U, pos).toarray()
+    KU = _block(K, U, pos)
     inI = np.isin(U, Ic, assume_unique=True)
     i_loc, r_loc = np.flatnonzero(inI), np.flatnonzero(~inI)
-    S = KU[np.ix_(i_loc, i_loc)]
+    S = KU[i_loc][:, i_loc].toarray()
     if r_loc.size:
-        KRI = KU[np.ix_(r_loc, i_loc)]
-        S = S - KRI.T @ sla.solve(KU[np.ix_(r_loc, r_loc)], KRI, assume_a="pos", check_finite=False)
+        KRI = KU[r_loc][:, i_loc].toarray()
+        KRR = KU[r_loc][:, r_loc]
+        if r_loc.size <= DENSE_LAYER:
+            X = sla.solve(KRR.toarray(), KRI, assume_a="pos", check_finite=False)
+        else:                             # a long crack: its layer is large, a sparse LU is cheaper
+            import scipy.sparse.linalg as spla
+
+            X = spla.splu(KRR.tocsc()).solve(KRI)
+        S = S - KRI.T @ X
     Bd = Bc[:, Ic].toarray() * w[r][:, None]
     Mc = Bd @ (0.5 * (S + S.T)) @ Bd.T
     rows.append(np.repeat(r, r.size))
