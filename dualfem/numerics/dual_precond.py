@@ -27,7 +27,7 @@ import scipy.sparse as sp
 
 #: the preconditioner names of the ``precond`` parameter of mprgp
 PRECONDS = ("none", "jacobi", "lumped", "dirichlet")
-#: a crack's layer up to this many unknowns is factorized dense, a larger one by a sparse LU
+#: a crack's layer (with the crack) up to this many unknowns is factorized dense, a larger one by a sparse LU
 DENSE_LAYER = 1500
 
 
@@ -72,6 +72,14 @@ class FacePreconditioner:
         return z
 
 
+def _gather(A: sp.csr_matrix, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(local row, column, value) of the entries of the rows ``rows`` of A (CSR), in numpy only."""
+    starts, ends = A.indptr[rows], A.indptr[rows + 1]
+    lens = ends - starts
+    idx = np.arange(lens.sum()) - np.repeat(np.cumsum(lens) - lens, lens) + np.repeat(starts, lens)
+    return np.repeat(np.arange(rows.size), lens), A.indices[idx], A.data[idx]
+
+
 def _grow(K: sp.csr_matrix, seed: np.ndarray, layers: int) -> np.ndarray:
     """The unknowns within ``layers`` steps of ``seed`` in the graph of K (sorted)."""
     region = np.unique(seed)
@@ -79,21 +87,10 @@ def _grow(K: sp.csr_matrix, seed: np.ndarray, layers: int) -> np.ndarray:
     for _ in range(layers):
         if front.size == 0:
             break
-        new = np.setdiff1d(np.unique(K[front].indices), region, assume_unique=True)
+        new = np.setdiff1d(np.unique(_gather(K, front)[1]), region, assume_unique=True)
         region = np.union1d(region, new)
         front = new
     return region
-
-
-def _block(K: sp.csr_matrix, U: np.ndarray, pos: np.ndarray) -> sp.csr_matrix:
-    """K[U][:, U] through a scratch map ``pos`` (-1 outside U; reset on return): O(nnz of the rows)."""
-    pos[U] = np.arange(U.size)
-    KU = K[U].tocoo()
-    c = pos[KU.col]
-    keep = c >= 0
-    out = sp.csr_matrix((KU.data[keep], (KU.row[keep], c[keep])), shape=(U.size, U.size))
-    pos[U] = -1
-    return out
 
 
 def defect_clusters(qp) -> tuple[int, np.ndarray]:
@@ -141,24 +138,36 @@ def _dirichlet_block(B, K, w, r, layers, pos, rows, cols, vals) -> None:
     """M_c of :func:`dirichlet_inverse` for the rows r of one cluster, appended as COO triplets."""
     import scipy.linalg as sla
 
-    Bc = B[r]
-    Ic = np.unique(Bc.indices)
+    br, bc, bv = _gather(B, r)
+    Ic = np.unique(bc)
     U = _grow(K, Ic, int(layers))
-    KU = _block(K, U, pos)
-    inI = np.isin(U, Ic, assume_unique=True)
-    i_loc, r_loc = np.flatnonzero(inI), np.flatnonzero(~inI)
-    S = KU[i_loc][:, i_loc].toarray()
-    if r_loc.size:
-        KRI = KU[r_loc][:, i_loc].toarray()
-        KRR = KU[r_loc][:, r_loc]
-        if r_loc.size <= DENSE_LAYER:
-            X = sla.solve(KRR.toarray(), KRI, assume_a="pos", check_finite=False)
-        else:                             # a long crack: its layer is large, a sparse LU is cheaper
-            import scipy.sparse.linalg as spla
+    pos[U] = np.arange(U.size)
+    kr, kc, kv = _gather(K, U)
+    kc = pos[kc]
+    keep = kc >= 0
+    pos[U] = -1
+    pos[Ic] = np.arange(Ic.size)
+    Bd = np.zeros((r.size, Ic.size))
+    np.add.at(Bd, (br, pos[bc]), bv)
+    Bd *= w[r][:, None]
+    inI = pos[U] >= 0
+    pos[Ic] = -1
+    i_loc, r_loc = np.flatnonzero(inI), np.flatnonzero(~inI)     # U is sorted and so is Ic: same order
+    if U.size <= DENSE_LAYER:
+        KU = np.zeros((U.size, U.size))
+        np.add.at(KU, (kr[keep], kc[keep]), kv[keep])
+        S = KU[np.ix_(i_loc, i_loc)]
+        if r_loc.size:
+            KRI = KU[np.ix_(r_loc, i_loc)]
+            S = S - KRI.T @ sla.solve(KU[np.ix_(r_loc, r_loc)], KRI, assume_a="pos", check_finite=False)
+    else:                                 # a long crack: its layer is large, a sparse LU is cheaper
+        import scipy.sparse.linalg as spla
 
-            X = spla.splu(KRR.tocsc()).solve(KRI)
-        S = S - KRI.T @ X
-    Bd = Bc[:, Ic].toarray() * w[r][:, None]
+        KU = sp.csr_matrix((kv[keep], (kr[keep], kc[keep])), shape=(U.size, U.size))
+        S = KU[i_loc][:, i_loc].toarray()
+        if r_loc.size:
+            KRI = KU[r_loc][:, i_loc].toarray()
+            S = S - KRI.T @ spla.splu(KU[r_loc][:, r_loc].tocsc()).solve(KRI)
     Mc = Bd @ (0.5 * (S + S.T)) @ Bd.T
     rows.append(np.repeat(r, r.size))
     cols.append(np.tile(r, r.size))
