@@ -145,3 +145,16 @@ def test_dirichlet_blocks_dense_and_sparse_agree(monkeypatch):
     monkeypatch.setattr(dual_precond, "DENSE_LAYER", 0)
     sparse = dirichlet_inverse(qp, 4).toarray()
     assert np.abs(dense - sparse).max() <= 1e-10 * np.abs(dense).max()
+
+
+def test_dirichlet_blocks_are_cut_for_long_clusters(monkeypatch):
+    """A cluster longer than MAX_BLOCK rows is cut into blocks: still SPD, mprgp gives the same answer."""
+    from dualfem.numerics import dual_precond
+
+    qp = f2(32, 1e-5)
+    ref = solve(qp, operator="dense", precond="none")
+    monkeypatch.setattr(dual_precond, "MAX_BLOCK", 4)
+    M = dirichlet_inverse(qp, 4).toarray()
+    assert np.allclose(M, M.T) and np.linalg.eigvalsh(M).min() > 0
+    assert np.count_nonzero(M) <= 4 * qp.m
+    assert_agree(qp, ref, solve(qp, operator="dense", precond="dirichlet"))

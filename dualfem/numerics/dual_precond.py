@@ -27,6 +27,9 @@ import scipy.sparse as sp
 
 #: the preconditioner names of the ``precond`` parameter of mprgp
 PRECONDS = ("none", "jacobi", "lumped", "dirichlet")
+#: at most this many rows per dense block: a larger cluster (a long crack, a network of touching cracks)
+#: is cut into pieces of consecutive rows (memory ~ 8 (4 MAX_BLOCK)^2 bytes per block)
+MAX_BLOCK = 512
 #: a crack's layer (with the crack) up to this many unknowns is factorized dense, a larger one by a sparse LU
 DENSE_LAYER = 1500
 
@@ -112,7 +115,8 @@ def dirichlet_inverse(qp, layers: int = 6) -> sp.csr_matrix:
     M_c. As the layer widens S_c tends to the exact Schur complement of K onto the crack, with which
     ``W B S B' W`` inverts D on the crack (measured: cond(M D) = 1.3 against cond(D) = 23 at h = 0.005);
     a layer of r rings catches the modes along the crack shorter than about r elements, so
-    cond(M D) ~ crack length / (r h) instead of crack length / h. W = diag(B B')^-1.
+    cond(M D) ~ crack length / (r h) instead of crack length / h. W = diag(B B')^-1. A cluster of
+    more than :data:`MAX_BLOCK` rows is cut into pieces of consecutive rows (each its own block).
     """
     from dualfem.numerics.threads import dense_threads
 
@@ -127,7 +131,9 @@ def dirichlet_inverse(qp, layers: int = 6) -> sp.csr_matrix:
     rows, cols, vals = [], [], []
     with dense_threads():                 # small dense blocks: one BLAS thread (threads.py)
         for c in range(ncl):
-            _dirichlet_block(B, K, w, order[starts[c]:starts[c + 1]], int(layers), pos, rows, cols, vals)
+            r = order[starts[c]:starts[c + 1]]
+            for k in range(0, r.size, MAX_BLOCK):     # a long crack or a crack network: pieces
+                _dirichlet_block(B, K, w, r[k:k + MAX_BLOCK], int(layers), pos, rows, cols, vals)
     m = B.shape[0]
     if not rows:
         return sp.csr_matrix((m, m))
