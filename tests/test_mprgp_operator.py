@@ -75,6 +75,7 @@ def test_dense_and_matrix_free_agree_on_many_cracks():
     qp = many_cracks()
     assert qp.m > 50
     dense, free = solve(qp, operator="dense"), solve(qp, operator="matrix_free")
+    assert dense.info["precond"] == "none" and free.info["precond"] == "dirichlet"     # precond=auto
     assert (dense.multipliers > 0).sum() > 10
     assert_agree(qp, dense, free)
     # the counters: matrix-free products are K-solves, counted next to MPRGP's own steps
@@ -131,9 +132,10 @@ def test_old_operator_spelling_is_accepted():
 
 
 def test_precond_none_keeps_the_former_iterations():
-    """The dense operator without preconditioner: the iterations of the former implementation."""
-    sol = solve(f2(32, 1e-5), operator="dense", precond="none")
-    assert sol.iterations == {"cg": 6, "expansion": 1, "proportioning": 1}
+    """The dense operator without preconditioner (the default for dense): the former iterations."""
+    for params in ({"precond": "none"}, {}):
+        sol = solve(f2(32, 1e-5), operator="dense", **params)
+        assert sol.iterations == {"cg": 6, "expansion": 1, "proportioning": 1}
 
 
 def test_dirichlet_blocks_dense_and_sparse_agree(monkeypatch):
