@@ -105,7 +105,7 @@ def defect_clusters(qp) -> tuple[int, np.ndarray]:
     return csg.connected_components(G, directed=False)
 
 
-def dirichlet_inverse(qp, layers: int = 6) -> sp.csr_matrix:
+def dirichlet_inverse(qp, layers: int = 4) -> sp.csr_matrix:
     """``W B S_loc B' W``: FETI's Dirichlet preconditioner with local Schur complements (sparse m x m).
 
     Per cluster c of defect rows (:func:`defect_clusters`: one per crack), I_c = the unknowns its rows
