@@ -26,7 +26,7 @@ def qp_for(load: str, delta: float, N: int = 16):
     return _QP[key]
 
 
-@pytest.mark.parametrize("operator", ["dense", "matrixfree"])
+@pytest.mark.parametrize("operator", ["dense", "matrix_free"])
 @pytest.mark.parametrize("delta", [1e-1, 1e-5, 1e-9])
 @pytest.mark.parametrize("load", ["f1", "f2", "f3"])
 def test_agrees_with_pdas(load, delta, operator):
@@ -48,7 +48,7 @@ def test_iterations_are_counted_on_a_contact_scene():
     assert sol.multipliers.max() > 0
 
 
-@pytest.mark.parametrize("operator", ["dense", "matrixfree"])
+@pytest.mark.parametrize("operator", ["dense", "matrix_free"])
 def test_zero_load_gives_zero_forces(operator):
     qp = dataclasses.replace(qp_for("f2", 1e-5), F=np.zeros(qp_for("f2", 1e-5).n))
     sol = run("mprgp", qp, {"operator": operator})
@@ -58,7 +58,7 @@ def test_zero_load_gives_zero_forces(operator):
 
 
 @pytest.mark.parametrize("factor", [1e-8, 1e8])
-@pytest.mark.parametrize("operator", ["dense", "matrixfree"])
+@pytest.mark.parametrize("operator", ["dense", "matrix_free"])
 def test_scale_invariance(factor, operator):
     """Load x factor: x and mu scale by the factor, the status does not change."""
     qp = qp_for("f2", 1e-5)
