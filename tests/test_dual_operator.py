@@ -118,3 +118,16 @@ def test_pdas_matrix_free_when_dense_does_not_fit(monkeypatch):
     assert str(s.status) == "solved" and s.info["operator"] == "matrix_free"
     sk = run("pdas", qp, {"operator": "dense"})
     assert str(sk.status) == "skipped" and "operator=matrix_free" in sk.message
+
+
+@pytest.mark.parametrize("solver", ["pdas", "mprgp", "uzawa_auto", "penalty"])
+def test_matrix_free_through_the_runner_on_a_gmsh_scene(solver):
+    """The runner hands plugins a read-only QP: the matrix-free path (and its preconditioners) must not
+    write into it; the answer is certified and equals the dense path's."""
+    qp = load_scene("two_defects", {}).build()
+    a = run(solver, qp, {"operator": "dense"})
+    b = run(solver, qp, {"operator": "matrix_free"})
+    assert str(a.status) == str(b.status) == "solved", b.message
+    assert b.info["operator"] == "matrix_free"
+    dx = a.x - b.x
+    assert np.sqrt(dx @ (qp.K @ dx) / (a.x @ (qp.K @ a.x))) < 1e-8

@@ -235,6 +235,9 @@ class MatrixFreeDualOperator(DualOperator):
         self._diag: np.ndarray | None = None
         #: the last face solve: CG iterations, the Lanczos condition estimate, the tolerance
         self.last_face: dict = {}
+        #: an approximate inverse of D (sparse m x m, SPD; e.g. dual_precond.dirichlet_inverse) whose A x A
+        #: block preconditions the face CG; None: Jacobi with :meth:`diagonal`
+        self.face_preconditioner = None
         self.time_s["setup"] = time.perf_counter() - t0
 
     def _solve(self, b: np.ndarray) -> np.ndarray:
@@ -311,8 +314,11 @@ class MatrixFreeDualOperator(DualOperator):
             return self.apply(v)[idx]
 
         stats: dict = {}
-        sol, its = pcg(mv, rhs, 1.0 / self.diagonal()[idx], x0=x0, rtol=rtol, max_iter=max(50, 4 * idx.size),
-                       stats=stats)
+        prec = 1.0 / self.diagonal()[idx]
+        if self.face_preconditioner is not None:             # its A x A block (sparse, SPD)
+            Msub = self.face_preconditioner[idx][:, idx].tocsr()
+            prec = Msub.__matmul__
+        sol, its = pcg(mv, rhs, prec, x0=x0, rtol=rtol, max_iter=max(50, 4 * idx.size), stats=stats)
         self.counters.cg_iterations += its
         return sol, its, stats["kappa"]
 
@@ -371,9 +377,11 @@ class MatrixFreeDualOperator(DualOperator):
         return out
 
 
-def pcg(matvec, rhs: np.ndarray, inv_diag: np.ndarray, x0: np.ndarray | None = None, rtol: float = 1e-13,
+def pcg(matvec, rhs: np.ndarray, inv_diag, x0: np.ndarray | None = None, rtol: float = 1e-13,
         max_iter: int = 1000, stats: dict | None = None) -> tuple[np.ndarray, int]:
-    """Jacobi-preconditioned CG for an SPD operator: (x, iterations) with |r| <= rtol |rhs|.
+    """Preconditioned CG for an SPD operator: (x, iterations) with |r| <= rtol |rhs|.
+
+    ``inv_diag``: the preconditioner, an array (Jacobi: z = inv_diag * r) or an SPD linear map r -> z.
 
     ``stats``, if given, receives ``kappa``: the condition number of the preconditioned operator
     estimated from the Lanczos tridiagonal matrix of the CG coefficients (a lower estimate).
@@ -386,9 +394,10 @@ def pcg(matvec, rhs: np.ndarray, inv_diag: np.ndarray, x0: np.ndarray | None = N
     if nb == 0.0:
         _lanczos_kappa(alphas, betas, stats)
         return np.zeros_like(rhs), 0
+    prec = inv_diag if callable(inv_diag) else (lambda v: inv_diag * v)
     x = np.zeros_like(rhs) if x0 is None else np.array(x0, float)
     r = rhs - matvec(x) if x0 is not None and np.any(x) else rhs.copy()
-    z = inv_diag * r
+    z = prec(r)
     p = z.copy()
     rz = float(r @ z)
     for k in range(max_iter + 1):
@@ -404,7 +413,7 @@ def pcg(matvec, rhs: np.ndarray, inv_diag: np.ndarray, x0: np.ndarray | None = N
         a = rz / pAp
         x += a * p
         r -= a * Ap
-        z = inv_diag * r
+        z = prec(r)
         rz, rz_old = float(r @ z), rz
         alphas.append(a)
         betas.append(rz / rz_old)

@@ -44,8 +44,8 @@ def jacobi_scaling(op) -> np.ndarray:
 
 def lumped_inverse(qp) -> sp.csr_matrix:
     """``W B K B' W`` with ``W = diag(B B')^-1`` (sparse m x m, symmetric positive semidefinite)."""
-    B = qp.B.tocsr()
-    K = qp.K.tocsr()
+    B = qp.B.tocsr(copy=True)          # own arrays: scipy may sort them in place (the runner's QP is read-only)
+    K = qp.K.tocsr(copy=True)
     bb = np.asarray(B.multiply(B).sum(axis=1)).ravel()
     w = np.where(bb > 0, 1.0 / np.where(bb > 0, bb, 1.0), 0.0)
     W = sp.diags(w)
@@ -100,8 +100,8 @@ def defect_clusters(qp) -> tuple[int, np.ndarray]:
     """(count, label per row of B): the rows coupled through K (B K B' != 0), i.e. one cluster per crack."""
     import scipy.sparse.csgraph as csg
 
-    B = qp.B.tocsr()
-    G = (abs(B) @ abs(qp.K.tocsr()) @ abs(B).T).tocsr()
+    B = qp.B.tocsr(copy=True)          # own arrays: scipy may sort them in place (the runner's QP is read-only)
+    G = (abs(B) @ abs(qp.K.tocsr(copy=True)) @ abs(B).T).tocsr()
     return csg.connected_components(G, directed=False)
 
 
@@ -120,8 +120,8 @@ def dirichlet_inverse(qp, layers: int = 4) -> sp.csr_matrix:
     """
     from dualfem.numerics.threads import dense_threads
 
-    B = qp.B.tocsr()
-    K = qp.K.tocsr()
+    B = qp.B.tocsr(copy=True)          # own arrays: scipy may sort them in place (the runner's QP is read-only)
+    K = qp.K.tocsr(copy=True)
     bb = np.asarray(B.multiply(B).sum(axis=1)).ravel()
     w = np.where(bb > 0, 1.0 / np.where(bb > 0, bb, 1.0), 0.0)
     ncl, lab = defect_clusters(qp)
