@@ -4,7 +4,11 @@
 Scene keys (lengths in the body's unit, angles in degrees), beside those of ``thin_defect``
 (``load`` = "f1" here, ``load_scale``, ``delta`` (every crack), ``E``, ``nu``, ``plane``, ``width``,
 ``height``, ``mesh_size``, ``tip_size``, ``N``, ``rotate_deg``); the mesh is always gmsh's
-(``mesh``, ``defect`` and ``defects`` are not keys of this problem):
+(``mesh``, ``defect`` and ``defects`` are not keys of this problem). The mesh is gmsh's Frontal-Delaunay
+mesh (as for the scene files) at twice ``mesh_size`` and ``tip_size``, every triangle then split into four
+(:func:`dualfem.problems.gmsh_mesh.refine_uniformly`): elements of size ``mesh_size``, about 3-4 times
+faster than meshing at ``mesh_size`` (400 cracks at mesh_size 0.003: 1.6 s instead of 5-7 s), with 5 %
+more nodes. Keys:
 
 * ``cracks`` (default 50): how many cracks, an integer in [1, 100000].
 * ``crack_length`` (default 0.025): a number, or a range ``[min, max]`` (each crack's length drawn
@@ -278,8 +282,10 @@ class Fractured(ThinDefect):
         "region": None,              # None: the whole body
     }
     presets = {"fractured": {}}
-    #: the gmsh algorithm (a key of dualfem.problems.gmsh_mesh.ALGORITHMS)
-    gmsh_algorithm = "delaunay"
+    #: the gmsh algorithm (a key of dualfem.problems.gmsh_mesh.ALGORITHMS) and the uniform refinements
+    #: after it (mesh_with_defects's refine)
+    gmsh_algorithm = "frontal"
+    gmsh_refine = 1
 
     def validate(self) -> None:
         p = self.params
@@ -304,9 +310,9 @@ class Fractured(ThinDefect):
         self._check_defects_and_load()
 
     def _gmsh_options(self) -> dict:
-        # gmsh's Delaunay without smoothing (the fastest, see gmsh_mesh.ALGORITHMS); the generator has
-        # placed the cracks min_gap apart, the mesher checks it again (on a grid) with room for every tip
-        return {"algorithm": self.gmsh_algorithm, "max_samples": 2 * MAX_CRACKS}
+        # meshed at twice the sizes, then every triangle split in four (see gmsh_mesh.ALGORITHMS); the
+        # generator placed the cracks min_gap apart, the mesher checks it again (on a grid), for every tip
+        return {"algorithm": self.gmsh_algorithm, "refine": self.gmsh_refine, "max_samples": 2 * MAX_CRACKS}
 
     def with_params(self, **changes: Any) -> Fractured:
         new = type(self)(**{**self._user, **changes})

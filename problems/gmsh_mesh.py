@@ -52,13 +52,17 @@ _OPTIONS = {                   # fixed gmsh options (reproducible, silent, first
 }
 
 #: gmsh options per 2D algorithm (over _OPTIONS). "frontal": Frontal-Delaunay with one smoothing pass (the
-#: meshes of the scene files and tests). "delaunay": gmsh's Delaunay, no smoothing: the fastest here.
-#: Measured on the 400-crack scene (unit square, mesh_size 0.003, 2 shared cores, generate only):
+#: meshes of the scene files and tests). "delaunay": gmsh's Delaunay without smoothing. Measured on the
+#: 400-crack scene (unit square, mesh_size 0.003, 2 cores shared with other jobs, generate only):
 #: frontal 5.2-7.2 s (262 k triangles, gamma >= 0.65), frontal without smoothing 4.8-5.2 s, delaunay
-#: 3.3-4.2 s (295 k triangles: it refines until every circumradius <= h / sqrt 2, gamma >= 0.47, mean
-#: 0.91); "frontal-quad" (8) 6.3 s, BAMG (7) 23 s with slivers (gamma 0)
+#: 3.3-4.2 s (295 k triangles: it refines until every circumradius <= h / sqrt 2; gamma >= 0.47, mean
+#: 0.91), "frontal-quad" (8) 6.3 s, BAMG (7) 23 s with slivers (gamma 0). Meshing at 2 h and splitting
+#: every triangle in four (mesh_with_defects's refine=1; what the fractured problem does): frontal
+#: 1.1 + 0.5 s (275 k triangles, gamma >= 0.62, mean 0.98), delaunay 0.55 + 0.65 s (302 k triangles);
+#: refine=2: frontal 0.25 + 0.6 s but 328 k triangles (the cracks force small elements at 4 h)
 ALGORITHMS: dict[str, dict[str, float]] = {
     "frontal": {"Mesh.Algorithm": 6, "Mesh.Smoothing": 1},
+    "frontal_unsmoothed": {"Mesh.Algorithm": 6, "Mesh.Smoothing": 0},
     "delaunay": {"Mesh.Algorithm": 5, "Mesh.Smoothing": 0},
 }
 
@@ -454,8 +458,10 @@ def _build(gmsh, width: float, height: float, parsed, right_split: tuple[float, 
     return sides, surface, curves, tips
 
 
-def _size_fields(gmsh, mesh_size: float, tip_size: float | None, tips: list[int]) -> None:
-    gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
+def _size_fields(gmsh, mesh_size: float, tip_size: float | None, tips: list[int], coarsen: float = 1.0) -> None:
+    """Element size mesh_size, tip_size near the tips; every size times ``coarsen`` (a mesh to be refined
+    uniformly afterwards), the distances of the tips' refinement those of the final sizes."""
+    gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size * coarsen)
     if tip_size is None or tip_size >= mesh_size or not tips:
         return
     d_min, d_max = _tip_distances(mesh_size, tip_size)
@@ -464,8 +470,8 @@ def _size_fields(gmsh, mesh_size: float, tip_size: float | None, tips: list[int]
     fld.setNumbers(dist, "PointsList", tips)
     thr = fld.add("Threshold")
     fld.setNumber(thr, "InField", dist)
-    fld.setNumber(thr, "SizeMin", tip_size)
-    fld.setNumber(thr, "SizeMax", mesh_size)
+    fld.setNumber(thr, "SizeMin", tip_size * coarsen)
+    fld.setNumber(thr, "SizeMax", mesh_size * coarsen)
     fld.setNumber(thr, "DistMin", d_min)
     fld.setNumber(thr, "DistMax", d_max)
     fld.setAsBackgroundMesh(thr)
@@ -524,19 +530,62 @@ def _extract(gmsh, sides, surface, curves) -> DefectMesh:
                       {s: boundary[s] for s in SIDES})
 
 
+def refine_uniformly(dm: DefectMesh) -> DefectMesh:
+    """Every triangle split into four by its edges' midpoints (the new nodes numbered after the old ones,
+    in the order of the sorted edge keys), every defect chain and boundary side with the midpoints of
+    its edges inserted: a conforming mesh of elements half the size and of the same shapes.
+    Counter-clockwise triangles stay counter-clockwise; ``mirror`` is dropped."""
+    P, t = dm.points, np.asarray(dm.triangles, dtype=np.int64)
+    n = P.shape[1]
+    e = np.concatenate([t[[0, 1]], t[[1, 2]], t[[2, 0]]], axis=1)           # (2, 3 nt): edges ab, bc, ca
+    keys = np.minimum(e[0], e[1]) * n + np.maximum(e[0], e[1])
+    uniq, inverse = np.unique(keys, return_inverse=True)
+    mid = (n + inverse).reshape(3, -1)                                       # ab, bc, ca per triangle
+    a, b = uniq // n, uniq % n
+    points = np.hstack([P, 0.5 * (P[:, a] + P[:, b])])
+
+    def mids(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        k = np.minimum(u, v) * n + np.maximum(u, v)
+        pos = np.searchsorted(uniq, k)
+        if np.any(pos >= uniq.size) or np.any(uniq[np.minimum(pos, uniq.size - 1)] != k):
+            raise RuntimeError("refine_uniformly: a defect or boundary edge is not a mesh edge")
+        return n + pos
+
+    def split(chain: np.ndarray) -> np.ndarray:
+        chain = np.asarray(chain, dtype=np.int64)
+        out = np.empty(2 * chain.size - 1, dtype=np.int64)
+        out[0::2] = chain
+        out[1::2] = mids(chain[:-1], chain[1:])
+        return out
+
+    ab, bc, ca = mid
+    tri = np.hstack([np.vstack([t[0], ab, ca]), np.vstack([ab, t[1], bc]), np.vstack([ca, bc, t[2]]),
+                     np.vstack([ab, bc, ca])])
+    boundary = {side: split(nodes) for side, nodes in dm.boundary.items()}   # sorted along the side: edges
+    return DefectMesh(points, np.ascontiguousarray(tri.astype(dm.triangles.dtype)),
+                      [split(d) for d in dm.defect_nodes], boundary)
+
+
 def mesh_with_defects(width: float, height: float, defects: list[dict], mesh_size: float,
-                      tip_size: float | None = None, algorithm: str = "frontal",
+                      tip_size: float | None = None, algorithm: str = "frontal", refine: int = 0,
                       max_samples: int = MAX_SAMPLES) -> DefectMesh:
     """Mesh (0, width) x (0, height) with first-order triangles of size about ``mesh_size``
     (``tip_size`` near the defect tips), the defects embedded as internal edges.
 
     ``defects``: tables ``{"points": (k, 2), "curve": "polyline" | "spline"}`` (other keys are
     ignored). ``algorithm``: a key of :data:`ALGORITHMS` (``"frontal"``, the default: the meshes of
-    every scene file; ``"delaunay"``: faster, see there). ``max_samples``: see :func:`validate`.
+    every scene file; see there for the others). ``refine`` = r > 0: mesh with sizes 2^r times larger,
+    then split every triangle into four r times (:func:`refine_uniformly`: the defect and boundary
+    edges in two): elements of about the same size, of the coarse mesh's shapes, in a fraction of the
+    time (:data:`ALGORITHMS`); polyline defects only (a spline's new nodes would be chord midpoints).
+    ``max_samples``: see :func:`validate`.
     Raises InputError on bad input (see :func:`validate`), MissingDependency without gmsh.
     """
     if algorithm not in ALGORITHMS:
         raise InputError(f"algorithm must be one of {', '.join(ALGORITHMS)}, got {algorithm!r}")
+    if refine not in (0, 1, 2, 3) or (refine and any(d.get("curve", "polyline") == "spline"
+                                                     and len(d.get("points", ())) > 2 for d in defects)):
+        raise InputError(f"refine must be 0, 1, 2 or 3 (and 0 with spline defects), got {refine!r}")
     parsed = validate(width, height, defects, mesh_size, tip_size, max_samples)
     gmsh = _import_gmsh()
     # gmsh meshes the body scaled to max(width, height) = 1 (its tolerances are absolute), so a
@@ -545,11 +594,14 @@ def mesh_with_defects(width: float, height: float, defects: list[dict], mesh_siz
     parsed = [(np.asarray(P, dtype=float) / L, curve) for P, curve in parsed]
     with _session(gmsh, ALGORITHMS[algorithm]):
         sides, surface, curves, tips = _build(gmsh, float(width) / L, float(height) / L, parsed)
-        _size_fields(gmsh, float(mesh_size) / L, None if tip_size is None else float(tip_size) / L, tips)
+        _size_fields(gmsh, float(mesh_size) / L, None if tip_size is None else float(tip_size) / L, tips,
+                     2.0 ** refine)
         try:
             gmsh.model.mesh.generate(2)
         except Exception as exc:  # gmsh raises a bare Exception with its last error message
             raise RuntimeError(f"gmsh could not mesh the body with its defects: {exc}") from exc
         dm = _extract(gmsh, sides, surface, curves)
+    for _ in range(refine):
+        dm = refine_uniformly(dm)
     dm.points = dm.points * L
     return dm

@@ -232,3 +232,22 @@ def test_a_sweep_over_delta_reuses_the_mesh():
     assert other.shared is pr.shared and np.array_equal(other.crack_points, pr.crack_points)
     other.build()
     assert pr.shared.assemblies == 1
+
+
+def test_refine_splits_a_coarse_mesh_and_keeps_the_defects():
+    """mesh_with_defects(refine=1): meshed at 2 x mesh_size, every triangle split in four: each defect
+    chain is twice as fine and stays on its segment; a spline defect is refused (its new nodes would be
+    chord midpoints)."""
+    defects = [{"points": [[0.2, 0.3], [0.7, 0.45]]}, {"points": [[0.3, 0.7], [0.8, 0.6]]}]
+    coarse = gmsh_mesh.mesh_with_defects(1.0, 1.0, defects, 0.1)
+    fine = gmsh_mesh.mesh_with_defects(1.0, 1.0, defects, 0.05, refine=1)
+    assert fine.triangles.shape[1] == 4 * coarse.triangles.shape[1]
+    for d, c, f in zip(defects, coarse.defect_nodes, fine.defect_nodes):
+        assert len(f) == 2 * len(c) - 1
+        p0, p1 = np.array(d["points"])
+        rel = fine.points[:, f].T - p0
+        tau = (p1 - p0) / np.linalg.norm(p1 - p0)
+        assert np.abs(rel @ np.array([-tau[1], tau[0]])).max() < 1e-12 and np.all(np.diff(rel @ tau) > 0)
+    with pytest.raises(InputError, match="refine must be"):
+        gmsh_mesh.mesh_with_defects(1.0, 1.0, [{"points": [[0.2, 0.3], [0.5, 0.5], [0.7, 0.4]],
+                                                 "curve": "spline"}], 0.1, refine=1)
