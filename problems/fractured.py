@@ -19,7 +19,8 @@ more nodes. Keys:
   [-360, 360] (drawn uniformly). The angle also sets the crack's normal (the direction turned by
   +90 degrees) and so its "+" face: 0 and 180 give the same segment with opposite normals.
 * ``min_gap`` (default 0 = 2 x ``mesh_size``): the smallest distance between two cracks (exact
-  segment-to-segment distance) and between a crack and the body's boundary; >= 0 (0: the default).
+  segment-to-segment distance) and between a crack and the body's boundary; 0 (the default) or at
+  least a quarter of the element size near the cracks, min(mesh_size, tip_size).
   Two element sizes leave at least one layer of elements between neighbouring cracks; 3 would leave
   room for only about 350 cracks of the default length at the default mesh_size (random sequential
   addition jams there), 2 for about 620.
@@ -70,6 +71,8 @@ MAX_CRACKS = 100_000
 ATTEMPTS_PER_CRACK = 200
 #: default min_gap in element sizes
 GAP_IN_MESH_SIZES = 2.0
+#: smallest min_gap in element sizes (min(mesh_size, tip_size)): closer cracks force slivers between them
+MIN_GAP_IN_ELEMENTS = 0.25
 #: crack_length and crack_angle when not given
 DEFAULT_LENGTH = 0.025
 DEFAULT_ANGLE = (0.0, 180.0)
@@ -295,6 +298,11 @@ class Fractured(ThinDefect):
         self._check_keys(n)                      # the thin_defect keys and the mesh size, before placing
         h = p["mesh_size"] or min(p["width"], p["height"]) / p["N"]
         gap = check_positive("min_gap", p["min_gap"], allow_zero=True) or GAP_IN_MESH_SIZES * h
+        finest = min(h, p["tip_size"] or h)
+        if gap < MIN_GAP_IN_ELEMENTS * finest:          # closer cracks would force slivers between them
+            raise InputError(f"min_gap must be 0 (the default: {GAP_IN_MESH_SIZES:g} x mesh_size) or >= "
+                             f"{MIN_GAP_IN_ELEMENTS:g} x the element size near the cracks (min(mesh_size, "
+                             f"tip_size) = {finest:g}): >= {MIN_GAP_IN_ELEMENTS * finest:g}, got {p['min_gap']!r}")
         length = DEFAULT_LENGTH if p["crack_length"] is None else p["crack_length"]
         angle = DEFAULT_ANGLE if p["crack_angle"] is None else p["crack_angle"]
         seg = _place(n, length, angle, gap, p["seed"], p["region"], p["width"], p["height"])

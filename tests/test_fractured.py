@@ -132,6 +132,7 @@ def test_an_impossible_set_is_refused():
     ("crack_angle", [0, 400], [r"crack_angle", r"\[-360, 360\]"]),
     ("crack_angle", "north", [r"crack_angle", r"angle"]),
     ("min_gap", -1, [r"min_gap", r">= 0"]),
+    ("min_gap", 0.01, [r"min_gap", r"0 \(the default: 2 x mesh_size\) or >= 0\.25 x", r">= 0\.0125"]),
     ("min_gap", 0.6, [r"min_gap", r"no room"]),
     ("seed", -3, [r"seed", r"integer in \[0, "]),
     ("region", [[0.5, 0.5], [0.2, 0.9]], [r"region", r"x0 < x1"]),
