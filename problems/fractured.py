@@ -40,8 +40,8 @@ body's boundary); a candidate is accepted when its exact distance to every crack
 >= ``min_gap``, else rejected. Candidates are tested in batches (numpy;
 :func:`dualfem.problems.gmsh_mesh.near_segment_pairs`: a uniform grid hashing the cracks' midpoints,
 cells as wide as two conflicting cracks' midpoints can be apart, so only neighbouring cells are
-compared: 2,000 cracks place in under 0.1 s), with the same outcome as one at a time. After ``200 x
-cracks`` candidates without placing them all the scene is refused (an
+compared: 2,000 cracks place in under 0.1 s), with the same outcome as one at a time. After 200 x
+``cracks`` candidates without placing them all the scene is refused (an
 :class:`~dualfem.errors.InputError` naming ``cracks``, how many were placed, and what to change); so is,
 at once, a count beyond the packing bound (the cracks' neighbourhoods of radius ``min_gap / 2`` cannot
 overlap: ``cracks x (length x min_gap + pi min_gap^2 / 4)`` must not exceed the region's area grown by
