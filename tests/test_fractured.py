@@ -252,3 +252,13 @@ def test_refine_splits_a_coarse_mesh_and_keeps_the_defects():
     with pytest.raises(InputError, match="refine must be"):
         gmsh_mesh.mesh_with_defects(1.0, 1.0, [{"points": [[0.2, 0.3], [0.5, 0.5], [0.7, 0.4]],
                                                  "curve": "spline"}], 0.1, refine=1)
+
+
+def test_a_scene_file_takes_ranges_and_the_region_as_toml_lists(tmp_path):
+    f = tmp_path / "cracks.toml"
+    f.write_text('problem = "fractured"\ncracks = 8\ncrack_length = [0.1, 0.2]\ncrack_angle = [30, 60]\n'
+                 'region = [[0.1, 0.2], [0.9, 0.9]]\nmesh_size = 0.04\ntip_size = 0.02\nseed = 3\n')
+    pr = load_scene(str(f))
+    same = random_cracks(8, [0.1, 0.2], [30, 60], 0.08, 3, [[0.1, 0.2], [0.9, 0.9]])
+    assert np.array_equal(pr.crack_points, np.array([c["points"] for c in same]))
+    assert run("pdas", pr.build()).status == Status.SOLVED
