@@ -35,8 +35,9 @@ from dualfem.core.errors import InputError, MissingDependency, check_positive
 CURVES = ("polyline", "spline")
 SIDES = ("bottom", "top", "left", "right")
 MAX_TRIANGLES = 5_000_000
-#: defect points checked for crossings and self-intersection (pairwise: the cost grows with the square);
-#: a polyline counts its points, a spline SAMPLES_PER_SPAN per span: 2048 are checked in about 2 s
+#: defect points checked for crossings and self-intersection (a polyline counts its points, a spline
+#: SAMPLES_PER_SPAN per span); the default of ``max_samples`` in :func:`validate`. Crossings between
+#: defects are found on a spatial grid (near-linear cost), a self-intersection of one defect pairwise
 MAX_SAMPLES = 2048
 SAMPLES_PER_SPAN = 64          # spline samples per span between two given points (validation only)
 _TOL_REL = 1e-9                # "touching" tolerance, relative to max(width, height)
@@ -48,6 +49,22 @@ _OPTIONS = {                   # fixed gmsh options (reproducible, silent, first
     "Mesh.Algorithm": 6, "Mesh.ElementOrder": 1, "Mesh.RecombineAll": 0, "Mesh.Smoothing": 1,
     "Mesh.MinimumCurveNodes": 3, "Mesh.MeshSizeFromPoints": 0, "Mesh.MeshSizeFromCurvature": 0,
     "Mesh.MeshSizeExtendFromBoundary": 0, "Mesh.MeshSizeMin": 0.0,
+}
+
+#: gmsh options per 2D algorithm (over _OPTIONS). "frontal": Frontal-Delaunay with one smoothing pass (the
+#: meshes of the scene files and tests). "delaunay": gmsh's Delaunay without smoothing. Measured on the
+#: 400-crack scene (unit square, mesh_size 0.003, 2 cores shared with other jobs, generate only):
+#: frontal 5.2-7.2 s (262 k triangles, gamma >= 0.65), frontal without smoothing 4.8-5.2 s, delaunay
+#: 3.3-4.2 s (295 k triangles: it refines until every circumradius <= h / sqrt 2; gamma >= 0.47, mean
+#: 0.91), "frontal-quad" (8) 6.3 s, BAMG (7) 23 s with slivers (gamma 0). Meshing at 2 h and splitting
+#: every triangle in four (mesh_with_defects's refine=1, what the fractured problem does; the split by
+#: refine_uniformly takes 0.02-0.04 s, gmsh's own refine 0.5-1.0 s): frontal 1.1-1.9 s (275 k triangles,
+#: gamma >= 0.62, mean 0.98), frontal_unsmoothed 0.7 s (gamma >= 0.44, mean 0.976), delaunay 0.55 s
+#: (302 k triangles); refine=2: frontal 0.25 s but 328 k triangles (the cracks force small elements at 4 h)
+ALGORITHMS: dict[str, dict[str, float]] = {
+    "frontal": {"Mesh.Algorithm": 6, "Mesh.Smoothing": 1},
+    "frontal_unsmoothed": {"Mesh.Algorithm": 6, "Mesh.Smoothing": 0},
+    "delaunay": {"Mesh.Algorithm": 5, "Mesh.Smoothing": 0},
 }
 
 
@@ -118,6 +135,83 @@ def _segment_distances(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.nda
     d = np.minimum.reduce([point_seg(a0, b0, b1), point_seg(a1, b0, b1),
                            point_seg(b0, a0, a1), point_seg(b1, a0, a1)])
     return np.where(proper, 0.0, d), proper
+
+
+def segment_distances(P0, P1, Q0, Q1) -> tuple[np.ndarray, np.ndarray]:
+    """Exact distances between segments P0-P1 and Q0-Q1 (coordinate arrays (..., 2), broadcast), and a
+    mask of the pairs that cross properly (each segment's ends strictly on both sides of the other);
+    the distance of a crossing pair is 0."""
+    P0, P1, Q0, Q1 = (np.asarray(a, dtype=float) for a in (P0, P1, Q0, Q1))
+
+    def cross(o, p, q):
+        return (p[..., 0] - o[..., 0]) * (q[..., 1] - o[..., 1]) - (p[..., 1] - o[..., 1]) * (q[..., 0] - o[..., 0])
+
+    def point_seg(p, s0, s1):
+        d = s1 - s0
+        t = np.clip(((p - s0) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-300), 0.0, 1.0)
+        e = p - (s0 + t[..., None] * d)
+        return np.hypot(e[..., 0], e[..., 1])
+
+    proper = ((np.sign(cross(P0, P1, Q0)) * np.sign(cross(P0, P1, Q1)) < 0)
+              & (np.sign(cross(Q0, Q1, P0)) * np.sign(cross(Q0, Q1, P1)) < 0))
+    d = np.minimum(np.minimum(point_seg(P0, Q0, Q1), point_seg(P1, Q0, Q1)),
+                   np.minimum(point_seg(Q0, P0, P1), point_seg(Q1, P0, P1)))
+    return np.where(proper, 0.0, d), proper
+
+
+def near_segment_pairs(A: np.ndarray, B: np.ndarray | None, gap: float,
+                       chunk: int = 1 << 20) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Index pairs (i, j) of segments A[i] and B[j] (arrays (n, 2, 2): first and last point) whose exact
+    distance is <= ``gap``, with those distances; with B None the pairs i < j within A.
+
+    A uniform grid (cells of side the longest segment + ``gap``) hashes the segments' midpoints, so
+    only segments in neighbouring cells are compared (O(n) for segments of similar lengths, instead of
+    all n m pairs); exact distances (:func:`segment_distances`) in chunks of ``chunk`` pairs."""
+    same = B is None
+    B = A if B is None else B
+    empty = np.zeros(0, dtype=np.int64)
+    if len(A) == 0 or len(B) == 0:
+        return empty, empty, np.zeros(0)
+    ma, mb = A.mean(axis=1), B.mean(axis=1)
+    la, lb = (np.hypot(*(X[:, 1] - X[:, 0]).T) for X in (A, B))
+    reach = 0.5 * (la.max() + lb.max()) + gap         # midpoints of two segments within gap are this close
+    lo = np.minimum(ma.min(axis=0), mb.min(axis=0))
+    extent = float(np.max(np.maximum(ma.max(axis=0), mb.max(axis=0)) - lo))
+    cell = max(float(reach), extent / 2 ** 20, 1e-300)     # at most 2^20 cells a side: no key overflow
+    ca = np.floor((ma - lo) / cell).astype(np.int64)
+    cb = np.floor((mb - lo) / cell).astype(np.int64)
+    ny = int(max(ca[:, 1].max(), cb[:, 1].max())) + 3
+    key_b = (cb[:, 0] + 1) * ny + (cb[:, 1] + 1)
+    order = np.argsort(key_b, kind="stable")
+    sorted_keys = key_b[order]
+    ii, jj = [], []
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            k = (ca[:, 0] + 1 + dx) * ny + (ca[:, 1] + 1 + dy)
+            start = np.searchsorted(sorted_keys, k, side="left")
+            cnt = np.searchsorted(sorted_keys, k, side="right") - start
+            total = int(cnt.sum())
+            if not total:
+                continue
+            i = np.repeat(np.arange(len(A)), cnt)
+            j = order[np.repeat(start - np.cumsum(cnt) + cnt, cnt) + np.arange(total)]
+            keep = (i < j) if same else np.ones(total, dtype=bool)
+            dm = ma[i] - mb[j]
+            keep &= np.hypot(dm[:, 0], dm[:, 1]) <= reach
+            ii.append(i[keep])
+            jj.append(j[keep])
+    if not ii:
+        return empty, empty, np.zeros(0)
+    i, j = np.concatenate(ii), np.concatenate(jj)
+    out_i, out_j, out_d = [empty], [empty], [np.zeros(0)]
+    for c0 in range(0, len(i), chunk):
+        ic, jc = i[c0:c0 + chunk], j[c0:c0 + chunk]
+        d, _ = segment_distances(A[ic, 0], A[ic, 1], B[jc, 0], B[jc, 1])
+        near = d <= gap
+        out_i.append(ic[near])
+        out_j.append(jc[near])
+        out_d.append(d[near])
+    return np.concatenate(out_i), np.concatenate(out_j), np.concatenate(out_d)
 
 
 def _closest(A: np.ndarray, B: np.ndarray, mask=None) -> tuple[float, bool, np.ndarray]:
@@ -248,8 +342,10 @@ def _tip_distances(mesh_size: float, tip_size: float) -> tuple[float, float]:
 
 
 def validate(width: float, height: float, defects: list[dict], mesh_size: float,
-             tip_size: float | None = None) -> list[tuple[np.ndarray, str]]:
-    """Check all inputs of :func:`mesh_with_defects` (no gmsh needed); return [(points, curve)]."""
+             tip_size: float | None = None, max_samples: int = MAX_SAMPLES) -> list[tuple[np.ndarray, str]]:
+    """Check all inputs of :func:`mesh_with_defects` (no gmsh needed); return [(points, curve)].
+
+    ``max_samples``: the most curve points accepted (see :data:`MAX_SAMPLES`)."""
     width, height = check_positive("width", width), check_positive("height", height)
     mesh_size = check_positive("mesh_size", mesh_size)
     if mesh_size > min(width, height):
@@ -265,21 +361,30 @@ def validate(width: float, height: float, defects: list[dict], mesh_size: float,
     tol = _TOL_REL * max(width, height)
     parsed = [_check_defect(i, d) for i, d in enumerate(defects)]
     counts = [len(P) if c == "polyline" or len(P) == 2 else (len(P) - 1) * SAMPLES_PER_SPAN + 1 for P, c in parsed]
-    if sum(counts) > MAX_SAMPLES:
+    if sum(counts) > max_samples:
         raise InputError(f"defects: {len(parsed)} defects with {sum(len(P) for P, _ in parsed)} points give "
                          f"{sum(counts):,} curve points to check for crossings (a spline counts {SAMPLES_PER_SPAN} "
-                         f"per span); the limit is {MAX_SAMPLES:,}: use fewer points (a spline needs few)")
+                         f"per span); the limit is {max_samples:,}: use fewer points (a spline needs few)")
     samples = [sample_defect(P, c) for P, c in parsed]
     for i, (P, _) in enumerate(parsed):
         _check_one(i, P, samples[i], width, height, tol)
-    for i in range(len(samples)):
-        for j in range(i + 1, len(samples)):
+    if len(samples) > 1:
+        # segments of different defects closer than tol (a spatial grid: no all-pairs loop); the first pair
+        # of defects (i, j) in order that crosses or touches is reported
+        seg = np.concatenate([np.stack([S[:-1], S[1:]], axis=1) for S in samples])
+        owner = np.repeat(np.arange(len(samples)), [len(S) - 1 for S in samples])
+        a, b, _ = near_segment_pairs(seg, None, tol)
+        da, db = owner[a], owner[b]
+        other = da != db
+        if other.any():
+            lo_, hi_ = np.minimum(da, db)[other], np.maximum(da, db)[other]
+            k = np.lexsort((hi_, lo_))[0]
+            i, j = int(lo_[k]), int(hi_[k])
             dist, crossing, where = _closest(samples[i], samples[j])
             if crossing:
                 raise InputError(f"defects[{i}] and defects[{j}] cross near {_fmt(where)}")
-            if dist <= tol:
-                raise InputError(f"defects[{i}] and defects[{j}] touch near {_fmt(where)} "
-                                 f"(distance {dist:.3g}); defects must be disjoint")
+            raise InputError(f"defects[{i}] and defects[{j}] touch near {_fmt(where)} "
+                             f"(distance {dist:.3g}); defects must be disjoint")
     return parsed
 
 
@@ -293,16 +398,17 @@ def _import_gmsh():
 
 
 @contextmanager
-def _session(gmsh) -> Iterator[None]:
-    """A fresh gmsh model with the fixed options; gmsh is finalized (or, if the caller had it
-    initialized already, the model removed and the options restored) whatever happens."""
+def _session(gmsh, options: dict[str, float] | None = None) -> Iterator[None]:
+    """A fresh gmsh model with the fixed options (``options`` replacing some of them); gmsh is finalized
+    (or, if the caller had it initialized already, the model removed and the options restored) whatever
+    happens."""
     owner = not gmsh.isInitialized()
     if owner:
         gmsh.initialize(readConfigFiles=False, interruptible=False)
     saved: dict[str, float] = {}
     previous = None if owner else gmsh.model.getCurrent()
     try:
-        for name, value in _OPTIONS.items():
+        for name, value in {**_OPTIONS, **(options or {})}.items():
             saved[name] = gmsh.option.getNumber(name)
             gmsh.option.setNumber(name, value)
         gmsh.model.add("dualfem_defects")
@@ -353,8 +459,10 @@ def _build(gmsh, width: float, height: float, parsed, right_split: tuple[float, 
     return sides, surface, curves, tips
 
 
-def _size_fields(gmsh, mesh_size: float, tip_size: float | None, tips: list[int]) -> None:
-    gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
+def _size_fields(gmsh, mesh_size: float, tip_size: float | None, tips: list[int], coarsen: float = 1.0) -> None:
+    """Element size mesh_size, tip_size near the tips; every size times ``coarsen`` (a mesh to be refined
+    uniformly afterwards), the distances of the tips' refinement those of the final sizes."""
+    gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size * coarsen)
     if tip_size is None or tip_size >= mesh_size or not tips:
         return
     d_min, d_max = _tip_distances(mesh_size, tip_size)
@@ -363,8 +471,8 @@ def _size_fields(gmsh, mesh_size: float, tip_size: float | None, tips: list[int]
     fld.setNumbers(dist, "PointsList", tips)
     thr = fld.add("Threshold")
     fld.setNumber(thr, "InField", dist)
-    fld.setNumber(thr, "SizeMin", tip_size)
-    fld.setNumber(thr, "SizeMax", mesh_size)
+    fld.setNumber(thr, "SizeMin", tip_size * coarsen)
+    fld.setNumber(thr, "SizeMax", mesh_size * coarsen)
     fld.setNumber(thr, "DistMin", d_min)
     fld.setNumber(thr, "DistMax", d_max)
     fld.setAsBackgroundMesh(thr)
@@ -397,7 +505,9 @@ def _extract(gmsh, sides, surface, curves) -> DefectMesh:
     xy = np.asarray(coords, dtype=float).reshape(-1, 3)[:, :2]
     _, conn = gmsh.model.mesh.getElementsByType(2, surface)
     tri_tags = np.asarray(conn, dtype=np.int64).reshape(-1, 3)
-    used = np.unique(tri_tags)                    # drops nodes of free (control) points
+    mask = np.zeros(max(int(tags.max()), int(tri_tags.max())) + 1, dtype=bool)
+    mask[tri_tags.ravel()] = True
+    used = np.flatnonzero(mask)                   # = np.unique(tri_tags), without its sort; drops free (control) points
     pos = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
     pos[tags] = np.arange(len(tags))
     index = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
@@ -421,27 +531,78 @@ def _extract(gmsh, sides, surface, curves) -> DefectMesh:
                       {s: boundary[s] for s in SIDES})
 
 
+def refine_uniformly(dm: DefectMesh) -> DefectMesh:
+    """Every triangle split into four by its edges' midpoints (the new nodes numbered after the old ones,
+    in the order of the sorted edge keys), every defect chain and boundary side with the midpoints of
+    its edges inserted: a conforming mesh of elements half the size and of the same shapes.
+    Counter-clockwise triangles stay counter-clockwise; ``mirror`` is dropped."""
+    P, t = dm.points, np.asarray(dm.triangles, dtype=np.int64)
+    n = P.shape[1]
+    e = np.concatenate([t[[0, 1]], t[[1, 2]], t[[2, 0]]], axis=1)           # (2, 3 nt): edges ab, bc, ca
+    keys = np.minimum(e[0], e[1]) * n + np.maximum(e[0], e[1])
+    uniq, inverse = np.unique(keys, return_inverse=True)
+    mid = (n + inverse).reshape(3, -1)                                       # ab, bc, ca per triangle
+    a, b = uniq // n, uniq % n
+    points = np.hstack([P, 0.5 * (P[:, a] + P[:, b])])
+
+    def mids(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        k = np.minimum(u, v) * n + np.maximum(u, v)
+        pos = np.searchsorted(uniq, k)
+        if np.any(pos >= uniq.size) or np.any(uniq[np.minimum(pos, uniq.size - 1)] != k):
+            raise RuntimeError("refine_uniformly: a defect or boundary edge is not a mesh edge")
+        return n + pos
+
+    def split(chain: np.ndarray) -> np.ndarray:
+        chain = np.asarray(chain, dtype=np.int64)
+        out = np.empty(2 * chain.size - 1, dtype=np.int64)
+        out[0::2] = chain
+        out[1::2] = mids(chain[:-1], chain[1:])
+        return out
+
+    ab, bc, ca = mid
+    tri = np.hstack([np.vstack([t[0], ab, ca]), np.vstack([ab, t[1], bc]), np.vstack([ca, bc, t[2]]),
+                     np.vstack([ab, bc, ca])])
+    boundary = {side: split(nodes) for side, nodes in dm.boundary.items()}   # sorted along the side: edges
+    return DefectMesh(points, np.ascontiguousarray(tri.astype(dm.triangles.dtype)),
+                      [split(d) for d in dm.defect_nodes], boundary)
+
+
 def mesh_with_defects(width: float, height: float, defects: list[dict], mesh_size: float,
-                      tip_size: float | None = None) -> DefectMesh:
+                      tip_size: float | None = None, algorithm: str = "frontal", refine: int = 0,
+                      max_samples: int = MAX_SAMPLES) -> DefectMesh:
     """Mesh (0, width) x (0, height) with first-order triangles of size about ``mesh_size``
     (``tip_size`` near the defect tips), the defects embedded as internal edges.
 
     ``defects``: tables ``{"points": (k, 2), "curve": "polyline" | "spline"}`` (other keys are
-    ignored). Raises InputError on bad input (see :func:`validate`), MissingDependency without gmsh.
+    ignored). ``algorithm``: a key of :data:`ALGORITHMS` (``"frontal"``, the default: the meshes of
+    every scene file; see there for the others). ``refine`` = r > 0: mesh with sizes 2^r times larger,
+    then split every triangle into four r times (:func:`refine_uniformly`: the defect and boundary
+    edges in two): elements of about the same size, of the coarse mesh's shapes, in a fraction of the
+    time (:data:`ALGORITHMS`); polyline defects only (a spline's new nodes would be chord midpoints).
+    ``max_samples``: see :func:`validate`.
+    Raises InputError on bad input (see :func:`validate`), MissingDependency without gmsh.
     """
-    parsed = validate(width, height, defects, mesh_size, tip_size)
+    if algorithm not in ALGORITHMS:
+        raise InputError(f"algorithm must be one of {', '.join(ALGORITHMS)}, got {algorithm!r}")
+    if refine not in (0, 1, 2, 3) or (refine and any(d.get("curve", "polyline") == "spline"
+                                                     and len(d.get("points", ())) > 2 for d in defects)):
+        raise InputError(f"refine must be 0, 1, 2 or 3 (and 0 with spline defects), got {refine!r}")
+    parsed = validate(width, height, defects, mesh_size, tip_size, max_samples)
     gmsh = _import_gmsh()
     # gmsh meshes the body scaled to max(width, height) = 1 (its tolerances are absolute), so a
     # scene in other length units gets the same mesh, scaled; a unit-size body is meshed as given
     L = float(max(width, height))
     parsed = [(np.asarray(P, dtype=float) / L, curve) for P, curve in parsed]
-    with _session(gmsh):
+    with _session(gmsh, ALGORITHMS[algorithm]):
         sides, surface, curves, tips = _build(gmsh, float(width) / L, float(height) / L, parsed)
-        _size_fields(gmsh, float(mesh_size) / L, None if tip_size is None else float(tip_size) / L, tips)
+        _size_fields(gmsh, float(mesh_size) / L, None if tip_size is None else float(tip_size) / L, tips,
+                     2.0 ** refine)
         try:
             gmsh.model.mesh.generate(2)
         except Exception as exc:  # gmsh raises a bare Exception with its last error message
             raise RuntimeError(f"gmsh could not mesh the body with its defects: {exc}") from exc
         dm = _extract(gmsh, sides, surface, curves)
+    for _ in range(refine):
+        dm = refine_uniformly(dm)
     dm.points = dm.points * L
     return dm

@@ -91,6 +91,21 @@ class ThinDefect(Problem):
     update_keys = ("delta", "load", "load_scale")
 
     def validate(self) -> None:
+        tables = self.params["defects"]        # the size is the first thing to know: before the defects are parsed
+        self._check_keys(len(tables) if isinstance(tables, (list, tuple)) and len(tables) else 1)
+        p = self.params
+        p["defect"] = parse_defect(p["defect"])
+        default_defect = np.asarray(self.defaults["defect"], dtype=float)
+        tables = p["defects"]
+        if not (isinstance(tables, (list, tuple)) and len(tables) == 0) \
+                and not np.array_equal(p["defect"], default_defect):
+            raise InputError("give either defect = [[x1, y1], [x2, y2]] or [[defects]] tables, not both")
+        self._defects = parse_defects(p["defects"], p["defect"], p["delta"], p["width"], p["height"], p["mesh"])
+        self._check_defects_and_load()
+
+    def _check_keys(self, n_defects: int) -> None:
+        """Every key but the defects; with a gmsh mesh every size-driving key (mesh_size, tip_size, N, width,
+        height) is bounded for ``n_defects`` defects (2 tips each) before any defect is parsed or placed."""
         p = self.params
         p["N"] = check_int("N", p["N"], 2, 4096)
         p["delta"] = check_positive("delta", p["delta"])
@@ -110,9 +125,7 @@ class ThinDefect(Problem):
         rot = p["rotate_deg"]
         if not isinstance(rot, (int, float)) or not np.isfinite(rot):
             raise InputError(f"rotate_deg must be a finite number (degrees), got {rot!r}")
-        if p["mesh"] == "gmsh":        # every size-driving key (mesh_size, tip_size, N, width, height) bounded
-            tables = p["defects"]        # before the defects are parsed: the size is the first thing to know
-            n_defects = len(tables) if isinstance(tables, (list, tuple)) and len(tables) else 1
+        if p["mesh"] == "gmsh":
             from dualfem.problems.gmsh_mesh import check_size
 
             h = p["mesh_size"] or min(p["width"], p["height"]) / p["N"]
@@ -120,13 +133,10 @@ class ThinDefect(Problem):
                 f"mesh_size=0 (min(width, height)/N = {h:g} with N={p['N']})"
             tip = p["tip_size"] if 0 < p["tip_size"] < h else None
             check_size(p["width"], p["height"], h, tip, 2 * n_defects, label)
-        p["defect"] = parse_defect(p["defect"])
-        default_defect = np.asarray(self.defaults["defect"], dtype=float)
-        tables = p["defects"]
-        if not (isinstance(tables, (list, tuple)) and len(tables) == 0) \
-                and not np.array_equal(p["defect"], default_defect):
-            raise InputError("give either defect = [[x1, y1], [x2, y2]] or [[defects]] tables, not both")
-        self._defects = parse_defects(p["defects"], p["defect"], p["delta"], p["width"], p["height"], p["mesh"])
+
+    def _check_defects_and_load(self) -> None:
+        """Each defect's delta against E and the body size; the load resolved."""
+        p = self.params
         for i, d in enumerate(self._defects):
             # the interface stiffness ~ 1/delta must not swamp the elastic stiffness ~ E beyond double
             # precision (at 1e-12 the elasticity still keeps 4 digits at N = 4096); scale-free
@@ -153,6 +163,11 @@ class ThinDefect(Problem):
         return int(2 * nodes), f"mesh_size={h:g}" + (f", tip_size={tip:g}" if tip else "")
 
     # ----------------------------------------------------------------- mesh
+    def _gmsh_options(self) -> dict:
+        """Keyword arguments of :func:`dualfem.problems.gmsh_mesh.mesh_with_defects` beyond the geometry
+        (its defaults here: Frontal-Delaunay, the scene files' meshes)."""
+        return {}
+
     def _reference_mesh(self) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
         """(nodes, triangles, ordered node ids of each defect) in the reference (unrotated) frame."""
         p = self.params
@@ -164,7 +179,7 @@ class ThinDefect(Problem):
 
         h = p["mesh_size"] or min(W, H) / N
         dm = mesh_with_defects(W, H, [{"points": d["points"], "curve": d["curve"]} for d in self._defects],
-                               h, p["tip_size"] or None)
+                               h, p["tip_size"] or None, **self._gmsh_options())
         pts, tri = np.asarray(dm.points, dtype=float), np.asarray(dm.triangles, dtype=np.int32)
         if np.bincount(tri.ravel(), minlength=pts.shape[1]).min() == 0:
             raise RuntimeError("the gmsh mesh has nodes in no triangle (problems/gmsh_mesh.py must drop them)")

@@ -102,12 +102,15 @@ def _check_edges(t: np.ndarray, defects: list[np.ndarray], on_defect: np.ndarray
     nn = on_defect.size
     e = np.hstack([near[[0, 1]], near[[1, 2]], near[[2, 0]]])
     have = np.minimum(e[0], e[1]) * nn + np.maximum(e[0], e[1])
-    for k, nodes in enumerate(defects):
-        nodes = np.asarray(nodes, dtype=np.int64)
-        want = np.minimum(nodes[:-1], nodes[1:]) * nn + np.maximum(nodes[:-1], nodes[1:])
-        if not np.all(np.isin(want, have)):
-            raise ValueError(f"defect {k}: consecutive defect nodes are not joined by mesh edges "
-                             f"(the mesh does not carry the defect)")
+    nodes = [np.asarray(d, dtype=np.int64) for d in defects]
+    a = np.concatenate([d[:-1] for d in nodes])
+    b = np.concatenate([d[1:] for d in nodes])
+    want = np.minimum(a, b) * nn + np.maximum(a, b)
+    missing = ~np.isin(want, have)                      # one search for all defects
+    if missing.any():
+        k = int(np.repeat(np.arange(len(nodes)), [d.size - 1 for d in nodes])[np.argmax(missing)])
+        raise ValueError(f"defect {k}: consecutive defect nodes are not joined by mesh edges "
+                         f"(the mesh does not carry the defect)")
 
 
 def _assign_sides(p, t, lower, upper, prev, nxt) -> np.ndarray:
