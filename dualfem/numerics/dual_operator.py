@@ -30,9 +30,9 @@ Two implementations:
   (Jacobi, warm-started), whose iterations are counted.
 
 :func:`make_operator` builds the one asked for; ``"auto"`` picks by size and memory
-(:func:`choose_operator`): dense while the local unknowns are at most :data:`CROSSOVER_LOCAL`
-and the dense blocks fit in memory, matrix-free otherwise; a refusal names the sizes, the
-estimates, the memory available and the other operator.
+(:func:`choose_operator`): dense while the local unknowns |I| satisfy |I|^2 <= :data:`CROSSOVER_RATIO` n
+(and |I| <= :data:`CROSSOVER_LOCAL`) and the dense blocks fit in memory, matrix-free otherwise; a
+refusal names the sizes, the estimates, the memory available and the other operator.
 """
 from __future__ import annotations
 
@@ -48,9 +48,15 @@ from dualfem.core.qp import QP
 
 #: the operator names of the dual solvers' ``operator`` parameter
 OPERATORS = ("auto", "dense", "matrix_free")
-#: ``auto`` takes the dense reduction up to this many local unknowns (|I|), matrix-free above.
-#: Measured on fractured scenes (benchmarks/operator_crossover.py): see reports/fractured.md
-CROSSOVER_LOCAL = 6000
+#: ``auto`` takes the dense reduction while |I|^2 <= CROSSOVER_RATIO * n (n unknowns, |I| local unknowns):
+#: the dense phases cost ~|I|^3 flops and a 2D sparse factorization ~n^1.5, so the crossover is a ratio
+#: of |I|^2 to n. Measured (benchmarks/operator_crossover.py, pdas setup + solve, fractured scenes of
+#: 260-265 k unknowns, 2 cores, loaded): |I|^2 / n = 3.1: dense 1.0x the floor, matrix-free 1.7x;
+#: 12: 1.3x / 1.9x; 28: 2.2x / 2.4x; 49: 3.1x / 2.8x; 190: 9.5x / 4.2x; 420: 17.6x / 3.3x
+#: (the one-crack structured scenes have |I|^2 / n ~ 2: dense up to N = 2048)
+CROSSOVER_RATIO = 32.0
+#: and never more local unknowns than this on the dense path (tests lower it to force matrix-free)
+CROSSOVER_LOCAL = 12000
 #: how the matrix-free operator applies D_AA^-1 (MatrixFreeDualOperator.face)
 FACE_METHODS = ("cg", "factor")
 #: the factorized face solve's penalty C = AL_SCALE / diag(D): each step divides the error by ~ 1 + AL_SCALE
@@ -491,7 +497,8 @@ def choose_operator(qp: QP, asked: str = "auto", limit_bytes: int | None = None,
                     backend: str | None = None) -> tuple[str, str]:
     """(operator, why) for ``asked`` in :data:`OPERATORS`.
 
-    ``auto``: dense while |I| <= :data:`CROSSOVER_LOCAL` (and <= MAX_LOCAL) and its estimate fits the
+    ``auto``: dense while |I|^2 <= :data:`CROSSOVER_RATIO` n and |I| <= :data:`CROSSOVER_LOCAL` (and <=
+    MAX_LOCAL) and its estimate fits the
     memory available, else matrix-free if that fits. InputError when the asked one (or, for auto,
     neither) fits, naming the sizes, the estimates, the memory and the other operator.
     """
@@ -520,10 +527,11 @@ def choose_operator(qp: QP, asked: str = "auto", limit_bytes: int | None = None,
         if est["matrix_free"] > have:
             raise refuse("matrix_free", "dense")
         return "matrix_free", "asked"
-    if nI <= min(CROSSOVER_LOCAL, MAX_LOCAL) and est["dense"] <= have:
-        return "dense", f"auto: {nI} local unknowns <= {CROSSOVER_LOCAL}"
+    limit = int(min(CROSSOVER_LOCAL, MAX_LOCAL, np.sqrt(CROSSOVER_RATIO * qp.n)))
+    if nI <= limit and est["dense"] <= have:
+        return "dense", f"auto: {nI} local unknowns <= {limit}"
     if est["matrix_free"] <= have:
-        return "matrix_free", f"auto: {nI} local unknowns > {CROSSOVER_LOCAL}" if nI > CROSSOVER_LOCAL \
+        return "matrix_free", f"auto: {nI} local unknowns > {limit}" if nI > limit \
             else "auto: the dense blocks do not fit in memory"
     raise InputError(f"operator=auto: {sizes}: neither operator fits: dense about {est['dense'] / 1e9:.1f} GB, "
                      f"matrix_free about {est['matrix_free'] / 1e9:.1f} GB, available {have / 1e9:.1f} GB")
