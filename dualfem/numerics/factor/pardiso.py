@@ -117,13 +117,20 @@ class PardisoFactorization(Factorization):
                                f"{_ERRORS.get(err.value, 'unknown error')}")
 
     def _set_values(self, A: sp.csr_matrix) -> None:
-        U = sp.triu(A, format="csr")
-        U.sort_indices()
-        if U.nnz >= 2**31:
+        """The upper triangle of A (canonical CSR, as :meth:`analyze` passes it) in PARDISO's arrays; the mask
+        of its entries is kept for :meth:`_factorize` (same pattern). One mask over A's entries instead of
+        scipy's ``triu`` (through COO and back: N = 512, 7.3 M entries, 0.21 s against 0.05 s, and again
+        at every factorization, 0.01 s now)."""
+        rows = np.repeat(np.arange(A.shape[0], dtype=A.indices.dtype), np.diff(A.indptr))
+        keep = A.indices >= rows
+        del rows
+        nnz = int(np.count_nonzero(keep))
+        if nnz >= 2**31:
             raise ValueError("PARDISO (32-bit indices): too many nonzeros")
-        self._a = np.ascontiguousarray(U.data, float)
-        self._ia = U.indptr.astype(np.int32)
-        self._ja = U.indices.astype(np.int32)
+        self._upper = keep
+        self._a = np.ascontiguousarray(A.data[keep], float)
+        self._ia = np.concatenate([[0], np.cumsum(keep)])[A.indptr].astype(np.int32)
+        self._ja = A.indices[keep].astype(np.int32)
         if np.any(np.diff(self._ia) == 0):
             raise ValueError("PARDISO: the matrix has an empty row in its upper triangle (not SPD)")
 
@@ -158,7 +165,7 @@ class PardisoFactorization(Factorization):
                           "ordering": "METIS"})
 
     def _factorize(self, A: sp.csr_matrix) -> None:
-        self._a = np.ascontiguousarray(sp.triu(A, format="csr").data, float)
+        self._a = np.ascontiguousarray(A.data[self._upper], float)     # the pattern analyzed (checked by factorize)
         ns = self.local.size
         if self._all_local:
             self._call(22, np.zeros(self.n), np.zeros(self.n))
