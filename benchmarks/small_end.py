@@ -18,7 +18,9 @@ hits every column alike); medians are printed:
 
 The machine (CPU, cores, the commands' threads), the load average before and after, and whether Python
 may write bytecode caches (``PYTHONDONTWRITEBYTECODE``: without them every dualfem module is compiled at
-every start) are printed with the table.
+every start, 0.1-0.2 s here) are printed with the table. ``--pycache DIR`` runs the processes as an ordinary
+installation does, with bytecode caches (kept in DIR: ``PYTHONPYCACHEPREFIX``, so nothing is written
+into the repository; one untimed command fills it first).
 """
 from __future__ import annotations
 
@@ -54,8 +56,12 @@ COLUMNS = ("startup", "outside", "assembly", "setup", "solve", "certify", "total
            "floor_solve", "floor")
 
 
+#: environment of the timed processes (``--pycache`` changes it)
+ENV = dict(os.environ, MPLBACKEND="Agg")
+
+
 def _run(cmd: list[str]) -> tuple[float, dict]:
-    env = dict(os.environ, MPLBACKEND="Agg")
+    env = ENV
     t0 = time.perf_counter()
     r = subprocess.run(cmd, capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t0
@@ -83,6 +89,7 @@ def one_round(N: int) -> dict:
 
 
 def machine() -> str:
+    """CPU, cores, Python, the commit, and the bytecode setting of the timed processes."""
     cpu = platform.processor() or platform.machine()
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as fh:
@@ -96,9 +103,10 @@ def machine() -> str:
                                text=True, cwd=os.path.dirname(os.path.abspath(__file__))).stdout.strip()
     except OSError:
         commit, dirty = "?", ""
-    nobytecode = os.environ.get("PYTHONDONTWRITEBYTECODE", "")
+    cache = (f"bytecode caches in {ENV['PYTHONPYCACHEPREFIX']}" if "PYTHONPYCACHEPREFIX" in ENV else
+             f"PYTHONDONTWRITEBYTECODE={ENV.get('PYTHONDONTWRITEBYTECODE', '')!r}")
     return (f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, commit {commit}"
-            f"{' (modified)' if dirty else ''}, PYTHONDONTWRITEBYTECODE={nobytecode!r}")
+            f"{' (modified)' if dirty else ''}, {cache}")
 
 
 def main() -> int:
@@ -106,7 +114,13 @@ def main() -> int:
     ap.add_argument("--N", type=int, nargs="+", default=[256, 512])
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--json", default=None, metavar="FILE", help="also write every round and the medians here")
+    ap.add_argument("--pycache", default=None, metavar="DIR",
+                    help="bytecode caches in DIR (PYTHONPYCACHEPREFIX), as an ordinary installation has them")
     a = ap.parse_args()
+    if a.pycache:
+        ENV.pop("PYTHONDONTWRITEBYTECODE", None)
+        ENV["PYTHONPYCACHEPREFIX"] = os.path.abspath(a.pycache)
+        _run(_solve_cmd(4))                                     # fills the caches (untimed)
     load0, started = os.getloadavg(), time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     rounds: dict[int, list[dict]] = {}
     for N in a.N:
