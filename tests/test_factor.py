@@ -252,3 +252,25 @@ def test_schur_onto_every_unknown_is_the_matrix(name):
     assert np.abs(f.schur() - A.toarray()[np.ix_(loc, loc)]).max() <= 1e-12 * 2.5
     b = np.arange(n, dtype=float)
     assert np.abs(A @ f.solve(b) - b).max() <= 1e-12 * n
+
+
+def test_pardiso_finds_mkl_without_pypardisos_search(monkeypatch, tmp_path):
+    """MKL is loaded from the file PYPARDISO_MKL_RT names, else from this environment's lib directory
+    (pypardiso's recursive search of the whole environment, 0.15 s per call, is only the fallback),
+    and the upper triangle handed to PARDISO is scipy's triu."""
+    from dualfem.numerics.factor import pardiso
+
+    monkeypatch.setenv("PYPARDISO_MKL_RT", str(tmp_path / "libmkl_rt.so.9"))
+    assert pardiso._mkl_rt_candidates() == [str(tmp_path / "libmkl_rt.so.9")]
+    monkeypatch.delenv("PYPARDISO_MKL_RT")
+    if "pardiso" not in BACKENDS:
+        pytest.skip("pypardiso not installed")
+    fn = pardiso._lib()
+    assert fn.restype is None and len(fn.argtypes) == 16
+    A = sp.random(60, 60, density=0.1, random_state=3)
+    A = (A + A.T + 60 * sp.eye(60)).tocsr()
+    f = pardiso.PardisoFactorization()
+    f._set_values(A)
+    U = sp.triu(A, format="csr")
+    U.sort_indices()
+    assert np.array_equal(f._a, U.data) and np.array_equal(f._ia, U.indptr) and np.array_equal(f._ja, U.indices)

@@ -245,3 +245,88 @@ def test_planned_stiffness_sum_falls_back_on_an_exact_cancellation():
     ref = (a["K_el"] + interface(maps["node_dofs"], c.lower, c.upper, maps["defect_normals"], coef,
                                  a["n"])[0]).tocsc()
     assert plan and K.nnz == ref.nnz and abs(K - ref).max() == 0.0 and K[up, up] == 0.0
+
+
+def _random_mesh(seed: int, npts: int = 40) -> tuple[np.ndarray, np.ndarray]:
+    """A Delaunay mesh of random points in the unit square (corners included), triangles in random order."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(seed)
+    p = np.vstack([[0, 0], [1, 0], [1, 1], [0, 1], rng.random((npts, 2))]).T
+    t = Delaunay(p.T).simplices.T.astype(np.int32)
+    return p, t[:, rng.permutation(t.shape[1])]
+
+
+def _reference_stiffness(p, t, lam, mu, node_dofs, n):
+    """The textbook assembly: one dense 6 x 6 element matrix per triangle (B' D B area), scattered with
+    scipy's COO -> CSC (duplicates summed)."""
+    import scipy.sparse as sp
+
+    D = np.array([[lam + 2 * mu, lam, 0], [lam, lam + 2 * mu, 0], [0, 0, mu]])
+    rows, cols, vals = [], [], []
+    for tri in t.T:
+        x, y = p[0, tri], p[1, tri]
+        twoA = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0])
+        bx = np.array([y[1] - y[2], y[2] - y[0], y[0] - y[1]]) / twoA
+        by = np.array([x[2] - x[1], x[0] - x[2], x[1] - x[0]]) / twoA
+        Bm = np.zeros((3, 6))                        # local unknown 2 a + c
+        Bm[0, 0::2], Bm[1, 1::2], Bm[2, 0::2], Bm[2, 1::2] = bx, by, by, bx
+        Ke = Bm.T @ D @ Bm * abs(twoA) / 2
+        dofs = np.array([node_dofs[c, a] for a in tri for c in range(2)])
+        for i in range(6):
+            for j in range(6):
+                if dofs[i] >= 0 and dofs[j] >= 0:
+                    rows.append(dofs[i])
+                    cols.append(dofs[j])
+                    vals.append(Ke[i, j])
+    return sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("clamp", ["none", "nodes", "one_component", "other_numbering"])
+def test_stiffness_equals_the_textbook_assembly(seed, clamp):
+    """The direct compressed assembly (node pairs sorted once, bincount, 2 x 2 blocks) gives the matrix of
+    the element-by-element assembly to rounding, in canonical form with the same pattern."""
+    from dualfem.problems.thin_defect.assemble import free_dofs, stiffness
+
+    p, t = _random_mesh(seed)
+    nn = p.shape[1]
+    bottom = np.flatnonzero(p[1] == 0)
+    if clamp == "none":
+        nd = np.arange(2 * nn).reshape(nn, 2).T
+    elif clamp == "nodes":
+        nd = free_dofs(bottom, nn)
+    else:
+        free = np.ones((nn, 2), bool)
+        free[bottom, 1] = False                     # rollers: only the vertical component clamped
+        free[3, :] = False                          # and one whole node
+        nd = np.where(free, np.cumsum(free.ravel()).reshape(nn, 2) - 1, -1).T.copy()
+        if clamp == "other_numbering":             # components numbered block-wise: scipy's path
+            k = int(free.sum())
+            order = np.concatenate([np.flatnonzero(free[:, 0]), nn + np.flatnonzero(free[:, 1])])
+            nd = np.full(2 * nn, -1)
+            nd[order] = np.arange(k)
+            nd = nd.reshape(2, nn)
+    n = int(nd.max()) + 1
+    lam, mu = 1.2e5, 7.7e4
+    K = stiffness(p, t, lam, mu, nd, n)
+    ref = _reference_stiffness(p, t, lam, mu, nd, n)
+    assert K.format == "csc" and K.shape == (n, n) and K.has_canonical_format
+    srt = K.copy()
+    srt.has_sorted_indices = srt.has_canonical_format = False
+    srt.sum_duplicates()                                      # really canonical: nothing to merge or sort
+    assert np.array_equal(srt.indices, K.indices) and np.array_equal(srt.indptr, K.indptr)
+    assert np.array_equal(K.indptr, ref.indptr) and np.array_equal(K.indices, ref.indices)
+    assert np.abs(K - ref).max() <= 1e-12 * np.abs(ref).max()
+
+
+def test_stiffness_equals_scikit_fem():
+    """The same bilinear form as scikit-fem's linear elasticity on the doubled structured mesh."""
+    skfem = pytest.importorskip("skfem")
+    from skfem.models.elasticity import linear_elasticity
+
+    problem = load_scene("f2", {"N": 8, "nu": 0.3})
+    K_all, _, basis = problem.assemble()
+    lam, mu = lame(problem.params["E"], problem.params["nu"], problem.params["plane"])
+    ref = skfem.asm(linear_elasticity(lam, mu), basis)
+    assert abs(K_all - ref).max() <= 1e-12 * abs(ref).max()
