@@ -62,8 +62,7 @@ class _PardisoSlots(PardisoFactorization):
     "several factorizations with the same nonzero structure at the same time"): ``slot(k)`` selects the
     factor that the next ``factorize`` writes and ``solve`` uses. One analysis (phase 11) serves all.
 
-    It repeats :meth:`PardisoFactorization._call` with ``maxfct`` and ``mnum`` instead of 1 and 1 (the
-    parent's call hard-codes them); everything else is the parent's."""
+    The parent passes its ``maxfct`` and ``mnum`` to MKL; everything else is the parent's."""
 
     def __init__(self, maxfct: int):
         super().__init__()
@@ -79,24 +78,6 @@ class _PardisoSlots(PardisoFactorization):
     def _factorize(self, A: sp.csr_matrix) -> None:
         super()._factorize(A)
         self._values[self.mnum - 1] = self._a
-
-    def _call(self, phase: int, b: np.ndarray, x: np.ndarray, nrhs: int = 1) -> None:
-        import ctypes
-
-        from dualfem.numerics.factor.pardiso import _ERRORS, _lib
-
-        P = ctypes.POINTER
-        i32 = ctypes.c_int32
-        err = i32(0)
-        _lib()(self._pt.ctypes.data_as(P(ctypes.c_int64)), ctypes.byref(i32(self.maxfct)),
-               ctypes.byref(i32(self.mnum)), ctypes.byref(i32(2)), ctypes.byref(i32(phase)),
-               ctypes.byref(i32(self.n)), self._a.ctypes.data_as(P(ctypes.c_double)),
-               self._ia.ctypes.data_as(P(i32)), self._ja.ctypes.data_as(P(i32)), self._perm.ctypes.data_as(P(i32)),
-               ctypes.byref(i32(nrhs)), self._iparm.ctypes.data_as(P(i32)), ctypes.byref(i32(0)),
-               b.ctypes.data_as(P(ctypes.c_double)), x.ctypes.data_as(P(ctypes.c_double)), ctypes.byref(err))
-        if err.value != 0:
-            raise RuntimeError(f"PARDISO phase {phase} (factor {self.mnum} of {self.maxfct}) failed with error "
-                               f"{err.value}: {_ERRORS.get(err.value, 'unknown error')}")
 
     def free(self) -> None:
         self._values.clear()

@@ -101,13 +101,16 @@ class PardisoFactorization(Factorization):
         super().__init__(local, order)          # PARDISO orders with METIS itself: the hint is unused
         self._pt = np.zeros(64, np.int64)
         self._alive = False
+        #: MKL's maxfct / mnum: how many numeric factors of the analyzed pattern are kept, and which one the
+        #: next factorization writes and the solves use (1 and 1; several: dualfem.numerics.newton_matrix)
+        self.maxfct = self.mnum = 1
 
     def _call(self, phase: int, b: np.ndarray, x: np.ndarray, nrhs: int = 1) -> None:
         P = ctypes.POINTER
         i32 = ctypes.c_int32
         err = i32(0)
-        _lib()(self._pt.ctypes.data_as(P(ctypes.c_int64)), ctypes.byref(i32(1)), ctypes.byref(i32(1)),
-               ctypes.byref(i32(2)), ctypes.byref(i32(phase)), ctypes.byref(i32(self.n)),
+        _lib()(self._pt.ctypes.data_as(P(ctypes.c_int64)), ctypes.byref(i32(self.maxfct)),
+               ctypes.byref(i32(self.mnum)), ctypes.byref(i32(2)), ctypes.byref(i32(phase)), ctypes.byref(i32(self.n)),
                self._a.ctypes.data_as(P(ctypes.c_double)), self._ia.ctypes.data_as(P(i32)),
                self._ja.ctypes.data_as(P(i32)), self._perm.ctypes.data_as(P(i32)), ctypes.byref(i32(nrhs)),
                self._iparm.ctypes.data_as(P(i32)), ctypes.byref(i32(0)), b.ctypes.data_as(P(ctypes.c_double)),
