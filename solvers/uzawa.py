@@ -37,9 +37,12 @@ Choices where the paper is silent or misprinted (documented here once):
 * Honest stop: the paper's outer test bounds only the last change of l. Two estimates of the
   remaining error of l: change * rho / (1 - rho) with the observed linear rate rho, and the
   proximal-point bound change / (r mu_min) (mu_min = smallest dual compliance, see below), which
-  also holds after one outer iteration. When the larger exceeds ``error_factor * tol`` the
-  status is ``inaccurate`` (with both numbers in the message) instead of ``solved``. The iterates
-  and the counts k, m are not affected.
+  also holds after one outer iteration. With the relative test (``tol_mode="relative"``, the default)
+  the iteration goes on until the larger is also <= tol (the answer's multipliers are certified to the
+  declared tolerance: on fractured scenes the last change alone left errors of 1.5-1.7e-6 against a
+  tolerance of 1e-6). With the paper's absolute test, when the larger exceeds ``error_factor * tol`` the
+  status is ``inaccurate`` (with both numbers in the message) instead of ``solved``; the iterates
+  and the counts k, m are then the paper's.
 * Shortcut (``shortcut=True``, with l^0 = 0): if the unconstrained minimizer has no negative
   jump, it already is the answer of the first Uzawa iteration and l^1 = 0; we return it with
   k = 1, m = 1 (one solve).
@@ -471,13 +474,18 @@ class Uzawa(DualOperatorSolver):
                 # covers a stop after one or two outer iterations, where no rate can be observed.
                 est = max(est_rate, change / (r * self._mu_min()))
                 history[-1]["dual_error_estimate"] = est
-                if est > p["error_factor"] * tol:
+                if p["tol_mode"] == "relative" and est > tol and k < p["max_iter"]:
+                    # the relative test (the default) bounds the estimated error of l, not only its last
+                    # change: iterate on (the paper's absolute test stops here, as the paper does)
+                    pass
+                elif est > p["error_factor"] * tol:
                     return result(Status.INACCURATE,
                                   f"outer test met, but the estimated multiplier error {est:.2g} > "
                                   f"{p['error_factor']:g} x tol (observed rate {rho:.4f}, r x min dual "
                                   f"compliance = {r * self._mu_min():.2g}, which should be >> 1); "
                                   f"use r_rule='auto' (solver uzawa_auto) or a smaller tol")
-                return result(Status.SOLVED)
+                else:
+                    return result(Status.SOLVED)
             if change < best:
                 best, best_k = change, k
             elif k - best_k >= p["stall_window"]:
