@@ -131,3 +131,24 @@ def test_matrix_free_through_the_runner_on_a_gmsh_scene(solver):
     assert b.info["operator"] == "matrix_free"
     dx = a.x - b.x
     assert np.sqrt(dx @ (qp.K @ dx) / (a.x @ (qp.K @ a.x))) < 1e-8
+
+
+def test_certificate_takes_only_speed_hints_from_the_solver(monkeypatch):
+    """A matrix-free solver's diagonal estimate and preconditioner speed the certificate's CG up; a bogus
+    preconditioner cannot change what is certified (the certificate equals a fresh one, or is unavailable)."""
+    import scipy.sparse as sp
+
+    qp = load_scene("two_defects", {}).build()
+    monkeypatch.setattr(dop, "CROSSOVER_LOCAL", 0)
+    good = run("pdas", qp, {"operator": "matrix_free"})
+    fresh = certified_error(qp, good.x, good.multipliers, KSolver(qp))
+    assert good.info["certificate"]["value"] == pytest.approx(fresh["value"], rel=1e-4)
+
+    from dualfem.numerics.certify import OperatorHints
+
+    P = sp.random(qp.m, qp.m, density=0.3, random_state=1, format="csr") * 1e6     # not SPD, not an inverse
+    hints = OperatorHints.of(type("Op", (), {"_diag": np.full(qp.m, 1e-30), "face_preconditioner": P})(), qp.m)
+    x = good.x * (1 + 1e-7)                          # an answer 1e-7 off: never certified better than that
+    c = certified_error(qp, x, good.multipliers, KSolver(qp, reduction=hints))["value"]
+    assert not np.isfinite(c) or c == pytest.approx(1e-7, rel=0.05)
+    assert certified_error(qp, x, good.multipliers, KSolver(qp))["value"] == pytest.approx(1e-7, rel=0.05)

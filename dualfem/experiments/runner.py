@@ -262,14 +262,23 @@ def _checked_solution(returned: Any, qp: QP, name: str) -> tuple[Solution | None
 
 
 def _reduction_of(solver: Any, view: QP, qp: QP) -> Any:
-    """The solver's LocalReduction of the view it was given, rebound to ``qp`` (same arrays), else None."""
+    """The solver's LocalReduction of the view it was given, rebound to ``qp`` (same arrays); else the hints
+    of its matrix-free operator (:class:`dualfem.numerics.certify.OperatorHints`: its diagonal estimate and
+    face preconditioner, which only speed the certificate's CG up); else None."""
+    from dualfem.numerics.certify import OperatorHints
+    from dualfem.numerics.dual_operator import MatrixFreeDualOperator
     from dualfem.numerics.linalg import LocalReduction
 
     try:
         red = getattr(solver, "reduction", None)
+        op = getattr(solver, "op", None)
     except Exception:  # noqa: BLE001 - a property that raises: no reduction to reuse
         return None
-    if type(red) is not LocalReduction or red.qp is not view or not _view_intact(view, qp):
+    if not _view_intact(view, qp):
+        return None
+    if type(op) is MatrixFreeDualOperator and op.qp is view:
+        return OperatorHints.of(op, qp.m)
+    if type(red) is not LocalReduction or red.qp is not view:
         return None
     red = copy.copy(red)
     red.qp = qp
@@ -355,7 +364,8 @@ def fingerprint(qp: QP) -> dict[str, int]:
 def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: Any = None) -> Solution:
     """Demote an uncertified ``solved`` claim to ``inaccurate`` (see the module docstring).
 
-    ``reduction``: the solver's LocalReduction of ``qp`` (``Solver.reduction``), reused if valid.
+    ``reduction``: the solver's LocalReduction of ``qp`` (``Solver.reduction``), reused if valid, or the hints of
+    its matrix-free operator (:class:`dualfem.numerics.certify.OperatorHints`).
     """
     sol.info.setdefault("claimed_status", str(sol.status))
     sol.info["certified_tol"] = tol

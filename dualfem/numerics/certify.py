@@ -29,6 +29,8 @@ K_fixed through :meth:`dualfem.numerics.linalg.LocalReduction.k_solve`.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.linalg as sla
 
@@ -69,6 +71,27 @@ class _SparseK:
         return self.lu.solve(r)
 
 
+@dataclass
+class OperatorHints:
+    """What a solver's matrix-free operator knows that speeds the certificate's CG up without entering its
+    result: the diagonal estimate of D (the active-set guess's force scale, Jacobi) and an approximate inverse
+    of D (the face preconditioner). Taken only when well-formed (shapes, finite positive diagonal); a wrong
+    one can slow CG or make it fail (the certificate is then unavailable), never change what it certifies."""
+
+    diagonal: np.ndarray | None = None
+    face_preconditioner: object = None
+
+    @classmethod
+    def of(cls, op, m: int) -> OperatorHints:
+        import scipy.sparse as sp
+
+        d = getattr(op, "_diag", None)
+        ok_d = isinstance(d, np.ndarray) and d.shape == (m,) and bool(np.all(np.isfinite(d) & (d > 0)))
+        P = getattr(op, "face_preconditioner", None)
+        ok_p = sp.issparse(P) and P.shape == (m, m) and bool(np.all(np.isfinite(P.data)))
+        return cls(np.array(d) if ok_d else None, P.tocsr(copy=True) if ok_p else None)
+
+
 class KSolver:
     """r -> K^-1 r and the dual operator D = B K^-1 B' of a QP, for the certificate.
 
@@ -88,6 +111,7 @@ class KSolver:
         self.red = None
         self.op: MatrixFreeDualOperator | None = None
         self._D: np.ndarray | None = None
+        hints = reduction if isinstance(reduction, OperatorHints) else None
         if reduction is not None and type(reduction) is LocalReduction and reduction.qp is qp:
             self.red = reduction          # a solver's reduction of this very QP: same factorization, reused
             return
@@ -99,6 +123,9 @@ class KSolver:
                 raise RuntimeError(str(exc)) from exc
         if kind == "matrix_free":
             self.op = MatrixFreeDualOperator(qp, factor)
+            if hints is not None:
+                self.op._diag = hints.diagonal
+                self.op.face_preconditioner = hints.face_preconditioner
             return
         try:
             self.red = LocalReduction(qp, factor=factor)
