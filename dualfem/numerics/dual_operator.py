@@ -482,12 +482,14 @@ def dense_extra_bytes(n_local: int, m: int) -> int:
 
 
 def estimates(qp: QP, backend: str | None = None) -> dict:
-    """Peak-memory estimates (bytes) of both operators for this QP: {"dense": ..., "matrix_free": ...}."""
+    """Extra peak memory (bytes, x the model's SAFETY) of each operator for a QP the process already holds:
+    the factorization (:func:`dualfem.numerics.memory.factor_bytes`) plus, dense, the dense blocks
+    (:func:`dense_extra_bytes`), matrix-free, a few n-vectors. Compared with the memory available now."""
     from dualfem.numerics.factor import get_default
-    from dualfem.numerics.memory import SAFETY, estimate_peak_bytes
+    from dualfem.numerics.memory import SAFETY, factor_bytes
 
     backend = backend or get_default()
-    base = estimate_peak_bytes(max(qp.n, 1), backend)
+    base = factor_bytes(max(qp.n, 1), backend)
     nI = int(np.asarray(qp.local_dofs).size)
     return {"dense": int(SAFETY * (base + dense_extra_bytes(nI, qp.m))),
             "matrix_free": int(SAFETY * (base + 8 * 8 * qp.n))}

@@ -89,6 +89,18 @@ def estimate_peak_bytes(n_unknowns: int, backend: str = "pardiso", analysis: dic
     return int(max(build_peak, held + factor) * MB)
 
 
+def factor_bytes(n_unknowns: int, backend: str = "pardiso") -> int:
+    """Estimated extra peak RSS (bytes) of factorizing a QP with n unknowns that the process already holds
+    (the ``factor_peak`` part of the model, without the build and the QP itself)."""
+    n = int(n_unknowns)
+    if n < 1:
+        raise InputError(f"n_unknowns must be >= 1, got {n_unknowns!r}")
+    c = _coefficients()
+    if backend not in ("superlu", "pardiso", "cholmod"):
+        raise InputError(f"backend must be superlu, pardiso or cholmod, got {backend!r}")
+    return int(c[backend] * n * np.log2(max(n, 2)) * MB)
+
+
 def available_bytes() -> int:
     """Memory available for a new process now: the smallest of the machine's ``MemAvailable``, the
     address space left under ``ulimit -v`` and the room in the process's memory cgroups (v1 and v2):
