@@ -93,8 +93,8 @@ def node_pattern(t: np.ndarray, nn: int) -> tuple[np.ndarray, np.ndarray, np.nda
     pos = np.empty(sk.size, dtype=np.intp)
     pos[order] = np.cumsum(new) - 1
     del order
-    u = sk[new]
-    return u // nn, u % nn, pos
+    rows, cols = np.divmod(sk[new], nn)
+    return rows, cols, pos
 
 
 def _expand(rows: np.ndarray, cols: np.ndarray, vals, node_dofs: np.ndarray, nn: int, n: int) -> sp.csc_matrix:
