@@ -19,27 +19,12 @@ import sys
 import time
 from pathlib import Path
 
-FLOOR = """
-import json, resource, sys, time
-from dualfem.core.scene import load_scene
-from dualfem.numerics.factor import get_default
-from dualfem.numerics.linalg import sparse_factor
-warm = load_scene("f2", {"N": 4}).build()
-sparse_factor(warm.K, get_default()).solve(warm.F)       # the library is loaded before timing
-qp = load_scene("f2", {"N": int(sys.argv[1])}).build()
-K = qp.K.tocsc()
-t0 = time.perf_counter()
-f = sparse_factor(K, get_default())
-t1 = time.perf_counter()
-x = f.solve(qp.F)
-t2 = time.perf_counter()
-print(json.dumps({"backend": get_default(), "factor": t1 - t0, "solve": t2 - t1, "n": qp.n,
-                  "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
-"""
+FLOOR = Path(__file__).resolve().parent / "floor.py"       # the floor, in its own process
 
 
-def _run(cmd: list[str]) -> tuple[float, dict]:
-    env = dict(os.environ, MPLBACKEND="Agg")
+def _run(cmd: list[str], env: dict | None = None) -> tuple[float, dict]:
+    """(wall time, the command's last JSON line or {"error": its stderr's tail})."""
+    env = dict(os.environ, MPLBACKEND="Agg") if env is None else env
     t0 = time.perf_counter()
     r = subprocess.run(cmd, capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t0
@@ -76,7 +61,7 @@ def main() -> int:
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     rows = []
     for N in a.N:
-        fl = [_run([sys.executable, "-c", FLOOR, str(N)]) for _ in range(a.repeat)]
+        fl = [_run([sys.executable, str(FLOOR), "f2", json.dumps({"N": N})]) for _ in range(a.repeat)]
         floor = {"N": N, "kind": "floor", **fl[-1][1],
                  "floor_s": statistics.median(r[1].get("factor", float("nan")) + r[1].get("solve", 0) for r in fl)}
         rows.append(floor)

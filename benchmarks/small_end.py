@@ -32,25 +32,11 @@ import statistics
 import subprocess
 import sys
 import time
+from pathlib import Path
 
-FLOOR = """
-import json, sys, time
-from dualfem.core.scene import load_scene
-from dualfem.numerics.factor import get_default
-from dualfem.numerics.linalg import sparse_factor
-from dualfem.numerics.threads import get_threads
-warm = load_scene("f2", {"N": 4}).build()
-sparse_factor(warm.K, get_default()).solve(warm.F)       # the library is loaded before timing
-qp = load_scene("f2", {"N": int(sys.argv[1])}).build()
-K = qp.K.tocsc()
-t0 = time.perf_counter()
-f = sparse_factor(K, get_default())
-t1 = time.perf_counter()
-x = f.solve(qp.F)
-t2 = time.perf_counter()
-print(json.dumps({"backend": get_default(), "threads": get_threads(), "factor": t1 - t0, "solve": t2 - t1,
-                  "n": qp.n}))
-"""
+from end_to_end import _run as run_json  # noqa: E402  (benchmarks/end_to_end.py, beside this script)
+
+FLOOR = Path(__file__).resolve().parent / "floor.py"       # the floor, in its own process
 
 COLUMNS = ("startup", "outside", "assembly", "setup", "solve", "certify", "total", "whole", "floor_factor",
            "floor_solve", "floor")
@@ -61,14 +47,10 @@ ENV = dict(os.environ, MPLBACKEND="Agg")
 
 
 def _run(cmd: list[str]) -> tuple[float, dict]:
-    env = ENV
-    t0 = time.perf_counter()
-    r = subprocess.run(cmd, capture_output=True, text=True, env=env)
-    wall = time.perf_counter() - t0
-    try:
-        return wall, json.loads(r.stdout.strip().splitlines()[-1])
-    except (ValueError, IndexError):
-        raise SystemExit(f"{' '.join(cmd)} failed: {(r.stderr or r.stdout).strip()[-500:]}") from None
+    wall, res = run_json(cmd, ENV)
+    if "error" in res:
+        raise SystemExit(f"{' '.join(cmd)} failed: {res['error']}")
+    return wall, res
 
 
 def _solve_cmd(N: int) -> list[str]:
@@ -77,7 +59,7 @@ def _solve_cmd(N: int) -> list[str]:
 
 def one_round(N: int) -> dict:
     """One floor process, one whole command at N and one at N = 4: the columns of :data:`COLUMNS`."""
-    _, fl = _run([sys.executable, "-c", FLOOR, str(N)])
+    _, fl = _run([sys.executable, str(FLOOR), "f2", json.dumps({"N": N})])
     wall, rec = _run(_solve_cmd(N))
     start, _ = _run(_solve_cmd(4))
     t = rec["time_s"]

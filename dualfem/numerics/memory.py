@@ -74,30 +74,25 @@ def estimate_peak_bytes(n_unknowns: int, backend: str = "pardiso", analysis: dic
     ``analysis``: a factorization's ``info`` after its analysis phase; PARDISO's ``peak_bytes``
     replaces the model of the factor's peak.
     """
-    n = int(n_unknowns)
-    if n < 1:
-        raise InputError(f"n_unknowns must be >= 1, got {n_unknowns!r}")
-    c = _coefficients()
-    if backend not in ("superlu", "pardiso", "cholmod"):
-        raise InputError(f"backend must be superlu, pardiso or cholmod, got {backend!r}")
+    factor = factor_bytes(n_unknowns, backend, analysis) / MB
+    c, n = _coefficients(), int(n_unknowns)
     build_peak = c["build_peak"][0] + c["build_peak"][1] * n
     held = c["held"][0] + c["held"][1] * n
-    if analysis and analysis.get("peak_bytes"):
-        factor = c["pardiso_report"] * analysis["peak_bytes"] / MB
-    else:
-        factor = c[backend] * n * np.log2(max(n, 2))
     return int(max(build_peak, held + factor) * MB)
 
 
-def factor_bytes(n_unknowns: int, backend: str = "pardiso") -> int:
+def factor_bytes(n_unknowns: int, backend: str = "pardiso", analysis: dict | None = None) -> int:
     """Estimated extra peak RSS (bytes) of factorizing a QP with n unknowns that the process already holds
-    (the ``factor_peak`` part of the model, without the build and the QP itself)."""
+    (the ``factor_peak`` part of the model, without the build and the QP itself; ``analysis`` as in
+    :func:`estimate_peak_bytes`)."""
     n = int(n_unknowns)
     if n < 1:
         raise InputError(f"n_unknowns must be >= 1, got {n_unknowns!r}")
     c = _coefficients()
     if backend not in ("superlu", "pardiso", "cholmod"):
         raise InputError(f"backend must be superlu, pardiso or cholmod, got {backend!r}")
+    if analysis and analysis.get("peak_bytes"):
+        return int(c["pardiso_report"] * analysis["peak_bytes"])
     return int(c[backend] * n * np.log2(max(n, 2)) * MB)
 
 
