@@ -561,8 +561,11 @@ def test_a_real_ctrl_c_still_interrupts(tmp_path):
     import signal
 
     env = installed(tmp_path, {"hostile_sleepy": SLEEPY_SRC})
+    # a terminal's Ctrl-C reaches a process whose SIGINT is at its default; a suite started in the background
+    # of a non-interactive shell (nohup sh -c ... &) inherits SIGINT ignored, and Python then keeps it ignored
     p = subprocess.Popen([sys.executable, "-m", "dualfem", "solve", "f1", *SMALL, "--solver", "hostile_sleepy",
-                          "--json"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                          "--json"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         for line in p.stderr:
             if "ready" in line:
