@@ -40,7 +40,7 @@ def _line(entry: str, r: dict, floor: dict | None, best_energy: float | None) ->
     ts = res.get("time_s", {})
     c = res.get("counters", {})
     cert = (res.get("certificate") or {}).get("value")
-    ss = (ts.get("setup") or 0.0) + (ts.get("solve") or 0.0)
+    ss = _setup_solve(res)
     fl = floor.get("floor") if floor and "floor" in floor else None
     e = res.get("energy")
     de = abs(e - best_energy) / max(abs(best_energy), 1e-300) if e is not None and best_energy is not None else None
@@ -144,7 +144,7 @@ def _figure(labels, floors, table, path: Path) -> None:
             cert = (res.get("certificate") or {}).get("value")
             if cert is None or not math.isfinite(cert):
                 continue
-            xs.append((res["time_s"].get("setup", 0) + res["time_s"].get("solve", 0)) / fl)
+            xs.append(_setup_solve(res) / fl)
             ys.append(max(cert, 1e-16))
             names.append(lab)
         if xs:

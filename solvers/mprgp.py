@@ -77,21 +77,9 @@ import numpy as np
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.numerics import dual_precond as dp
+from dualfem.numerics.dual_operator import power_norm
 from dualfem.numerics.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics.polish import refine_on_active_set
-
-
-def norm_estimate(matvec, m: int, iters: int) -> float:
-    """|D| by power iterations from a fixed positive start vector (a lower estimate)."""
-    v = np.ones(m) / np.sqrt(max(m, 1))
-    lam = 0.0
-    for _ in range(iters):
-        w = matvec(v)
-        lam = float(np.linalg.norm(w))
-        if lam == 0.0:
-            return 0.0
-        v = w / lam
-    return lam
 
 
 def mprgp(matvec, b0: np.ndarray, alpha: float, gamma: float, tol: float, max_iter: int,
@@ -227,7 +215,7 @@ class MPRGPSolver(DualOperatorSolver):
         elif kind == "dirichlet":
             self.precond = dp.FacePreconditioner(dp.dirichlet_inverse(qp, int(self.params["layers"])))
         iters = int(self.params["power_iter"])
-        self.norm = op.norm_estimate(iters) if self.scale is None else norm_estimate(self._matvec, qp.m, iters)
+        self.norm = op.norm_estimate(iters) if self.scale is None else power_norm(self._matvec, qp.m, iters)
 
     def _matvec(self, v: np.ndarray) -> np.ndarray:
         """The (scaled) operator MPRGP iterates with: D v, or S D S v."""
@@ -264,18 +252,13 @@ class MPRGPSolver(DualOperatorSolver):
                         history=history, message=message, info=info)
 
     def _face_polish(self, mu: np.ndarray, b0: np.ndarray) -> tuple[np.ndarray, bool]:
-        """Exact minimiser of q on the face {mu_j = 0 off A}, kept if consistent."""
-        A = mu > 0
-        mu_p = np.zeros_like(mu)
+        """Exact minimiser of q on the face {mu_j = 0 off A}, kept if consistent
+        (:meth:`dualfem.numerics.dual_operator.DualOperator.face_minimiser`)."""
         try:
-            if A.any():
-                mu_p[A] = self.op.face_solve(A, -b0[A], x0=mu[A])
+            mu_p = self.op.face_minimiser(mu, self.params["tol"])
         except (np.linalg.LinAlgError, ValueError):
             return mu, False
-        gap = self.op.apply(mu_p) + b0
-        if np.all(mu_p >= 0) and np.all(gap[~A] >= -self.params["tol"] * np.abs(b0).max()):
-            return mu_p, True
-        return mu, False
+        return (mu, False) if mu_p is None else (mu_p, True)
 
     def _refine(self, x, mu, steps):
         """Iterative refinement on the final active set (:func:`dualfem.numerics.polish.refine_on_active_set`)."""

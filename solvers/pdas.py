@@ -196,16 +196,10 @@ class PDASSolver(DualOperatorSolver):
 
     def _polish(self, mu: np.ndarray) -> np.ndarray:
         """The exact Newton point of the converged active set, kept only if consistent (forces >= 0
-        on the set, gaps >= 0 off it, to rounding); else mu clipped at 0."""
-        op, b0 = self.op, self.op.b0
-        A = mu > 0
-        mu_p = np.zeros(b0.size)
-        if A.any():
-            mu_p[A] = op.face_solve(A, -b0[A], x0=mu[A], rtol=FACE_RTOL)
-        gap_p = op.apply(mu_p) + b0
-        if np.all(mu_p >= 0) and np.all(gap_p[~A] >= -self.params["tol"] * max(np.abs(b0).max(initial=0.0), 1e-300)):
-            return mu_p
-        return np.maximum(mu, 0.0)
+        on the set, gaps >= 0 off it, to rounding: :meth:`~dualfem.numerics.dual_operator.DualOperator.
+        face_minimiser`); else mu clipped at 0."""
+        mu_p = self.op.face_minimiser(mu, self.params["tol"], rtol=FACE_RTOL)
+        return np.maximum(mu, 0.0) if mu_p is None else mu_p
 
     def solve(self) -> Solution:
         p = self.params

@@ -351,8 +351,7 @@ def multiplier_floor(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     z = ksolve(ROUNDING_C * EPS * s)
     rhs = (np.abs(qp.B @ z) + EPS * abs_product(qp.B, np.abs(x)))[A]
     try:
-        dm = sla.solve(D[np.ix_(A, A)], rhs, assume_a="pos") if D is not None else \
-            op.face_solve(A, rhs, rtol=CG_RTOL)
+        dm = _Face(D, op, A, CG_RTOL).solve(rhs)
     except (np.linalg.LinAlgError, ValueError):
         return float("nan")
     return float(np.abs(dm).max()) / force_scale(qp, mu)

@@ -45,6 +45,7 @@ import scipy.linalg as sla
 
 from dualfem.core.errors import InputError
 from dualfem.core.qp import QP
+from dualfem.numerics.linalg import factor_whole
 from dualfem.numerics.pcg import pcg
 
 #: the operator names of the dual solvers' ``operator`` parameter
@@ -67,6 +68,20 @@ AL_SCALE = 1e4
 AL_MAX_STEPS = 30
 #: rows whose exact D_jj calibrates the matrix-free diagonal estimate (one block solve with this many columns)
 DIAG_SAMPLES = 8
+
+
+def power_norm(matvec, m: int, iters: int) -> float:
+    """|D|_2 of an SPD operator by ``iters`` power iterations from a fixed positive start vector (a lower
+    estimate; 0 when a product vanishes or m = 0)."""
+    v = np.ones(m) / np.sqrt(max(m, 1))
+    lam = 0.0
+    for _ in range(iters if m else 0):
+        w = matvec(v)
+        lam = float(np.linalg.norm(w))
+        if lam == 0.0:
+            return 0.0
+        v = w / lam
+    return lam
 
 
 def check_operator(value, solver: str) -> str:
@@ -146,18 +161,24 @@ class DualOperator(ABC):
 
     # -------------------------------------------------------------- shared
     def norm_estimate(self, iters: int = 20) -> float:
-        """|D|_2 from power iterations (a lower estimate; cached)."""
+        """|D|_2 from power iterations (:func:`power_norm`; a lower estimate; cached)."""
         if self._norm is None:
-            v = np.ones(self.m) / np.sqrt(max(self.m, 1))
-            lam = 0.0
-            for _ in range(iters if self.m else 0):
-                w = self.apply(v)
-                lam = float(np.linalg.norm(w))
-                if lam == 0.0:
-                    break
-                v = w / lam
-            self._norm = lam
+            self._norm = power_norm(self.apply, self.m, iters)
         return self._norm
+
+    def face_minimiser(self, mu: np.ndarray, tol: float, rtol: float = 1e-13) -> np.ndarray | None:
+        """The exact minimiser of q on the face of mu (D_AA mu_A = -b0_A on A = {mu > 0}, 0 elsewhere; the
+        face solve from mu_A), or None when it is not consistent: a negative force, or a gap off A below
+        -tol max|b0|. Raises what :meth:`face_solve` raises."""
+        b0 = self.b0
+        A = mu > 0
+        mu_p = np.zeros(b0.size)
+        if A.any():
+            mu_p[A] = self.face_solve(A, -b0[A], x0=mu[A], rtol=rtol)
+        gap = self.apply(mu_p) + b0
+        if np.all(mu_p >= 0) and np.all(gap[~A] >= -tol * max(np.abs(b0).max(initial=0.0), 1e-300)):
+            return mu_p
+        return None
 
     def dual_energy(self, mu: np.ndarray, Dmu: np.ndarray | None = None) -> float:
         """q(mu) = 1/2 mu'D mu + b0'mu (the negative dual function up to a constant)."""
@@ -237,7 +258,6 @@ class MatrixFreeDualOperator(DualOperator):
         self.counters.factorizations = _factorizations(qp, store) - before
         self.B = qp.B.tocsr()
         self.BT = self.B.T.tocsr()
-        self._xF: np.ndarray | None = None
         self._b0: np.ndarray | None = None
         self._diag: np.ndarray | None = None
         #: the last face solve: CG iterations, the Lanczos condition estimate, the tolerance
@@ -254,8 +274,7 @@ class MatrixFreeDualOperator(DualOperator):
     @property
     def b0(self) -> np.ndarray:
         if self._b0 is None:
-            self._xF = self._solve(np.asarray(self.qp.F, float))
-            self._b0 = self.B @ self._xF
+            self._b0 = self.B @ self._solve(np.asarray(self.qp.F, float))
         return self._b0
 
     def apply(self, v):
@@ -385,28 +404,6 @@ class MatrixFreeDualOperator(DualOperator):
 
 
 # --------------------------------------------------------------------------- factorization of K
-def factor_whole(qp: QP, factor=None, store=None):
-    """The factorization of the whole K (no Schur set), kept by the QP's store (or ``store``)."""
-    from dualfem.numerics.factor import choose as choose_backend
-    from dualfem.numerics.linalg import FixedFactor, store_of
-    from dualfem.numerics.threads import ensure_threads
-
-    backend = choose_backend(factor)
-    ensure_threads()
-    store = store_of(qp) if store is None else store
-    K = qp.K if qp.K.format in ("csr", "csc") else qp.K.tocsr()
-    key = store.key((K.indptr, K.indices, K.data), f":{K.format}:whole:{backend.name}")
-    ff = store.get(key)
-    if ff is None:
-        t0 = time.perf_counter()
-        fact = backend.factor(K.tocsr())
-        ff = FixedFactor(n=K.shape[0], local=np.zeros(0, np.int64), fact=fact, S_fixed=np.zeros((0, 0)),
-                         time_s={"factorize": time.perf_counter() - t0})
-        store.put(key, ff)
-        store.factorizations += 1
-    return ff.fact
-
-
 def _factorizations(qp: QP, store) -> int:
     from dualfem.numerics.linalg import store_of
 

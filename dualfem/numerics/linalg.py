@@ -194,6 +194,16 @@ def store_of(qp: QP) -> FactorStore:
     return store
 
 
+def _stored(store: FactorStore, key: str, make) -> FixedFactor:
+    """The store's entry ``key``, else ``make()`` put there and counted as one factorization of the store."""
+    ff = store.get(key)
+    if ff is None:
+        ff = make()
+        store.put(key, ff)
+        store.factorizations += 1
+    return ff
+
+
 def factor_fixed(qp: QP, factor: str | Backend | None = None, store: FactorStore | None = None) -> FixedFactor:
     """Factorize ``qp.K_fixed`` with its Schur complement onto ``qp.local_dofs``, once per store.
 
@@ -207,24 +217,39 @@ def factor_fixed(qp: QP, factor: str | Backend | None = None, store: FactorStore
     local = np.asarray(qp.local_dofs, np.int64)
     Kf = qp.K_fixed if qp.K_fixed.format in ("csr", "csc") else qp.K_fixed.tocsr()
     key = store.key((Kf.indptr, Kf.indices, Kf.data, local), f":{Kf.format}:{backend.name}")
-    ff = store.get(key)
-    if ff is not None:
-        return ff
-    Kf = Kf.tocsr()
-    t0 = time.perf_counter()
-    ref = weakref.ref(qp)             # the factorization must not keep the QP alive (QP -> store -> factor)
-    fact = backend.make(local, order=lambda: ordering(ref(), local))
-    fact.analyze(Kf)
-    t1 = time.perf_counter()
-    fact.factorize(Kf)
-    t2 = time.perf_counter()
-    S = fact.schur()
-    t3 = time.perf_counter()
-    ff = FixedFactor(n=Kf.shape[0], local=local, fact=fact, S_fixed=S,
-                     time_s={"ordering": t1 - t0, "factorize": t2 - t1, "schur": t3 - t2})
-    store.put(key, ff)
-    store.factorizations += 1
-    return ff
+
+    def make() -> FixedFactor:
+        K = Kf.tocsr()
+        t0 = time.perf_counter()
+        ref = weakref.ref(qp)         # the factorization must not keep the QP alive (QP -> store -> factor)
+        fact = backend.make(local, order=lambda: ordering(ref(), local))
+        fact.analyze(K)
+        t1 = time.perf_counter()
+        fact.factorize(K)
+        t2 = time.perf_counter()
+        S = fact.schur()
+        t3 = time.perf_counter()
+        return FixedFactor(n=K.shape[0], local=local, fact=fact, S_fixed=S,
+                           time_s={"ordering": t1 - t0, "factorize": t2 - t1, "schur": t3 - t2})
+
+    return _stored(store, key, make)
+
+
+def factor_whole(qp: QP, factor: str | Backend | None = None, store: FactorStore | None = None) -> Factorization:
+    """The factorization of the whole K (no Schur set: the matrix-free dual operator's), once per store."""
+    backend = choose_backend(factor)
+    ensure_threads()
+    store = store_of(qp) if store is None else store
+    K = qp.K if qp.K.format in ("csr", "csc") else qp.K.tocsr()
+    key = store.key((K.indptr, K.indices, K.data), f":{K.format}:whole:{backend.name}")
+
+    def make() -> FixedFactor:
+        t0 = time.perf_counter()
+        fact = backend.factor(K.tocsr())
+        return FixedFactor(n=K.shape[0], local=np.zeros(0, np.int64), fact=fact, S_fixed=np.zeros((0, 0)),
+                           time_s={"factorize": time.perf_counter() - t0})
+
+    return _stored(store, key, make).fact
 
 
 def sparse_factor(A: sp.spmatrix, factor: str | Backend | None = None) -> Factorization:
