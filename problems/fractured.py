@@ -39,7 +39,7 @@ random stream (per candidate, in this order: the length, the angle, the centre's
 uniform in the part of the region where a crack of that length and angle fits with ``min_gap`` from the
 body's boundary); a candidate is accepted when its exact distance to every crack accepted before it is
 >= ``min_gap``, else rejected. Candidates are tested in batches (numpy;
-:func:`dualfem.problems.gmsh_mesh.near_segment_pairs`: a uniform grid hashing the cracks' midpoints,
+:func:`dualfem.problems._segments.near_segment_pairs`: a uniform grid hashing the cracks' midpoints,
 cells as wide as two conflicting cracks' midpoints can be apart, so only neighbouring cells are
 compared: 2,000 cracks place in under 0.1 s), with the same outcome as one at a time. After 200 x
 ``cracks`` candidates without placing them all the scene is refused (an
@@ -64,7 +64,7 @@ import numpy as np
 from dualfem.core.errors import InputError, check_int, check_positive
 from dualfem.core.registry import register_problem
 
-from .gmsh_mesh import near_segment_pairs
+from ._segments import near_segment_pairs
 from .thin_defect import ThinDefect
 
 #: largest crack count accepted

@@ -32,6 +32,8 @@ import numpy as np
 
 from dualfem.core.errors import InputError, MissingDependency, check_positive
 
+from ._segments import closest, near_segment_pairs, segment_distances  # noqa: F401  (public here too)
+
 CURVES = ("polyline", "spline")
 SIDES = ("bottom", "top", "left", "right")
 MAX_TRIANGLES = 5_000_000
@@ -116,120 +118,6 @@ def sample_defect(points: np.ndarray, curve: str, per_span: int = SAMPLES_PER_SP
                   + (3 * p1 - p0 - 3 * p2 + p3) * t ** 3)
 
 
-def _segment_distances(A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distances (na, nb) between the segments of polylines A (na+1, 2) and B (nb+1, 2), and a
-    mask of the pairs that cross properly (each segment's ends strictly on both sides of the other)."""
-    a0, a1 = A[:-1, None, :], A[1:, None, :]
-    b0, b1 = B[None, :-1, :], B[None, 1:, :]
-
-    def cross(o, p, q):
-        return (p[..., 0] - o[..., 0]) * (q[..., 1] - o[..., 1]) - (p[..., 1] - o[..., 1]) * (q[..., 0] - o[..., 0])
-
-    def point_seg(p, s0, s1):
-        d = s1 - s0
-        t = np.clip(((p - s0) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-300), 0.0, 1.0)
-        return np.linalg.norm(p - (s0 + t[..., None] * d), axis=-1)
-
-    proper = ((np.sign(cross(a0, a1, b0)) * np.sign(cross(a0, a1, b1)) < 0)
-              & (np.sign(cross(b0, b1, a0)) * np.sign(cross(b0, b1, a1)) < 0))
-    d = np.minimum.reduce([point_seg(a0, b0, b1), point_seg(a1, b0, b1),
-                           point_seg(b0, a0, a1), point_seg(b1, a0, a1)])
-    return np.where(proper, 0.0, d), proper
-
-
-def segment_distances(P0, P1, Q0, Q1) -> tuple[np.ndarray, np.ndarray]:
-    """Exact distances between segments P0-P1 and Q0-Q1 (coordinate arrays (..., 2), broadcast), and a
-    mask of the pairs that cross properly (each segment's ends strictly on both sides of the other);
-    the distance of a crossing pair is 0."""
-    P0, P1, Q0, Q1 = (np.asarray(a, dtype=float) for a in (P0, P1, Q0, Q1))
-
-    def cross(o, p, q):
-        return (p[..., 0] - o[..., 0]) * (q[..., 1] - o[..., 1]) - (p[..., 1] - o[..., 1]) * (q[..., 0] - o[..., 0])
-
-    def point_seg(p, s0, s1):
-        d = s1 - s0
-        t = np.clip(((p - s0) * d).sum(-1) / np.maximum((d * d).sum(-1), 1e-300), 0.0, 1.0)
-        e = p - (s0 + t[..., None] * d)
-        return np.hypot(e[..., 0], e[..., 1])
-
-    proper = ((np.sign(cross(P0, P1, Q0)) * np.sign(cross(P0, P1, Q1)) < 0)
-              & (np.sign(cross(Q0, Q1, P0)) * np.sign(cross(Q0, Q1, P1)) < 0))
-    d = np.minimum(np.minimum(point_seg(P0, Q0, Q1), point_seg(P1, Q0, Q1)),
-                   np.minimum(point_seg(Q0, P0, P1), point_seg(Q1, P0, P1)))
-    return np.where(proper, 0.0, d), proper
-
-
-def near_segment_pairs(A: np.ndarray, B: np.ndarray | None, gap: float,
-                       chunk: int = 1 << 20) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Index pairs (i, j) of segments A[i] and B[j] (arrays (n, 2, 2): first and last point) whose exact
-    distance is <= ``gap``, with those distances; with B None the pairs i < j within A.
-
-    A uniform grid (cells of side the longest segment + ``gap``) hashes the segments' midpoints, so
-    only segments in neighbouring cells are compared (O(n) for segments of similar lengths, instead of
-    all n m pairs); exact distances (:func:`segment_distances`) in chunks of ``chunk`` pairs."""
-    same = B is None
-    B = A if B is None else B
-    empty = np.zeros(0, dtype=np.int64)
-    if len(A) == 0 or len(B) == 0:
-        return empty, empty, np.zeros(0)
-    ma, mb = A.mean(axis=1), B.mean(axis=1)
-    la, lb = (np.hypot(*(X[:, 1] - X[:, 0]).T) for X in (A, B))
-    reach = 0.5 * (la.max() + lb.max()) + gap         # midpoints of two segments within gap are this close
-    lo = np.minimum(ma.min(axis=0), mb.min(axis=0))
-    extent = float(np.max(np.maximum(ma.max(axis=0), mb.max(axis=0)) - lo))
-    cell = max(float(reach), extent / 2 ** 20, 1e-300)     # at most 2^20 cells a side: no key overflow
-    ca = np.floor((ma - lo) / cell).astype(np.int64)
-    cb = np.floor((mb - lo) / cell).astype(np.int64)
-    ny = int(max(ca[:, 1].max(), cb[:, 1].max())) + 3
-    key_b = (cb[:, 0] + 1) * ny + (cb[:, 1] + 1)
-    order = np.argsort(key_b, kind="stable")
-    sorted_keys = key_b[order]
-    ii, jj = [], []
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            k = (ca[:, 0] + 1 + dx) * ny + (ca[:, 1] + 1 + dy)
-            start = np.searchsorted(sorted_keys, k, side="left")
-            cnt = np.searchsorted(sorted_keys, k, side="right") - start
-            total = int(cnt.sum())
-            if not total:
-                continue
-            i = np.repeat(np.arange(len(A)), cnt)
-            j = order[np.repeat(start - np.cumsum(cnt) + cnt, cnt) + np.arange(total)]
-            keep = (i < j) if same else np.ones(total, dtype=bool)
-            dm = ma[i] - mb[j]
-            keep &= np.hypot(dm[:, 0], dm[:, 1]) <= reach
-            ii.append(i[keep])
-            jj.append(j[keep])
-    if not ii:
-        return empty, empty, np.zeros(0)
-    i, j = np.concatenate(ii), np.concatenate(jj)
-    out_i, out_j, out_d = [empty], [empty], [np.zeros(0)]
-    for c0 in range(0, len(i), chunk):
-        ic, jc = i[c0:c0 + chunk], j[c0:c0 + chunk]
-        d, _ = segment_distances(A[ic, 0], A[ic, 1], B[jc, 0], B[jc, 1])
-        near = d <= gap
-        out_i.append(ic[near])
-        out_j.append(jc[near])
-        out_d.append(d[near])
-    return np.concatenate(out_i), np.concatenate(out_j), np.concatenate(out_d)
-
-
-def _closest(A: np.ndarray, B: np.ndarray, mask=None) -> tuple[float, bool, np.ndarray]:
-    """Smallest segment distance between polylines A and B (pairs allowed by ``mask``), whether
-    that pair crosses properly, and a point near the closest approach."""
-    best, crossing, where = np.inf, False, A[0]
-    for r0 in range(0, len(A) - 1, 256):               # row blocks keep memory bounded
-        Ar = A[r0:r0 + 257]
-        d, proper = _segment_distances(Ar, B)
-        if mask is not None:
-            d = np.where(mask[r0:r0 + 256], d, np.inf)
-        k = np.unravel_index(np.argmin(d), d.shape)
-        if d[k] < best:
-            best, crossing = float(d[k]), bool(proper[k])
-            where = 0.25 * (Ar[k[0]] + Ar[k[0] + 1] + B[k[1]] + B[k[1] + 1])
-    return best, crossing, where
-
-
 def _fmt(p) -> str:
     return f"({float(p[0]):.6g}, {float(p[1]):.6g})"
 
@@ -278,7 +166,7 @@ def _check_one(i: int, P: np.ndarray, S: np.ndarray, width: float, height: float
     if len(seg) >= 3:
         idx = np.arange(len(seg))
         mask = idx[None, :] >= idx[:, None] + 2          # non-adjacent pairs only
-        dist, _, where = _closest(S, S, mask)
+        dist, _, where = closest(S, S, mask)
         if dist <= tol:
             raise InputError(f"defects[{i}] intersects itself near {_fmt(where)}")
 
@@ -380,7 +268,7 @@ def validate(width: float, height: float, defects: list[dict], mesh_size: float,
             lo_, hi_ = np.minimum(da, db)[other], np.maximum(da, db)[other]
             k = np.lexsort((hi_, lo_))[0]
             i, j = int(lo_[k]), int(hi_[k])
-            dist, crossing, where = _closest(samples[i], samples[j])
+            dist, crossing, where = closest(samples[i], samples[j])
             if crossing:
                 raise InputError(f"defects[{i}] and defects[{j}] cross near {_fmt(where)}")
             raise InputError(f"defects[{i}] and defects[{j}] touch near {_fmt(where)} "
