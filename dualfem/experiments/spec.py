@@ -1,5 +1,8 @@
 """Sweep specs for ``dualfem bench``: read a TOML file, validate every key before anything runs.
 
+Every key and the command line's ``-s``/``-d``/``-r`` selection are documented in docs/bench.md
+(a test keeps it complete); the selection itself is :mod:`dualfem.experiments.spec_select`.
+
 A sweep is described by a TOML spec (see ``benchmarks/default.toml``)::
 
     name = "small"
@@ -48,6 +51,7 @@ from typing import Any
 
 from dualfem.core.errors import InputError
 from dualfem.core.solver import reference_solvers
+from dualfem.experiments.spec_select import Selection, apply_selection, effective_text
 
 SPEC_KEYS = {"name", "description", "repeats", "warmup", "time_limit", "guard_factor", "guard_slack",
              "build_limit", "cold_setup", "tiers", "reference", "floor", "scenes", "solvers"}
@@ -155,8 +159,11 @@ def _as_list(v: Any) -> list:
     return list(v) if isinstance(v, list) else [v]
 
 
-def load_spec(path: str | Path) -> Spec:
-    """Read and validate a sweep spec; InputError names the offending key."""
+def load_spec(path: str | Path, selection: Selection | None = None) -> Spec:
+    """Read and validate a sweep spec; InputError names the offending key.
+
+    ``selection``: the command line's ``-s``/``-d``/``-r`` (:mod:`dualfem.experiments.spec_select`),
+    applied to the parsed file before validation; the spec's ``text`` is then the effective spec."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"spec file {str(path)!r} does not exist")
@@ -171,6 +178,9 @@ def load_spec(path: str | Path) -> Spec:
         raise InputError(f"malformed TOML in spec {str(path)!r}: {exc}") from None
     except UnicodeDecodeError:
         raise InputError(f"spec {str(path)!r} is not UTF-8 text") from None
+    if selection:
+        data = apply_selection(data, selection)
+        text = effective_text(data, str(path), selection)
     return parse_spec(data, path=str(path), text=text)
 
 
