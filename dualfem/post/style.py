@@ -27,9 +27,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-#: Okabe-Ito colours, in the order series use them (blue, vermillion, bluish green, orange,
-#: reddish purple, sky blue, black, yellow).
-PALETTE: tuple[str, ...] = ("#0072B2", "#D55E00", "#009E73", "#E69F00", "#CC79A7", "#56B4E9", "#000000",
+#: Okabe-Ito colours, in the order series use them (blue, vermillion, bluish green, reddish purple,
+#: black, orange, sky blue, yellow): the pairs easiest to confuse (blue / sky blue, vermillion /
+#: orange) are far apart, so a family of up to five solvers never holds both of a pair.
+PALETTE: tuple[str, ...] = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#000000", "#E69F00", "#56B4E9",
                             "#F0E442")
 #: colours too light on white to carry a marker alone: drawn with this marker edge colour
 _LIGHT = {"#F0E442": "#8C8100", "#56B4E9": "#1F6F9E"}
@@ -46,7 +47,7 @@ MAX_SERIES = 10
 FAMILIES: dict[str, tuple[str, ...]] = {
     "dual": ("uzawa", "uzawa_auto", "pdas", "mprgp", "penalty", "dual_gradient"),
     "interior point": ("clarabel", "qp_clarabel", "cvxpy", "qp_piqp", "qp_ecos", "qp_cvxopt", "qp_sip",
-                       "qp_qtqp", "qp_kvxopt", "qp_hpipm", "qp_qpswift", "qp_qpax", "qp_mosek", "qp_gurobi",
+                       "qp_qtqp", "qp_qpax", "qp_kvxopt", "qp_hpipm", "qp_qpswift", "qp_mosek", "qp_gurobi",
                        "qp_copt"),
     "first-order": ("osqp", "qp_osqp", "qp_scs", "qp_proxqp", "qp_qpalm", "qp_jaxopt_osqp", "qp_pdhcg"),
     "active set": ("qp_daqp", "qp_quadprog", "qp_pyqpmad", "qp_highs", "qp_qpoases", "qp_nppro"),
