@@ -1,4 +1,5 @@
-"""``dualfem bench SPEC.toml [--jobs N] [--dask ADDRESS] [--out DIR] [--resume] [--force]``: run or resume a sweep.
+"""``dualfem bench SPEC.toml [-s SOLVER[K=V,...]] [-d SCENE[K=V,...]] [-r REPEATS] [--jobs N] [--dask ADDRESS]
+[--out DIR] [--resume] [--force]``: run or resume a sweep (the spec format and the options: docs/bench.md).
 
 The one sweep engine (:func:`dualfem.experiments.bench.run_tasks`, shared with ``dualfem stress``):
 ``--jobs`` parallel guarded workers, ``--resume`` continues DIR (finished rows kept and not
@@ -19,6 +20,14 @@ from dualfem.core.errors import InputError
 def _cfg(p):
     add_factor_arg(p)
     p.add_argument("spec", metavar="SPEC.toml", help="sweep spec (see benchmarks/default.toml)")
+    p.add_argument("-s", "--solver", action="append", metavar="SOLVER[KEY=V,...]", default=None,
+                   help="run only this solver's blocks of the spec (added when the spec has none), with these "
+                        "parameters (a list KEY=[a,b] is a grid); repeatable. See docs/bench.md")
+    p.add_argument("-d", "--scene", action="append", metavar="SCENE[KEY=V,...]", default=None,
+                   help="run only this scene of the spec's [[scenes]] blocks (added when it has none), with these "
+                        "scene keys (a list is a grid dimension); repeatable")
+    p.add_argument("-r", "--repeats", type=int, metavar="REPEATS", default=None,
+                   help="timed repeats of every run and of the floor (overrides the spec)")
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="parallel worker processes (joblib/loky); default 1 (timings are cleanest serially)")
     p.add_argument("--dask", metavar="ADDRESS", default=None,
@@ -42,6 +51,7 @@ def cmd_bench(args) -> int:
     apply_factor(args)
     from dualfem.experiments.bench import run_sweep
     from dualfem.experiments.spec import load_spec
+    from dualfem.experiments.spec_select import make_selection
     from dualfem.experiments.store import default_out
 
     max_jobs = 4 * (os.cpu_count() or 1)
@@ -53,13 +63,17 @@ def cmd_bench(args) -> int:
     from dualfem.core.errors import check_positive
 
     dask_timeout = check_positive("--dask-timeout", args.dask_timeout)
-    spec = load_spec(args.spec)
+    opts = tuple(f"{flag} {shlex.quote(v)}" for flag, vals in (("-s", args.solver), ("-d", args.scene))
+                 for v in vals or ()) + ((f"-r {args.repeats}",) if args.repeats is not None else ())
+    selection = make_selection(args.solver, args.scene, args.repeats, opts)
+    spec = load_spec(args.spec, selection)
     out = Path(args.out) if args.out else default_out("bench", spec.name)
     if sys.argv[1:2] == ["bench"]:
         command = "dualfem bench " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     else:   # called through main(argv) from Python: rebuild it from the parsed arguments
         command = f"dualfem bench {shlex.quote(args.spec)} --jobs {args.jobs}" + \
-            (f" --dask {shlex.quote(args.dask)}" if args.dask else "") + (f" --out {shlex.quote(str(out))}")
+            (f" --dask {shlex.quote(args.dask)}" if args.dask else "") + "".join(f" {o}" for o in opts) + \
+            (f" --out {shlex.quote(str(out))}")
     summary = run_sweep(spec, out, jobs=args.jobs, dask=args.dask, command=command,
                         progress=not args.no_progress_bar, retry_failed=args.retry_failed, force=args.force,
                         connect_timeout=dask_timeout)

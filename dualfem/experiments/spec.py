@@ -1,5 +1,8 @@
 """Sweep specs for ``dualfem bench``: read a TOML file, validate every key before anything runs.
 
+Every key and the command line's ``-s``/``-d``/``-r`` selection are documented in docs/bench.md
+(a test keeps it complete); the selection itself is :mod:`dualfem.experiments.spec_select`.
+
 A sweep is described by a TOML spec (see ``benchmarks/default.toml``)::
 
     name = "small"
@@ -10,6 +13,8 @@ A sweep is described by a TOML spec (see ``benchmarks/default.toml``)::
     cold_setup = true      # the QP's FactorStore is emptied before every run (store_of(qp).clear(),
                            # dualfem.numerics.linalg): setup is measured with the factorization,
                            # never read from a store; false: every run after the first reuses it
+    curves = false         # true: record each run's error along its iterations (curves.csv beside
+                           # results.csv, dualfem.experiments.curves); only solvers reporting iterates
     [tiers]                # tolerance tiers -> each solver's Solver.tolerance_params(tol)
     low = 1e-3
     high = 1e-9
@@ -48,9 +53,10 @@ from typing import Any
 
 from dualfem.core.errors import InputError
 from dualfem.core.solver import reference_solvers
+from dualfem.experiments.spec_select import Selection, apply_selection, effective_text
 
 SPEC_KEYS = {"name", "description", "repeats", "warmup", "time_limit", "guard_factor", "guard_slack",
-             "build_limit", "cold_setup", "tiers", "reference", "floor", "scenes", "solvers"}
+             "build_limit", "cold_setup", "curves", "tiers", "reference", "floor", "scenes", "solvers"}
 
 
 SCENE_KEYS_RESERVED = {"scene", "repeats", "warmup"}
@@ -88,6 +94,7 @@ class Spec:
     guard_slack: float = 10.0
     build_limit: float = 900.0
     cold_setup: bool = True
+    curves: bool = False
     tiers: dict[str, float] = field(default_factory=dict)
     reference: dict[str, Any] = field(default_factory=dict)
     floor: dict[str, Any] = field(default_factory=dict)
@@ -155,8 +162,11 @@ def _as_list(v: Any) -> list:
     return list(v) if isinstance(v, list) else [v]
 
 
-def load_spec(path: str | Path) -> Spec:
-    """Read and validate a sweep spec; InputError names the offending key."""
+def load_spec(path: str | Path, selection: Selection | None = None) -> Spec:
+    """Read and validate a sweep spec; InputError names the offending key.
+
+    ``selection``: the command line's ``-s``/``-d``/``-r`` (:mod:`dualfem.experiments.spec_select`),
+    applied to the parsed file before validation; the spec's ``text`` is then the effective spec."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"spec file {str(path)!r} does not exist")
@@ -171,6 +181,9 @@ def load_spec(path: str | Path) -> Spec:
         raise InputError(f"malformed TOML in spec {str(path)!r}: {exc}") from None
     except UnicodeDecodeError:
         raise InputError(f"spec {str(path)!r} is not UTF-8 text") from None
+    if selection:
+        data = apply_selection(data, selection)
+        text = effective_text(data, str(path), selection)
     return parse_spec(data, path=str(path), text=text)
 
 
@@ -213,6 +226,8 @@ def _parse_top(s: Spec, data: dict) -> None:
         raise InputError(f"guard_factor must be >= 1, got {s.guard_factor}")
     if "cold_setup" in data:
         s.cold_setup = _bool("cold_setup", data["cold_setup"])
+    if "curves" in data:
+        s.curves = _bool("curves", data["curves"])
 
 
 def _parse_tiers(s: Spec, data: dict) -> None:
