@@ -9,8 +9,9 @@
   know (a plug-in).
 * :func:`style` / :func:`styles`: a deterministic (colour, marker, line style) per solver. Each family
   owns its markers (dual: circles, interior point: squares, first-order: triangles, active set:
-  diamonds, other: stars), and the solvers of a family take the palette's colours in their order of
-  :data:`FAMILIES`: two known solvers never share both colour and marker, in any figure. A name not
+  diamonds, other: stars) and line style (solid, dashed, dash-dot, dotted), and the solvers of a family
+  take the palette's colours in their order of :data:`FAMILIES` from the family's offset
+  (:data:`FAMILY_OFFSET`): two known solvers never share both colour and marker, in any figure. A name not
   listed (a plug-in, a labelled variant) gets, in :func:`styles`, the first (colour, marker) pair of its
   family's markers not taken by the other names of the same call: distinct within one figure, the same
   for the same set of names.
@@ -27,9 +28,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-#: Okabe-Ito colours, in the order series use them (blue, vermillion, bluish green, reddish purple,
-#: black, orange, sky blue, yellow): the pairs easiest to confuse (blue / sky blue, vermillion /
-#: orange) are far apart, so a family of up to five solvers never holds both of a pair.
+#: Okabe-Ito colours (blue, vermillion, bluish green, reddish purple, black, orange, sky blue, yellow):
+#: the pairs easiest to confuse (blue / sky blue, vermillion / orange) are far apart in this order;
+#: the light yellow is used only by the 8th solver of a family
 PALETTE: tuple[str, ...] = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#000000", "#E69F00", "#56B4E9",
                             "#F0E442")
 #: colours too light on white to carry a marker alone: drawn with this marker edge colour
@@ -58,8 +59,13 @@ FAMILY_MARKERS: dict[str, tuple[str, ...]] = {
     "dual": ("o", "h"), "interior point": ("s", "P"), "first-order": ("^", "v"),
     "active set": ("D", "X"), "other": ("*", "p"),
 }
-#: line style of a solver's curve: by its round through the palette within its family
-LINESTYLES: tuple[str, ...] = ("-", "--", ":", "-.")
+#: line style of each family (curves and lines through tier points)
+FAMILY_LINESTYLE: dict[str, str] = {"dual": "-", "interior point": "--", "first-order": "-.",
+                                    "active set": ":", "other": "--"}
+#: where each family starts in the first seven colours, chosen so that the solvers most often drawn
+#: together differ in colour too: dual uzawa blue, uzawa_auto vermillion, pdas green, mprgp purple,
+#: penalty black, dual_gradient orange; clarabel sky blue; osqp orange; qp_daqp green
+FAMILY_OFFSET: dict[str, int] = {"dual": 0, "interior point": 6, "first-order": 5, "active set": 2, "other": 3}
 #: cvxpy backends that are first-order methods (a cvxpy variant naming one is of that family)
 _CVXPY_FIRST_ORDER = ("OSQP", "SCS", "PIQP_ADMM")
 _SEPARATORS = "[(:_-@ ,"
@@ -106,9 +112,13 @@ def family(name: str) -> str:
 
 
 def _slot(fam: str, i: int) -> Style:
-    """Style of the i-th colour slot of a family: colour i mod 8, marker and line style by round."""
-    rnd, markers = divmod(i, len(PALETTE))[0], FAMILY_MARKERS[fam]
-    return Style(PALETTE[i % len(PALETTE)], markers[rnd % len(markers)], LINESTYLES[rnd % len(LINESTYLES)])
+    """Style of the i-th slot of a family: in each round of eight, the first seven colours from the
+    family's offset, then yellow; the round picks the marker."""
+    rnd, j = divmod(i, len(PALETTE))
+    n = len(PALETTE) - 1
+    color = PALETTE[(FAMILY_OFFSET[fam] + j) % n] if j < n else PALETTE[n]
+    markers = FAMILY_MARKERS[fam]
+    return Style(color, markers[rnd % len(markers)], FAMILY_LINESTYLE[fam])
 
 
 def style(name: str) -> Style:
