@@ -84,6 +84,18 @@ class Style:
         return {"color": self.color, "marker": self.marker, "linestyle": self.linestyle,
                 "markeredgecolor": _LIGHT.get(self.color, self.color)}
 
+    def plotly(self) -> dict[str, str]:
+        """The same look for plotly: ``color``, marker ``symbol``, line ``dash`` and the marker's
+        ``edge`` colour (e.g. ``marker=dict(color=c, symbol=s, line=dict(color=edge))``)."""
+        return {"color": self.color, "symbol": _PLOTLY_SYMBOL[self.marker], "dash": _PLOTLY_DASH[self.linestyle],
+                "edge": _LIGHT.get(self.color, self.color)}
+
+
+#: matplotlib marker -> plotly marker symbol, line style -> plotly dash, for every marker and style used
+_PLOTLY_SYMBOL = {"o": "circle", "h": "hexagon", "s": "square", "P": "cross", "^": "triangle-up",
+                  "v": "triangle-down", "D": "diamond", "X": "x", "*": "star", "p": "pentagon"}
+_PLOTLY_DASH = {"-": "solid", "--": "dash", "-.": "dashdot", ":": "dot"}
+
 
 def _known() -> dict[str, tuple[str, int]]:
     return {name: (fam, i) for fam, names in FAMILIES.items() for i, name in enumerate(names)}
