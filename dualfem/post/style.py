@@ -26,6 +26,7 @@ matplotlib (or plotly) caller passes on.
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 #: Okabe-Ito colours (blue, vermillion, bluish green, reddish purple, black, orange, sky blue, yellow):
@@ -142,7 +143,7 @@ def style(name: str) -> Style:
     return styles([name])[name]
 
 
-def styles(names) -> dict[str, Style]:
+def styles(names: Iterable[str]) -> dict[str, Style]:
     """A style per name, no two sharing both colour and marker: listed names keep their fixed
     style; the others (sorted, those of a known family first) take the first free (colour, marker)
     pair of their family's slots, then of the other families' slots. Deterministic: the same
@@ -167,11 +168,12 @@ def styles(names) -> dict[str, Style]:
     return out
 
 
-def group_by_family(names) -> dict[str, list[str]]:
+def group_by_family(names: Iterable[str]) -> dict[str, list[str]]:
     """The names (sorted) per family, families in the order of :data:`FAMILIES`, empty ones left out."""
     out: dict[str, list[str]] = {}
+    names = set(names)
     for fam in FAMILIES:
-        members = sorted(n for n in set(names) if family(n) == fam)
+        members = sorted(n for n in names if family(n) == fam)
         if members:
             out[fam] = members
     return out

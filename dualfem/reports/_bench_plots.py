@@ -16,6 +16,7 @@ single row with its legend below. No legend is drawn over data.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,7 +45,7 @@ class SolverCurve:
     curve: MedianCurve
 
 
-def facets(variants) -> list[tuple[str, list[str]]]:
+def facets(variants: Iterable[str]) -> list[tuple[str, list[str]]]:
     """Rows of panels: one row with every series when there are at most MAX_SERIES, else one row per
     solver family (:func:`dualfem.post.style.group_by_family`) as (family, members)."""
     variants = sorted(set(variants))
