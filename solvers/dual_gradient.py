@@ -123,6 +123,7 @@ class DualGradient(Solver):
         status, restarts = Status.MAX_ITER, 0
         primal, compl = self._residuals(x, mu)
         it = 0
+        self.report_iterate(0, x, mu)
         if max(primal, compl) <= tol:
             status = Status.SOLVED
         while status != Status.SOLVED and it < max_iter:
@@ -144,6 +145,7 @@ class DualGradient(Solver):
                 restarts += 1
             mu_old, x_old, mu, x, theta = mu, x, mu_new, x_new, theta_new
             primal, compl = self._residuals(x, mu)
+            self.report_iterate(it, x, mu)
             if it % 100 == 0 or it <= 10:
                 history.append({"iter": it, "primal": primal, "complementarity": compl})
                 if p["verbose"]:

@@ -83,8 +83,11 @@ from dualfem.numerics.polish import refine_on_active_set
 
 
 def mprgp(matvec, b0: np.ndarray, alpha: float, gamma: float, tol: float, max_iter: int,
-          time_limit: float, verbose: bool = False, precond=None, unscale: np.ndarray | None = None):
+          time_limit: float, verbose: bool = False, precond=None, unscale: np.ndarray | None = None,
+          report=None):
     """MPRGP for min 1/2 mu'D mu + b0'mu, mu >= 0. Returns (mu, counts, status, message, history).
+
+    ``report(k, mu)``: called with the iterate after each iteration k (k = 0: the start), if given.
 
     ``precond(r, free)``: the preconditioner in face (z on the free set, 0 elsewhere), None for
     plain MPRGP. ``unscale``: for a scaled problem (``mu = S nu``: D = S D0 S, b0 = S b0_orig), the
@@ -114,6 +117,8 @@ def mprgp(matvec, b0: np.ndarray, alpha: float, gamma: float, tol: float, max_it
     free, phi, beta = split(mu, g)
     p = prec(phi, free)
     k = 0
+    if report is not None:
+        report(0, mu)
     while True:
         gp = pnorm(phi, beta)
         if gp <= target:
@@ -161,6 +166,8 @@ def mprgp(matvec, b0: np.ndarray, alpha: float, gamma: float, tol: float, max_it
             p = prec(phi, free)
             counts["proportioning"] += 1
             kind = "proportioning"
+        if report is not None:
+            report(k, mu)
         if verbose:
             history.append({"iter": k, "kind": kind, "active": int((~free).sum()),
                             "proj_grad": float(pnorm(phi, beta))})
@@ -235,9 +242,14 @@ class MPRGPSolver(DualOperatorSolver):
                             info={"precond": self.precond_kind, **op.info()})
         alpha = p["alpha_factor"] / self.norm
         s = self.scale
+
+        def report(k: int, nu: np.ndarray) -> None:     # the iterate in the QP's forces (unscaled), x lazily
+            self.report_iterate(k, lambda: op.x_of(nu if s is None else s * nu), lambda: nu if s is None else s * nu)
+
         mu, counts, status, message, history = mprgp(
             self._matvec, b0 if s is None else s * b0, alpha, p["gamma"], p["tol"], int(p["max_iter"]),
-            p["time_limit"], p["verbose"], precond=self.precond, unscale=None if s is None else 1.0 / s)
+            p["time_limit"], p["verbose"], precond=self.precond, unscale=None if s is None else 1.0 / s,
+            report=report if self._iterate_monitor is not None else None)
         if s is not None:
             mu = s * mu
         info: dict = {"alpha": alpha, "norm_D_est": self.norm, "precond": self.precond_kind}

@@ -223,6 +223,7 @@ class PDASSolver(DualOperatorSolver):
         history: list[dict] = []
         k, projected = 0, False
         deadline = time.perf_counter() + p["time_limit"]
+        self.report_iterate(0, lambda: op.x_of(mu), mu)        # the start: mu = 0
         while True:
             res = np.abs(Phi).max(initial=0.0) / max(scale0, np.abs(mu).max(initial=0.0))
             stop = self._stop(res, k, deadline, projected)
@@ -272,6 +273,7 @@ class PDASSolver(DualOperatorSolver):
                     mu = mu + t * d
                     how = "damped"
             gap, Phi, theta = state(mu)
+            self.report_iterate(k, lambda mu=mu: op.x_of(mu), mu)
             history.append({"iter": k, "active": nA, "step": t, "kind": how,
                             "residual": float(np.abs(Phi).max(initial=0.0) / max(scale0, np.abs(mu).max(initial=0.0)))})
             if p["verbose"]:

@@ -336,6 +336,8 @@ class PenaltySolver(DualOperatorSolver):
                 else:
                     return xI, steps, bool(sp_.size(d) <= 1e-10 * xs)
             xI = xI + t * d
+            self.report_iterate(self._steps_before + steps, lambda xI=xI: sp_.full(xI),   # Newton steps in all
+                                lambda xI=xI: rho * w * np.maximum(-(BI @ xI), 0.0))   # stages; penalty forces
             # stop when the step is at rounding level of x (P_rho is piecewise quadratic: a
             # full step that keeps the active set is exact)
             f = ft
@@ -372,8 +374,10 @@ class PenaltySolver(DualOperatorSolver):
         status, message = Status.INACCURATE, ""
         mu = np.zeros(self.qp.m)
         pen = float("nan")
+        self.report_iterate(0, lambda: sp_.full(xI), mu)        # the start: the unconstrained minimiser
         while True:
             stage += 1
+            self._steps_before = total
             xI, steps, ok = self._newton(xI, rho, history, stage)
             total += steps
             if not ok:

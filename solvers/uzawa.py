@@ -439,8 +439,10 @@ class Uzawa(DualOperatorSolver):
             return Solution(solver=self.name, status=status, x=x, multipliers=w * l,
                             iterations={"outer": k, "inner": m_total}, history=history, message=msg, info=info)
 
+        self.report_iterate(0, lambda: sp_.full(z), lambda: w * l)     # the start: K^-1 F, l^0
         if p["shortcut"] and p["l0"] == 0.0 and np.all(sp_.B @ z >= 0):
             k, m_total = 1, 1
+            self.report_iterate(1, lambda: sp_.full(z), lambda: w * l)
             history.append({"k": 1, "dual_change": 0.0, "inner_steps": 1, "steps": [1.0], "active": 0,
                             "shortcut": True})
             return result(Status.SOLVED, "unconstrained minimizer is admissible (shortcut)")
@@ -458,6 +460,7 @@ class Uzawa(DualOperatorSolver):
                             "active": int(np.count_nonzero(l_new > 0)), "inner_converged": inner_ok,
                             "inner_ratios": list(self._ratios)})
             l = l_new
+            self.report_iterate(k, lambda z=z: sp_.full(z), lambda l=l: w * l)
             if p["verbose"]:
                 print(f"{self.name}: outer {k} dual change {change:.3e} inner {len(steps)} "
                       f"active {history[-1]['active']}", file=sys.stderr)

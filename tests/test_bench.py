@@ -533,9 +533,10 @@ def test_results_load_as_a_dataframe(small_sweep):
     from dualfem import results
 
     spec, out, summary = small_sweep
-    df = results.load(out)
+    df = results.load(out, kind="all")
     runs = df[df["kind"] == "run"]
     assert len(runs) == summary.total and list(df.columns[:3]) == ["run_id", "kind", "spec"]
+    assert results.load(out)["run_id"].tolist() == runs["run_id"].tolist()      # the default: runs only
     assert runs["total_s"].dtype.kind == "f" and set(runs["status"]) <= RUN_STATUSES
     import importlib.util
 
@@ -552,7 +553,7 @@ def test_stress_results_load_as_a_dataframe(tmp_path):
 
     (tmp_path / "runs.jsonl").write_text('{"id": "a", "axis": "nu", "outcome": "correct", "solver": "pdas", '
                                          '"status": "solved", "err": 1e-12, "tolerance": 1e-9, "kkt": 1e-13}\n')
-    df = results.load(tmp_path)
+    df = results.load(tmp_path, kind="stress")
     assert df.loc[0, "grade"] == "correct" and df.loc[0, "err_x_energy"] == 1e-12
 
 
@@ -606,7 +607,7 @@ def test_a_damaged_results_csv_loses_no_readable_row(small_sweep, tmp_path, caps
     pytest.importorskip("pandas")
     from dualfem import results
 
-    assert len(results.load(clone)) == len(good) - 2
+    assert len(results.load(clone, kind=None)) == len(good) - 2
     assert main(["report", "bench", str(clone), "--md", str(tmp_path / "rep" / "b.md")]) == 0
     assert "unreadable line" in capsys.readouterr().err
     assert (clone / "results.csv").read_bytes() == before_csv            # reading changes nothing

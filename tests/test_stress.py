@@ -206,7 +206,7 @@ def test_committed_stress_folders_still_load(tmp_path):
     pd = pytest.importorskip("pandas")
     from dualfem import results
 
-    df = results.load(stress_results())
+    df = results.load(stress_results(), kind="stress")
     assert isinstance(df, pd.DataFrame) and len(df) == len(load_results(stress_results())[1])
     small = tmp_path / "small"
     small.mkdir()

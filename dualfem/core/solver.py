@@ -31,6 +31,12 @@ solver-specific parameters keep their own names.
 and implements ``setup(qp)`` (work that depends on the matrices only: scaling, factorizations)
 and ``solve()`` returning a :class:`~dualfem.solution.Solution`. ``skip(qp)`` returns a reason
 string when the solver does not apply to ``qp`` (for example, too large), else None.
+
+**Iterates (optional).** A solver with an outer iteration may call
+``self.report_iterate(iteration, x, mu)`` once per iteration (:meth:`Solver.report_iterate`): a no-op
+unless the runner attached an iterate monitor for this solve (a bench with ``curves = true``:
+:mod:`dualfem.experiments.curves`), which samples the iterates into a convergence curve. A solver
+that never calls it is a point in a work-precision diagram, as before.
 """
 from __future__ import annotations
 
@@ -75,6 +81,9 @@ class Solver:
     #: (accepted only if it is exactly that class and belongs to the QP being certified)
     reduction: Any = None
     ranges: ClassVar[dict[str, Any]] = {}
+    #: the iterate monitor the runner attached for the current ``solve()`` (None: none attached);
+    #: set and cleared by :func:`dualfem.experiments.runner.run`, never by the plugin
+    _iterate_monitor: Any = None
 
     def __init__(self, **params: Any) -> None:
         params = _apply_renames(self.name, self.renamed, params)
@@ -152,6 +161,21 @@ class Solver:
     def solve(self) -> Solution:  # pragma: no cover - abstract
         """Solve the QP given to :meth:`setup` (timed as solve)."""
         raise NotImplementedError
+
+    def report_iterate(self, iteration: int, x: Any, mu: Any) -> None:
+        """Report the iterate of outer iteration ``iteration`` (call it once per iteration from ``solve``).
+
+        ``x``: the QP's unknowns, shape (n,); ``mu``: the multipliers of ``B x >= 0`` in the Solution's
+        convention (contact forces, mu >= 0 at the answer), shape (m,). Either may be a zero-argument
+        callable returning the array (e.g. ``lambda: op.x_of(mu)`` for a dual method): it is called only
+        when the monitor keeps this iterate, so an unsampled iteration costs one attribute read and one
+        call. Without a monitor (every ``dualfem solve``, compare, stress, a bench without ``curves``)
+        it does nothing. The monitor copies what it keeps, and the time spent in it is excluded from the
+        run's solve time; it never raises into the solver (a bad iterate ends the sampling, with a note).
+        """
+        monitor = self._iterate_monitor
+        if monitor is not None:
+            monitor.report(iteration, x, mu)
 
 
 def declared_tolerance(solver: Solver | type[Solver]) -> float:

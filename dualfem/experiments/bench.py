@@ -24,6 +24,7 @@ import numpy as np
 
 from dualfem.core.errors import InputError
 from dualfem.core.io import atomic_write_text, backup
+from dualfem.experiments.curves import CurveStore, sample_errors, timed_runs
 from dualfem.experiments.harness import DASK_CONNECT_TIMEOUT, check_dask, execute_all
 from dualfem.experiments.machine import loadavg, machine_info, utc_now
 from dualfem.experiments.progress import Progress
@@ -70,16 +71,18 @@ def execute(task: dict, tick: Callable[[str, float], None] = lambda phase, budge
     if task["kind"] == "reference":
         row, payload = _execute_reference(task, qp, row, tick)
         return row.to_dict(), payload
-    return _execute_run(task, qp, row, tick).to_dict(), None
+    row, curve = _execute_run(task, qp, row, tick)
+    return row.to_dict(), ({"curve": curve} if curve else None)
 
 
-def _execute_run(task: dict, qp, row: Row, tick) -> Row:
+def _execute_run(task: dict, qp, row: Row, tick) -> tuple[Row, dict | None]:
+    """The run's row, and its convergence curve (:mod:`dualfem.experiments.curves`) or None."""
     from dualfem.core import evaluator
     from dualfem.core.solution import Status
 
     ref = task.get("ref")
-    sol, setups, solves, done, note = _timed_runs(task, qp, task["solver"], task["params"], tick,
-                                                  task["warmup"], task["repeats"])
+    sol, setups, solves, done, note, monitor = timed_runs(task, qp, task["solver"], task["params"], tick,
+                                                          task["warmup"], task["repeats"])
     status = str(sol.status)
     total = [a + b for a, b in zip(setups, solves)]
     msg = sol.message
@@ -106,7 +109,11 @@ def _execute_run(task: dict, qp, row: Row, tick) -> Row:
                        err_energy=c["energy"], contact_mismatch=c["contact_mismatch"],
                        ref_solver=ref["solver"], ref_kkt=ref["kkt"], ref_bound=ref.get("bound"))
     row.regrade()
-    return row
+    tick("curve errors", task["hard_limit"])
+    curve = sample_errors(qp, monitor, ref)
+    if curve and curve["note"]:
+        row.message = (row.message + "; " if row.message else "") + curve["note"]
+    return row, curve
 
 
 def check_reference(qp, ref: dict, kkt_max: float) -> tuple[str | None, float, float]:
@@ -165,38 +172,6 @@ def _execute_reference(task: dict, qp, row: Row, tick) -> tuple[Row, Any]:
 
 def _median(v: list[float]) -> float:
     return float(np.median(v)) if v else float("nan")
-
-
-def _timed_runs(task: dict, qp, name: str, params: dict, tick, warmup: bool, repeats: int):
-    """Warm-up (untimed) then ``repeats`` timed runs; returns (last solution, setup list, solve list, note)."""
-    from dualfem.core.solution import Status
-    from dualfem.experiments.runner import run
-    from dualfem.numerics import linalg
-
-    setups, solves, statuses = [], [], []
-    sol = None
-    stop = {Status.TIME_LIMIT, Status.ERROR, Status.SKIPPED}
-    if warmup:
-        tick("warmup", task["hard_limit"])
-        if task.get("cold_setup", True):
-            linalg.store_of(qp).clear()
-        sol = run(name, qp, params, tol=task.get("tol"))
-        if sol.status in stop:     # nothing to time: report the warm-up as is
-            return sol, [sol.time_s["setup"]], [sol.time_s["solve"]], 0, "from the warm-up run"
-    done = 0
-    for i in range(repeats):
-        tick(f"repeat {i + 1}", task["hard_limit"])
-        if task.get("cold_setup", True):
-            linalg.store_of(qp).clear()
-        sol = run(name, qp, params, tol=task.get("tol"))
-        setups.append(sol.time_s["setup"])
-        solves.append(sol.time_s["solve"])
-        statuses.append(str(sol.status))
-        done += 1
-        if sol.status in stop:
-            break
-    note = "" if len(set(statuses)) <= 1 else f"statuses differ across repeats: {statuses}"
-    return sol, setups, solves, done, note
 
 
 def _execute_floor(task: dict, qp, row: dict, tick) -> dict:
@@ -446,7 +421,8 @@ def _size(t: dict) -> float:
 
 def _runs(pending, refs, store, jobs, dask, stream, progress, title,
           connect_timeout=DASK_CONNECT_TIMEOUT) -> tuple[dict[str, int], int]:
-    """Phase 2: the runs (skipped ones are written directly); returns (status counts, runs executed)."""
+    """Phase 2: the runs (skipped ones are written directly; a run's curve, if the store records curves,
+    before its row); returns (status counts, runs executed)."""
     statuses: dict[str, int] = {}
     tasks = [t if t["skip"] else {**t, "ref": refs.get(t["scene_key"])} for t in pending]
     skip_ids = {t["run_id"] for t in tasks if t["skip"]}
@@ -456,6 +432,8 @@ def _runs(pending, refs, store, jobs, dask, stream, progress, title,
 
     def on_row(row: dict, payload: Any) -> None:
         nonlocal ran
+        if store.curves is not None:
+            store.curves.add(row, payload)
         statuses[row["status"]] = statuses.get(row["status"], 0) + 1
         if row["run_id"] not in skip_ids:
             ran += 1
@@ -505,6 +483,9 @@ def _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, strea
         return not (retry_failed and store.rows[rid].get("status") not in ("solved", "inaccurate"))
 
     pending = [t for t in tasks if not is_done(t["run_id"])]
+    if spec.curves or (store.out / "curves.csv").is_file() or (store.out / "curves").is_dir():
+        # the curves are kept in step with their rows (a run redone without a curve loses its old one)
+        CurveStore(store).open()
     # results.csv lists every row of the folder: this spec's, and (a folder shared with --force) those
     # of other specs or other versions of this one; nothing finished is ever dropped from it
     refs, aux, n_refs = _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream, progress,

@@ -76,14 +76,17 @@ def missing_reason(solver: Solver) -> str | None:
 
 
 def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, tol: float | None = None,
-        progress: Callable[[str, float], None] | None = None) -> Solution:
+        progress: Callable[[str, float], None] | None = None, monitor: Any = None) -> Solution:
     """Solve ``qp`` with ``solver`` (an instance, or a registry name plus ``params``).
 
     ``tol``: the relative accuracy asked for (e.g. a benchmark tier, with the parameters of
     ``Solver.tolerance_params(tol)``); the answer is then certified to ``tol`` itself (a `solved` at a
     benchmark tier means that tier's accuracy, whatever the solver declares by default).
     Without it, to the tolerance the solver declares. ``progress(stage, seconds)`` is called as
-    each stage (setup, solve, certify) finishes.
+    each stage (setup, solve, certify) finishes. ``monitor``: an iterate monitor
+    (:class:`dualfem.experiments.curves.IterateMonitor`) attached to the solver for ``solve()`` only
+    (:meth:`dualfem.core.solver.Solver.report_iterate`); the time spent in it is not counted in the
+    solve time, and the answer returned becomes its last sample.
 
     Nothing the plugin says about itself is trusted (docs/plugins.md, sections 1.1-1.3):
 
@@ -103,7 +106,7 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
         solver = make_solver(solver, params)
     name = _name(solver)
     before = fingerprint(qp)
-    att = _attempt(solver, guarded_view(qp), qp, tick)
+    att = _attempt(solver, guarded_view(qp), qp, tick, monitor)
     after = fingerprint(qp)            # whatever happened: did the plugin write into the caller's QP?
     changed = [k for k in before if after.get(k) != before[k]]
     if changed:
@@ -120,6 +123,8 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
             out.info["qp_changed"] = changed
         return out
     sol.time_s = {"setup": att.setup_s, "solve": att.solve_s, **sol.time_s}
+    if monitor is not None:
+        monitor.finish(sol.x, sol.multipliers, att.solve_s)
     sol.params = _params(solver)
     sol.info["declared"] = {"tolerance": att.declared[0], "exact": att.declared[1]}
     return _certified(qp, sol, att, tol, tick)
@@ -138,9 +143,11 @@ class _Attempt:
     reduction: Any = None
 
 
-def _attempt(solver: Solver, view: QP, qp: QP, tick: Callable[[str, float], None]) -> _Attempt:
-    """check_params, the declared tolerance, missing/skip, setup and solve, contained (see :func:`run`)."""
+def _attempt(solver: Solver, view: QP, qp: QP, tick: Callable[[str, float], None], monitor: Any = None) -> _Attempt:
+    """check_params, the declared tolerance, missing/skip, setup and solve, contained (see :func:`run`);
+    ``monitor`` is attached for ``solve()`` only, and its time taken out of ``solve_s``."""
     att = _Attempt()
+    spent = (lambda: monitor.overhead) if monitor is not None else (lambda: 0.0)
     name = _name(solver)
     with plugin_output():
         t0 = t1 = time.perf_counter()
@@ -156,8 +163,13 @@ def _attempt(solver: Solver, view: QP, qp: QP, tick: Callable[[str, float], None
                 t1 = time.perf_counter()
                 att.setup_s = t1 - t0
                 tick("setup (factorization)", att.setup_s)
-                att.returned = solver.solve()
-                att.solve_s = time.perf_counter() - t1
+                attached = _attach(solver, monitor, t1, att.setup_s)
+                try:
+                    att.returned = solver.solve()
+                finally:
+                    if attached:
+                        _attach(solver, None, t1, 0.0)
+                att.solve_s = time.perf_counter() - t1 - spent()
                 tick("solve (iterations)", att.solve_s)
         except InputError:
             raise
@@ -166,7 +178,7 @@ def _attempt(solver: Solver, view: QP, qp: QP, tick: Callable[[str, float], None
                 raise
             att.why = f"{type(exc).__name__}: {exc}"
             if att.setup_s or t1 != t0:
-                att.solve_s = time.perf_counter() - t1
+                att.solve_s = time.perf_counter() - t1 - spent()
         if att.why is None:
             try:
                 if check_declared(solver) != att.declared:
@@ -177,6 +189,18 @@ def _attempt(solver: Solver, view: QP, qp: QP, tick: Callable[[str, float], None
                 att.why = f"{exc} (changed during the run)"
         att.reduction = _reduction_of(solver, view, qp) if att.why is None else None
     return att
+
+
+def _attach(solver: Any, monitor: Any, t1: float, setup_s: float) -> bool:
+    """Attach ``monitor`` (None: detach) as the solver's iterate monitor, its clock started at ``t1``
+    after ``setup_s``; False when there is none or the plugin object refuses the attribute (it stays a point)."""
+    if monitor is not None:
+        monitor.start(t1, setup_s)
+    try:
+        solver._iterate_monitor = monitor
+    except (AttributeError, TypeError):
+        return False
+    return monitor is not None
 
 
 def _certified(qp: QP, sol: Solution, att: _Attempt, tol: float | None, tick: Callable[[str, float], None]) -> Solution:

@@ -13,6 +13,8 @@ A sweep is described by a TOML spec (see ``benchmarks/default.toml``)::
     cold_setup = true      # the QP's FactorStore is emptied before every run (store_of(qp).clear(),
                            # dualfem.numerics.linalg): setup is measured with the factorization,
                            # never read from a store; false: every run after the first reuses it
+    curves = false         # true: record each run's error along its iterations (curves.csv beside
+                           # results.csv, dualfem.experiments.curves); only solvers reporting iterates
     [tiers]                # tolerance tiers -> each solver's Solver.tolerance_params(tol)
     low = 1e-3
     high = 1e-9
@@ -54,7 +56,7 @@ from dualfem.core.solver import reference_solvers
 from dualfem.experiments.spec_select import Selection, apply_selection, effective_text
 
 SPEC_KEYS = {"name", "description", "repeats", "warmup", "time_limit", "guard_factor", "guard_slack",
-             "build_limit", "cold_setup", "tiers", "reference", "floor", "scenes", "solvers"}
+             "build_limit", "cold_setup", "curves", "tiers", "reference", "floor", "scenes", "solvers"}
 
 
 SCENE_KEYS_RESERVED = {"scene", "repeats", "warmup"}
@@ -92,6 +94,7 @@ class Spec:
     guard_slack: float = 10.0
     build_limit: float = 900.0
     cold_setup: bool = True
+    curves: bool = False
     tiers: dict[str, float] = field(default_factory=dict)
     reference: dict[str, Any] = field(default_factory=dict)
     floor: dict[str, Any] = field(default_factory=dict)
@@ -223,6 +226,8 @@ def _parse_top(s: Spec, data: dict) -> None:
         raise InputError(f"guard_factor must be >= 1, got {s.guard_factor}")
     if "cold_setup" in data:
         s.cold_setup = _bool("cold_setup", data["cold_setup"])
+    if "curves" in data:
+        s.curves = _bool("curves", data["curves"])
 
 
 def _parse_tiers(s: Spec, data: dict) -> None:

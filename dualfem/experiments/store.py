@@ -1,7 +1,8 @@
 """The results folder of a sweep: one atomic JSON file per row, a merged ``results.csv``, references.
 
 ``rows/<run_id>.json`` (a row file is complete or absent), ``results.csv`` (rewritten
-atomically), ``refs/<scene_key>.npz`` (certified reference solutions).
+atomically), ``refs/<scene_key>.npz`` (certified reference solutions); with ``curves = true``,
+``curves/<run_id>.json`` and ``curves.csv`` (:mod:`dualfem.experiments.curves`).
 """
 from __future__ import annotations
 
@@ -53,7 +54,7 @@ class ResultStore:
         # temporary files of writes interrupted by a kill (atomic_write names them ".NAME.*"):
         # the result they were meant to become is absent, so the run is simply redone
         stale = [p for d in (self.rows_dir, self.refs_dir) for p in d.glob(".*")]
-        stale += [p for n in ("results.csv", "sweep.json", "spec.toml") for p in self.out.glob(f".{n}.*")]
+        stale += [p for n in ("results.csv", "curves.csv", "sweep.json", "spec.toml") for p in self.out.glob(f".{n}.*")]
         for p in stale:
             if p.is_file():
                 p.unlink()
@@ -87,6 +88,7 @@ class ResultStore:
                 write_csv(csv_path, list(self.rows.values()))     # at once: every readable row
         self._last_csv = 0.0
         self.keep: Callable[[dict], bool] | None = None
+        self.curves = None     # a dualfem.experiments.curves.CurveStore, when the sweep records curves
         return self
 
     def _take_lock(self) -> None:
@@ -144,8 +146,11 @@ class ResultStore:
 
     def write_csv(self) -> Path:
         """results.csv of the rows of the current spec (rows of runs no longer in it stay in rows/),
-        and results.parquet beside it when pandas and pyarrow are installed."""
+        and results.parquet beside it when pandas and pyarrow are installed; curves.csv first (its
+        curves are those of rows in the store: :mod:`dualfem.experiments.curves`), when recorded."""
         self._last_csv = time.monotonic()
+        if self.curves is not None:
+            self.curves.write_csv(self.keep)
         rows = list(self.rows.values())
         if self.keep is not None:
             rows = [r for r in rows if self.keep(r)]

@@ -133,12 +133,14 @@ def expand_tasks(spec: Spec, scenes: list[SceneSpec] | None = None) -> list[dict
                     ident = {"scene": sc.key, "solver": name, "params": params, "tier": tier, "tol": tol,
                              "repeats": repeats, "warmup": sc.warmup, "cold": spec.cold_setup,
                              "time_limit": time_limit}
+                    if spec.curves:         # a monitored run is its own run (its solve_s excludes the monitor)
+                        ident["curves"] = True
                     task = {"kind": "run", "run_id": _hash(ident), "spec": spec.name, "scene": sc.scene,
                             "scene_params": sc.params, "scene_key": sc.key, "label": sc.label,
                             "solver": name, "variant": variant, "params": params, "tier": tier, "tol": tol,
                             "repeats": repeats, "warmup": sc.warmup, "cold_setup": spec.cold_setup,
                             "time_limit": time_limit, "hard_limit": hard_limit,
-                            "build_limit": spec.build_limit}
+                            "build_limit": spec.build_limit, "curves": spec.curves}
                     if not _in_range(sc, blk):
                         continue     # excluded by the spec's min/max: not a run of this sweep
                     reason = None
