@@ -14,9 +14,8 @@ import numpy as np
 
 from dualfem.core.errors import InputError
 from dualfem.post.fields3d import defect_fields3d, plane_cut, stresses3d
+from dualfem.post.style import FIELD_CMAP
 
-#: sequential colour map of every field (colour-blind safe, perceptually uniform)
-FIELD_CMAP = "viridis"
 #: defects drawn at most (one row of panels each)
 MAX_DEFECT_ROWS = 4
 

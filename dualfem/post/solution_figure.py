@@ -41,7 +41,7 @@ def solution_figure(qp, sol):
     from dualfem.post.figures import plot_deformed, plot_jump
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), layout="constrained")
-    plot_deformed(qp, sol, ax=axes[0], contact=True, cmap="viridis")
+    plot_deformed(qp, sol, ax=axes[0], contact=True)
     if "defect_upper" in qp.maps:
         plot_jump([(sol.info.get("solver", "solution") if isinstance(sol.info, dict) else "solution", qp, sol)],
                   ax=axes[1])
