@@ -18,14 +18,16 @@ last), and the row's ``message`` says so.
 the time spent inside the monitor so far (copies, and the x a dual method computes only for a kept
 sample): the last sample lies at that repeat's ``setup_s + solve_s``, on the axis of the rows'
 ``total_s``. The monitor's time is excluded from the run's ``solve_s`` too (every timed repeat is
-monitored, so the repeats stay comparable). The curve is that of the last timed repeat, the one
-whose answer the row's errors are measured on.
+monitored, so the repeats stay comparable); a solver's own ``time_limit`` clock still runs through
+it. The curve is that of the last timed repeat, the one whose answer the row's errors are measured
+on (the row's times are medians over the repeats).
 
 **Error** of each sample, computed after the solve (untimed): with a certified reference of the
 scene, the row's ``err_x_energy`` (:func:`dualfem.core.evaluator.compare`: |x - x_ref|_K / |x_ref|_K;
 ``error_kind = "reference"``), else the evaluator's KKT error of (x, mu)
 (:func:`dualfem.core.evaluator.kkt_error`, the row's ``kkt_error``; ``error_kind = "kkt"``). The last
-sample's error is the row's error exactly (the same function of the same answer).
+sample's error is the row's error exactly (the same function of the same answer); an error that
+cannot be computed (NaN in the iterate) is NaN, an empty field in curves.csv.
 
 **Files** (:class:`CurveStore`): ``curves/<run_id>.json`` (one atomic file per run's curve, written
 before the run's row) and ``curves.csv`` beside ``results.csv`` (rewritten atomically with it), one line
