@@ -179,6 +179,9 @@ def _cfg_solve(p):
     p.add_argument("--vtk", metavar="FILE.vtu", default=None,
                    help="also write the solution for ParaView (displacement, stresses, defect jump/pressure)")
     p.add_argument("--xdmf", metavar="FILE.xdmf", default=None, help="the same as XDMF + HDF5 (needs h5py)")
+    p.add_argument("--figure", metavar="FILE.png", default=None,
+                   help="also draw the solution (.png/.pdf/.svg): 2D the deformed body and the jump; 3D the "
+                        "opening, slip and pressure maps over each defect and a cut through the body (FILE_cut.png)")
     p.add_argument("--threads", type=int, default=None, metavar="N",
                    help="threads for the factorization (default: all cores; dense phases use what is fastest)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -201,6 +204,10 @@ def cmd_solve(args) -> int:
         for path, kind in ((args.vtk, "vtu"), (args.xdmf, "xdmf")):
             if path:
                 check_path(path, kind)
+    if args.figure:
+        from dualfem.post.solution_figure import check_figure_path
+
+        check_figure_path(args.figure)
     from dualfem.numerics.factor import missing_fast_backend_hint
     from dualfem.numerics.threads import set_threads
 
@@ -235,6 +242,11 @@ def cmd_solve(args) -> int:
         else:
             for path in write_outputs(qp, sol, vtk=args.vtk, xdmf=args.xdmf):
                 print(f"wrote {path}", file=sys.stderr)
+    if args.figure and sol.x is not None:
+        from dualfem.post.solution_figure import write_solution_figure
+
+        for path in write_solution_figure(args.figure, qp, sol):
+            print(f"wrote {path}", file=sys.stderr)
     if args.json:
         print(dumps(rec))
     else:

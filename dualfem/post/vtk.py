@@ -67,12 +67,12 @@ def check_qp(qp) -> None:
     if g is None:
         raise InputError("--vtk/--xdmf need the mesh of the QP (qp.geometry: nodes, cells, node_dofs): "
                          "solve a scene, or a file exported with its map_ arrays")
-    if g.dim != 2 or g.cells.shape[0] != 3:
-        raise InputError(f"--vtk/--xdmf write 2-D triangle meshes; the QP's geometry has dim {g.dim} and cells "
-                         f"of {g.cells.shape[0]} nodes")
-    if g.node_dofs.shape[0] != 2:
-        raise InputError(f"--vtk/--xdmf write 2-D displacements: geometry.node_dofs (map_node_dofs) must have 2 rows "
-                         f"(one per component), got shape {g.node_dofs.shape}")
+    if (g.dim, g.cells.shape[0]) not in ((2, 3), (3, 4)):
+        raise InputError(f"--vtk/--xdmf write triangle (2-D) or tetrahedron (3-D) meshes; the QP's geometry has "
+                         f"dim {g.dim} and cells of {g.cells.shape[0]} nodes")
+    if g.node_dofs.shape[0] != g.dim:
+        raise InputError(f"--vtk/--xdmf write {g.dim}-D displacements: geometry.node_dofs (map_node_dofs) must have "
+                         f"{g.dim} rows (one per component), got shape {g.node_dofs.shape}")
     check_maps(qp.maps, qp.m, g.nodes.shape[1], "the QP")
     if "defect_upper" in qp.maps and not ("defect_lower" in qp.maps and "defect_s" in qp.maps):
         raise InputError("the defect maps of the QP need defect_upper, defect_lower and defect_s together")
@@ -83,7 +83,10 @@ def to_meshio(qp, sol=None, *, post: Post | None = None):
     import meshio
 
     check_qp(qp)
+    if qp.geometry.dim == 3:
+        from dualfem.post.vtk3d import to_meshio3d
 
+        return to_meshio3d(qp, sol)
     p = post if post is not None else Post(qp, sol)
     nodes = p.nodes
     npts = nodes.shape[1]
@@ -188,10 +191,10 @@ def write_outputs(qp, sol, *, vtk: str | None = None, xdmf: str | None = None) -
     if sol.x is None:
         raise InputError(f"no solution to write (solver status {sol.status}: {sol.message})")
     check_qp(qp)
-    post = Post(qp, sol)
+    post = Post(qp, sol) if qp.geometry.dim == 2 else None
     out = []
     if vtk:
-        out.append(write_vtu(vtk, qp, post=post))
+        out.append(write_vtu(vtk, qp, sol, post=post))
     if xdmf:
-        out.append(write_xdmf(xdmf, qp, post=post))
+        out.append(write_xdmf(xdmf, qp, sol, post=post))
     return out

@@ -1,0 +1,143 @@
+"""Post-processing of a 3D solution: stresses per P1 tetrahedron, fields on the defect surfaces,
+and a plane cut through the body.
+
+Read from the QP alone: ``qp.geometry`` (dim 3: ``nodes`` (3, n_nodes), ``cells`` (4, n_tets),
+``node_dofs`` (3, n_nodes)), ``qp.material`` (``E``, ``nu``), ``qp.weights`` (nodal areas of the
+defect nodes) and the defect maps ``defect_upper``/``defect_lower`` (node ids of the "+"/"-" copy of
+defect node j, row j of B), ``defect_normals`` (the unit normal nu_j pointing to the "+" face; stored
+(3, m) or (m, 3)) and ``defect_id``.
+
+Conventions (as in 2D, :mod:`dualfem.post.fields`): strains and stresses are constant per
+tetrahedron, in the units of E, tensor components (not engineering shear), Voigt order 11, 22,
+33, 23, 13, 12. On a defect: ``jump = u+ - u-`` (3-vector), ``opening = jump . nu`` (>= 0 is
+admissible), ``slip = |jump - opening nu|`` (the tangential jump's length), ``pressure = mu / w``
+(contact pressure, stress units; mu >= 0 the nodal contact force of row j).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from dualfem.core.errors import InputError
+from dualfem.post.fields import material, nodal_displacement
+
+VOIGT = ("s11", "s22", "s33", "s23", "s13", "s12")
+
+
+def _geometry3d(qp):
+    g = getattr(qp, "geometry", None)
+    if g is None or g.dim != 3 or g.cells.shape[0] != 4:
+        raise InputError("3D post-processing needs a tetrahedral mesh (qp.geometry with dim 3 and cells (4, n))")
+    return g
+
+
+def tet_gradients(nodes: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gradients of the four P1 shape functions per tetrahedron, shape (nt, 4, 3), and the volumes (nt,).
+
+    Degenerate (zero-volume) tetrahedra are refused (InputError)."""
+    X = nodes[:, tets]                       # (3, 4, nt)
+    J = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2)   # (3, nt, 3): columns edges
+    J = np.moveaxis(J, 1, 0)                 # (nt, 3, 3), J[:, i, k] = (X_k+1 - X_0)_i
+    det = np.linalg.det(J)
+    if np.any(np.abs(det) <= 1e-300):
+        raise InputError(f"the mesh has {int(np.sum(np.abs(det) <= 1e-300))} degenerate tetrahedra")
+    Jinv = np.linalg.inv(J)                  # rows: gradients of the barycentric coordinates 1..3
+    grads = np.empty((tets.shape[1], 4, 3))
+    grads[:, 1:, :] = Jinv
+    grads[:, 0, :] = -Jinv.sum(axis=1)
+    return grads, np.abs(det) / 6.0
+
+
+def strains3d(qp, x: np.ndarray) -> np.ndarray:
+    """Strain tensor per tetrahedron, shape (nt, 3, 3) (symmetric, dimensionless)."""
+    g = _geometry3d(qp)
+    u = nodal_displacement(qp, x)            # (n_nodes, 3)
+    grads, _ = tet_gradients(g.nodes, g.cells)
+    Ue = u[g.cells.T]                        # (nt, 4, 3)
+    Du = np.einsum("tai,taj->tij", Ue, grads)    # du_i/dx_j
+    return 0.5 * (Du + np.transpose(Du, (0, 2, 1)))
+
+
+def stresses3d(qp, x: np.ndarray, E: float | None = None, nu: float | None = None) -> dict[str, np.ndarray]:
+    """Cauchy stress per tetrahedron (units of E): the six components (:data:`VOIGT`) and ``von_mises``."""
+    E, nu, _ = material(qp, E, nu, "strain")
+    lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    eps = strains3d(qp, x)
+    tr = np.trace(eps, axis1=1, axis2=2)
+    sig = 2 * mu * eps + lam * tr[:, None, None] * np.eye(3)
+    out = {k: sig[:, i, j] for k, (i, j) in zip(VOIGT, ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)))}
+    dev = sig - np.trace(sig, axis1=1, axis2=2)[:, None, None] / 3 * np.eye(3)
+    out["von_mises"] = np.sqrt(1.5 * np.einsum("tij,tij->t", dev, dev))
+    return out
+
+
+def defect_normals(qp) -> np.ndarray:
+    """The unit normals of the defect nodes as (m, 3), whichever way the QP stores them."""
+    nrm = np.asarray(qp.maps.get("defect_normals"), dtype=float)
+    m = qp.m
+    if nrm.shape == (3, m) and m != 3:
+        nrm = nrm.T
+    if nrm.shape != (m, 3):
+        raise InputError(f"maps['defect_normals'] must have shape (m, 3) or (3, m) with m = {m}, got {nrm.shape}")
+    return nrm
+
+
+def defect_fields3d(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Per defect node j: ``points`` (m, 3: the "+" copy's position), ``normal`` (m, 3), ``jump`` (m, 3),
+    ``opening``, ``slip`` (m,), ``defect_id``, ``upper``/``lower`` node ids; with multipliers also
+    ``force`` (= mu) and ``pressure`` (= mu / w)."""
+    g = _geometry3d(qp)
+    for k in ("defect_upper", "defect_lower"):
+        if k not in qp.maps:
+            raise InputError(f"3D defect fields need maps['{k}'] (the QP has no defect maps)")
+    up, lo = np.asarray(qp.maps["defect_upper"], int), np.asarray(qp.maps["defect_lower"], int)
+    u = nodal_displacement(qp, x)
+    nrm = defect_normals(qp)
+    jump = u[up] - u[lo]
+    opening = np.einsum("ij,ij->i", jump, nrm)
+    tangential = jump - opening[:, None] * nrm
+    out = {"points": g.nodes[:, up].T, "normal": nrm, "jump": jump, "opening": opening,
+           "slip": np.linalg.norm(tangential, axis=1), "upper": up, "lower": lo,
+           "defect_id": np.asarray(qp.maps.get("defect_id", np.zeros(up.size, int)), int)}
+    if multipliers is not None:
+        mu = np.asarray(multipliers, dtype=float)
+        w = np.asarray(qp.weights, dtype=float)
+        out["force"] = mu
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out["pressure"] = np.where(w > 0, mu / np.where(w > 0, w, 1.0), np.nan)
+    return out
+
+
+def plane_cut(nodes: np.ndarray, tets: np.ndarray, origin, normal) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The intersection of the tetrahedra with the plane through ``origin`` with unit ``normal``.
+
+    Returns (polygons (k, 4, 3): each cut tetrahedron's section, a triangle repeating its last vertex
+    or a quadrilateral in order; tet ids (k,); barycentric weights (k, 4, 4): polygon vertex v is
+    sum_a weights[v, a] * node a of the tet, so nodal fields interpolate linearly onto the section)."""
+    o, nv = np.asarray(origin, float), np.asarray(normal, float)
+    nv = nv / np.linalg.norm(nv)
+    d = np.einsum("i,iat->ta", nv, nodes[:, tets] - o[:, None, None])     # (nt, 4) signed distances
+    cut = np.flatnonzero((d.min(axis=1) < 0) & (d.max(axis=1) > 0))
+    polys = np.zeros((cut.size, 4, 3))
+    bary = np.zeros((cut.size, 4, 4))
+    edges = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    for r, t in enumerate(cut):
+        pts, ws = [], []
+        for a, b in edges:
+            da, db = d[t, a], d[t, b]
+            if (da < 0) != (db < 0) and da != db:
+                s = da / (da - db)
+                w = np.zeros(4)
+                w[a], w[b] = 1 - s, s
+                ws.append(w)
+                pts.append(nodes[:, tets[a, t]] * (1 - s) + nodes[:, tets[b, t]] * s)
+        pts_a, ws_a = np.array(pts), np.array(ws)
+        if len(pts) == 4:                     # order the quadrilateral around its centre
+            c = pts_a.mean(axis=0)
+            e1 = pts_a[0] - c
+            e2 = np.cross(nv, e1)
+            order = np.argsort(np.arctan2((pts_a - c) @ e2, (pts_a - c) @ e1))
+            pts_a, ws_a = pts_a[order], ws_a[order]
+        else:
+            pts_a, ws_a = np.vstack([pts_a, pts_a[-1:]]), np.vstack([ws_a, ws_a[-1:]])
+        polys[r], bary[r] = pts_a, ws_a
+    return polys, cut, bary

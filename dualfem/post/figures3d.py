@@ -1,0 +1,132 @@
+"""Figures of a 3D solution: maps of opening, slip and contact pressure over each defect surface, and
+a plane cut through the body coloured by the von Mises stress (matplotlib, Agg-safe).
+
+The defect maps are drawn in the defect's own plane coordinates (the plane through its nodes' centroid
+orthogonal to their mean normal; for a curved defect, its projection), triangulated by the defect's
+surface triangles when the QP has them (``maps['defect_faces']``: (3, n_faces) node ids of the "-"
+face, the front nodes single; the front drawn with opening and slip 0), else by a Delaunay
+triangulation of the projected defect nodes restricted to the defect's outline. Units: lengths of the
+scene, opening and slip in displacement units, pressure in stress units (E's).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from dualfem.core.errors import InputError
+from dualfem.post.fields3d import defect_fields3d, plane_cut, stresses3d
+
+#: sequential colour map of every field (colour-blind safe, perceptually uniform)
+FIELD_CMAP = "viridis"
+#: defects drawn at most (one row of panels each)
+MAX_DEFECT_ROWS = 4
+
+
+def plane_frame(points: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(centre (3,), in-plane unit vectors e1, e2 (3,)) of a defect from its nodes (k, 3) and normals (k, 3)."""
+    c = points.mean(axis=0)
+    nv = normals.mean(axis=0)
+    if np.linalg.norm(nv) < 1e-12:
+        nv = normals[0]
+    nv = nv / np.linalg.norm(nv)
+    trial = np.eye(3)[int(np.argmin(np.abs(nv)))]
+    e1 = np.cross(nv, trial)
+    e1 /= np.linalg.norm(e1)
+    return c, e1, np.cross(nv, e1)
+
+
+def _surface(qp, d: dict, k: int):
+    """(node coordinates (p, 3), triangles (nf, 3) into them or None, row of each vertex (p,) or -1 at the
+    front) of defect ``k``, from ``maps['defect_faces']`` ((3, n_faces) node ids of the "-" face)."""
+    faces = qp.maps.get("defect_faces")
+    rows = np.flatnonzero(d["defect_id"] == k)
+    if faces is None or not np.size(faces):
+        return d["points"][rows], None, rows
+    f = np.asarray(faces, int)
+    row_of = np.full(qp.geometry.nodes.shape[1], -1)
+    row_of[d["lower"]] = np.arange(d["lower"].size)
+    mine = np.any(np.isin(row_of[f], rows), axis=0)
+    f = f[:, mine]
+    verts, inv = np.unique(f, return_inverse=True)
+    return qp.geometry.nodes[:, verts].T, inv.reshape(f.shape).T, row_of[verts]
+
+
+def _triangulation(xy: np.ndarray, triangles):
+    import matplotlib.tri as mtri
+
+    if triangles is not None:
+        return mtri.Triangulation(xy[:, 0], xy[:, 1], triangles)
+    tri = mtri.Triangulation(xy[:, 0], xy[:, 1])
+    # drop Delaunay triangles much longer than the typical node spacing (concave outlines)
+    e = xy[tri.triangles]
+    longest = np.max(np.linalg.norm(e - np.roll(e, 1, axis=1), axis=2), axis=1)
+    tri.set_mask(longest > 3 * np.median(longest))
+    return tri
+
+
+def plot_defect_maps(qp, sol, *, fig=None, quantities=("opening", "slip", "pressure")):
+    """One row per defect (at most :data:`MAX_DEFECT_ROWS`), one panel per quantity; returns the figure."""
+    import matplotlib.pyplot as plt
+
+    if sol.x is None:
+        raise InputError(f"no solution to draw (status {sol.status})")
+    d = defect_fields3d(qp, sol.x, sol.multipliers)
+    ids = np.unique(d["defect_id"])[:MAX_DEFECT_ROWS]
+    qs = [q for q in quantities if q in d]
+    fig = fig or plt.figure(figsize=(3.6 * len(qs), 3.1 * len(ids)), layout="constrained")
+    axes = np.atleast_2d(fig.subplots(len(ids), len(qs), squeeze=False))
+    for r, k in enumerate(ids):
+        rows = np.flatnonzero(d["defect_id"] == k)
+        c, e1, e2 = plane_frame(d["points"][rows], d["normal"][rows])
+        pts, triangles, vrows = _surface(qp, d, k)
+        xy = np.stack([(pts - c) @ e1, (pts - c) @ e2], axis=1)
+        tri = _triangulation(xy, triangles)
+        for col, q in enumerate(qs):
+            ax = axes[r, col]
+            # the front is sealed: opening and slip 0 there; the pressure is drawn as 0 where undefined
+            v = np.where(vrows >= 0, np.nan_to_num(d[q][np.maximum(vrows, 0)], nan=0.0), 0.0)
+            im = ax.tripcolor(tri, v, shading="gouraud", cmap=FIELD_CMAP)
+            ax.set_aspect("equal")
+            ax.set_title(f"defect {k}: {q}", fontsize=9)
+            ax.tick_params(labelsize=7)
+            fig.colorbar(im, ax=ax, shrink=0.8).ax.tick_params(labelsize=7)
+    return fig
+
+
+def plot_cut(qp, sol, *, origin=None, normal=None, ax=None, scale: float = 0.0):
+    """The section of the body by a plane (default: through the first defect's centre, containing its
+    normal), coloured by the von Mises stress per tetrahedron; the defect nodes near the plane are marked.
+    ``scale`` > 0 draws the section at displaced positions (u times scale). Returns the axes."""
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+
+    if sol.x is None:
+        raise InputError(f"no solution to draw (status {sol.status})")
+    g = qp.geometry
+    d = defect_fields3d(qp, sol.x)
+    rows = np.flatnonzero(d["defect_id"] == d["defect_id"].min())
+    c, e1, e2 = plane_frame(d["points"][rows], d["normal"][rows])
+    origin = c if origin is None else np.asarray(origin, float)
+    normal = e2 if normal is None else np.asarray(normal, float)
+    polys, tets, bary = plane_cut(g.nodes, g.cells, origin, normal)
+    if scale:
+        from dualfem.post.fields import nodal_displacement
+
+        u = nodal_displacement(qp, sol.x)
+        polys = polys + scale * np.einsum("kva,aki->kvi", bary, u[g.cells[:, tets]])
+    nv = np.asarray(normal, float) / np.linalg.norm(normal)
+    a1 = np.cross(nv, np.eye(3)[int(np.argmin(np.abs(nv)))])
+    a1 /= np.linalg.norm(a1)
+    a2 = np.cross(nv, a1)
+    xy = np.stack([(polys - origin) @ a1, (polys - origin) @ a2], axis=-1)
+    vm = stresses3d(qp, sol.x)["von_mises"][tets]
+    ax = ax or plt.figure(figsize=(5, 4.4), layout="constrained").add_subplot()
+    pc = PolyCollection(xy, array=vm, cmap=FIELD_CMAP, edgecolors="none")
+    ax.add_collection(pc)
+    ax.autoscale_view()
+    ax.set_aspect("equal")
+    near = np.abs((d["points"] - origin) @ nv) < 0.5 * np.ptp(xy[..., 0]) / max(np.sqrt(len(tets)), 1)
+    pts = d["points"][near]
+    ax.plot((pts - origin) @ a1, (pts - origin) @ a2, "w.", ms=2, label="defect nodes")
+    ax.figure.colorbar(pc, ax=ax, shrink=0.8, label="von Mises (units of E)")
+    ax.set_title("cut through the body", fontsize=9)
+    return ax

@@ -1,0 +1,73 @@
+"""ParaView output of a 3D solution (VTU/XDMF via meshio): the tetrahedra and the defect surfaces.
+
+One unstructured grid holds the points (every node, both copies of a defect node), point data
+``displacement`` (3 components: *Warp By Vector*), ``opening``, ``slip``, ``pressure`` (NaN away from
+the defects; both copies of a defect node carry its value), ``defect_id`` (-1 elsewhere) and
+``normal`` (the unit normal pointing to the "+" face at defect nodes, 0 elsewhere); cell blocks: the
+tetrahedra, then, when the QP has its defect surface triangles (``maps['defect_faces']``, (3, n_faces)
+node ids of the "-" face, the front nodes single), the triangles of every "+" face followed by those
+of every "-" face. Cell data: the stress
+components ``s11 s22 s33 s23 s13 s12`` and ``von_mises`` (units of E, NaN on the surface cells),
+``opening``/``slip``/``pressure`` on the surface cells (means of the three nodes, NaN on the
+tetrahedra), ``defect_id`` and ``face`` (0 tetrahedron, +1 "+" face, -1 "-" face).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from dualfem.post.fields3d import VOIGT, defect_fields3d, stresses3d
+
+NODAL = ("opening", "slip", "pressure")
+
+
+def to_meshio3d(qp, sol):
+    """The meshio.Mesh described in the module docstring."""
+    import meshio
+
+    g = qp.geometry
+    npts = g.nodes.shape[1]
+    from dualfem.post.fields import nodal_displacement
+
+    u = nodal_displacement(qp, sol.x)
+    st = stresses3d(qp, sol.x)
+    ntet = g.cells.shape[1]
+    cells = [("tetra", g.cells.T.astype(np.int64))]
+    cell_data = {k: [np.asarray(st[k], float)] for k in (*VOIGT, "von_mises")}
+    point_data = {"displacement": u}
+    face = [np.zeros(ntet, dtype=np.int32)]
+    if "defect_upper" in qp.maps:
+        d = defect_fields3d(qp, sol.x, sol.multipliers)
+        d.setdefault("pressure", np.full(qp.m, np.nan))
+        for k in NODAL:
+            arr = np.full(npts, np.nan)
+            arr[d["lower"]] = d[k]
+            arr[d["upper"]] = d[k]
+            point_data[k] = arr
+        point_data["defect_id"] = np.full(npts, -1, dtype=np.int32)
+        point_data["normal"] = np.zeros((npts, 3))
+        for ids in (d["lower"], d["upper"]):
+            point_data["defect_id"][ids] = d["defect_id"]
+            point_data["normal"][ids] = d["normal"]
+        faces = qp.maps.get("defect_faces")
+        if faces is not None and np.size(faces):
+            f = np.asarray(faces, dtype=np.int64)          # node ids of the "-" face; the front single
+            plus = np.arange(npts)
+            plus[d["lower"]] = d["upper"]
+            tri = np.vstack([plus[f].T, f.T])
+            nf = f.shape[1]
+            row_of = np.full(npts, -1)
+            row_of[d["lower"]] = np.arange(qp.m)
+            cells.append(("triangle", tri))
+            for k in cell_data:
+                cell_data[k].append(np.full(2 * nf, np.nan))
+            face.append(np.concatenate([np.ones(nf, np.int32), -np.ones(nf, np.int32)]))
+            r = row_of[f]
+            for k in NODAL:         # the front: opening and slip 0, pressure undefined (ignored in the mean)
+                vals = np.where(r >= 0, np.asarray(d[k], float)[np.maximum(r, 0)], np.nan if k == "pressure" else 0.0)
+                cnt = np.sum(np.isfinite(vals), axis=0)
+                v = np.where(cnt > 0, np.nansum(vals, axis=0) / np.maximum(cnt, 1), np.nan)
+                cell_data[k] = [np.full(ntet, np.nan), np.concatenate([v, v])]
+            did = d["defect_id"][np.max(r, axis=0)].astype(np.int32)
+            cell_data["defect_id"] = [np.full(ntet, -1, dtype=np.int32), np.concatenate([did, did])]
+    cell_data["face"] = face
+    return meshio.Mesh(g.nodes.T.copy(), cells, point_data=point_data, cell_data=cell_data)
