@@ -37,6 +37,7 @@ chooses others, ``None`` or ``"all"`` every row.
 """
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -78,7 +79,11 @@ def load(path: str | Path, table: str = "runs", kind: str | Sequence[str] | None
     else:
         raise InputError(f"{str(p)!r} is not a dualfem bench folder (results.csv) or stress folder (runs.jsonl)")
     if kinds is not None:
+        held = sorted({str(r.get("kind")) for r in rows})
         rows = [r for r in rows if r.get("kind") in kinds]
+        if not rows and held:          # e.g. the default kind="run" on a stress folder: say what is there
+            warnings.warn(f"{str(p)!r} holds no rows of kind {', '.join(sorted(kinds))}; its kinds: "
+                          f"{', '.join(held)} (load(..., kind={held[0]!r}) or kind='all')", stacklevel=2)
     df = pd.DataFrame(rows, columns=None if rows else COLUMNS)
     first = [c for c in COLUMNS if c in df.columns]
     return df[first + sorted(c for c in df.columns if c not in first)]

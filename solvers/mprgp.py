@@ -117,8 +117,8 @@ def mprgp(matvec, b0: np.ndarray, alpha: float, gamma: float, tol: float, max_it
     free, phi, beta = split(mu, g)
     p = prec(phi, free)
     k = 0
-    if report is not None:
-        report(0, mu)
+    report = report or (lambda k_, mu_: None)
+    report(0, mu)
     while True:
         gp = pnorm(phi, beta)
         if gp <= target:
@@ -166,8 +166,7 @@ def mprgp(matvec, b0: np.ndarray, alpha: float, gamma: float, tol: float, max_it
             p = prec(phi, free)
             counts["proportioning"] += 1
             kind = "proportioning"
-        if report is not None:
-            report(k, mu)
+        report(k, mu)
         if verbose:
             history.append({"iter": k, "kind": kind, "active": int((~free).sum()),
                             "proj_grad": float(pnorm(phi, beta))})
