@@ -11,8 +11,9 @@ stress folder written before both used one store (its ``runs.jsonl``). Needs pan
   ``peak_rss_mb``, errors relative), then the row's extra keys (``scene_*`` parameters, ...).
   Dict-valued fields (``solver_params``, ``iterations``, ``coords``) are dicts.
 * ``"curves"``: the convergence curves of a bench run with ``curves = true``
-  (:mod:`dualfem.experiments.curves`): one row per (run, sample), columns exactly ``run_id, solver,
-  tier, scene_key, iteration, time_s, error, error_kind`` (``run_id`` joins the runs table; ``time_s``
+  (:mod:`dualfem.experiments.curves`): one row per (run, timed repeat, sample), columns exactly ``run_id,
+  solver, tier, scene_key, iteration, time_s, error, error_kind, repeat`` (``run_id`` joins the runs table;
+  ``repeat`` = 1, 2, ... numbers the run's timed repeats, whose curves differ in their times; ``time_s``
   = setup + solve time at the sample, the monitor's own time excluded; ``error`` relative: the
   energy-norm error against the certified reference when ``error_kind == "reference"``, else the
   evaluator's KKT error, ``"kkt"``; NaN where it could not be computed). A folder without curves
@@ -106,11 +107,11 @@ def _curves(p: Path, pd):
     if not csv_path.is_file():
         if not ((folder / "results.csv").is_file() or (folder / "runs.jsonl").is_file()):
             raise InputError(f"{str(p)!r} is not a dualfem bench folder (results.csv, curves.csv)")
-        return pd.DataFrame({c: pd.Series(dtype="float64" if c in ("time_s", "error") else
-                                          "int64" if c == "iteration" else "object") for c in CURVE_COLUMNS})
+        kinds = {"time_s": "float64", "error": "float64", "iteration": "int64", "repeat": "int64"}
+        return pd.DataFrame({c: pd.Series(dtype=kinds.get(c, "object")) for c in CURVE_COLUMNS})
     recs = read_curves(csv_path)
     if (folder / "results.csv").is_file():       # never a sample of a run whose row is not there
         runs = {r["run_id"] for r in read_results(folder / "results.csv", warn=lambda msg: None)}
         recs = [r for r in recs if r["run_id"] in runs]
     df = pd.DataFrame(recs, columns=list(CURVE_COLUMNS))
-    return df.astype({"iteration": "int64", "time_s": "float64", "error": "float64"})
+    return df.astype({"iteration": "int64", "time_s": "float64", "error": "float64", "repeat": "int64"})

@@ -172,7 +172,7 @@ def test_every_builtin_iterative_solver_reports_its_iterates(qp, name):
     mon = IterateMonitor(qp.n, qp.m)
     sol = run(name, qp, monitor=mon)
     curve = sample_errors(qp, mon, None)
-    errs = [e for _, _, e in curve["samples"]]
+    errs = [e for _, _, e, _ in curve["samples"]]
     assert sol.status == Status.SOLVED and curve["error_kind"] == "kkt" and 2 <= len(errs) <= MAX_SAMPLES
     assert errs[-1] == evaluator.kkt_error(sol.residuals)
     assert errs[-1] < 1e-3 * errs[0]
@@ -326,3 +326,31 @@ def test_a_damaged_curves_csv_keeps_its_readable_lines(sweep, tmp_path):
     path.write_text("a,b\n1,2\n")
     with pytest.raises(InputError, match="not a dualfem curves.csv"):
         curves.read_curves(path)
+
+
+def test_every_timed_repeat_gives_a_curve_with_the_same_errors(tmp_path):
+    """repeats = 3: one curve per repeat (repeat 1, 2, 3), the same iterations and errors (the solver is
+    deterministic: errors are measured once, on the last repeat's copies), each repeat's own times; the
+    last repeat's last sample is the row's answer."""
+    from dualfem.experiments.spec_select import make_selection
+
+    (tmp_path / "spec.toml").write_text(SPEC, encoding="utf-8")
+    spec = load_spec(tmp_path / "spec.toml", make_selection(["uzawa"], ["f2[N=8]"], 3))
+    out = tmp_path / "out"
+    bench.run_sweep(spec, out, progress=False, stream=open(os.devnull, "w"))
+    recs = curve_rows(out)
+    (row,) = [r for r in read_results(out) if r["kind"] == "run"]
+    assert {r["run_id"] for r in recs} == {row["run_id"]}
+    by = {k: [r for r in recs if int(r["repeat"]) == k] for k in (1, 2, 3)}
+    assert all(len(by[k]) >= 4 for k in by)
+    for k in (1, 2):
+        assert [r["iteration"] for r in by[k]] == [r["iteration"] for r in by[3]]
+        assert [r["error"] for r in by[k]] == [r["error"] for r in by[3]]
+    times = {k: [float(r["time_s"]) for r in by[k]] for k in by}
+    assert all(t == sorted(t) for t in times.values())
+    assert float(by[3][-1]["error"]) == row["err_x_energy"]
+    pytest.importorskip("pandas")
+    from dualfem.results import load as load_results
+
+    df = load_results(out, table="curves")
+    assert list(df.columns) == list(COLUMNS) and sorted(df["repeat"].unique()) == [1, 2, 3]

@@ -204,10 +204,11 @@ def test_field_figures_use_the_declared_colormap():
 
 
 def test_report_reads_the_curves_of_the_rows_it_keeps(tmp_path):
+    from dualfem.experiments.curves import COLUMNS
     from dualfem.reports.bench import load_curves
 
-    lines = [",".join(CURVE_COLUMNS)]
-    lines += [f"{rid},uzawa,high,sk,{k},{t!r},{1e-3 / t!r},reference"
+    lines = [",".join(COLUMNS)]
+    lines += [f"{rid},uzawa,high,sk,{k},{t!r},{1e-3 / t!r},reference,1"
               for rid in ("kept", "replaced", "orphan") for k, t in enumerate((0.1, 0.2))]
     (tmp_path / "curves.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
     runs = [{"run_id": "kept", "_source": 0}, {"run_id": "replaced", "_source": 1}]

@@ -19,8 +19,12 @@ the time spent inside the monitor so far (copies, and the x a dual method comput
 sample): the last sample lies at that repeat's ``setup_s + solve_s``, on the axis of the rows'
 ``total_s``. The monitor's time is excluded from the run's ``solve_s`` too (every timed repeat is
 monitored, so the repeats stay comparable); a solver's own ``time_limit`` clock still runs through
-it. The curve is that of the last timed repeat, the one whose answer the row's errors are measured
-on (the row's times are medians over the repeats).
+it. **Repeats**: every timed repeat gives a curve (``repeat`` = 1, 2, ...: the median curve and its
+quantile band across repeats show the timing spread); the iterates are copied only for the last one,
+the one whose answer the row's errors are measured on, and an earlier repeat's sample takes the
+error of the last repeat's sample at the same iteration (a deterministic solver repeats its
+iterates exactly; a sample of an iteration the last repeat did not sample is left out, and a
+repeat that reached another answer keeps no curve).
 
 **Error** of each sample, computed after the solve (untimed): with a certified reference of the
 scene, the row's ``err_x_energy`` (:func:`dualfem.core.evaluator.compare`: |x - x_ref|_K / |x_ref|_K;
@@ -54,7 +58,7 @@ import numpy as np
 from dualfem.core.io import atomic_write_text
 
 #: the columns of curves.csv, in order (a stable interface: run_id joins results.csv's run rows)
-COLUMNS = ("run_id", "solver", "tier", "scene_key", "iteration", "time_s", "error", "error_kind")
+COLUMNS = ("run_id", "solver", "tier", "scene_key", "iteration", "time_s", "error", "error_kind", "repeat")
 #: what ``error`` measures: the energy-norm error against the certified reference, or the KKT error
 ERROR_KINDS = ("reference", "kkt")
 #: samples kept per run at most (the last iterate included)
@@ -97,6 +101,8 @@ class IterateMonitor:
         self.t0: float | None = None
         self.offset = 0.0
         self.stopped = False
+        #: (iteration, time_s) samples of the earlier timed repeats, one list per repeat (copies dropped)
+        self.earlier: list[list[tuple[int, float]]] = []
 
     def start(self, t0: float, offset: float = 0.0) -> None:
         """The solve starts at ``t0`` (``time.perf_counter()``), after ``offset`` seconds of setup."""
@@ -182,7 +188,13 @@ def sample_errors(qp, monitor: IterateMonitor | None, ref: dict | None) -> dict 
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):
             return float("nan")
 
-    out = [(s.iteration, s.time_s, error(s)) for s in monitor.samples]
+    last = len(monitor.earlier) + 1
+    out = [(s.iteration, s.time_s, error(s), last) for s in monitor.samples]
+    at = {it: e for it, _, e, _ in out}
+    final = out[-1][0]
+    for r, samples in enumerate(monitor.earlier, start=1):
+        if samples and samples[-1][0] == final:        # the same run of iterates (a repeat that stopped
+            out.extend((it, t, at[it], r) for it, t in samples if it in at)   # elsewhere keeps no curve)
     monitor.samples = []
     return {"error_kind": "reference" if use_ref else "kkt", "samples": out, "note": monitor.note}
 
@@ -196,6 +208,7 @@ def timed_runs(task: dict, qp, name: str, params: dict, tick, warmup: bool, repe
 
     setups, solves, statuses = [], [], []
     sol = monitor = None
+    earlier: list[list[tuple[int, float]]] = []
     stop = {Status.TIME_LIMIT, Status.ERROR, Status.SKIPPED}
     if warmup:
         tick("warmup", task["hard_limit"])
@@ -209,7 +222,9 @@ def timed_runs(task: dict, qp, name: str, params: dict, tick, warmup: bool, repe
         tick(f"repeat {i + 1}", task["hard_limit"])
         if task.get("cold_setup", True):
             linalg.store_of(qp).clear()
-        monitor = None                      # the previous repeat's copies are freed first
+        if monitor is not None:             # the previous repeat keeps its times; its copies are freed first
+            earlier.append([(smp.iteration, smp.time_s) for smp in monitor.samples])
+        monitor = None
         monitor = IterateMonitor(qp.n, qp.m) if task.get("curves") else None
         sol = run(name, qp, params, tol=task.get("tol"), monitor=monitor)
         setups.append(sol.time_s["setup"])
@@ -219,6 +234,8 @@ def timed_runs(task: dict, qp, name: str, params: dict, tick, warmup: bool, repe
         if sol.status in stop:
             break
     note = "" if len(set(statuses)) <= 1 else f"statuses differ across repeats: {statuses}"
+    if monitor is not None:
+        monitor.earlier = earlier
     return sol, setups, solves, done, note, monitor
 
 
@@ -324,9 +341,9 @@ class CurveStore:
             if row is None or (keep is not None and not keep(row)):
                 continue
             c = self.curves[rid]
-            for it, t, err in c["samples"]:
+            for it, t, err, *r in c["samples"]:
                 w.writerow([rid, _text(c["solver"]), _text(c["tier"]), _text(c["scene_key"]), int(it),
-                            _num(t), _num(err), c["error_kind"]])
+                            _num(t), _num(err), c["error_kind"], int(r[0]) if r else 1])
         return atomic_write_text(self.csv, buf.getvalue())
 
 
@@ -343,7 +360,7 @@ def _group(recs: list[dict]) -> dict[str, dict]:
     for r in recs:
         c = out.setdefault(r["run_id"], {"run_id": r["run_id"], "solver": r["solver"], "tier": r["tier"],
                                          "scene_key": r["scene_key"], "error_kind": r["error_kind"], "samples": []})
-        c["samples"].append([r["iteration"], r["time_s"], r["error"]])
+        c["samples"].append([r["iteration"], r["time_s"], r["error"], r["repeat"]])
     return out
 
 
@@ -369,7 +386,9 @@ def read_curves_checked(path: str | Path) -> tuple[list[dict], list[int]]:
                 raise ValueError(line)
             r = dict(zip(COLUMNS, rec))
             r.update(iteration=_whole(r["iteration"]), time_s=float(r["time_s"] or "nan"),
-                     error=float(r["error"] or "nan"))
+                     error=float(r["error"] or "nan"), repeat=_whole(r["repeat"]))
+            if r["repeat"] < 1:
+                raise ValueError(line)
             for key in ("solver", "tier", "scene_key"):
                 r[key] = r[key] or None
         except (ValueError, StopIteration, csv.Error):

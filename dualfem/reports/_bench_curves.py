@@ -1,8 +1,9 @@
 """Convergence curves of a bench for the work-precision figures: median and quantile band across runs.
 
 The input is the bench's curves table (``dualfem.results.load(DIR, table="curves")``), one row per
-(run, sample) with exactly the columns ``run_id, solver, tier, scene_key, iteration, time_s, error,
-error_kind`` (``time_s`` in seconds since the start of the run's setup, ``error`` relative,
+(run, repeat, sample) with the columns ``run_id, solver, tier, scene_key, iteration, time_s, error,
+error_kind, repeat`` (one curve per timed repeat of a run; a table without ``repeat`` is one curve per
+run; ``time_s`` in seconds since the start of the run's setup, ``error`` relative,
 dimensionless, of the kind ``error_kind``). :func:`curves_from_table` turns it (a pandas DataFrame or
 any iterable of mappings with those keys) into typed :class:`Curve` objects; :func:`median_curve`
 aggregates the curves of one (solver, scene, tier):
@@ -42,6 +43,7 @@ class Curve:
     iteration: np.ndarray
     time_s: np.ndarray
     error: np.ndarray
+    repeat: int = 1
 
 
 @dataclass(frozen=True)
@@ -64,7 +66,8 @@ def _records(table):
         if missing:
             raise InputError(f"the curves table lacks the columns {', '.join(missing)} "
                              f"(expected exactly {', '.join(CURVE_COLUMNS)})")
-        return table[list(CURVE_COLUMNS)].to_dict("records")
+        cols = list(CURVE_COLUMNS) + (["repeat"] if "repeat" in table.columns else [])
+        return table[cols].to_dict("records")
     return list(table)
 
 
@@ -76,14 +79,16 @@ def _float(v) -> float:
 
 
 def curves_from_table(table) -> list[Curve]:
-    """One :class:`Curve` per run (per ``run_id``) of a curves table, in the order of first appearance.
+    """One :class:`Curve` per run and repeat (``run_id``, ``repeat``) of a curves table, in the order of
+    first appearance.
     Samples with a non-finite or negative time or a non-finite error are dropped; a run's samples are
     sorted by (time, iteration). Empty table: []."""
-    groups: dict[str, list[tuple[float, float, float]]] = defaultdict(list)
-    meta: dict[str, tuple[str, str, str, str]] = {}
+    groups: dict[tuple[str, int], list[tuple[float, float, float]]] = defaultdict(list)
+    meta: dict[tuple[str, int], tuple[str, str, str, str]] = {}
     for r in _records(table):
         try:
-            rid = str(r["run_id"])
+            rep = _float(r.get("repeat", 1))
+            rid = (str(r["run_id"]), int(rep) if math.isfinite(rep) else 1)
             key = (str(r["solver"]), str(r["tier"]), str(r["scene_key"]), str(r["error_kind"]))
             t, e, it = _float(r["time_s"]), _float(r["error"]), _float(r["iteration"])
         except KeyError as exc:
@@ -97,7 +102,7 @@ def curves_from_table(table) -> list[Curve]:
         s = sorted(groups.get(rid, []))
         if s:
             a = np.array(s, dtype=float)
-            out.append(Curve(rid, solver, tier, scene_key, kind, a[:, 1], a[:, 0], a[:, 2]))
+            out.append(Curve(rid[0], solver, tier, scene_key, kind, a[:, 1], a[:, 0], a[:, 2], rid[1]))
     return out
 
 
