@@ -202,6 +202,19 @@ def certified_reference(qp: QP, name: str):
     return np.asarray(ref.x, float), np.asarray(ref.multipliers, float), cert, ref.solver, float(ref.kkt)
 
 
+def _check_converted(name: str, P, q, G, x: np.ndarray, z: np.ndarray, res: dict[str, float]) -> None:
+    """The certified (x, mu) of dualfem's QP must be a KKT point of the converted QP too (a sign slip in the
+    conversion would show here): stationarity and complementarity at rounding level of the forces, G x <= 0
+    at rounding level of x, z >= 0. RuntimeError otherwise (a bug, not an input error)."""
+    force = float(np.max(abs(P) @ np.abs(x) + np.abs(q) + abs(G.T) @ np.abs(z)))
+    length = float(np.max(np.abs(x), initial=0.0))
+    bad = [k for k, v, s in (("dual", res["dual"], force), ("primal", res["primal"], length),
+                              ("sign", res["sign"], force), ("complementarity", res["complementarity"], force * length))
+           if not v <= 1e-8 * s]
+    if bad:
+        raise RuntimeError(f"the reference of {name!r} is not a KKT point of G x <= h ({', '.join(bad)}: {res})")
+
+
 def build_entry(d: Declared, problem, out: Path) -> Entry:
     """Assemble, certify and write one declared problem; its manifest entry."""
     from dualfem.core.scene import build_qp
@@ -212,6 +225,7 @@ def build_entry(d: Declared, problem, out: Path) -> Entry:
     x, z, cert, solver, kkt = certified_reference(qp, d.name)
     objective = float(0.5 * x @ (P @ x) + q @ x)
     res = files.kkt_residuals(P, q, G, h, x, z)
+    _check_converted(d.name, P, q, G, x, z, res)
     qp_path = files.write_qp(out / files.QP_DIR / f"{d.name}.npz", d.name, P, q, G, h)
     ref_info = {"solver": solver, "certified_error": cert["value"], "duality_gap_bound": cert["bound"],
                 "active_set_estimate": cert["active_set"], "multiplier_error": cert["multipliers"],

@@ -55,7 +55,7 @@ def manifest(entries: list, sizes: tuple[str, ...]) -> dict:
         "convention": CONVENTION,
         "dualfem_convention": "dualfem's QP: minimize 1/2 x'Kx - F'x subject to B x >= 0, multipliers mu >= 0 "
                               "with K x - F = B'mu; here P = K, q = -F, G = -B, h = 0, z = mu",
-        "units": {"x": "mm (displacements of the free nodes, 2 per node: x then y)", "P": "N/mm per mm of "
+        "units": {"x": "mm (displacements of the unclamped nodes)", "P": "N/mm per mm of "
                   "thickness (E in MPa)", "q": "N per mm of thickness", "z": "N per mm of thickness (nodal "
                   "contact forces, >= 0 in compression)", "objective": "N.mm per mm of thickness"},
         "certification": "reference = dualfem.experiments.reference.compute (the reference policy of dualfem "
