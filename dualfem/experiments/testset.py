@@ -107,6 +107,8 @@ class Entry:
     m: int
     nnz_P: int
     nnz_G: int
+    max_abs_P: float
+    max_abs_q: float
     delta: float | None
     objective: float
     reference: dict[str, Any]
@@ -235,6 +237,7 @@ def build_entry(d: Declared, problem, out: Path) -> Entry:
     return Entry(name=d.name, size=d.size, scene=d.scene, overrides=dict(d.params),
                  params={k: v for k, v in qp.params.items() if isinstance(v, (int, float, str))},
                  n=qp.n, m=qp.m, nnz_P=int(P.nnz), nnz_G=int(G.nnz),
+                 max_abs_P=float(abs(P).max()), max_abs_q=float(np.max(np.abs(q), initial=0.0)),
                  delta=float(delta) if isinstance(delta, (int, float)) else None, objective=objective,
                  reference=ref_info, bytes_qp=qp_path.stat().st_size, bytes_reference=ref_path.stat().st_size,
                  seconds=time.perf_counter() - t0)

@@ -100,6 +100,11 @@ def problems_markdown(man: dict) -> str:
     return "\n".join(lines)
 
 
+def _range(man: dict, key: str) -> str:
+    vals = [p[key] for p in man["problems"]]
+    return f"{min(vals):.2g} to {max(vals):.2g}"
+
+
 def readme(man: dict) -> str:
     """The README of a written test set."""
     ts = man["testset"]
@@ -120,8 +125,10 @@ dualfem's own QP files read `B x >= h`; these files are not dualfem QP files. Th
 `G x <= h` are dualfem's contact forces mu >= 0: P x + q + G'z = 0, G x <= 0, z >= 0, z'(G x) = 0.
 
 Units: {'; '.join(f'{k} in {v}' for k, v in man['units'].items())}. The residuals qpbenchmark
-reports are absolute in these units: P reaches 1e5 (delta = 1e-3) to 1e11 (delta = 1e-9), x is about
-1e-5 mm, so judge its residuals against the scale of each problem.
+reports are absolute in these units. In this set max|P| is {_range(man, 'max_abs_P')} (the 1/delta
+interface term: the small-delta problems are badly scaled on purpose), max|q| {_range(man, 'max_abs_q')},
+|x| about 1e-5 mm, and the objectives {_range(man, 'objective')}: judge qpbenchmark's absolute
+tolerances (1e-3 at low accuracy) against that scale.
 
 ## Files
 
