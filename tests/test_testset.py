@@ -148,6 +148,7 @@ def test_qpbenchmark_solutions_agree_with_the_references(tiny, tmp_path):
         assert not agreement(P, q, G, h, moved, sol.x, sol.z).ok, name
 
 
+@pytest.mark.slow
 def test_qpbenchmark_command_line_runs_the_test_set(tiny):
     pytest.importorskip("qpbenchmark", reason="qpbenchmark is not installed (pip install 'dualfem[testset]')")
     out, man = tiny
@@ -208,3 +209,15 @@ def test_cli_refuses_a_non_empty_folder_unless_forced(tmp_path, capsys):
     assert (out / "mine.txt").read_text() == "keep me" and (out / MANIFEST).is_file()
     assert main(["testset", "--out", str(out), "--sizes", "tiny"]) == 2       # a test set is not replaced either
     assert "it holds a dualfem test set" in capsys.readouterr().err
+
+
+def test_force_replaces_the_previous_set_and_nothing_else(tmp_path):
+    out = tmp_path / "o"
+    testset.write_testset(out, ("tiny",))
+    (out / "qp" / "notes.npz").write_bytes(b"mine")                   # not listed by the manifest: kept
+    man = testset.write_testset(out, ("tiny",), force=True, declared=tuple(TINY[:1]))
+    assert [p["name"] for p in man["problems"]] == [TINY[0].name]
+    assert sorted(p.name for p in (out / "qp").iterdir()) == sorted([f"{TINY[0].name}.npz", "notes.npz"])
+    assert sorted(p.name for p in (out / "reference").iterdir()) == [f"{TINY[0].name}.npz"]
+    with pytest.raises(InputError, match="unknown size class 'huge'"):
+        testset.write_testset(out, ("huge",), force=True)

@@ -22,7 +22,6 @@ q and z in N per mm of thickness (MPa.mm), the objective in N.mm per mm of thick
 from __future__ import annotations
 
 import json
-import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -145,7 +144,8 @@ def select(sizes: tuple[str, ...], declared: tuple[Declared, ...] = DECLARED) ->
 
 def check_out(out: Path, force: bool) -> None:
     """Refuse, before any work, an ``--out`` that is a file, cannot be written, or is a non-empty folder
-    (unless ``force``: then only the test set's own files in it are replaced)."""
+    (unless ``force``: then the test set's files are written over, the problems a previous set listed and this
+    one does not hold are removed, and nothing else is touched)."""
     from dualfem.core.io import check_output_path
 
     if out.exists() and not out.is_dir():
@@ -252,15 +252,15 @@ def write_testset(out: str | Path, sizes: tuple[str, ...] = DEFAULT_SIZES, *, fo
     written atomically and the manifest last, so a folder without ``manifest.json`` is an unfinished set.
     ``progress(stage, seconds)`` hears of each written problem."""
     out = Path(out)
+    unknown = [s for s in sizes if s not in SIZES]
+    if unknown:
+        raise InputError(f"unknown size class {unknown[0]!r}; allowed: {', '.join(SIZES)}")
     chosen = select(sizes, declared)
     if not chosen:
         raise InputError(f"no declared problem in the size classes {', '.join(sizes)}")
     check_out(out, force)
     problems = check_sizes(chosen, max_bytes)
-    if force:
-        for sub in (files.QP_DIR, files.REF_DIR):           # the set's own folders only: nothing else is touched
-            if (out / sub).is_dir():
-                shutil.rmtree(out / sub)
+    stale = _stale_files(out, {d.name for d in chosen}) if force else []
     entries = []
     for i, (d, problem) in enumerate(zip(chosen, problems)):
         e = build_entry(d, problem, out)
@@ -268,8 +268,22 @@ def write_testset(out: str | Path, sizes: tuple[str, ...] = DEFAULT_SIZES, *, fo
         if progress:
             progress(f"[{i + 1}/{len(chosen)}] {d.name} ({d.size}, n = {e.n}, m = {e.m}, certified error "
                      f"{e.reference['certified_error']:.1e})", e.seconds)
-    manifest = render.manifest(entries, sizes)
+    manifest = render.manifest(entries, sizes, bound_max=REF_BOUND_MAX, kkt_max=REF_KKT_MAX)
     atomic_write_text(out / files.TESTSET_PY, render.testset_source(manifest))
     atomic_write_text(out / files.README, render.readme(manifest))
     atomic_write_text(out / files.MANIFEST, json.dumps(json.loads(dumps(manifest)), indent=1) + "\n")
+    for path in stale:                  # problems of the previous set that this one does not hold
+        path.unlink(missing_ok=True)
     return manifest
+
+
+def _stale_files(out: Path, names: set[str]) -> list[Path]:
+    """The problem and reference files a previous test set in ``out`` lists (its manifest) and the new one
+    will not rewrite; nothing else in ``out`` is ever removed. An unreadable old manifest lists nothing."""
+    try:
+        old = json.loads((out / files.MANIFEST).read_text(encoding="utf-8"))
+        listed = [p["name"] for p in old["problems"]]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+    return [out / sub / f"{n}.npz" for n in listed if isinstance(n, str) and n not in names
+            for sub in (files.QP_DIR, files.REF_DIR) if files.NAME_PATTERN.fullmatch(n)]

@@ -38,12 +38,12 @@ FORMAT = "dualfem-testset/1"
 CONVENTION = "qpsolvers: minimize 1/2 x'Px + q'x subject to G x <= h (P = K, q = -F, G = -B, h = 0)"
 #: qpbenchmark's time limit per solve (s) written into the TestSet, by the largest size class it holds
 RUNTIME = {"tiny": 10.0, "small": 10.0, "medium": 100.0, "large": 1000.0}
-_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,99}")
+NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,99}")
 
 
 def check_name(name: str) -> str:
     """A problem name is a file stem: letters, digits, ``_ . + -``, at most 100 characters."""
-    if not _NAME.fullmatch(name) or name.endswith(".npz"):
+    if not NAME_PATTERN.fullmatch(name) or name.endswith(".npz"):
         raise InputError(f"problem name {name!r} must be 1-100 letters, digits or _.+- (a file stem)")
     return name
 

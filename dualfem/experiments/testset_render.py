@@ -29,8 +29,9 @@ def size_table(problems: list[dict]) -> list[dict]:
     return rows
 
 
-def manifest(entries: list, sizes: tuple[str, ...]) -> dict:
-    """The manifest of a written test set (``entries``: :class:`dualfem.experiments.testset.Entry`)."""
+def manifest(entries: list, sizes: tuple[str, ...], *, bound_max: float, kkt_max: float) -> dict:
+    """The manifest of a written test set (``entries``: :class:`dualfem.experiments.testset.Entry`; each
+    reference's certified error was at most ``bound_max``, its evaluator KKT error at most ``kkt_max``)."""
     import dataclasses
     import time
     from importlib.metadata import PackageNotFoundError, version
@@ -59,10 +60,10 @@ def manifest(entries: list, sizes: tuple[str, ...]) -> dict:
                   "thickness (E in MPa)", "q": "N per mm of thickness", "z": "N per mm of thickness (nodal "
                   "contact forces, >= 0 in compression)", "objective": "N.mm per mm of thickness"},
         "certification": "reference = dualfem.experiments.reference.compute (the reference policy of dualfem "
-                         "compare / bench): an exact solver's answer, its evaluator KKT error <= 1e-8 and its "
+                         f"compare / bench): an exact solver's answer, its evaluator KKT error <= {kkt_max:g} and its "
                          "certified relative energy-norm error |x - x*|_K / |x*|_K (dualfem.numerics.certify."
                          "certified_error: the smaller of a duality-gap bound and the exact step onto the "
-                         "verified active set) <= 1e-8",
+                         f"verified active set) <= {bound_max:g}",
         "testset": {"file": TESTSET_PY, "class": TESTSET_CLASS, "runtime_s": RUNTIME[largest]},
         "size_table": size_table(problems),
         "problems": problems,
