@@ -221,3 +221,16 @@ def test_force_replaces_the_previous_set_and_nothing_else(tmp_path):
     assert sorted(p.name for p in (out / "reference").iterdir()) == [f"{TINY[0].name}.npz"]
     with pytest.raises(InputError, match="unknown size class 'huge'"):
         testset.write_testset(out, ("huge",), force=True)
+
+
+def test_a_failed_forced_rewrite_leaves_no_manifest(tmp_path, monkeypatch):
+    out = tmp_path / "o"
+    testset.write_testset(out, ("tiny",))
+
+    def fail(qp, name):
+        raise InputError(f"no certified reference for {name!r}")
+
+    monkeypatch.setattr(testset, "certified_reference", fail)
+    with pytest.raises(InputError, match="no certified reference"):
+        testset.write_testset(out, ("tiny",), force=True)
+    assert not (out / MANIFEST).exists()                  # an unfinished set says so: no manifest

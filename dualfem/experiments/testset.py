@@ -261,6 +261,7 @@ def write_testset(out: str | Path, sizes: tuple[str, ...] = DEFAULT_SIZES, *, fo
     check_out(out, force)
     problems = check_sizes(chosen, max_bytes)
     stale = _stale_files(out, {d.name for d in chosen}) if force else []
+    (out / files.MANIFEST).unlink(missing_ok=True)     # the folder is an unfinished set until the new one is written
     entries = []
     for i, (d, problem) in enumerate(zip(chosen, problems)):
         e = build_entry(d, problem, out)
