@@ -22,7 +22,8 @@ def _cfg(p):
     p.add_argument("--sizes", default=None, metavar="A,B,...",
                    help=f"size classes to write, of {', '.join(SIZES)} (default: {','.join(DEFAULT_SIZES)})")
     p.add_argument("--force", action="store_true",
-                   help="write into a non-empty --out (the test set's own files in it are replaced)")
+                   help="write into a non-empty --out: the test set's files are written over, the problems of a "
+                        "previous set that this one lacks removed, nothing else touched")
     p.add_argument("--max-memory", type=float, default=None, metavar="GB",
                    help="memory a scene may use (default: what the machine has available)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
