@@ -16,8 +16,8 @@ and writes, in the formats of :mod:`dualfem.experiments.testset_files`:
 Adding a scene is one line of :data:`DECLARED` (a scene of ``dualfem list``, a scene of the library or
 a ``.toml`` file, with overrides). Problem names are the declared names: never renamed.
 
-Units (the scenes' own): lengths in mm, E in MPa, so x in mm, P in MPa (N/mm per mm of thickness),
-q and z in N per mm of thickness (MPa.mm), the objective in N.mm per mm of thickness (N).
+Units (the scenes' own): lengths in mm, E in MPa, so x in mm, P in MPa (force per mm of thickness per mm of
+displacement), q and z in N per mm of thickness (MPa.mm), the objective in N.mm per mm of thickness (N).
 """
 from __future__ import annotations
 

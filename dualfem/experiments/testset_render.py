@@ -56,9 +56,11 @@ def manifest(entries: list, sizes: tuple[str, ...], *, bound_max: float, kkt_max
         "convention": CONVENTION,
         "dualfem_convention": "dualfem's QP: minimize 1/2 x'Kx - F'x subject to B x >= 0, multipliers mu >= 0 "
                               "with K x - F = B'mu; here P = K, q = -F, G = -B, h = 0, z = mu",
-        "units": {"x": "mm (displacements of the unclamped nodes)", "P": "N/mm per mm of "
-                  "thickness (E in MPa)", "q": "N per mm of thickness", "z": "N per mm of thickness (nodal "
-                  "contact forces, >= 0 in compression)", "objective": "N.mm per mm of thickness"},
+        "units": {"x": "mm (displacements of the unclamped nodes)",
+                  "P": "MPa (force per mm of thickness per mm of displacement; E in MPa)",
+                  "q": "N per mm of thickness",
+                  "z": "N per mm of thickness (nodal contact forces, >= 0 in compression)",
+                  "objective": "N.mm per mm of thickness"},
         "certification": "reference = dualfem.experiments.reference.compute (the reference policy of dualfem "
                          f"compare / bench): an exact solver's answer, its evaluator KKT error <= {kkt_max:g} and its "
                          "certified relative energy-norm error |x - x*|_K / |x*|_K (dualfem.numerics.certify."
