@@ -1,0 +1,53 @@
+"""``dualfem testset --out DIR [--sizes tiny,small,medium,large] [--force]``: a public qpbenchmark test set.
+
+Writes the declared contact QPs (:data:`dualfem.experiments.testset.DECLARED`) of the chosen size classes in
+qpsolvers' convention ``G x <= h``, each with its certified reference, the qpbenchmark ``TestSet`` module,
+``manifest.json`` and ``README.md`` (see :mod:`dualfem.experiments.testset`). Everything is validated
+before anything is written; a non-empty ``DIR`` is refused unless ``--force``. One progress line per
+problem on stderr once the command has run longer than 2 s (``--quiet`` silences them).
+"""
+from __future__ import annotations
+
+import sys
+
+from dualfem.cli.main import add_factor_arg, apply_factor, command
+from dualfem.cli.stages import Stages
+from dualfem.core.errors import InputError
+
+
+def _cfg(p):
+    from dualfem.experiments.testset import DEFAULT_SIZES, SIZES
+
+    p.add_argument("--out", required=True, metavar="DIR", help="folder to write the test set into")
+    p.add_argument("--sizes", default=None, metavar="A,B,...",
+                   help=f"size classes to write, of {', '.join(SIZES)} (default: {','.join(DEFAULT_SIZES)})")
+    p.add_argument("--force", action="store_true",
+                   help="write into a non-empty --out: the test set's files are written over, the problems of a "
+                        "previous set that this one lacks removed, nothing else touched")
+    p.add_argument("--max-memory", type=float, default=None, metavar="GB",
+                   help="memory a scene may use (default: what the machine has available)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    add_factor_arg(p)
+
+
+@command("testset", "write a qpbenchmark test set of contact QPs with certified references")(_cfg)
+def cmd_testset(args) -> int:
+    from dualfem.core.quiet import c_stdout_to_stderr
+    from dualfem.experiments.testset import parse_sizes, write_testset
+    from dualfem.experiments.testset_files import MANIFEST, TESTSET_PY
+    from dualfem.experiments.testset_render import size_markdown
+
+    sizes = parse_sizes(args.sizes)
+    mm = args.max_memory
+    if mm is not None and not (mm > 0 and mm < 1e6):
+        raise InputError(f"--max-memory must be a number of GB in (0, 1e6), got {mm!r}")
+    apply_factor(args)
+    stages = Stages("testset", quiet=args.quiet)
+    with c_stdout_to_stderr():
+        man = write_testset(args.out, sizes, force=args.force, max_bytes=None if mm is None else mm * 1e9,
+                            progress=stages)
+    print(size_markdown(man))
+    print(f"wrote {len(man['problems'])} problems to {args.out} ({TESTSET_PY}, {MANIFEST}, README.md); run: "
+          f"python {args.out}/{TESTSET_PY} run --solver clarabel --author NAME",
+          file=sys.stderr)
+    return 0
