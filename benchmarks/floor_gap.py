@@ -1,14 +1,14 @@
 """Why an exact solver's setup + solve can take less than "the floor" (issue 28, item 7d).
 
-    python benchmarks/floor_gap.py --N 256 512 --repeats 3 --threads 1 --out benchmarks/results/floor_gap.md
+    python benchmarks/floor_gap.py --N 256 512 --repeats 3 --threads 1 --out benchmarks/results/floor_gap/floor_gap.md
 
 The floor (benchmarks/floor.py, ``dualfem bench``'s floor rows, benchmarks/primary_perf.py) is one
 analysis + factorization + solve of the QP's K. The exact solvers (pdas, uzawa, uzawa_auto, mprgp)
 factorize another matrix: K_fixed (``QP.K_fixed``, the delta-free elastic stiffness K_el) with the
 Schur complement onto the defect unknowns I (``dualfem.numerics.linalg.factor_fixed``). The two
 differ in their sparsity pattern, not only in values: K = K_el + interface term is a scipy sum,
-which drops the entries that cancel exactly (on the right-triangle mesh, the x-y couplings across
-each triangle's legs), while K_el keeps them as stored zeros. This script factorizes (analysis +
+which drops the entries that are exactly zero (on the f2 mesh, the x-x and y-y couplings of the two
+ends of each triangle's diagonal), while K_el keeps them as stored zeros. This script factorizes (analysis +
 numeric factorization + one solve, PARDISO, from scratch each time) five matrices in one process,
 alternating, and prints a Markdown table with wall and CPU seconds, PARDISO's analysis and numeric
 seconds and nnz(L), plus the pattern facts (stored zeros, nodes whose two unknowns have identical
