@@ -62,10 +62,10 @@ BELOW_FLOOR = (
     "stiffness entries that are exactly zero on this mesh (the x-x and y-y couplings of the two ends of "
     "each triangle's diagonal; K_el stores them as zeros): in K_el the two unknowns of every node have "
     "identical rows, in K almost none do. Measured with `python benchmarks/floor_gap.py --N 256 512 "
-    "--repeats 3 --threads 1` (benchmarks/results/floor_gap/floor_gap.md: CPU seconds on one thread, "
-    "medians of 3 on a loaded machine): K's own values on K_el's pattern took 0.67-0.80 of the floor's "
-    "time, the exact solvers' factorization of K_el with the Schur set 0.77-0.78, K with the same Schur "
-    "set 0.93-0.97: the pattern, not the Schur complement, makes the difference.")
+    "--repeats 5 --threads 1` (benchmarks/results/floor_gap/floor_gap.md: CPU seconds on one thread, "
+    "medians of 5 on a loaded machine): K's own values on K_el's pattern took 0.75-0.80 x the floor, the "
+    "exact solvers' factorization of K_el with the Schur set 0.72-0.81, K with the same Schur set "
+    "0.98-0.99: the pattern, not the Schur complement, makes the difference.")
 
 
 def machine() -> dict:
