@@ -17,7 +17,8 @@ Times are medians over repeats (wall clock). Errors are relative energy-norm err
 a certified reference: the exact KKT solve for the contact set of a tight uzawa_auto solve
 (``evaluator.certify``); Clarabel's own error against it is listed too.
 Writes a Markdown report, a CSV with one row per (N, delta, method) and a JSON of the run's facts
-(machine, load, duration, command: ``<out>.json``); ``--render-only`` re-renders the report from the
+(machine, load, duration, command, and every library version:
+:func:`dualfem.experiments.machine.versions`; ``<out>.json``); ``--render-only`` re-renders the report from the
 CSV and that JSON (no solve; a report written before the JSON existed gives its facts from its own
 header once, and the JSON is written then).
 
@@ -213,7 +214,10 @@ def main(argv=None) -> int:
             for r in rows:
                 w.writerow(r)
     atomic_write(out.with_suffix(".csv"), write_csv)
-    meta = {"machine": info, "load": [load0[0], load1[0]], "elapsed_s": elapsed, "command": " ".join(sys.argv)}
+    from dualfem.experiments.machine import versions
+
+    meta = {"machine": info, "load": [load0[0], load1[0]], "elapsed_s": elapsed, "command": " ".join(sys.argv),
+            "versions": versions()}
     atomic_write_text(out.with_suffix(".json"), json.dumps(meta, indent=1) + "\n")
     atomic_write_text(out, render(rows, info, load0, load1, elapsed, meta["command"]))
     print(f"wrote {out} and {out.with_suffix('.csv')}", file=sys.stderr)
