@@ -1,6 +1,6 @@
 """Why an exact solver's setup + solve can take less than "the floor" (issue 28, item 7d).
 
-    python benchmarks/floor_gap.py --N 256 512 --repeats 5 --threads 1 --out benchmarks/results/floor_gap/floor_gap.md
+    python benchmarks/floor_gap.py --N 256 512 --repeats 5 --threads 1 --out benchmarks/results/floor_gap/floor_gap.md --force
 
 The floor (benchmarks/floor.py, ``dualfem bench``'s floor rows, benchmarks/primary_perf.py) is one
 analysis + factorization + solve of the QP's K. The exact solvers (pdas, uzawa, uzawa_auto, mprgp)
@@ -100,10 +100,17 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", type=Path, help="write the Markdown here (atomically) as well as to stdout")
+    ap.add_argument("--force", action="store_true", help="replace the file at --out")
     a = ap.parse_args(argv)
-    if any(n < 4 or n > 1024 for n in a.N) or not 1 <= a.repeats <= 20:
-        ap.error("--N must be in [4, 1024], --repeats in [1, 20]")
-    from dualfem.core.io import atomic_write_text
+    if any(n < 4 or n > 1024 for n in a.N) or not 1 <= a.repeats <= 20 or not 1 <= a.threads <= 256:
+        ap.error("--N must be in [4, 1024], --repeats in [1, 20], --threads in [1, 256]")
+    from dualfem.core.errors import InputError
+    from dualfem.core.io import atomic_write_text, refuse_overwrite
+
+    try:
+        refuse_overwrite([a.out] if a.out else [], a.force)
+    except InputError as exc:
+        ap.error(str(exc))
     from dualfem.core.scene import load_scene
     from dualfem.numerics.linalg import sparse_factor
     from dualfem.numerics.threads import set_threads
