@@ -1,6 +1,7 @@
 """Why an exact solver's setup + solve can take less than "the floor" (issue 28, item 7d).
 
-    python benchmarks/floor_gap.py --N 256 512 --repeats 5 --threads 1 --out benchmarks/results/floor_gap/floor_gap.md --force
+    python benchmarks/floor_gap.py --N 256 512 --repeats 5 --threads 1 --force \
+        --out benchmarks/results/floor_gap/floor_gap.md
 
 The floor (benchmarks/floor.py, ``dualfem bench``'s floor rows, benchmarks/primary_perf.py) is one
 analysis + factorization + solve of the QP's K. The exact solvers (pdas, uzawa, uzawa_auto, mprgp)
