@@ -1,7 +1,8 @@
 """Performance of the primary solver against the floor and third-party QP solvers (issue 3).
 
-    python benchmarks/primary_perf.py --force         # N = 64, 128, 256, 512 (about 25 min; replaces the report)
+    python benchmarks/primary_perf.py --force         # N = 64, 128, 256, 512 (13-25 min; replaces the report)
     python benchmarks/primary_perf.py --N 32,64 --repeats 2 --out /tmp/perf.md   # quick
+    python benchmarks/primary_perf.py --render-only   # re-render reports/primary_performance.md from its .csv
 
 On f2 for every delta, in one run on one machine, one worker process per N (its peak RSS is reported):
 * floor: one factorization + solve of the unconstrained K by the fastest installed backend
@@ -15,7 +16,16 @@ On f2 for every delta, in one run on one machine, one worker process per N (its 
 Times are medians over repeats (wall clock). Errors are relative energy-norm errors of x against
 a certified reference: the exact KKT solve for the contact set of a tight uzawa_auto solve
 (``evaluator.certify``); Clarabel's own error against it is listed too.
-Writes a Markdown report and a CSV with one row per (N, delta, method).
+Writes a Markdown report, a CSV with one row per (N, delta, method) and a JSON of the run's facts
+(machine, load, duration, command, and every library version:
+:func:`dualfem.experiments.machine.versions`; ``<out>.json``); ``--render-only`` re-renders the report from the
+CSV and that JSON (no solve; a report written before the JSON existed gives its facts from its own
+header once, and the JSON is written then).
+
+The target (exact solvers within ``FLOOR_TARGET`` x the floor at the largest N) follows the rule of
+``dualfem report bench`` (:func:`dualfem.reports._bench_targets.targets`): a run counts only when its
+certified status is ``solved`` and its error is <= ``ERR_TARGET``; any other run misses the target,
+however fast it was.
 """
 from __future__ import annotations
 
@@ -41,6 +51,22 @@ from dualfem.experiments.runner import run
 from dualfem.numerics import linalg
 
 DELTAS = [1e-1, 1e-3, 1e-5, 1e-7, 1e-9]
+#: the target: every delta's run of an exact solver at the largest N within this many times the floor
+FLOOR_TARGET = 2.0
+#: a run counts for the target only when solved with an error <= this (``dualfem report bench --error``)
+ERR_TARGET = 1e-8
+#: why an exact solver's time can be below the floor (benchmarks/floor_gap.py; shown in the report)
+BELOW_FLOOR = (
+    "A ratio below 1 is not a solve faster than a factorization of the same matrix: the floor factorizes K, "
+    "the exact solvers the delta-free K_el (with the Schur complement onto the defect unknowns), and the "
+    "two differ in their pattern. K is scipy's sum of K_el and the interface term, which drops the "
+    "stiffness entries that are exactly zero on this mesh (the x-x and y-y couplings of the two ends of "
+    "each triangle's diagonal; K_el stores them as zeros): in K_el the two unknowns of every node have "
+    "identical rows, in K almost none do. Measured with `python benchmarks/floor_gap.py --N 256 512 "
+    "--repeats 5 --threads 1` (benchmarks/results/floor_gap/floor_gap.md: CPU seconds on one thread, "
+    "medians of 5 on a loaded machine): K's own values on K_el's pattern took 0.75-0.80 x the floor, the "
+    "exact solvers' factorization of K_el with the Schur set 0.72-0.81, K with the same Schur set "
+    "0.98-0.99: the pattern, not the Schur complement, makes the difference.")
 
 
 def machine() -> dict:
@@ -148,13 +174,21 @@ def main(argv=None) -> int:
                     help="above this N, Clarabel/OSQP run only at delta=1e-5")
     ap.add_argument("--out", default="reports/primary_performance.md")
     ap.add_argument("--force", action="store_true", help="replace the report (and its .csv) already at --out")
+    ap.add_argument("--render-only", action="store_true",
+                    help="re-render --out from its .csv and .json (written by an earlier run): nothing is solved")
     ap.add_argument("--worker", type=int, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.worker:
         print(json.dumps(measure(args.worker, args), default=str))
         return 0
+    if args.render_only:
+        try:
+            return render_only(Path(args.out))
+        except InputError as exc:
+            ap.error(str(exc))
     try:
-        refuse_overwrite([Path(args.out), Path(args.out).with_suffix(".csv")], args.force)
+        refuse_overwrite([Path(args.out), Path(args.out).with_suffix(".csv"), Path(args.out).with_suffix(".json")],
+                         args.force)
     except InputError as exc:
         ap.error(str(exc))
     Ns = [int(n) for n in args.N.split(",")]
@@ -180,14 +214,21 @@ def main(argv=None) -> int:
             for r in rows:
                 w.writerow(r)
     atomic_write(out.with_suffix(".csv"), write_csv)
-    atomic_write_text(out, render(rows, info, load0, load1, elapsed, " ".join(sys.argv)))
+    from dualfem.experiments.machine import versions
+
+    meta = {"machine": info, "load": [load0[0], load1[0]], "elapsed_s": elapsed, "command": " ".join(sys.argv),
+            "versions": versions()}
+    atomic_write_text(out.with_suffix(".json"), json.dumps(meta, indent=1) + "\n")
+    atomic_write_text(out, render(rows, info, load0, load1, elapsed, meta["command"]))
     print(f"wrote {out} and {out.with_suffix('.csv')}", file=sys.stderr)
     return 0
 
 
-def render(rows, info, load0, load1, elapsed, command) -> str:
+def render(rows, info, load0, load1, elapsed, command, note: str = "") -> str:
+    """The Markdown report (``note``: a line said after the header, e.g. that it was re-rendered)."""
     L = ["# Primary solver performance: Uzawa (fast path) against the floor, the textbook path, Clarabel and OSQP", "",
          f"Generated by `python {command}` in {elapsed / 60:.1f} min. Do not edit by hand.", "",
+         *([note, ""] if note else []),
          "Machine: " + ", ".join(f"{k} {v}" for k, v in info.items()) +
          f"; load average at start {load0[0]:.1f}, at end {load1[0]:.1f} (1 min).", "",
          "Scene f2 (plane strain, unit square), every delta. **floor** = one factorization + solve of "
@@ -199,7 +240,7 @@ def render(rows, info, load0, load1, elapsed, command) -> str:
          "reference (exact KKT solve for the contact set of a tight `uzawa_auto` run). k / m = outer / inner "
          "iterations for Uzawa, Newton steps for pdas, IPM or ADMM iterations otherwise. **peak RSS**: "
          "of the worker process that ran every method of that N (Clarabel and OSQP included); the exact "
-         "solvers' own peaks per run are in benchmarks/results/end_to_end.", ""]
+         "solvers' own peaks per run are in benchmarks/results/end_to_end.", "", BELOW_FLOOR, ""]
     Ns = sorted({r["N"] for r in rows})
     for N in Ns:
         rs = [r for r in rows if r["N"] == N]
@@ -213,17 +254,98 @@ def render(rows, info, load0, load1, elapsed, command) -> str:
                      f"{r['time_s']:.3f} | {r['ratio']:.2f} | {r['end_to_end_s']:.3f} | {r['status']} | {it} | "
                      f"{r['error']:.1e} |")
         L.append("")
-    big = max(Ns)
+    L += target_lines(rows, max(Ns))
+    return "\n".join(L)
+
+
+def counts(r: dict) -> bool:
+    """The bench's rule (dualfem.reports._bench_targets): certified ``solved`` and error <= ERR_TARGET."""
+    return r["status"] == "solved" and float(r["error"]) <= ERR_TARGET
+
+
+def target_lines(rows: list[dict], big: int) -> list[str]:
+    """The target section: per exact solver, met only when every delta's run counts (:func:`counts`) and
+    is within FLOOR_TARGET x the floor."""
     fast = [r for r in rows if r["N"] == big and r["method"] in ("uzawa", "uzawa_auto", "pdas")]
-    L += [f"## Target: exact solvers within 2x the floor at N = {big}", ""]
+    L = [f"## Target: exact solvers within {FLOOR_TARGET:g}x the floor at N = {big}", "",
+         f"A run meets the target when its certified status is `solved`, its error is <= {ERR_TARGET:g} (the rule "
+         f"of the targets of `dualfem report bench`: any other run misses, however fast) and its time is <= "
+         f"{FLOOR_TARGET:g} x the floor; a solver meets it when every delta's run does.", ""]
     for m in ("uzawa", "uzawa_auto", "pdas"):
         rr = [r for r in fast if r["method"] == m]
-        if rr:
-            worst = max(rr, key=lambda r: r["ratio"])
-            L.append(f"* `{m}`: worst ratio {worst['ratio']:.2f} (delta {worst['delta']:.0e}); "
-                     + ("met" if worst["ratio"] <= 2 else "NOT met") + " for every delta.")
+        if not rr:
+            continue
+        bad = [r for r in rr if not counts(r)]
+        ok = [r for r in rr if counts(r)]
+        parts = [f"delta {r['delta']:.0e}: status {r['status']}, error {float(r['error']):.1e}, "
+                 f"{r['ratio']:.2f} x the floor: does not count" for r in bad]
+        if ok:
+            worst = max(ok, key=lambda r: r["ratio"])
+            parts.append(f"worst ratio of the runs that count {worst['ratio']:.2f} (delta {worst['delta']:.0e})")
+        met = not bad and all(r["ratio"] <= FLOOR_TARGET for r in rr)
+        L.append(f"* `{m}`: {'met' if met else 'NOT met'} ({'; '.join(parts)}).")
     L.append("")
-    return "\n".join(L)
+    return L
+
+
+def _read_rows(csv_path: Path) -> list[dict]:
+    """The rows of the CSV written by :func:`main`, with their types back."""
+    import ast
+
+    ints, bools, texts = {"N", "ndof", "repeats"}, {"certified"}, {"method", "status"}
+    rows = []
+    with open(csv_path, newline="") as fh:
+        for raw in csv.DictReader(fh):
+            r: dict = {}
+            for k, v in raw.items():
+                if k in texts:
+                    r[k] = v
+                elif k == "iterations":
+                    r[k] = ast.literal_eval(v)
+                elif k in ints:
+                    r[k] = int(v)
+                elif k in bools:
+                    r[k] = v == "True"
+                else:
+                    r[k] = float(v) if v not in ("", "None") else None
+            rows.append(r)
+    if not rows:
+        raise InputError(f"{csv_path}: no rows to render")
+    return rows
+
+
+def _meta_from_header(md: Path) -> dict:
+    """The run's facts from the header of a report written before the JSON existed."""
+    import re
+
+    text = md.read_text(encoding="utf-8") if md.exists() else ""
+    g = re.search(r"^Generated by `python (.+)` in ([\d.]+) min\. Do not edit by hand\.$", text, re.M)
+    m = re.search(r"^Machine: (.+); load average at start ([\d.]+), at end ([\d.]+) \(1 min\)\.$", text, re.M)
+    if not (g and m):
+        raise InputError(f"--render-only needs {md.with_suffix('.json')} (written by a run of this script) or the "
+                         f"header of {md}")
+    info = dict(kv.split(" ", 1) for kv in m.group(1).split(", "))
+    return {"machine": info, "load": [float(m.group(2)), float(m.group(3))], "elapsed_s": float(g.group(2)) * 60,
+            "command": g.group(1)}
+
+
+def render_only(out: Path) -> int:
+    """Re-render ``out`` from ``out.csv`` and ``out.json`` (or, once, the facts of its own header)."""
+    rows = _read_rows(out.with_suffix(".csv")) if out.with_suffix(".csv").exists() else None
+    if rows is None:
+        raise InputError(f"--render-only: {out.with_suffix('.csv')} does not exist (run the sweep first)")
+    meta_path = out.with_suffix(".json")
+    if meta_path.exists():
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+    else:
+        meta = _meta_from_header(out)
+        atomic_write_text(meta_path, json.dumps(meta, indent=1) + "\n")
+    l0, l1 = meta["load"]
+    note = (f"Re-rendered from `{out.with_suffix('.csv')}` and `{meta_path}` by `python benchmarks/primary_perf.py "
+            f"--render-only --out {out}` (nothing re-run; the text and the target rule are today's).")
+    atomic_write_text(out, render(rows, meta["machine"], (l0,), (l1,), meta["elapsed_s"], meta["command"], note))
+    print(f"re-rendered {out} from {out.with_suffix('.csv')} and {meta_path}", file=sys.stderr)
+    return 0
 
 
 if __name__ == "__main__":
