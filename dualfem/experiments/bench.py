@@ -187,10 +187,13 @@ def _execute_floor(task: dict, qp, row: dict, tick) -> dict:
 
     methods = [("floor_splu", splu)]
     from dualfem.numerics.factor import available
-    from dualfem.numerics.linalg import sparse_factor
+    from dualfem.numerics.linalg import on_fixed_pattern, sparse_factor
 
     if "pardiso" in available():      # MKL PARDISO: the fastest library factorization here
         methods.append(("floor_pardiso", lambda: sparse_factor(K, "pardiso").solve))
+        if qp.local is not None:      # the same K on the elastic pattern (node blocks kept): often faster
+            K_el_pattern = on_fixed_pattern(K, qp.local.K_fixed).tocsc()
+            methods.append(("floor_pardiso_blocked", lambda: sparse_factor(K_el_pattern, "pardiso").solve))
     missing_cholmod = ""
     if task.get("cholmod"):
         try:
