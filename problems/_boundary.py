@@ -27,8 +27,8 @@ the rigid-mode matrix restricted to them is well conditioned; the loads must the
 
 API: :func:`parse_loads` (the keys -> a frozen :class:`LoadSpec`, or None when none is given),
 :func:`box_sides` (boundary facets per side), :func:`fixed_mask`, :func:`nodal_forces`,
-:func:`check_balance`, :func:`face_pressure_forces`, :func:`parse_scalar` (a per-defect
-``face_pressure``).
+:func:`check_balance`, :func:`dof_numbering` (the mask as ``node_dofs``), :func:`face_pressure_forces`,
+:func:`parse_scalar` (a per-defect ``face_pressure``).
 """
 from __future__ import annotations
 
@@ -544,6 +544,15 @@ def nodal_forces(spec: LoadSpec, nodes: np.ndarray, cells: np.ndarray, sides: di
         if spec.body_force is not None:
             _integrate(F, nodes, np.asarray(cells), spec.body_force, scale, "in the body")
     return F
+
+
+def dof_numbering(mask: np.ndarray) -> np.ndarray:
+    """node_dofs (dim, n) int64: the index of component c of node i among the free unknowns (numbered node by
+    node, component by component: unknown dim i + c before the fixed ones are dropped), -1 where ``mask``
+    (dim, n) fixes it."""
+    free = ~np.asarray(mask, dtype=bool).T.ravel()
+    idx = np.cumsum(free) - 1
+    return np.where(free, idx, -1).reshape(mask.shape[1], mask.shape[0]).T.copy()
 
 
 def face_pressure_forces(upper: np.ndarray, lower: np.ndarray, normals: np.ndarray, weights: np.ndarray,
