@@ -2,11 +2,22 @@
 
 Body: the rectangle (0, width) x (0, height) (unit square by default), isotropic linear
 elasticity (E, nu; ``plane = "strain"`` by default, ``"stress"`` supported: the paper does not
-say which it used), clamped on the bottom side x2 = 0, a traction on the top side x2 = height
-(:mod:`dualfem.problems.loads`), other sides free. Defects: polylines (or splines, gmsh mesh only)
-strictly inside the body; the normal nu of a defect is its tangent, from its first to its last
-point, turned by +90 degrees (so for the default horizontal defect nu = (0, 1) and the "+" face
-is the upper one); see :mod:`.cut`. Energy (paper, section 1), one term per defect d:
+say which it used). Supports and loads: by default (the paper's scenes) clamped on the bottom side
+x2 = 0, a traction ``load`` on the top side x2 = height (:mod:`dualfem.problems.loads`), other sides
+free; with any of the keys ``boundary`` (``[[boundary]]`` tables: ``side`` = left | right | bottom |
+top, ``support`` = clamp | roller | free, ``traction`` = [t1, t2] of numbers or expressions in x, y),
+``body_force`` ([b1, b2], force per volume) or ``remote_stress`` ([[s11, s12], [s12, s22]]: the
+traction sigma.n on every side without a support; no support at all = only the rigid-body motions
+removed) the scene's own supports and loads instead, and ``load`` is not used
+(:mod:`dualfem.problems._boundary`, docs/loads.md). Each ``[[defects]]`` table may carry a
+``face_pressure`` (a number or an expression in x, y; > 0 pushes the faces apart, the "+" copy of
+node j gets +p_j w_j nu_j). ``load_scale`` multiplies every load. Tractions are forces per area on
+the body's outer surface, in the reference frame (before ``rotate_deg``).
+
+Defects: polylines (or splines, gmsh mesh only) strictly inside the body; the normal nu of a
+defect is its tangent, from its first to its last point, turned by +90 degrees (so for the
+default horizontal defect nu = (0, 1) and the "+" face is the upper one); see :mod:`.cut`.
+Energy (paper, section 1), one term per defect d:
 
     Pi(v) = 1/2 a(v, v) - (f, v) + sum_d 1/(2 delta_d) int_gamma_d |[v]|^2,   [v_nu] >= 0 on every gamma_d.
 
@@ -16,16 +27,18 @@ along grid edges) or ``"gmsh"`` (unstructured, defects embedded; :mod:`dualfem.p
 ``mesh_size`` (gmsh target element size; 0 = min(width, height) / N), ``tip_size`` (gmsh size
 at the defect tips; 0 = mesh_size), ``rotate_deg`` (rigid counter-clockwise rotation of the whole
 scene about the body's centre: body, defects, loads and supports; the mesh is generated once in
-the reference frame and rotated; the clamped and loaded sides are those of the reference frame),
+the reference frame and rotated; the supported and loaded sides are those of the reference frame;
+a roller on a rotated body is refused),
 and ``defects`` (TOML ``[[defects]]`` tables: ``points`` = [[x, y], ...] in the reference frame,
-``curve`` = "polyline" | "spline", optional ``delta``). Without ``defects`` the single segment
+``curve`` = "polyline" | "spline", optional ``delta`` and ``face_pressure``). Without ``defects`` the single segment
 ``defect = [[x1, y1], [x2, y2]]`` is used.
 
 P1 elements; nodes strictly inside a defect are doubled (tips not); the interface integral uses
 the trapezoid rule. Units are whatever the inputs use (paper: MPa and a unit length). The QP and
 its multiplier convention are described in :mod:`dualfem.qp`. ``QP.maps``: ``nodes`` (2, n),
-``triangles`` (3, nt), ``node_dofs`` (2, n; -1 = clamped), per constrained defect node j (row j
-of B) ``defect_lower``/``defect_upper`` (node ids of the - / + copies), ``defect_id``,
+``triangles`` (3, nt), ``node_dofs`` (2, n; -1 = fixed: clamped, a roller's normal component or a
+rigid-body removal), per constrained defect node j (row j of B) ``defect_lower``/``defect_upper``
+(node ids of the - / + copies), ``defect_id``,
 ``defect_s`` (arc length from the defect's first point), ``defect_normals``/``defect_tangents``
 (2, m); ``defect_tips`` (first and last node of each defect, flat); and, for a single straight
 defect, ``normal`` and ``tangent`` (2,).
