@@ -474,3 +474,21 @@ def test_fractured_face_pressure_opens_every_crack():
     assert all(jump[ids == k].max() > 0 for k in range(3)) and jump.min() >= -1e-12
     with pytest.raises(InputError, match="face_pressure"):
         _scene("fractured", face_pressure="foo", **kw)
+
+
+def test_stress_grid_units_convert_the_new_keys():
+    """The units axis (stress_grid.scene_in_units) keeps the physics of a scene with body force, traction and
+    face pressure expressions: displacements x length, contact forces x stress x length."""
+    from dualfem.core.scene import load_scene
+    from dualfem.experiments.stress_grid import scene_in_units
+
+    base = {"N": 8, "boundary": [{"side": "bottom", "support": "clamp"}, {"side": "top", "traction": ["x", "-3 - y"]}],
+            "body_force": ["0.5*y", -2.0], "remote_stress": None,
+            "defects": [{"points": [[0.25, 0.5], [0.75, 0.5]], "face_pressure": "-1 - x"}]}
+    fs, fl = 1e6, 1e-3
+    a = load_scene("f2", scene_in_units(base, 1.0, 1.0)).build()
+    b = load_scene("f2", scene_in_units(base, fs, fl)).build()
+    sa, sb = _solve_qp(a), _solve_qp(b)
+    assert np.abs(sb.x - fl * sa.x).max() <= 1e-8 * fl * np.abs(sa.x).max()
+    assert np.abs(sb.multipliers - fs * fl * sa.multipliers).max() <= 1e-8 * fs * fl * np.abs(sa.multipliers).max()
+    assert sa.multipliers.max() > 0
