@@ -171,6 +171,18 @@ def test_body_force_reaction():
     assert np.isclose(react[1].sum(), -F[1].sum(), rtol=1e-12) and u[1].min() < 0
 
 
+def test_body_force_3d_total():
+    """A body force expression on tetrahedra: its resultant and first moment are the exact integrals."""
+    spec = bd.parse_loads(_params(3, boundary=[{"side": "bottom", "support": "clamp"}],
+                                  body_force=["z", 0.0, "-1 - x*y"]), 3)
+    p, t = _mesh(3, 2, spec.box)
+    F = bd.nodal_forces(spec, p, t, bd.box_sides(p, t, spec.box))
+    W, D, H = spec.box
+    assert np.isclose(F[0].sum(), W * D * H ** 2 / 2, rtol=1e-13) and F[1].sum() == 0
+    assert np.isclose(F[2].sum(), -W * D * H - W ** 2 * D ** 2 * H / 4, rtol=1e-13)
+    assert np.isclose(F[0] @ p[2], W * D * H ** 3 / 3, rtol=1e-13)          # int z * z dV (P1 interpolates z)
+
+
 def test_unbalanced_load_without_support_refused():
     spec = bd.parse_loads(_params(2, body_force=[0.0, -1.0]), 2)
     p, t = _mesh(2, 3, spec.box)

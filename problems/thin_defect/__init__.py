@@ -177,7 +177,7 @@ class ThinDefect(Problem):
             raise InputError(f"load = {_load_label(p['load'])} (the top traction of a scene without supports and "
                              f"loads of its own) cannot be combined with {', '.join(bd.KEYS)}: give the top "
                              f"traction as a [[boundary]] table (side = 'top', traction = [t1, t2]) and leave load "
-                             f"at its default {default!r}")
+                             f"at its default {default!r} (no preset scene that sets it, such as f1 or f3)")
         rollers = [s.side for s in self._loads.sides if s.support == "roller"]
         if rollers and float(p["rotate_deg"]) != 0.0:
             raise InputError(f"boundary: a roller support (side {rollers[0]}) fixes the normal component of a side, "
