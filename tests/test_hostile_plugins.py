@@ -587,12 +587,12 @@ def test_keyboard_interrupt_subclass_is_contained(qp):
 
 
 def test_bench_flags_a_run_that_changed_the_qp(register):
-    from dualfem.experiments.bench import _timed_runs
+    from dualfem.experiments.curves import timed_runs
 
     register(Unlocks)
     qp = load_scene("f1", {"N": 8}).build()
     task = {"hard_limit": 60, "cold_setup": True, "tol": None}
-    sol, setups, solves, done, note = _timed_runs(task, qp, "hostile_unlocks", {}, lambda *a: None, False, 3)
+    sol, setups, solves, done, note, _ = timed_runs(task, qp, "hostile_unlocks", {}, lambda *a: None, False, 3)
     assert sol.status == Status.ERROR and "changed the QP" in sol.message and done == 1
 
 

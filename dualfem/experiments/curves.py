@@ -18,14 +18,16 @@ last), and the row's ``message`` says so.
 the time spent inside the monitor so far (copies, and the x a dual method computes only for a kept
 sample): the last sample lies at that repeat's ``setup_s + solve_s``, on the axis of the rows'
 ``total_s``. The monitor's time is excluded from the run's ``solve_s`` too (every timed repeat is
-monitored, so the repeats stay comparable). The curve is that of the last timed repeat, the one
-whose answer the row's errors are measured on.
+monitored, so the repeats stay comparable); a solver's own ``time_limit`` clock still runs through
+it. The curve is that of the last timed repeat, the one whose answer the row's errors are measured
+on (the row's times are medians over the repeats).
 
 **Error** of each sample, computed after the solve (untimed): with a certified reference of the
 scene, the row's ``err_x_energy`` (:func:`dualfem.core.evaluator.compare`: |x - x_ref|_K / |x_ref|_K;
 ``error_kind = "reference"``), else the evaluator's KKT error of (x, mu)
 (:func:`dualfem.core.evaluator.kkt_error`, the row's ``kkt_error``; ``error_kind = "kkt"``). The last
-sample's error is the row's error exactly (the same function of the same answer).
+sample's error is the row's error exactly (the same function of the same answer); an error that
+cannot be computed (NaN in the iterate) is NaN, an empty field in curves.csv.
 
 **Files** (:class:`CurveStore`): ``curves/<run_id>.json`` (one atomic file per run's curve, written
 before the run's row) and ``curves.csv`` beside ``results.csv`` (rewritten atomically with it), one line
@@ -106,19 +108,22 @@ class IterateMonitor:
         try:
             self._report(enter, iteration, x, mu)
         except Exception as exc:  # noqa: BLE001 - the monitor never breaks the solve it watches
+            if not self.stopped:
+                self.note = (self.note + "; " if self.note else "") + \
+                    f"curve sampling stopped at iteration {iteration!r}: {type(exc).__name__}: {exc}"
             self.stopped = True
-            self.note = (self.note + "; " if self.note else "") + \
-                f"curve sampling stopped at iteration {iteration!r}: {type(exc).__name__}: {exc}"
         finally:
             self.overhead += time.perf_counter() - enter
 
     def _report(self, enter: float, iteration: Any, x: Any, mu: Any) -> None:
-        if self.stopped or self.t0 is None:
+        if self.t0 is None:
             return
         it = _whole(iteration)
+        self.last_iteration = it           # stopped or not: the answer is the last reported iterate
+        if self.stopped:
+            return
         i = self.count
         self.count += 1
-        self.last_iteration = it
         if i % self.stride:
             return
         if len(self.samples) >= self.room:          # full: keep every second sample, double the stride
@@ -232,37 +237,59 @@ class CurveStore:
         self.curves: dict[str, dict] = {}
 
     def open(self) -> CurveStore:
-        """Read curves.csv and curves/ (a file beats the CSV; files of interrupted writes are removed), keep
-        only the curves whose run row is there (and, for a file, the very row it was written with)."""
+        """Read curves/ and curves.csv, keep a run's curve only with the very row it was written with
+        (a file carries its row's ``started_utc``; a line of curves.csv the one results.csv gave the run
+        when both were written): a file first, else the CSV's; files of interrupted writes are removed."""
         self.dir.mkdir(parents=True, exist_ok=True)
         for p in self.dir.glob(".*"):
             if p.is_file():
                 p.unlink()
-        if self.csv.is_file():
-            recs, bad = read_curves_checked(self.csv)
-            if bad:
-                from dualfem.core.io import move_aside
-
-                dest = move_aside(self.csv, "corrupt")
-                self.store.warn(f"{len(bad)} unreadable line(s) of curves.csv: the file as it was is kept as "
-                                f"{str(dest)!r}; the curves of its readable lines are kept")
-            for rid, c in _group(recs).items():
-                self.curves[rid] = {**c, "started_utc": None}
+        found: dict[str, list[dict]] = {}
         for p in sorted(self.dir.glob("[!.]*.json")):
             try:
                 c = json.loads(p.read_text(encoding="utf-8"))
-                self.curves[c["run_id"]] = c
+                found.setdefault(str(c["run_id"]), []).append(c)
             except (OSError, ValueError, KeyError, TypeError):
                 self.store.set_aside(p, "unreadable curve file; its curve is dropped (curves.csv may hold it)")
-        for rid in list(self.curves):
+        for rid, c in self._read_csv().items():
+            found.setdefault(rid, []).append(c)
+        for rid, cands in found.items():
             row = self.store.rows.get(rid)
-            stamp = self.curves[rid].get("started_utc")
-            if row is None or (stamp is not None and row.get("started_utc") != stamp):
-                self._drop(rid)         # no row, or another attempt's row: never a curve without its row
-            elif not (self.dir / f"{rid}.json").is_file():
-                self._write(rid)        # kept only in curves.csv (curves/ is not committed)
+            ok = [c for c in cands if row is not None and row.get("started_utc") == c.get("started_utc")]
+            if ok:
+                self.curves[rid] = ok[0]
+            file = self.dir / f"{rid}.json"
+            if not ok or ok[0] is not cands[0] or not file.is_file():
+                file.unlink(missing_ok=True)  # no row, another attempt's row, or only in curves.csv (not committed)
+                if ok:
+                    self._write(rid)
         self.store.curves = self
         return self
+
+    def _read_csv(self) -> dict[str, dict]:
+        """The curves of curves.csv, each stamped with its run's ``started_utc`` in results.csv."""
+        if not self.csv.is_file():
+            return {}
+        from dualfem.core.errors import InputError
+        from dualfem.experiments.store import read_results_checked
+
+        try:
+            recs, bad = read_curves_checked(self.csv)
+        except InputError as exc:
+            self.store.set_aside(self.csv, f"unreadable curves.csv ({exc})")
+            return {}
+        if bad:
+            from dualfem.core.io import move_aside
+
+            dest = move_aside(self.csv, "corrupt")
+            self.store.warn(f"{len(bad)} unreadable line(s) of curves.csv: the file as it was is kept as "
+                            f"{str(dest)!r}; the curves of its readable lines are kept")
+        try:
+            stamps = {r["run_id"]: r.get("started_utc") for r in read_results_checked(self.store.out)[0]}
+        except InputError:
+            stamps = {}
+        return {rid: {**c, "started_utc": stamps.get(rid, "(not in results.csv)")}
+                for rid, c in _group(recs).items()}
 
     def add(self, row: dict, payload: Any) -> None:
         """The curve of a finished run (``payload`` of its task), written before its row; a run without
