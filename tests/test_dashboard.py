@@ -221,6 +221,48 @@ def test_missing_plotly_names_the_extra(tmp_path, tiny, monkeypatch):
     assert not (tmp_path / "d").exists()
 
 
+# ---------------------------------------------------------------- the page's arithmetic, under node
+
+def _node(tmp_path: Path, code: str):
+    """Run ``code`` after the dashboard's pure helpers (``DashLib`` as ``L``) under node; its JSON output."""
+    from importlib import resources
+
+    lib = (resources.files("dualfem.reports") / "templates" / "dashboard_lib.js").read_text(encoding="utf-8")
+    f = tmp_path / "t.cjs"
+    f.write_text(lib + "\nconst L = module.exports;\nconsole.log(JSON.stringify(" + code + "));\n", encoding="utf-8")
+    out = subprocess.run(["node", str(f)], capture_output=True, text=True, timeout=30, check=True).stdout
+    return json.loads(out)
+
+
+needs_node = pytest.mark.skipif(shutil.which("node") is None, reason="no node binary to run the page's helpers")
+
+
+@needs_node
+def test_median_curve_and_band(tmp_path):
+    """Three runs' curves: the median and interquartile band at the first and last time, checked by hand."""
+    curves = [{"t": [1, 2, 4], "e": [1e-1, 1e-3, 1e-6]}, {"t": [1, 3], "e": [1e-2, 1e-8]},
+              {"t": [2, 4], "e": [1, None]}]
+    b = _node(tmp_path, f"L.medianBand({json.dumps(curves)})")
+    assert len(b["t"]) == 60 and b["t"][0] == pytest.approx(1) and b["t"][-1] == pytest.approx(4)
+    assert np.all(np.diff(np.log(b["t"])) == pytest.approx(np.log(4) / 59))
+    # t = 1: 0.1, 1e-2 and a run not started (+inf): median 0.1, lower quartile between 1e-2 and 0.1
+    assert b["med"][0] == pytest.approx(0.1) and b["lo"][0] == pytest.approx(0.055) and b["hi"][0] is None
+    # t = 4: 1e-6, 1e-8 and the third run's last error with a value (1, its sample at t = 4 has none)
+    assert b["med"][-1] == pytest.approx(1e-6) and b["lo"][-1] == pytest.approx((1e-8 + 1e-6) / 2)
+    assert b["hi"][-1] == pytest.approx((1e-6 + 1) / 2)
+    # the median never rises while no run starts later (all three have started from t = 2 on)
+    later = [m for t, m in zip(b["t"], b["med"]) if t >= 2]
+    assert all(x >= y for x, y in zip(later, later[1:]))
+    assert _node(tmp_path, 'L.medianBand([{"t": [0], "e": [1]}])') is None
+
+
+@needs_node
+def test_numbers_are_written_as_python_writes_them(tmp_path):
+    vals = [1e-6, 5.95e-9, 0.00126, 1500, 999.96, 1e-5, 0.1, 16, 1e-4, 1e-16, 123456, 1234567, -2.5e-7, 0.5]
+    got = _node(tmp_path, f"{json.dumps(vals)}.map((v) => [L.g(v, 3), L.g(v, 6)])")
+    assert got == [[format(v, ".3g"), format(v, ".6g")] for v in vals]
+
+
 # ---------------------------------------------------------------- in headless Chromium
 
 def chromium() -> str | None:
@@ -292,6 +334,12 @@ def test_dashboard_renders_in_chromium(page, tmp_path):
     assert res.dom.count("js-plotly-plot") >= 2
     # the side panel lists every solver of the input, one checkbox each
     data = embedded(page)
+    # a median curve for every solver with curves (the tiny bench's uzawa and pdas; osqp has no iterates)
+    solver_of = dict(zip(data["runs"]["id"], data["runs"]["solver"]))
+    with_curves = {solver_of[i] for i, c in data["curves"].items() if c["kind"] == "reference"}
+    assert {data["solvers"][i]["name"] for i in with_curves} == {"uzawa", "pdas"}
+    assert re.search(rf'<div id="dash-status"[^>]*data-median-curves="{len(with_curves)}"', res.dom), \
+        re.search(r'<div id="dash-status"[^>]*>', res.dom)
     assert len(re.findall(r'<input type="checkbox" data-solver=', res.dom)) == len(data["solvers"])
     if os.environ.get("DUALFEM_DASHBOARD_SCREENSHOT"):          # keep the picture when asked
         shutil.copy(res.screenshot, os.environ["DUALFEM_DASHBOARD_SCREENSHOT"])

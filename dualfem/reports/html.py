@@ -64,7 +64,8 @@ def render(data: dict, js_bundle: str) -> str:
     blob = json.dumps(_finite(data), separators=(",", ":"), allow_nan=False).replace("<", "\\u003c")
     values = {"TITLE": _escape(str(data.get("title") or "dualfem dashboard")),
               "MAX_SERIES": str(int(data.get("max_series", 10))),
-              "DASH_CSS": _template("dashboard.css"), "DASH_JS": _script_safe(_template("dashboard.js")),
+              "DASH_CSS": _template("dashboard.css"), "DASH_LIB": _script_safe(_template("dashboard_lib.js")),
+              "DASH_JS": _script_safe(_template("dashboard.js")),
               "PLOTLY_JS": _script_safe(js_bundle), "DATA_JSON": blob}
     # one pass: inserted text (plotly.js, the data) is never scanned for placeholders again
     return _PLACEHOLDER.sub(lambda m: values[m.group(1)], _template("dashboard.html"))

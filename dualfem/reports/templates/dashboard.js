@@ -6,9 +6,7 @@
   const D = JSON.parse(document.getElementById("dash-data").textContent);
   const R = D.runs;
   const NRUNS = (R.solver || []).length;
-  const FLOOR_ERR = 1e-16;          // errors below are drawn at 1e-16 (as the bench report's figures)
-  const QLO = 0.25, QHI = 0.75;     // the band of the curves: the interquartile range across runs
-  const GRID = 60;                  // time points of a median curve
+  const { g, medianBand, FLOOR_ERR, QLO, QHI } = window.DashLib;
   const byId = (id) => document.getElementById(id);
   const el = (tag, attrs, text) => {
     const e = document.createElement(tag);
@@ -16,7 +14,8 @@
     if (text !== undefined) e.textContent = text;
     return e;
   };
-  const g3 = (v) => (v === null || v === undefined || !isFinite(v)) ? "n/a" : String(Number(v.toPrecision(3)));
+  const g3 = (v) => g(v, 3);
+  const gg = (v) => g(v, 6);
   const f2 = (v) => (v === null || v === undefined || !isFinite(v)) ? "n/a" : v.toFixed(2);
   const pct = (v) => (v === null || v === undefined || !isFinite(v)) ? "-" : Math.round(100 * v) + " %";
   const solverIndex = new Map(D.solvers.map((s, i) => [s.name, i]));
@@ -27,10 +26,10 @@
     values.forEach((v, i) => sel.appendChild(el("option", { value: String(i) }, labels ? labels[i] : String(v))));
   }
   options(byId("f-scene"), D.scenes);
-  options(byId("f-N"), D.Ns);
-  options(byId("f-delta"), D.deltas);
+  options(byId("f-N"), D.Ns, D.Ns.map(gg));
+  options(byId("f-delta"), D.deltas, D.deltas.map(gg));
   options(byId("f-tier"), D.tiers.map((t) => t.name),
-          D.tiers.map((t) => t.tol === null ? t.name : `${t.name} (tol ${t.tol})`));
+          D.tiers.map((t) => t.tol === null ? t.name : `${t.name} (tol ${gg(t.tol)})`));
 
   function markerSvg(s, filled) {
     const ns = "http://www.w3.org/2000/svg";
@@ -129,29 +128,6 @@
     const n = parseInt(hex.slice(1), 16);
     return `rgba(${(n >> 16) & 255},${(n >> 8) & 255},${n & 255},${a})`;
   }
-  function valueAt(c, t) {        // the error of the last sample at or before t (+Infinity before the first)
-    let v = Infinity;
-    for (let j = 0; j < c.t.length && c.t[j] <= t * (1 + 1e-12); j++) if (c.e[j] !== null) v = Math.max(c.e[j], FLOOR_ERR);
-    return v;
-  }
-  function quantile(sorted, q) {
-    const pos = (sorted.length - 1) * q, lo = Math.floor(pos), hi = Math.ceil(pos);
-    const v = sorted[lo] + (sorted[hi] - sorted[lo]) * (pos - lo);
-    return isFinite(v) ? v : null;
-  }
-  function medianBand(curves) {
-    let tmin = Infinity, tmax = 0;
-    for (const c of curves) for (const t of c.t) if (t > 0) { tmin = Math.min(tmin, t); tmax = Math.max(tmax, t); }
-    if (!(tmax > 0)) return null;
-    const grid = [];
-    for (let j = 0; j < GRID; j++) grid.push(tmin === tmax ? tmin : tmin * Math.pow(tmax / tmin, j / (GRID - 1)));
-    const med = [], lo = [], hi = [];
-    for (const t of grid) {
-      const vals = curves.map((c) => valueAt(c, t)).sort((a, b) => a - b);
-      med.push(quantile(vals, 0.5)); lo.push(quantile(vals, QLO)); hi.push(quantile(vals, QHI));
-    }
-    return { t: grid, med, lo, hi };
-  }
   function hover(k) {
     const s = D.solvers[R.solver[k]], tier = D.tiers[R.tier[k]];
     return `<b>${s.name}</b> (${s.family})<br>${R.label[k] || D.scenes[R.scene[k]]}, tier ${tier.name}<br>` +
@@ -171,7 +147,7 @@
     const nMarkers = [...bySolver.values()].reduce((a, ks) => a + ks.length, 0);
     const oneScene = sel.scene >= 0 && sel.N >= 0 && sel.delta >= 0 && sel.tier < 0;
     const kind = sel.error === "err" ? "reference" : "kkt";
-    let nCurves = 0, nPoints = 0;
+    let nCurves = 0, nPoints = 0, nMedians = 0;
     for (const [si, ks] of bySolver) {
       const s = D.solvers[si], ax = panelOf(s.family);
       const xa = ax === 1 ? "x" : "x" + ax, ya = ax === 1 ? "y" : "y" + ax;
@@ -181,6 +157,7 @@
         const b = medianBand(curves);
         if (b) {
           nCurves += curves.length;
+          nMedians += 1;
           const common = { x: b.t, xaxis: xa, yaxis: ya, hoverinfo: "skip", showlegend: false, legendgroup: s.name };
           traces.push(Object.assign({ y: b.lo, mode: "lines", line: { width: 0, color: s.color } }, common));
           traces.push(Object.assign({ y: b.hi, mode: "lines", line: { width: 0, color: s.color }, fill: "tonexty",
@@ -203,7 +180,7 @@
         text: ks.map(hover), hovertemplate: "%{text}<extra></extra>",
       });
     }
-    return { traces, nCurves, nPoints, nSolvers: bySolver.size, solvers: [...bySolver.keys()] };
+    return { traces, nCurves, nPoints, nMedians, nSolvers: bySolver.size };
   }
   function wpLayout(sel, panels, runs) {
     const ytitle = sel.error === "err" ? "relative energy-norm error vs certified reference" : "KKT error (evaluator)";
@@ -211,11 +188,12 @@
     const layout = { height: n > 1 ? 330 * rows + 60 : 560, margin: { l: 70, r: 20, t: 40, b: 60 },
                      hovermode: "closest", showlegend: false, annotations: [], shapes: [],
                      plot_bgcolor: "#fff", paper_bgcolor: "#fff" };
-    if (n > 1) layout.grid = { rows, columns: cols, pattern: "independent", xgap: 0.08, ygap: 0.16 };
+    if (n > 1) layout.grid = { rows, columns: cols, pattern: "independent", xgap: 0.08, ygap: 0.14 };
     const Ns = new Set(runs.map((k) => R.N[k]));
     panels.forEach((fam, i) => {
       const ax = i + 1, sx = ax === 1 ? "" : String(ax);
-      layout["xaxis" + sx] = { type: "log", title: { text: "time = setup + solve [s]" }, gridcolor: "#e5e5e5",
+      const bottom = Math.floor(i / cols) === rows - 1 || i + cols >= n;
+      layout["xaxis" + sx] = { type: "log", title: { text: bottom ? "time = setup + solve [s]" : "" }, gridcolor: "#e5e5e5",
                               exponentformat: "power", matches: ax === 1 ? undefined : "x" };
       layout["yaxis" + sx] = { type: "log", title: { text: n > 1 && i % cols ? "" : ytitle }, gridcolor: "#e5e5e5",
                               exponentformat: "power", matches: ax === 1 ? undefined : "y" };
@@ -225,7 +203,7 @@
         if (!Ns.has(f.N) || f.time === null) continue;
         layout.shapes.push({ type: "line", xref: "x" + sx, yref: `y${sx} domain`, x0: f.time, x1: f.time, y0: 0, y1: 1,
                              line: { color: "#666", width: 1, dash: "dash" } });
-        layout.annotations.push({ text: `floor N=${f.N}`, xref: "x" + sx, yref: `y${sx} domain`, x: Math.log10(f.time),
+        layout.annotations.push({ text: `floor N=${gg(f.N)}`, xref: "x" + sx, yref: `y${sx} domain`, x: Math.log10(f.time),
                                   y: 0.02, textangle: -90, xanchor: "right", yanchor: "bottom", showarrow: false,
                                   font: { size: 10, color: "#666" } });
       }
@@ -244,7 +222,9 @@
       `or before each time; a finished run keeps its last error), bands: the ${100 * QLO}-${100 * QHI} % quantiles ` +
       `(${w.nCurves} curves); markers: the runs' final answers.` :
       "These results hold no convergence curves (bench spec key curves = true records them): each run is a point.";
-    byId("wp-note").textContent = `${w.nPoints} runs of ${w.nSolvers} solvers in the selection. ${curvesNote} ` +
+    byId("dash-status").dataset.medianCurves = String(w.nMedians);
+    byId("wp-note").textContent = `${w.nPoints} runs of ${w.nSolvers} solvers drawn (runs without a time or this ` +
+      `error are left out). ${curvesNote} ` +
       "Hollow markers: status not solved (the solver's claim demoted, or a failure with an iterate). " +
       `Errors below ${FLOOR_ERR} are drawn at ${FLOOR_ERR}. Dashed: the floor (one factorization + one solve of K). ` +
       "Hover a point for its run; the side panel selects solvers, by family.";
@@ -301,7 +281,7 @@
     box.replaceChildren();
     for (const ti of rankedTiers(sel)) {
       const t = D.tiers[ti], data = D.rank[rankKey(ti, sel)];
-      box.appendChild(el("h3", {}, t.tol === null ? `tier ${t.name}` : `tier ${t.name} (tol ${t.tol})`));
+      box.appendChild(el("h3", {}, t.tol === null ? `tier ${t.name}` : `tier ${t.name} (tol ${gg(t.tol)})`));
       if (!data) { box.appendChild(el("p", { class: "note" }, "No runs of this tier in the selection.")); continue; }
       box.appendChild(el("p", { class: "note" }, `Shifted geometric mean of time over the ${data.n} scenes every ` +
         "solver of this table ran; ranks among all solvers of the results (unticked ones are hidden, not re-ranked)."));
@@ -336,7 +316,7 @@
       solverIndex.has(c.solver) && sel.solvers.has(solverIndex.get(c.solver)));
     byId("targets-note").textContent = D.targets.length ?
       `Our solvers (${T.ours.join(", ")}) at the two largest sizes: a run counts when solved with relative ` +
-      `energy-norm error <= ${T.error}; time = setup + solve, against the floor (target <= ${T.floor} x) and the ` +
+      `energy-norm error <= ${gg(T.error)}; time = setup + solve, against the floor (target <= ${T.floor} x) and the ` +
       `fastest competitor at that error (target >= ${T.speed} x faster).` : "No run of our solvers in these results.";
     if (!rows.length) return;
     const tab = el("table"), head = el("tr");
@@ -346,13 +326,13 @@
     const misses = [];
     for (const c of rows) {
       const tr = el("tr");
-      cell(tr, c.scene, "name"); cell(tr, String(c.N)); cell(tr, String(c.delta)); nameCell(tr, solverIndex.get(c.solver));
+      cell(tr, c.scene, "name"); cell(tr, gg(c.N)); cell(tr, gg(c.delta)); nameCell(tr, solverIndex.get(c.solver));
       if (c.met) {
         cell(tr, `${g3(c.time_s)} (${g3(c.setup_s)} + ${g3(c.solve_s)})`); cell(tr, g3(c.end_to_end_s));
         cell(tr, c.peak_rss_mb === null ? "n/a" : c.peak_rss_mb.toFixed(0));
       } else {
         cell(tr, c.quiet_status !== null ? `status ${c.quiet_status}: error ${g3(c.quiet_error)} in ${g3(c.time_s)} s, ` +
-          "not claimed" : `no run reached ${T.error} (${c.statuses.join(", ")})`, "miss");
+          "not claimed" : `no run reached ${gg(T.error)} (${c.statuses.join(", ")})`, "miss");
         cell(tr, ""); cell(tr, "");
       }
       cell(tr, g3(c.floor_s) + (c.floor_backend ? ` (${c.floor_backend.replace(/^floor_/, "")})` : ""));
@@ -380,7 +360,7 @@
   function header() {
     const nsrc = D.sources.length;
     byId("dash-summary").textContent = `${NRUNS} runs of ${D.solvers.length} solver variants (${D.families.length} ` +
-      `families) on ${D.scenes.length} scene(s), N in {${D.Ns.join(", ")}}, ${D.deltas.length} delta(s), tiers ` +
+      `families) on ${D.scenes.length} scene(s), N in {${D.Ns.map(gg).join(", ")}}, ${D.deltas.length} delta(s), tiers ` +
       `${D.tiers.map((t) => t.name).join(", ")}; from ${nsrc} results folder${nsrc > 1 ? "s" : ""}` +
       (D.command ? `; generated by ${D.command}` : "") + ".";
     const ul = document.querySelector("#dash-sources ul");
