@@ -151,6 +151,46 @@ def test_page_embeds_every_solver_and_the_bench_numbers(page, tiny):
             assert (v is None and not np.isfinite(s[c])) or v == pytest.approx(s[c], rel=1e-3), (c, row, s)
 
 
+def test_text_of_the_results_stays_data(tmp_path, tiny):
+    """A message or label holding HTML cannot end the data's <script> or add an element to the page."""
+    import csv
+
+    with open(tiny / "results.csv", newline="", encoding="utf-8") as fh:
+        reader = csv.DictReader(fh)
+        fields, rows = reader.fieldnames, list(reader)
+    hostile = '</script><script>window.PWNED = 1</script><!-- & "'
+    run = next(r for r in rows if r["kind"] == "run")
+    run["message"], run["status"], run["label"] = hostile, "inaccurate", hostile
+    (tmp_path / "res").mkdir()
+    with open(tmp_path / "res" / "results.csv", "w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=fields)
+        w.writeheader()
+        w.writerows(rows)
+    plain, bad = build_dashboard([tiny], tmp_path / "plain"), build_dashboard([tmp_path / "res"], tmp_path / "bad")
+
+    def tags(path):
+        p = _Refs()
+        p.feed(path.read_text(encoding="utf-8"))
+        return p.inline_scripts
+
+    assert tags(bad) == tags(plain)
+    data = embedded(bad)
+    k = data["runs"]["id"].index(run["run_id"])
+    assert data["runs"]["message"][k] == hostile and data["runs"]["label"][k] == hostile
+
+
+def test_stress_results(tmp_path):
+    """A stress folder (runs.jsonl): every solver, one tier of declared tolerances, rankings per delta."""
+    from dualfem.reports._dash_data import STRESS_TIER, payload
+
+    folder = ROOT / "benchmarks" / "results" / "stress_breadth"
+    data = payload([folder])
+    solvers = {json.loads(line)["solver"] for line in (folder / "runs.jsonl").read_text().splitlines() if line}
+    assert {s["name"] for s in data["solvers"]} == solvers
+    assert [t["name"] for t in data["tiers"]] == [STRESS_TIER] and data["targets"] == []
+    assert f"0|-1|-1|{len(data['deltas']) - 1}" in data["rank"]
+
+
 def test_bad_inputs_are_refused_before_anything_is_written(tmp_path, tiny):
     out = tmp_path / "dash"
     with pytest.raises(InputError, match="does not exist"):

@@ -97,10 +97,10 @@ def _read_one(item: str | Path) -> tuple[list[dict], Source, Path]:
         raise InputError(f"RESULTS {str(p)!r} does not exist (give a 'dualfem bench' or 'dualfem stress' "
                          "results folder)")
     folder = p if p.is_dir() else p.parent
-    if (folder / "results.csv").is_file() and (p.is_dir() or p.suffix == ".csv"):
-        raw = read_results(folder / "results.csv" if p.is_dir() else p)
+    if p.suffix == ".csv" or (p.is_dir() and (p / "results.csv").is_file()):
+        raw = read_results(p)
         rows = [_stress_row(Row.from_dict(r).to_dict()) if r.get("kind") == "stress" else r for r in raw]
-    elif (folder / "runs.jsonl").is_file() and (p.is_dir() or p.suffix == ".jsonl"):
+    elif p.suffix == ".jsonl" or (p.is_dir() and (p / "runs.jsonl").is_file()):
         rows = [_stress_row(r.to_dict()) for r in load_results(p)[1]]
     else:
         raise InputError(f"RESULTS {str(p)!r} is not a 'dualfem bench' folder (results.csv) or a 'dualfem stress' "

@@ -128,12 +128,13 @@
     const n = parseInt(hex.slice(1), 16);
     return `rgba(${(n >> 16) & 255},${(n >> 8) & 255},${n & 255},${a})`;
   }
-  function hover(k) {
+  const esc = (t) => String(t).replace(/[<>&"]/g, (c) => ({ "<": "&lt;", ">": "&gt;", "&": "&amp;", '"': "&quot;" })[c]);
+  function hover(k) {         // plotly hover text is HTML: every text of the results is escaped
     const s = D.solvers[R.solver[k]], tier = D.tiers[R.tier[k]];
-    return `<b>${s.name}</b> (${s.family})<br>${R.label[k] || D.scenes[R.scene[k]]}, tier ${tier.name}<br>` +
-      `status ${D.statuses[R.status[k]]} (claimed ${R.claimed[k]}), grade ${R.grade[k] || "-"}<br>` +
-      `time ${g3(R.time[k])} s, error ${g3(R.err[k])}, KKT ${g3(R.kkt[k])}` +
-      (R.message[k] ? `<br>${R.message[k].replace(/[<>&]/g, " ").slice(0, 100)}` : "");
+    return `<b>${esc(s.name)}</b> (${esc(s.family)})<br>${esc(R.label[k] || D.scenes[R.scene[k]])}, ` +
+      `tier ${esc(tier.name)}<br>status ${esc(D.statuses[R.status[k]])} (claimed ${esc(R.claimed[k])}), grade ` +
+      `${esc(R.grade[k] || "-")}<br>time ${g3(R.time[k])} s, error ${g3(R.err[k])}, KKT ${g3(R.kkt[k])}` +
+      (R.message[k] ? `<br>${esc(R.message[k].slice(0, 100))}` : "");
   }
   function wpTraces(sel, runs, panelOf) {
     const traces = [];
@@ -164,7 +165,7 @@
                                       fillcolor: rgba(s.color, 0.18) }, common));
           traces.push({ x: b.t, y: b.med, xaxis: xa, yaxis: ya, mode: "lines", name: s.name, showlegend: false,
                         line: { color: s.color, width: 2, dash: s.dash },
-                        hovertemplate: `<b>${s.name}</b>: median of ${curves.length} curve(s)<br>t %{x:.3g} s, error %{y:.3g}<extra></extra>` });
+                        hovertemplate: `<b>${esc(s.name)}</b>: median of ${curves.length} curve(s)<br>t %{x:.3g} s, error %{y:.3g}<extra></extra>` });
         }
       }
       if (oneScene) ks.sort((a, b) => (D.tiers[R.tier[b]].tol || 0) - (D.tiers[R.tier[a]].tol || 0));
@@ -197,7 +198,7 @@
                               exponentformat: "power", matches: ax === 1 ? undefined : "x" };
       layout["yaxis" + sx] = { type: "log", title: { text: n > 1 && i % cols ? "" : ytitle }, gridcolor: "#e5e5e5",
                               exponentformat: "power", matches: ax === 1 ? undefined : "y" };
-      if (n > 1) layout.annotations.push({ text: `<b>${fam}</b>`, xref: `x${sx} domain`, yref: `y${sx} domain`,
+      if (n > 1) layout.annotations.push({ text: `<b>${esc(fam)}</b>`, xref: `x${sx} domain`, yref: `y${sx} domain`,
                                            x: 0.5, y: 1.02, xanchor: "center", yanchor: "bottom", showarrow: false });
       for (const f of D.floors) {
         if (!Ns.has(f.N) || f.time === null) continue;
@@ -253,7 +254,7 @@
       for (const [key, label, color] of [["success", "success rate", "#0072B2"], ["correct", "correct rate", "#E69F00"]]) {
         traces.push({ type: "bar", orientation: "h", y, x: rows.map((r) => r[RC[key]] === null ? null : 100 * r[RC[key]]),
                       name: label, marker: { color }, xaxis: "x" + sx, yaxis: "y" + sx, showlegend: j === 0,
-                      legendgroup: key, hovertemplate: `%{y}: ${label} %{x:.0f} %<extra>tier ${D.tiers[ti].name}</extra>` });
+                      legendgroup: key, hovertemplate: `%{y}: ${label} %{x:.0f} %<extra>tier ${esc(D.tiers[ti].name)}</extra>` });
       }
       layout["xaxis" + sx] = { range: [0, 104], tickvals: [0, 25, 50, 75, 100], title: { text: `% (tier ${D.tiers[ti].name})` }, gridcolor: "#e5e5e5" };
       layout["yaxis" + sx] = { categoryorder: "array", categoryarray: names.slice().reverse(), showticklabels: j === 0,
