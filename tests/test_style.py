@@ -54,3 +54,12 @@ def test_group_by_family_order():
     g = S.group_by_family(["qp_daqp", "pdas", "osqp", "clarabel", "x_plugin", "uzawa"])
     assert list(g) == ["dual", "interior point", "first-order", "active set", "other"]
     assert g["dual"] == ["pdas", "uzawa"]
+
+
+def test_plotly_equivalents_cover_every_style():
+    markers = {m for ms in S.FAMILY_MARKERS.values() for m in ms}
+    for m in markers:
+        for ls in set(S.FAMILY_LINESTYLE.values()):
+            p = S.Style("#0072B2", m, ls).plotly()
+            assert p["symbol"] and p["dash"] in ("solid", "dash", "dashdot", "dot")
+    assert S.style("uzawa").plotly() == {"color": "#0072B2", "symbol": "circle", "dash": "solid", "edge": "#0072B2"}

@@ -25,6 +25,12 @@ from dualfem.core.errors import InputError
 from dualfem.core.registry import get_solver, solvers
 from dualfem.core.solver import reference_solvers
 from dualfem.post.fields import Post, defect_stretches
+from dualfem.post.style import FIELD_CMAP, PALETTE
+
+#: the colours of line series (the Okabe-Ito palette without its light yellow)
+LINE_COLORS = PALETTE[:-1]
+#: colours of the two faces of a defect (upper +, lower -) and of the closed-node markers
+UPPER, LOWER, CLOSED = PALETTE[1], PALETTE[0], PALETTE[1]
 
 
 def pick_solver(name: str | None = None, *, exact: bool = True, order: Sequence[str] | None = None) -> str:
@@ -49,11 +55,14 @@ def pick_solver(name: str | None = None, *, exact: bool = True, order: Sequence[
                      "is registered and installed")
 
 
-def _axes(ax, figsize=(6.4, 4.8)):
+def _axes(ax, figsize=(6.4, 4.8), lines: bool = False):
+    """``ax``, or a new figure's; ``lines``: its line colours cycle through :data:`LINE_COLORS`."""
     import matplotlib.pyplot as plt
 
     if ax is None:
         _, ax = plt.subplots(figsize=figsize)
+    if lines:
+        ax.set_prop_cycle(color=list(LINE_COLORS))
     return ax
 
 
@@ -86,11 +95,13 @@ def _stretches(post: Post, label: str):
 
 
 def plot_deformed(qp, sol, ax=None, *, scale: float = 300.0, title: str | None = None, vmax: float | None = None,
-                  cmap: str = "jet", colorbar: bool = True, edges: bool = False, reference: bool = False,
+                  cmap: str = FIELD_CMAP, colorbar: bool = True, edges: bool = False, reference: bool = False,
                   contact: bool = False, labels: bool = False):
     """The deformed body X + scale u, triangles coloured by the von Mises stress (colour bar in
-    the units of E); the faces of every defect are drawn in white on top, each defect on its own
-    (tips included). ``reference``: each defect's undeformed line too (black, dashed);
+    the units of E; ``cmap`` default :data:`dualfem.post.style.FIELD_CMAP`, viridis: the stress is
+    >= 0, no sign to show); the faces of every defect are drawn in white outlined in black on top
+    (legible on every colour of the map), each defect on its own (tips included). ``reference``: each
+    defect's undeformed line too (black, dashed);
     ``contact``: the closed nodes (evaluator contact set) marked on the deformed lower face;
     ``labels``: each defect's number (``[[defects]]`` order, from 0) beside its first tip."""
     ax = _axes(ax)
@@ -115,20 +126,23 @@ def plot_deformed(qp, sol, ax=None, *, scale: float = 300.0, title: str | None =
 def _draw_defects(ax, qp, p: Post, xy: np.ndarray, *, reference: bool, contact: bool, labels: bool) -> None:
     """Both faces of each defect (white), optionally its undeformed line, closed nodes and number."""
 
+    from matplotlib import patheffects
+
     d = p.defect
     closed = None
+    outline = [patheffects.withStroke(linewidth=2.0, foreground="k")]
     if contact:
 
         closed = np.zeros(d["s"].size, dtype=bool)
         closed[d["interior"]] = evaluator.contact_set(qp, p.x)[d["row"][d["interior"]]]
     for n, idx in enumerate(defect_stretches(d)):
         for ids in (d["upper"][idx], d["lower"][idx]):
-            ax.plot(xy[0, ids], xy[1, ids], "w-", lw=0.8)
+            ax.plot(xy[0, ids], xy[1, ids], "w-", lw=0.8, path_effects=outline)
         if reference:
             ax.plot(d["X"][0, idx], d["X"][1, idx], "k--", lw=0.6, label="undeformed defect" if n == 0 else None)
         if closed is not None and closed[idx].any():
             c = d["lower"][idx][closed[idx]]
-            ax.plot(xy[0, c], xy[1, c], "o", ms=3, mfc="magenta", mec="k", mew=0.4, ls="none",
+            ax.plot(xy[0, c], xy[1, c], "o", ms=3, mfc=CLOSED, mec="k", mew=0.4, ls="none",
                     label="closed nodes (contact)" if not any(ln.get_label().startswith("closed")
                                                               for ln in ax.get_lines()) else None)
         if labels:
@@ -146,7 +160,7 @@ def plot_jump(cases: Iterable[tuple[str, object, object]], ax=None, *, unit: flo
     ``(label, qp, sol)``; values are plotted in multiples of ``unit`` (paper: 1e-5), or with
     ``log=True`` as they are on a log scale (values below ``floor``, e.g. closed nodes, drawn
     at the floor)."""
-    ax = _axes(ax)
+    ax = _axes(ax, lines=True)
     key = {"normal": "jump_normal", "tangent": "jump_tangent"}.get(component)
     if key is None:
         raise InputError(f"component must be 'normal' or 'tangent', got {component!r}")
@@ -181,8 +195,8 @@ def plot_faces(qp, sol, ax=None, *, scale: float = 300.0, title: str | None = No
     d = p.defect
     for n, idx in enumerate(defect_stretches(d)):     # each defect on its own
         X = d["X"][:, idx]
-        for key, style, label in (("u_upper", "r.-", "upper face (+)"), ("u_lower", "b.-", "lower face (-)")):
-            ax.plot(X[0] + scale * d[key][idx, 0], X[1] + scale * d[key][idx, 1], style, ms=3, lw=1,
+        for key, color, label in (("u_upper", UPPER, "upper face (+)"), ("u_lower", LOWER, "lower face (-)")):
+            ax.plot(X[0] + scale * d[key][idx, 0], X[1] + scale * d[key][idx, 1], ".-", color=color, ms=3, lw=1,
                     label=label if n == 0 else None)
         ax.plot(X[0], X[1], "k--", lw=0.7, label="undeformed" if n == 0 else None)
     ax.set_xlabel(f"x1 + {scale:g} u1")
@@ -196,7 +210,7 @@ def plot_faces(qp, sol, ax=None, *, scale: float = 300.0, title: str | None = No
 
 def plot_pressure(cases: Iterable[tuple[str, object, object]], ax=None):
     """Contact pressure l = mu / w (units of E) along the defect; ``cases`` are ``(label, qp, sol)``."""
-    ax = _axes(ax)
+    ax = _axes(ax, lines=True)
     xlabel, units = "s", "MPa"
     for label, qp, sol in cases:
         p = _post(qp, sol)
@@ -234,7 +248,7 @@ def plot_history(runs: Iterable[tuple], ax=None, *, key: str | Sequence[str] = "
     history has, and the legend says which. Runs with none of them are listed as skipped in
     the legend title; InputError if no run has any. ``logx`` puts the iterations on a log scale
     (useful when one run takes hundreds of iterations and the others a few)."""
-    ax = _axes(ax)
+    ax = _axes(ax, lines=True)
     keys = (key,) if isinstance(key, str) else tuple(key)
     n = 0
     skipped = []

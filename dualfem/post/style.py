@@ -9,8 +9,9 @@
   know (a plug-in).
 * :func:`style` / :func:`styles`: a deterministic (colour, marker, line style) per solver. Each family
   owns its markers (dual: circles, interior point: squares, first-order: triangles, active set:
-  diamonds, other: stars), and the solvers of a family take the palette's colours in their order of
-  :data:`FAMILIES`: two known solvers never share both colour and marker, in any figure. A name not
+  diamonds, other: stars) and line style (solid, dashed, dash-dot, dotted), and the solvers of a family
+  take the palette's colours in their order of :data:`FAMILIES` from the family's offset
+  (:data:`FAMILY_OFFSET`): two known solvers never share both colour and marker, in any figure. A name not
   listed (a plug-in, a labelled variant) gets, in :func:`styles`, the first (colour, marker) pair of its
   family's markers not taken by the other names of the same call: distinct within one figure, the same
   for the same set of names.
@@ -25,11 +26,13 @@ matplotlib (or plotly) caller passes on.
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
-#: Okabe-Ito colours, in the order series use them (blue, vermillion, bluish green, orange,
-#: reddish purple, sky blue, black, yellow).
-PALETTE: tuple[str, ...] = ("#0072B2", "#D55E00", "#009E73", "#E69F00", "#CC79A7", "#56B4E9", "#000000",
+#: Okabe-Ito colours (blue, vermillion, bluish green, reddish purple, black, orange, sky blue, yellow):
+#: the pairs easiest to confuse (blue / sky blue, vermillion / orange) are far apart in this order;
+#: the light yellow is used only by the 8th solver of a family
+PALETTE: tuple[str, ...] = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#000000", "#E69F00", "#56B4E9",
                             "#F0E442")
 #: colours too light on white to carry a marker alone: drawn with this marker edge colour
 _LIGHT = {"#F0E442": "#8C8100", "#56B4E9": "#1F6F9E"}
@@ -46,7 +49,7 @@ MAX_SERIES = 10
 FAMILIES: dict[str, tuple[str, ...]] = {
     "dual": ("uzawa", "uzawa_auto", "pdas", "mprgp", "penalty", "dual_gradient"),
     "interior point": ("clarabel", "qp_clarabel", "cvxpy", "qp_piqp", "qp_ecos", "qp_cvxopt", "qp_sip",
-                       "qp_qtqp", "qp_kvxopt", "qp_hpipm", "qp_qpswift", "qp_qpax", "qp_mosek", "qp_gurobi",
+                       "qp_qtqp", "qp_qpax", "qp_kvxopt", "qp_hpipm", "qp_qpswift", "qp_mosek", "qp_gurobi",
                        "qp_copt"),
     "first-order": ("osqp", "qp_osqp", "qp_scs", "qp_proxqp", "qp_qpalm", "qp_jaxopt_osqp", "qp_pdhcg"),
     "active set": ("qp_daqp", "qp_quadprog", "qp_pyqpmad", "qp_highs", "qp_qpoases", "qp_nppro"),
@@ -57,8 +60,13 @@ FAMILY_MARKERS: dict[str, tuple[str, ...]] = {
     "dual": ("o", "h"), "interior point": ("s", "P"), "first-order": ("^", "v"),
     "active set": ("D", "X"), "other": ("*", "p"),
 }
-#: line style of a solver's curve: by its round through the palette within its family
-LINESTYLES: tuple[str, ...] = ("-", "--", ":", "-.")
+#: line style of each family (curves and lines through tier points)
+FAMILY_LINESTYLE: dict[str, str] = {"dual": "-", "interior point": "--", "first-order": "-.",
+                                    "active set": ":", "other": "--"}
+#: where each family starts in the first seven colours, chosen so that the solvers most often drawn
+#: together differ in colour too: dual uzawa blue, uzawa_auto vermillion, pdas green, mprgp purple,
+#: penalty black, dual_gradient orange; clarabel sky blue; osqp orange; qp_daqp green
+FAMILY_OFFSET: dict[str, int] = {"dual": 0, "interior point": 6, "first-order": 5, "active set": 2, "other": 3}
 #: cvxpy backends that are first-order methods (a cvxpy variant naming one is of that family)
 _CVXPY_FIRST_ORDER = ("OSQP", "SCS", "PIQP_ADMM")
 _SEPARATORS = "[(:_-@ ,"
@@ -76,6 +84,18 @@ class Style:
         """matplotlib line properties (``color``, ``marker``, ``linestyle``, ``markeredgecolor``)."""
         return {"color": self.color, "marker": self.marker, "linestyle": self.linestyle,
                 "markeredgecolor": _LIGHT.get(self.color, self.color)}
+
+    def plotly(self) -> dict[str, str]:
+        """The same look for plotly: ``color``, marker ``symbol``, line ``dash`` and the marker's
+        ``edge`` colour (e.g. ``marker=dict(color=c, symbol=s, line=dict(color=edge))``)."""
+        return {"color": self.color, "symbol": _PLOTLY_SYMBOL[self.marker], "dash": _PLOTLY_DASH[self.linestyle],
+                "edge": _LIGHT.get(self.color, self.color)}
+
+
+#: matplotlib marker -> plotly marker symbol, line style -> plotly dash, for every marker and style used
+_PLOTLY_SYMBOL = {"o": "circle", "h": "hexagon", "s": "square", "P": "cross", "^": "triangle-up",
+                  "v": "triangle-down", "D": "diamond", "X": "x", "*": "star", "p": "pentagon"}
+_PLOTLY_DASH = {"-": "solid", "--": "dash", "-.": "dashdot", ":": "dot"}
 
 
 def _known() -> dict[str, tuple[str, int]]:
@@ -105,9 +125,13 @@ def family(name: str) -> str:
 
 
 def _slot(fam: str, i: int) -> Style:
-    """Style of the i-th colour slot of a family: colour i mod 8, marker and line style by round."""
-    rnd, markers = divmod(i, len(PALETTE))[0], FAMILY_MARKERS[fam]
-    return Style(PALETTE[i % len(PALETTE)], markers[rnd % len(markers)], LINESTYLES[rnd % len(LINESTYLES)])
+    """Style of the i-th slot of a family: in each round of eight, the first seven colours from the
+    family's offset, then yellow; the round picks the marker."""
+    rnd, j = divmod(i, len(PALETTE))
+    n = len(PALETTE) - 1
+    color = PALETTE[(FAMILY_OFFSET[fam] + j) % n] if j < n else PALETTE[n]
+    markers = FAMILY_MARKERS[fam]
+    return Style(color, markers[rnd % len(markers)], FAMILY_LINESTYLE[fam])
 
 
 def style(name: str) -> Style:
@@ -119,7 +143,7 @@ def style(name: str) -> Style:
     return styles([name])[name]
 
 
-def styles(names) -> dict[str, Style]:
+def styles(names: Iterable[str]) -> dict[str, Style]:
     """A style per name, no two sharing both colour and marker: listed names keep their fixed
     style; the others (sorted, those of a known family first) take the first free (colour, marker)
     pair of their family's slots, then of the other families' slots. Deterministic: the same
@@ -144,11 +168,12 @@ def styles(names) -> dict[str, Style]:
     return out
 
 
-def group_by_family(names) -> dict[str, list[str]]:
+def group_by_family(names: Iterable[str]) -> dict[str, list[str]]:
     """The names (sorted) per family, families in the order of :data:`FAMILIES`, empty ones left out."""
     out: dict[str, list[str]] = {}
+    names = set(names)
     for fam in FAMILIES:
-        members = sorted(n for n in set(names) if family(n) == fam)
+        members = sorted(n for n in names if family(n) == fam)
         if members:
             out[fam] = members
     return out

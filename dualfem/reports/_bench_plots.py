@@ -1,67 +1,237 @@
-"""The figures of ``dualfem report bench``: work-precision per (scene, N) and scaling per scene."""
+"""The figures of ``dualfem report bench``: work-precision per (scene, N) and scaling per scene.
+
+Work-precision: relative energy-norm error of x against time (setup + solve, seconds), log-log, one
+column of panels per delta. Every run is a point (hollow when its status is not ``solved``). A solver
+whose runs recorded convergence curves (:mod:`dualfem.reports._bench_curves`, error kind
+``reference``: the same error as the points) is drawn as the median of the curves of its tightest
+tier that has any, with the 25-75 % band when there are several curves; a solver without curves
+joins its tier points by a thin line, as before curves existed. Horizontal dotted lines: the tiers'
+tolerances; vertical dashed line: the floor (one factorization + one solve of K).
+
+Legibility (:mod:`dualfem.post.style`): each solver keeps one Okabe-Ito colour + marker + line style
+in every figure; a figure with more than :data:`~dualfem.post.style.MAX_SERIES` solvers gets one row
+of panels per solver family (shared axes, one legend per row, right of the row); a smaller one a
+single row with its legend below. No legend is drawn over data.
+"""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 from dualfem.core.io import atomic_savefig
+from dualfem.post.style import MAX_SERIES, Style, group_by_family, styles
+from dualfem.reports._bench_curves import Curve, MedianCurve, median_curve
 from dualfem.reports._bench_util import _f
 
+#: font sizes of every bench figure (points)
+RC = {"font.size": 9, "axes.titlesize": 9.5, "axes.labelsize": 9, "legend.fontsize": 8,
+      "xtick.labelsize": 8, "ytick.labelsize": 8, "legend.title_fontsize": 8.5}
+#: grey of the floor and tolerance guide lines (not a series colour)
+GUIDE = "0.45"
+#: errors below this are drawn at it
+ERR_FLOOR = 1e-16
+PANEL_W, PANEL_H = 3.3, 2.6
 
-def save_with_legend(fig, axes, figdir, name: str) -> str:
-    """One legend for all panels (labels de-duplicated), saved as figdir/name; returns name."""
+
+@dataclass(frozen=True)
+class SolverCurve:
+    """The median curve of one solver on one scene (the runs of its tier ``tier``)."""
+
+    variant: str
+    scene_key: str
+    tier: str
+    curve: MedianCurve
+
+
+def facets(variants: Iterable[str]) -> list[tuple[str, list[str]]]:
+    """Rows of panels: one row with every series when there are at most MAX_SERIES, else one row per
+    solver family (:func:`dualfem.post.style.group_by_family`) as (family, members)."""
+    variants = sorted(set(variants))
+    if len(variants) <= MAX_SERIES:
+        return [("", variants)]
+    return list(group_by_family(variants).items())
+
+
+def _tier_order(runs: list[dict]) -> dict[str, float]:
+    """Tier name -> its tolerance (NaN for a tier without one: ``any``, tried last)."""
+    out: dict[str, float] = {}
+    for r in runs:
+        out.setdefault(str(r["tier"]), _f(r.get("tol")))
+    return out
+
+
+def solver_curves(curves: list[Curve], runs: list[dict], kind: str = "reference") -> dict[tuple[str, str], SolverCurve]:
+    """(variant, scene_key) -> the median curve of that solver's tightest tier with curves of ``kind``.
+    A curve's variant and scene come from its run row (``run_id``), else from its own columns."""
+    by_id = {str(r.get("run_id")): r for r in runs}
+    tol = _tier_order(runs)
+    groups: dict[tuple[str, str, str], list[Curve]] = {}
+    for c in curves:
+        if c.error_kind != kind:
+            continue
+        row = by_id.get(c.run_id)
+        var = row["variant"] if row else c.solver
+        sk = str(row.get("scene_key")) if row else c.scene_key
+        groups.setdefault((var, sk, c.tier), []).append(c)
+    out: dict[tuple[str, str], SolverCurve] = {}
+
+    def tightness(tier: str) -> tuple[int, float]:
+        t = tol.get(tier, float("nan"))
+        return (0, t) if math.isfinite(t) else (1, 0.0)
+
+    for (var, sk, tier) in sorted(groups, key=lambda k: (k[0], k[1], tightness(k[2]))):
+        if (var, sk) not in out:
+            out[(var, sk)] = SolverCurve(var, sk, tier, median_curve(groups[(var, sk, tier)]))
+    return out
+
+
+def _finite_points(pts: list[dict], var: str) -> list[dict]:
+    vr = [r for r in pts if r["variant"] == var and math.isfinite(_f(r.get("err_x_energy")))
+          and math.isfinite(_f(r.get("total_s")))]
+    vr.sort(key=lambda r: -_f(r.get("tol")) if math.isfinite(_f(r.get("tol"))) else 0)
+    return vr
+
+
+def _draw_curve(ax, sc: SolverCurve, st: Style) -> None:
+    import numpy as np
+
+    c = sc.curve
+    ok = np.isfinite(c.median)
+    ax.plot(c.time_s[ok], np.maximum(c.median[ok], ERR_FLOOR), color=st.color, ls=st.linestyle, lw=1.6,
+            alpha=0.95, zorder=3)
+    if c.n_curves > 1:
+        ax.fill_between(c.time_s[ok], np.maximum(c.low[ok], ERR_FLOOR), np.maximum(c.high[ok], ERR_FLOOR),
+                        color=st.color, alpha=0.18, lw=0, zorder=2)
+
+
+def _wp_panel(ax, pts: list[dict], members: list[str], st: dict[str, Style], floor_s: float | None,
+              curves: dict[tuple[str, str], SolverCurve], tols: dict[str, float]) -> None:
+    """One work-precision panel: the members' points, curves (or tier lines) and the guide lines."""
+    keys = {str(r.get("scene_key")) for r in pts}
+    for var in members:
+        s = st[var]
+        vr = _finite_points(pts, var)
+        sc = next((curves[(var, k)] for k in sorted(keys) if (var, k) in curves), None)
+        if sc is not None:
+            _draw_curve(ax, sc, s)
+        elif len(vr) > 1:
+            ax.plot([_f(r["total_s"]) for r in vr], [max(_f(r["err_x_energy"]), ERR_FLOOR) for r in vr],
+                    color=s.color, ls=s.linestyle, lw=1.0, alpha=0.6, zorder=3)
+        for r in vr:
+            solved = r["status"] == "solved"
+            ax.plot([_f(r["total_s"])], [max(_f(r["err_x_energy"]), ERR_FLOOR)], ls="none", marker=s.marker,
+                    ms=5.5, color=s.color, mec=s.kwargs()["markeredgecolor"], mew=1.0,
+                    mfc=s.color if solved else "none", zorder=4)
+    if floor_s is not None and math.isfinite(floor_s):
+        ax.axvline(floor_s, color=GUIDE, ls="--", lw=0.9, zorder=1)
+    for tol in tols.values():
+        ax.axhline(tol, color=GUIDE, ls=":", lw=0.9, zorder=1)
+
+
+def _legend_handles(members: list[str], st: dict[str, Style], curved: set[str], extra: list) -> list:
+    from matplotlib.lines import Line2D
+
+    h = [Line2D([], [], color=st[v].color, marker=st[v].marker, mec=st[v].kwargs()["markeredgecolor"],
+                ls=st[v].linestyle, lw=1.6 if v in curved else 1.0, ms=5.5,
+                label=v + (" (curve)" if v in curved else "")) for v in members]
+    return h + extra
+
+
+def _guides(floor: bool, tols: dict[str, float]) -> list:
+    from matplotlib.lines import Line2D
+
+    out = [Line2D([], [], color=GUIDE, ls="none", marker="o", mfc="none", ms=5.5, label="hollow: not solved")]
+    if floor:
+        out.append(Line2D([], [], color=GUIDE, ls="--", lw=0.9, label="floor: factor + solve K"))
+    if tols:
+        out.append(Line2D([], [], color=GUIDE, ls=":", lw=0.9,
+                          label="tier tol: " + ", ".join(f"{k} {v:g}" for k, v in sorted(tols.items(),
+                                                                                   key=lambda kv: -kv[1]))))
+    return out
+
+
+def _log_axes(ax, minor_labels: bool = True) -> None:
+    from matplotlib.ticker import FormatStrFormatter, NullFormatter
+
+    if ax.get_xscale() != "log":     # (setting it again would reset ticks a panel chose)
+        ax.set_xscale("log")
+    if ax.get_yscale() != "log":
+        ax.set_yscale("log")
+    lo, hi = ax.get_xlim()
+    if minor_labels and hi < 10 * lo:     # within one decade: no major tick, so label the minor ones
+        ax.xaxis.set_minor_formatter(FormatStrFormatter("%g"))
+    else:
+        ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.grid(True, which="major", alpha=0.3)
+
+
+def _grid(rows: list[tuple[str, list[str]]], ncols: int):
     import matplotlib.pyplot as plt
 
-    h, lab = [], []
-    for ax in axes:
-        for hh, ll in zip(*ax.get_legend_handles_labels()):
-            if ll not in lab:
-                h.append(hh)
-                lab.append(ll)
-    fig.legend(h, lab, loc="upper center", ncol=min(len(lab), 8), fontsize=8, bbox_to_anchor=(0.5, 1.08))
-    fig.tight_layout()
+    legend_w = 2.3 if len(rows) > 1 else 0.0
+    fig, axes = plt.subplots(len(rows), ncols, figsize=(PANEL_W * ncols + legend_w, PANEL_H * len(rows) + 0.6),
+                             squeeze=False, sharex=True, sharey=True)
+    return fig, axes
 
-    atomic_savefig(fig, figdir / name, dpi=90, bbox_inches="tight")
+
+def _finish(fig, axes, rows, st, curved, guides, ylabel: str, title: str, figdir: Path, name: str,
+            minor_labels: bool = True) -> str:
+    """Row labels, legends outside the panels (per row when faceted, below otherwise), save."""
+    import matplotlib.pyplot as plt
+
+    for i, (fam, members) in enumerate(rows):
+        axes[i][0].set_ylabel(f"{fam}\n{ylabel}" if fam else ylabel)
+        for ax in axes[i]:
+            _log_axes(ax, minor_labels)
+        if len(rows) > 1:
+            axes[i][-1].legend(handles=_legend_handles(members, st, curved, guides if i == 0 else []),
+                               loc="upper left", bbox_to_anchor=(1.03, 1.0), borderaxespad=0.0, title=fam,
+                               frameon=False)
+    fig.suptitle(title, fontsize=10.5)
+    fig.tight_layout()
+    if len(rows) == 1:
+        h = _legend_handles(rows[0][1], st, curved, guides)
+        fig.legend(handles=h, loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=min(len(h), 4), frameon=False)
+    atomic_savefig(fig, figdir / name, dpi=110, bbox_inches="tight")
     plt.close(fig)
     return name
 
 
-def _wp_panel(ax, pts: list[dict], variants, color, floor_t: dict, load: str, N: float, d: float) -> None:
-    """One work-precision panel: error against time, one curve per variant through its tiers."""
-    from matplotlib.ticker import FormatStrFormatter, NullFormatter
-
-    for var in variants:
-        vr = [r for r in pts if r["variant"] == var and math.isfinite(_f(r.get("err_x_energy")))
-              and math.isfinite(_f(r.get("total_s")))]
-        if not vr:
-            continue
-        vr.sort(key=lambda r: -_f(r.get("tol")) if math.isfinite(_f(r.get("tol"))) else 0)
-        x = [_f(r["total_s"]) for r in vr]
-        y = [max(_f(r["err_x_energy"]), 1e-16) for r in vr]
-        ax.plot(x, y, "-", color=color[var], lw=1, alpha=0.7)
-        for r, xi, yi in zip(vr, x, y):
-            ok = r["status"] == "solved"
-            ax.plot([xi], [yi], "o", color=color[var], mfc=color[var] if ok else "none",
-                    label=var if r is vr[0] else None)
-    if N in floor_t:
-        ax.axvline(floor_t[N][1], color="k", ls="--", lw=0.8, label="floor")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    lo, hi = ax.get_xlim()
-    if hi < 10 * lo:     # within one decade: no major tick, so label the minor ones
-        ax.xaxis.set_minor_formatter(FormatStrFormatter("%g"))
-    else:
-        ax.xaxis.set_minor_formatter(NullFormatter())
-    ax.set_title(f"{load} N={N:g} delta={d:g}", fontsize=9)
-    ax.set_xlabel("time (setup + solve) [s]")
-    ax.grid(True, which="major", alpha=0.3)
+def _present(sel: list[dict], curves: dict[tuple[str, str], SolverCurve]) -> list[str]:
+    """The variants with something to draw in ``sel``: a finite point or a curve of one of its scenes."""
+    keys = {str(r.get("scene_key")) for r in sel}
+    out = {r["variant"] for r in sel
+           if math.isfinite(_f(r.get("err_x_energy"))) and math.isfinite(_f(r.get("total_s")))}
+    return sorted(out | {v for (v, k) in curves if k in keys and any(r["variant"] == v for r in sel)})
 
 
-def _scaling_panel(ax, sel: list[dict], variants, color, floor_t: dict, load: str, d: float) -> None:
+def wp_figure(sel: list[dict], deltas: list[float], floor_s: float | None, curves, load: str, N: float,
+              figdir: Path, name: str) -> str:
+    """One work-precision figure (scene ``load``, size N): facets x deltas; returns the file name."""
+    import matplotlib
+
+    members = _present(sel, curves)
+    rows = facets(members) or [("", [])]
+    st = styles(members)
+    tols = {k: v for k, v in _tier_order(sel).items() if math.isfinite(v) and v > 0}
+    with matplotlib.rc_context(RC):
+        fig, axes = _grid(rows, len(deltas))
+        for j, d in enumerate(deltas):
+            pts = [r for r in sel if _f(r.get("scene_delta")) == d or not math.isfinite(d)]
+            for i, (_, mem) in enumerate(rows):
+                _wp_panel(axes[i][j], pts, mem, st, floor_s, curves, tols)
+            axes[0][j].set_title(f"delta = {d:g}")
+            axes[-1][j].set_xlabel("time (setup + solve) [s]")
+        curved = {v for (v, k) in curves if v in members and k in {str(r.get("scene_key")) for r in sel}}
+        return _finish(fig, axes, rows, st, curved, _guides(floor_s is not None, tols),
+                       "rel. energy-norm error of x", f"work-precision: {load}, N = {N:g}", figdir, name)
+
+
+def _scaling_panel(ax, sel: list[dict], members: list[str], st: dict[str, Style], floor_t: dict, d: float) -> None:
     """One scaling panel: time of the tightest solved tier against the unknowns, with the floor."""
-    from matplotlib.ticker import NullFormatter
-
-    for var in variants:
+    for var in members:
         pts = {}
         for r in sel:
             if r["variant"] != var or _f(r.get("scene_delta")) != d or r["status"] != "solved":
@@ -72,58 +242,73 @@ def _scaling_panel(ax, sel: list[dict], variants, color, floor_t: dict, load: st
                 pts[n] = (t, tol)
         if pts:
             ns = sorted(pts)
-            ax.plot(ns, [pts[n][0] for n in ns], "o-", color=color[var], label=var, ms=4)
+            s = st[var]
+            ax.plot(ns, [pts[n][0] for n in ns], color=s.color, ls=s.linestyle, marker=s.marker, ms=5,
+                    mec=s.kwargs()["markeredgecolor"], lw=1.2)
+    ns = sorted({_f(r.get("n_unknowns")) for r in sel if math.isfinite(_f(r.get("n_unknowns")))})
+    if ns:      # label the measured sizes only (the default minor labels crowd a short log axis)
+        from matplotlib.ticker import NullFormatter
+
+        ax.set_xscale("log")
+        ax.set_xticks(ns, [f"{n:g}" for n in ns])
+        ax.xaxis.set_minor_formatter(NullFormatter())
     if floor_t:
         fl = sorted(floor_t.values())
-        ax.plot([a for a, _, _ in fl], [b for _, b, _ in fl], "k--", lw=1.2, label="floor: factor+solve K")
-        ax.plot([a for a, _, _ in fl], [1.5 * b for _, b, _ in fl], "k:", lw=0.8, label="1.5 x floor")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.xaxis.set_minor_formatter(NullFormatter())
-    ax.set_title(f"{load} delta={d:g}", fontsize=9)
-    ax.set_xlabel("unknowns")
-    ax.grid(True, which="major", alpha=0.3)
+        ax.plot([a for a, _, _ in fl], [b for _, b, _ in fl], color=GUIDE, ls="--", lw=1.2)
+        ax.plot([a for a, _, _ in fl], [1.5 * b for _, b, _ in fl], color=GUIDE, ls=":", lw=0.9)
 
 
-def plots(runs, floors, figdir: Path) -> tuple[list[str], list[str]]:
-    """Draw every figure into ``figdir``; returns (work-precision files, scaling files)."""
+def scaling_figure(sel: list[dict], deltas: list[float], floor_t: dict, load: str, figdir: Path, name: str) -> str:
+    """One scaling figure (scene ``load``): facets x deltas; returns the file name."""
+    import matplotlib
+    from matplotlib.lines import Line2D
+
+    members = sorted({r["variant"] for r in sel if r["status"] == "solved"
+                      and math.isfinite(_f(r.get("total_s")))})
+    rows = facets(members) or [("", [])]
+    st = styles(members)
+    guides = ([Line2D([], [], color=GUIDE, ls="--", lw=1.2, label="floor: factor + solve K"),
+               Line2D([], [], color=GUIDE, ls=":", lw=0.9, label="1.5 x floor")] if floor_t else [])
+    with matplotlib.rc_context(RC):
+        fig, axes = _grid(rows, len(deltas))
+        for j, d in enumerate(deltas):
+            for i, (_, mem) in enumerate(rows):
+                _scaling_panel(axes[i][j], sel, mem, st, floor_t, d)
+            axes[0][j].set_title(f"delta = {d:g}")
+            axes[-1][j].set_xlabel("unknowns")
+        return _finish(fig, axes, rows, st, set(), guides, "time [s], tightest solved tier",
+                       f"scaling: {load}", figdir, name, minor_labels=False)
+
+
+def plots(runs: list[dict], floors: list[dict], figdir: Path,
+          curves: list[Curve] | None = None) -> tuple[list[str], list[str]]:
+    """Draw every figure into ``figdir``; returns (work-precision files, scaling files). ``curves``:
+    the sweep's convergence curves (those of error kind ``reference`` are drawn)."""
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     figdir.mkdir(parents=True, exist_ok=True)
-    variants = sorted({r["variant"] for r in runs})
-    cmap = plt.get_cmap("tab10")
-    color = {v: cmap(i % 10) for i, v in enumerate(variants)}
     floor_t = {_f(f.get("scene_N")): (_f(f["n_unknowns"]), _f(f["total_s"]), f["solver"])
                for f in floors if f["status"] in ("solved", "inaccurate")}
     loads = sorted({str(r["scene"]) for r in runs})
     Ns = sorted({_f(r.get("scene_N")) for r in runs if math.isfinite(_f(r.get("scene_N")))})
     deltas = sorted({_f(r.get("scene_delta")) for r in runs if math.isfinite(_f(r.get("scene_delta")))},
                     reverse=True)
-    wp_files, sc_files = [], []
     has = [r for r in runs if r["status"] != "skipped"]
-    for load in loads:     # work-precision: one figure per (scene, N), one panel per delta
+    med = solver_curves(curves or [], has)
+    wp_files, sc_files = [], []
+    for load in loads:     # work-precision: one figure per (scene, N), one panel column per delta
         for N in Ns:
             sel = [r for r in has if r["scene"] == load and _f(r.get("scene_N")) == N]
             if not sel:
                 continue
             ds = [d for d in deltas if any(_f(r.get("scene_delta")) == d for r in sel)] or [float("nan")]
-            fig, axes = plt.subplots(1, len(ds), figsize=(3.6 * len(ds), 3.4), squeeze=False, sharey=True)
-            for ax, d in zip(axes[0], ds):
-                pts = [r for r in sel if _f(r.get("scene_delta")) == d or not math.isfinite(d)]
-                _wp_panel(ax, pts, variants, color, floor_t, load, N, d)
-            axes[0][0].set_ylabel("relative energy-norm error of x")
-            wp_files.append(save_with_legend(fig, axes[0], figdir, f"wp_{load}_N{int(N)}.png"))
-    for load in loads:     # scaling: one figure per scene, one panel per delta
+            fl = floor_t[N][1] if N in floor_t else None
+            wp_files.append(wp_figure(sel, ds, fl, med, load, N, figdir, f"wp_{load}_N{int(N)}.png"))
+    for load in loads:     # scaling: one figure per scene, one panel column per delta
         sel = [r for r in has if r["scene"] == load]
         ds = [d for d in deltas if any(_f(r.get("scene_delta")) == d for r in sel)]
         if not ds or len(Ns) < 2:
             continue
-        fig, axes = plt.subplots(1, len(ds), figsize=(3.6 * len(ds), 3.4), squeeze=False, sharey=True)
-        for ax, d in zip(axes[0], ds):
-            _scaling_panel(ax, sel, variants, color, floor_t, load, d)
-        axes[0][0].set_ylabel("time (setup + solve) [s], tightest solved tier")
-        sc_files.append(save_with_legend(fig, axes[0], figdir, f"scaling_{load}.png"))
+        sc_files.append(scaling_figure(sel, ds, floor_t, load, figdir, f"scaling_{load}.png"))
     return wp_files, sc_files

@@ -22,6 +22,7 @@ from pathlib import Path
 from dualfem.core.errors import InputError
 from dualfem.core.io import atomic_write_text
 from dualfem.experiments.store import read_results
+from dualfem.reports._bench_curves import Curve, curves_from_table
 from dualfem.reports._bench_plots import plots
 from dualfem.reports._bench_rank import rank_table, ranking
 from dualfem.reports._bench_targets import targets
@@ -71,6 +72,20 @@ def load_sources(results: list[str | Path]) -> tuple[list[dict], list[dict]]:
     for i, src in enumerate(sources):
         src["kept"] = sum(r["_source"] == i for r in rows)
     return rows, sources
+
+def load_curves(runs: list[dict], sources: list[dict]) -> list[Curve]:
+    """The convergence curves (``curves.csv``, :mod:`dualfem.experiments.curves`) of the run rows kept in
+    the report: a curve counts only from the results its row was taken from."""
+    from dualfem.experiments.curves import read_curves
+
+    kept = {(str(r.get("run_id")), r["_source"]) for r in runs}
+    out: list[Curve] = []
+    for i, src in enumerate(sources):
+        path = src["dir"] / "curves.csv"
+        if path.is_file():
+            out += [c for c in curves_from_table(read_curves(path)) if (c.run_id, i) in kept]
+    return out
+
 
 def _header(results: list, sources: list[dict], rows: list[dict], command: str) -> list[str]:
     """Title, the command, and one line per merged results directory."""
@@ -215,11 +230,33 @@ def _references(refs: list[dict], sources: list[dict]) -> list[str]:
     return L + [""]
 
 
-def _figures(wp: list[str], sc: list[str], figrel, ok_solvers: list[str]) -> list[str]:
+def _curves_text(curves: list[Curve]) -> str:
+    """What the figures draw of the convergence curves (one sentence), or "" without curves."""
+    if not curves:
+        return (" No run recorded a convergence curve (a sweep with `curves = true` records them for the "
+                "solvers that report their iterates): every solver is drawn as its points.")
+    ref = sorted({c.solver for c in curves if c.error_kind == "reference"})
+    kkt = sum(c.error_kind != "reference" for c in curves)
+    txt = (f" Thick lines: the convergence curves of {', '.join(ref) or 'no solver'} (error of the iterates "
+           "along the solve against the same time axis; per solver and scene, the median over the runs of its "
+           "tightest tier that recorded one, on a common log-time grid, interpolated log-log, the last error "
+           "held after the last sample; shaded: the 25-75 % band when there are several runs). The other "
+           "solvers report no iterates: their tier points are joined by a thin line.")
+    if kkt:
+        txt += (f" {kkt} curves measured by the KKT error (scenes without a certified reference) are not "
+                "drawn: they are another quantity than the y axis.")
+    return txt
+
+
+def _figures(wp: list[str], sc: list[str], figrel, ok_solvers: list[str], curves: list[Curve]) -> list[str]:
     """Work-precision (largest N per scene inline, the others linked) and scaling figures."""
     L = ["## Work-precision", "",
-         "Relative energy-norm error of x against time (setup + solve), one curve per solver through its "
-         "tiers; hollow markers: status not solved; dashed line: the floor. Errors below 1e-16 are drawn at 1e-16."
+         "Relative energy-norm error of x against time (setup + solve, seconds), log-log; markers: the runs "
+         "(one per tolerance tier; hollow: status not solved); dotted horizontal lines: the tiers' tolerances; "
+         "dashed vertical line: the floor. Errors below 1e-16 are drawn at 1e-16. Each solver keeps one "
+         "colour-blind-safe colour + marker (`dualfem.post.style`); with more than 10 solvers, one row of "
+         "panels per solver family (dual, interior point, first-order, active set), shared axes."
+         + _curves_text(curves)
          + (f" The references were computed by {', '.join(ok_solvers)}: that solver's "
             "own runs agree with them by construction (error near 0), their accuracy is the KKT error in the "
             "tier tables." if ok_solvers else ""), ""]
@@ -235,7 +272,7 @@ def _figures(wp: list[str], sc: list[str], figrel, ok_solvers: list[str]) -> lis
         L += ["Other sizes: " + ", ".join(f"[{n[3:-4]}]({figrel}/{n})" for n in others), ""]
     L += ["## Scaling", "",
           "Time of the tightest solved tier against the number of unknowns; dashed: the floor (one "
-          "factorization + one solve of K), dotted: 1.5 x the floor.", ""]
+          "factorization + one solve of K), dotted: 1.5 x the floor. Same styles and facets as above.", ""]
     for name in sc:
         L += [f"![scaling {name[8:-4]}]({figrel}/{name})", ""]
     return L
@@ -277,7 +314,8 @@ def build_report(results: str | Path | list[str | Path], md: str | Path, figdir:
     refs = [r for r in rows if r["kind"] == "reference"]
     floors = [r for r in rows if r["kind"] == "floor"]
     md, figdir = Path(md), Path(figdir)
-    wp, sc = plots(runs, floors, figdir)
+    curves = load_curves(runs, sources)
+    wp, sc = plots(runs, floors, figdir, curves)
     try:
         figrel = figdir.resolve().relative_to(md.parent.resolve())
     except ValueError:
@@ -286,7 +324,7 @@ def build_report(results: str | Path | list[str | Path], md: str | Path, figdir:
     L += _references(refs, sources) + ranking(runs, shift) + ["## Performance targets", ""]
     L += targets(runs, floors, ours, err_target, floor_target, speed_target, tag_sources=len(sources) > 1)
     L.append("")
-    L += _figures(wp, sc, figrel, sorted({r["solver"] for r in refs if r["status"] == "solved"}))
+    L += _figures(wp, sc, figrel, sorted({r["solver"] for r in refs if r["status"] == "solved"}), curves)
     L += _statuses(runs)
     atomic_write_text(md, "\n".join(L) + "\n")
     return md

@@ -50,7 +50,9 @@ def _deformed_section(data: dict, figdir: Path, scale: float, dpi: int) -> list[
     md = ["## Deformed body coloured by von Mises stress (paper Figs 2, 3, 4, 7)\n",
           f"Deformed configuration x + {scale:g} u(x); every triangle (P1: constant stress) coloured by its "
           "von Mises stress in MPa (plane strain: sigma_33 = lambda (eps_11 + eps_22) included); the defect "
-          "faces are drawn in white. Each picture has its own colour scale (maximum in the table below).\n"]
+          "faces are drawn in white outlined in black. Colour map viridis (perceptually uniform, colour-blind safe; "
+          "the stress is >= 0, so no diverging map). Each picture has its own colour scale (maximum in the table "
+          "below).\n"]
     for r in data["rows"]:
         scene, delta = r["scene"], r["delta"]
         qp = cases.qp(scene, delta)
@@ -87,7 +89,7 @@ def _defect_sections(data: dict, figdir: Path, scale: float, dpi: int) -> list[s
                      title=f"f2, delta = {d:g}: faces X + {scale:g} u")
     fig.tight_layout()
     md += ["## Shapes of the two faces (paper Fig. 6)\n",
-           f"f2 at delta = 1e-1 and 1e-5: the upper face (red) and the lower face (blue), x + {scale:g} u, "
+           f"f2 at delta = 1e-1 and 1e-5: the upper face (vermillion) and the lower face (blue), x + {scale:g} u, "
            "with the undeformed defect dashed.\n",
            f"![faces](figures/{_save(fig, figdir / 'faces_f2.png', dpi)})\n"]
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
@@ -130,9 +132,10 @@ def _scenes_section(data: dict, figdir: Path, scale: float, dpi: int) -> list[st
     md = ["## Scenes of the library: inclined, curved, kinked and several defects (gmsh meshes)\n",
           f"Every scene of `scenes/` (`dualfem list`; `dualfem solve NAME`), solved by `{data['exact']}` on its "
           "own gmsh mesh (`mesh_size`, refined to `tip_size` at the tips). Left: the deformed body "
-          f"x + {scale:g} u coloured by the von Mises stress (MPa, own colour scale); both faces of every defect "
-          "in white, the undeformed defect dashed black, the closed nodes (the evaluator's contact set: normal "
-          "jump <= 1e-6 max|x|) as magenta dots on the deformed lower face, each defect's number (its place in "
+          f"x + {scale:g} u coloured by the von Mises stress (MPa, own colour scale, viridis); both faces of every "
+          "defect in white outlined in black, the undeformed defect dashed black, the closed nodes (the "
+          "evaluator's contact set: normal jump <= 1e-6 max|x|) as vermillion dots on the deformed lower face, "
+          "each defect's number (its place in "
           "`[[defects]]`, from 0) beside its first tip. Right: the normal jump [u_nu] along each defect "
           "(in units of 1e-5), s measured from its first tip; the normal is the tangent turned by +90 degrees.\n",
           f"| scene | what | unknowns | defects (delta) | closed nodes per defect | max von Mises (MPa) | "
@@ -161,7 +164,7 @@ def _history_figure(data: dict, scene: str, figdir: Path, dpi: int) -> str:
     runs = [(f"delta = {d:g}", cases.solution(uz["solver"], scene, d)) for d in data["sweep"]]
     F.plot_history(runs, ax=axes[0], key="dual_change", ylabel=KEY_LABEL["dual_change"],
                    title=f"{scene}: Uzawa, N = {data['N']}", logx=True)
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    colors = F.LINE_COLORS
     other = []
     for i, name in enumerate(uz["others"]):
         for d, ls in OTHER_DELTAS:
