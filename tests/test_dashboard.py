@@ -279,21 +279,47 @@ needs_node = pytest.mark.skipif(shutil.which("node") is None, reason="no node bi
 
 @needs_node
 def test_median_curve_and_band(tmp_path):
-    """Three runs' curves: the median and interquartile band at the first and last time, checked by hand."""
+    """Three runs' curves: the median and interquartile band at the first and last time, by hand."""
     curves = [{"t": [1, 2, 4], "e": [1e-1, 1e-3, 1e-6]}, {"t": [1, 3], "e": [1e-2, 1e-8]},
               {"t": [2, 4], "e": [1, None]}]
     b = _node(tmp_path, f"L.medianBand({json.dumps(curves)})")
-    assert len(b["t"]) == 60 and b["t"][0] == pytest.approx(1) and b["t"][-1] == pytest.approx(4)
-    assert np.all(np.diff(np.log(b["t"])) == pytest.approx(np.log(4) / 59))
-    # t = 1: 0.1, 1e-2 and a run not started (+inf): median 0.1, lower quartile between 1e-2 and 0.1
-    assert b["med"][0] == pytest.approx(0.1) and b["lo"][0] == pytest.approx(0.055) and b["hi"][0] is None
-    # t = 4: 1e-6, 1e-8 and the third run's last error with a value (1, its sample at t = 4 has none)
-    assert b["med"][-1] == pytest.approx(1e-6) and b["lo"][-1] == pytest.approx((1e-8 + 1e-6) / 2)
-    assert b["hi"][-1] == pytest.approx((1e-6 + 1) / 2)
-    # the median never rises while no run starts later (all three have started from t = 2 on)
-    later = [m for t, m in zip(b["t"], b["med"]) if t >= 2]
-    assert all(x >= y for x, y in zip(later, later[1:]))
-    assert _node(tmp_path, 'L.medianBand([{"t": [0], "e": [1]}])') is None
+    assert len(b["t"]) == 64 and b["t"][0] == 1 and b["t"][-1] == 4
+    assert np.diff(np.log(b["t"])) == pytest.approx(np.full(63, np.log(4) / 63))
+    # t = 1: two runs started (0.1, 1e-2): the geometric median, quartiles of the logs
+    assert b["n"][0] == 2 and b["med"][0] == pytest.approx(10 ** -1.5)
+    assert b["lo"][0] == pytest.approx(10 ** -1.75) and b["hi"][0] == pytest.approx(10 ** -1.25)
+    # t = 4: 1e-6, 1e-8 (held since t = 3) and 1 (held: the sample at t = 4 has no error)
+    assert b["n"][-1] == 3 and b["med"][-1] == pytest.approx(1e-6)
+    assert b["lo"][-1] == pytest.approx(1e-7) and b["hi"][-1] == pytest.approx(1e-3)
+    assert _node(tmp_path, 'L.medianBand([{"t": [1], "e": [null]}])') is None
+
+
+@needs_node
+def test_median_curve_is_that_of_the_static_figures(tmp_path):
+    """The page's median and band equal dualfem.reports._bench_curves.median_curve on the same curves."""
+    from dualfem.reports._bench_curves import Curve, median_curve
+
+    rng = np.random.default_rng(7)
+    curves = []
+    for k in range(7):
+        n = int(rng.integers(1, 12))
+        t = np.sort(rng.uniform(0.01, 1.0, n)) * 10 ** rng.uniform(-1, 1)
+        t[n // 2:] = np.maximum.accumulate(t[n // 2:])
+        if n > 3:
+            t[2] = t[1]                                  # equal times: the later sample counts
+        e = 10 ** np.sort(rng.uniform(-14, 0, n))[::-1]
+        if k == 3:
+            e[-1] = 0.0                                  # floored at 1e-16
+        curves.append((t, e))
+    want = median_curve([Curve(str(k), "s", "x", "k", "reference", np.arange(len(t)), t, e)
+                         for k, (t, e) in enumerate(curves)])
+    got = _node(tmp_path, "L.medianBand(" + json.dumps([{"t": t.tolist(), "e": e.tolist()} for t, e in curves]) + ")")
+    assert got["t"] == pytest.approx(want.time_s, rel=1e-12)
+    assert got["n"] == want.n_defined.tolist()
+    for key, ref in (("med", want.median), ("lo", want.low), ("hi", want.high)):
+        vals = np.array([np.nan if v is None else v for v in got[key]])
+        assert np.isnan(vals).tolist() == np.isnan(ref).tolist()
+        assert vals[~np.isnan(vals)] == pytest.approx(ref[~np.isnan(ref)], rel=1e-9), key
 
 
 @needs_node

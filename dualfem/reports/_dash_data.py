@@ -15,7 +15,7 @@ What the payload holds (every number as measured; NaN and infinities become ``nu
 * ``targets``: the performance-target checks of ``dualfem report bench``
   (:func:`dualfem.reports._bench_targets.target_checks`);
 * ``solvers``: every solver variant of the input (also those only skipped) with its family and
-  style (:mod:`dualfem.post.style`: Okabe-Ito colours, one marker set per family);
+  plotly style (:meth:`dualfem.post.style.Style.plotly`: Okabe-Ito colours, one marker set per family);
 * ``floors``: the floor (one factorization + one solve of K) per N.
 
 Stress rows (``dualfem stress``) have no tier: they are put in the tier ``declared`` (each solver's own
@@ -48,11 +48,6 @@ STRESS_TIER = "declared"
 #: the columns of a ranking row in the payload (``rank``), in order
 RANK_COLUMNS = ("solver", "runs", "success", "claims", "certified", "over_time", "correct", "agree", "demoted",
                 "flagged", "silent_wrong", "unverified", "sgm", "sgm_rel", "gm_rel")
-#: matplotlib marker (post.style) -> plotly marker symbol
-SYMBOLS = {"o": "circle", "h": "hexagon", "s": "square", "P": "cross", "^": "triangle-up", "v": "triangle-down",
-           "D": "diamond", "X": "x", "*": "star", "p": "pentagon"}
-#: matplotlib line style -> plotly dash
-DASHES = {"-": "solid", "--": "dash", ":": "dot", "-.": "dashdot"}
 
 
 @dataclass
@@ -174,9 +169,9 @@ def _solvers(runs: list[dict]) -> list[dict]:
             skipped[r["variant"]].add(str(r.get("message") or "")[:150])
     out = []
     for n in sorted(names, key=lambda n: (order.index(family(n)), n)):
-        s = st[n]
-        out.append({"name": n, "family": family(n), "color": s.color, "symbol": SYMBOLS.get(s.marker, "circle"),
-                    "dash": DASHES.get(s.linestyle, "solid"), "ran": n in ran,
+        look = st[n].plotly()
+        out.append({"name": n, "family": family(n), "color": look["color"], "symbol": look["symbol"],
+                    "dash": look["dash"], "edge": look["edge"], "ran": n in ran,
                     "skipped": "; ".join(sorted(skipped[n])) if n not in ran else ""})
     return out
 
@@ -210,7 +205,7 @@ def _curves(curves: dict[str, list[dict]]) -> dict[str, dict]:
     out = {}
     for rid, recs in curves.items():
         recs = sorted(recs, key=lambda c: (_f(c["time_s"]), c["iteration"]))
-        out[rid] = {"t": [_num(c["time_s"], 4) for c in recs], "e": [_num(c["error"], 4) for c in recs],
+        out[rid] = {"t": [_num(c["time_s"], 6) for c in recs], "e": [_num(c["error"], 5) for c in recs],
                     "it": [c["iteration"] for c in recs], "kind": recs[0]["error_kind"]}
     return out
 

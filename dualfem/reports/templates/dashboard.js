@@ -47,7 +47,7 @@
     if (pts) shape.setAttribute("points", pts);
     else { shape.setAttribute("cx", "7"); shape.setAttribute("cy", "7"); shape.setAttribute("r", "5"); }
     shape.setAttribute("fill", filled ? s.color : "none");
-    shape.setAttribute("stroke", s.color);
+    shape.setAttribute("stroke", s.edge || s.color);
     shape.setAttribute("stroke-width", "1.5");
     svg.appendChild(shape);
     return svg;
@@ -176,7 +176,7 @@
         mode: oneScene && !curves.length ? "lines+markers" : "markers",
         line: { color: s.color, dash: s.dash, width: 1.5 },
         marker: { color: s.color, size: nMarkers > 400 ? 7 : 9, opacity: nMarkers > 400 ? 0.85 : 1,
-                  line: { color: s.color, width: 1.5 },
+                  line: { color: s.edge || s.color, width: 1.5 },
                   symbol: ks.map((k) => D.statuses[R.status[k]] === "solved" ? s.symbol : s.symbol + "-open") },
         text: ks.map(hover), hovertemplate: "%{text}<extra></extra>",
       });
@@ -219,9 +219,10 @@
     const panelOf = (fam) => panels.length > 1 ? panels.indexOf(fam) + 1 : 1;
     const w = wpTraces(sel, runs, panelOf);
     const curvesNote = Object.keys(D.curves).length ?
-      `Lines: the median across the selected runs of each solver's convergence curve (error of the last sample at ` +
-      `or before each time; a finished run keeps its last error), bands: the ${100 * QLO}-${100 * QHI} % quantiles ` +
-      `(${w.nCurves} curves); markers: the runs' final answers.` :
+      `Lines: at each time, the median over the selected runs started by then of each solver's convergence ` +
+      `curve (interpolated in log time and log error between samples; a finished run keeps its last error), ` +
+      `bands: the ${100 * QLO}-${100 * QHI} % quantiles of log error (${w.nCurves} curves; as the static ` +
+      `figures of 'dualfem report bench'); markers: the runs' final answers.` :
       "These results hold no convergence curves (bench spec key curves = true records them): each run is a point.";
     byId("dash-status").dataset.medianCurves = String(w.nMedians);
     byId("wp-note").textContent = `${w.nPoints} runs of ${w.nSolvers} solvers drawn (runs without a time or this ` +
