@@ -43,7 +43,7 @@ def _cfg(p):
                    help="arguments of that report (see 'dualfem report KIND --help')")
 
 
-@command("report", "regenerate a report in reports/ (KIND: paper, bench, figures, ...)")(_cfg)
+@command("report", "regenerate a report in reports/ (KIND: paper, bench, html, figures, ...)")(_cfg)
 def cmd_report(args) -> int:
     kinds = reports()
     if args.kind == "list":

@@ -99,11 +99,20 @@ def _tier_section(runs: list[dict], tier: str, tol: float, shift: float, deltas:
     return L
 
 
+def tiers_of(runs: list[dict]) -> list[tuple[str, float]]:
+    """The (tier, tolerance) pairs of the runs, loosest first (tolerance-free ``any`` rows are no tier)."""
+    return sorted({(r["tier"], _f(r.get("tol"))) for r in runs if r["tier"] not in ("any", "")}, key=lambda t: -t[1])
+
+
+def deltas_of(runs: list[dict]) -> list[float]:
+    """The deltas of the runs' scenes, largest first."""
+    return sorted({_delta(r) for r in runs if math.isfinite(_delta(r))}, reverse=True)
+
+
 def ranking(runs: list[dict], shift: float) -> list[str]:
     """The section ``Per tolerance tier``: a ranked table per tier, then per delta within it."""
-    tiers = sorted({(r["tier"], _f(r.get("tol"))) for r in runs if r["tier"] not in ("any", "")},
-                   key=lambda t: -t[1])
-    deltas = sorted({_delta(r) for r in runs if math.isfinite(_delta(r))}, reverse=True)
+    tiers = tiers_of(runs)
+    deltas = deltas_of(runs)
     L = ["## Per tolerance tier and delta", "", DEFINITION + " " + SUCCESS, "",
          f"Solvers are ranked by success rate, then by the shifted geometric mean of time (shift {shift:g} s; a run "
          "that is not a success counts at its time limit), then by correct rate. *wrong claims* splits the checkable "
