@@ -35,3 +35,21 @@ def ints(text: str, name: str) -> list[int]:
 def progress(msg: str) -> None:
     """One progress line on stderr."""
     print(msg, file=sys.stderr, flush=True)
+
+
+def add_target_args(p) -> None:
+    """``--ours``, ``--shift``, ``--error``: the performance-target options of ``report bench`` and ``report html``."""
+    from dualfem.reports._bench_util import OURS
+
+    p.add_argument("--ours", default=",".join(OURS), help="comma-separated solvers checked against the targets")
+    p.add_argument("--shift", type=float, default=10.0, help="shift of the geometric mean in seconds (10)")
+    p.add_argument("--error", type=float, default=1e-8, help="equal-error level of the targets (1e-8)")
+
+
+def target_args(a) -> dict:
+    """The checked target options as keyword arguments: ``ours`` (list), ``shift``, ``err_target``."""
+    if not (a.shift >= 0 and math.isfinite(a.shift)):
+        raise InputError(f"--shift must be a finite number >= 0, got {a.shift}")
+    if not (a.error > 0 and math.isfinite(a.error)):
+        raise InputError(f"--error must be a finite number > 0, got {a.error}")
+    return {"ours": [s for s in a.ours.split(",") if s], "shift": a.shift, "err_target": a.error}

@@ -5,14 +5,12 @@ Reads the results and writes the report with :func:`dualfem.reports.bench.build_
 from __future__ import annotations
 
 import argparse
-import math
 import shlex
 import sys
 from pathlib import Path
 
 from dualfem.cli.report import register_report
-from dualfem.core.errors import InputError
-from dualfem.reports._bench_util import OURS
+from dualfem.cli.reports._args import add_target_args, target_args
 
 
 @register_report("bench", "benchmark report (work-precision, scaling, tiers) from a 'dualfem bench' results.csv")
@@ -28,21 +26,14 @@ def run(argv: list[str]) -> int:
                    help="markdown output (default dualfem-results/reports/benchmark.md; reports/benchmark.md for the "
                         "committed one)")
     p.add_argument("--figdir", default=None, help="figure directory (default: bench/ beside --md)")
-    p.add_argument("--ours", default=",".join(OURS),
-                   help="comma-separated solvers checked against the targets")
-    p.add_argument("--shift", type=float, default=10.0, help="shift of the geometric mean in seconds (10)")
-    p.add_argument("--error", type=float, default=1e-8, help="equal-error level of the targets (1e-8)")
+    add_target_args(p)
     try:
         a = p.parse_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0)
-    if not (a.shift >= 0 and math.isfinite(a.shift)):
-        raise InputError(f"--shift must be a finite number >= 0, got {a.shift}")
-    if not (a.error > 0 and math.isfinite(a.error)):
-        raise InputError(f"--error must be a finite number > 0, got {a.error}")
+    targets = target_args(a)
     cmd = "dualfem report bench " + " ".join(shlex.quote(x) for x in argv)
     figdir = a.figdir or str(Path(a.md).parent / "bench")
-    md = build_report(a.results, a.md, figdir, ours=[s for s in a.ours.split(",") if s], shift=a.shift,
-                      err_target=a.error, command=cmd)
+    md = build_report(a.results, a.md, figdir, command=cmd, **targets)
     print(f"wrote {md} and figures in {figdir}", file=sys.stderr)
     return 0
