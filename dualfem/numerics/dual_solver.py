@@ -1,7 +1,9 @@
 """Base class of the solver plugins that work on the contact dual through a :class:`DualOperator`.
 
-:class:`DualOperatorSolver` adds the parameters ``operator`` (``auto`` | ``dense`` | ``matrix_free``,
-:data:`dualfem.numerics.dual_operator.OPERATORS`) and ``factor`` (the factorization backend) to a
+:class:`DualOperatorSolver` adds the parameters ``operator`` (``auto`` | ``dense`` | ``matrix_free`` |
+``amg``, :data:`dualfem.numerics.dual_operator.OPERATORS`; ``amg``: matrix-free with K-solves by
+AMG-preconditioned CG to 1e-3 x the solver's declared tolerance, :mod:`dualfem.numerics.amg`) and
+``factor`` (the factorization backend) to a
 :class:`~dualfem.core.solver.Solver`; ``skip`` answers with the operator choice's refusal (a QP for
 which no operator fits the memory), ``setup`` builds ``self.op`` (:func:`make_operator`) and
 publishes the dense path's :class:`~dualfem.numerics.linalg.LocalReduction` as ``self.reduction``
@@ -36,5 +38,5 @@ class DualOperatorSolver(Solver):
 
     def setup(self, qp) -> None:
         self.qp = qp
-        self.op = make_operator(qp, self.params["operator"], factor=from_param(self))
+        self.op = make_operator(qp, self.params["operator"], factor=from_param(self), tol=self.tolerance)
         self.reduction = self.op.reduction
