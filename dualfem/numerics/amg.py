@@ -113,12 +113,16 @@ class AmgKSolve:
     backend = "amg"
 
     def __init__(self, K: sp.spmatrix, modes: np.ndarray | None = None, rtol: float = RTOL):
+        from dualfem.numerics.threads import ensure_threads
+
         pyamg = require_pyamg()
+        ensure_threads()       # OpenBLAS on one thread: CG's vector operations with two spinning threads lost 100x
         t0 = time.perf_counter()
         self.K = sp.csr_matrix(K, dtype=float)
         self.n = self.K.shape[0]
         self.rtol = float(rtol)
-        self.ml = pyamg.smoothed_aggregation_solver(self.K, B=modes, symmetry="hermitian", max_coarse=500)
+        self.ml = pyamg.smoothed_aggregation_solver(self.K, B=modes, symmetry="hermitian", max_coarse=500,
+                                                     coarse_solver="splu")
         self.M = self.ml.aspreconditioner(cycle="V")
         self.counters = AmgCounters()
         self.counters.time_s["setup"] = time.perf_counter() - t0

@@ -30,7 +30,7 @@ Two implementations:
   (Jacobi, warm-started), whose iterations are counted. Its K-solves (``ksolve``) are the factorization
   (``"factor"``) or, where no factorization of K fits (3D), CG preconditioned by smoothed-aggregation AMG
   with the rigid-body modes (``"amg"``, :mod:`dualfem.numerics.amg`; the ``operator="amg"`` of the dual
-  solvers) to a relative residual :attr:`MatrixFreeDualOperator.k_rtol` (:func:`dualfem.numerics.amg.
+  solvers) to a relative residual ``k_rtol`` (:func:`dualfem.numerics.amg.
   inner_rtol` of the solver's declared tolerance: 1e-3 x it), so D v, b0 and x(mu) are known to about that
   accuracy (:attr:`DualOperator.accuracy`) instead of to rounding.
 
