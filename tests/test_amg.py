@@ -194,3 +194,17 @@ def test_newton_matrix_by_amg():
     assert _energy_rel(qp, z, spla.spsolve(H, qp.F)) < 1e-8
     nm.solve(c, qp.F)
     assert nm.counters.factorizations == 1 and nm.counters.reuses == 1 and nm.info()["newton_backend"] == "amg"
+
+
+def test_check_fits_before_assembly_knows_3d_and_amg():
+    class Scene:
+        dim = 3
+
+        def size_estimate(self):
+            return 670_000, "a 3D scene"
+
+    memory.check_fits(Scene(), max_bytes=16e9)            # the factor does not fit, one AMG hierarchy does
+    with pytest.raises(InputError, match="a 3D scene"):
+        memory.check_fits(Scene(), max_bytes=2e9)         # neither
+    Scene.dim = 2
+    memory.check_fits(Scene(), max_bytes=16e9)            # 2D: the factorization fits

@@ -178,21 +178,40 @@ def amg_installed() -> bool:
     return importlib.util.find_spec("pyamg") is not None
 
 
+def _problem_dim(problem, est: tuple) -> int:
+    """The scene's dimension: a third entry of ``size_estimate()``, else ``problem.dim``, else
+    ``problem.params["dim"]``, else 2."""
+    if len(est) > 2:
+        return int(est[2])
+    d = getattr(problem, "dim", None)
+    if d is None and isinstance(getattr(problem, "params", None), dict):
+        d = problem.params.get("dim")
+    try:
+        return 3 if int(d) == 3 else 2
+    except (TypeError, ValueError):
+        return 2
+
+
 def check_fits(problem, max_bytes: float | None = None, backend: str | None = None) -> None:
-    """InputError naming the size, the estimate and the memory when a scene cannot fit (before assembly)."""
+    """InputError naming the size, the estimate and the memory when a scene cannot fit (before assembly).
+    3D scenes (:func:`_problem_dim`) use the 3D factor model and pass when the AMG K-solve fits."""
 
     est = problem.size_estimate() if hasattr(problem, "size_estimate") else None
     if est is None:
         return
-    n, label = est
+    n, label = est[0], est[1]
     backend = backend or get_default()
-    dim = int(getattr(problem, "dim", 2) or 2)
+    dim = _problem_dim(problem, est)
     limit = None if max_bytes is None else int(max_bytes)
     ok, need, have = fits(n, backend, limit, dim=dim)
     if not ok and dim == 3 and amg_installed():      # 3D: where no factorization fits, the AMG K-solve may
         ok = fits(n, "amg", limit, dim=3)[0]
     if not ok:
+        alt = ""
+        if dim == 3:
+            alt = (f" or about {fits(n, 'amg', limit, dim=3)[1] / 1e9:.0f} GB with the AMG K-solve"
+                   + ("" if amg_installed() else " (pip install 'dualfem[amg]')"))
         raise InputError(f"{label} ({n / 1e6:.1f} M unknowns) needs about {need / 1e9:.0f} GB of memory with the "
-                         f"{backend} factorization (estimate x {SAFETY:g}), "
+                         f"{backend} factorization{alt} (estimate x {SAFETY:g}), "
                          f"{'allowed' if max_bytes is not None else 'available'}: {have / 1e9:.1f} GB; use a smaller "
                          f"size, or --max-memory GB to override")
