@@ -118,8 +118,11 @@ class KSolver:
     ``QP.store``, :func:`dualfem.numerics.linalg.store_of`); the matrix-free operator
     (:class:`dualfem.numerics.dual_operator.MatrixFreeDualOperator`: one factorization of the whole K,
     found in the same store when a matrix-free solver made it, D_AA^-1 by preconditioned CG) when the
-    dense reduction does not fit (:func:`dualfem.numerics.dual_operator.choose_operator`); a plain sparse
-    factorization of K (D by m solves for m <= 2000) when the QP has no usable local structure."""
+    dense reduction does not fit (:func:`dualfem.numerics.dual_operator.choose_operator`); the matrix-free
+    operator with AMG K-solves (``ksolve="amg"``, or auto when no factorization of K fits: the hierarchy
+    from the QP's store, solves to :data:`CERT_K_RTOL`, their true residuals recorded for the widened
+    bounds of the module docstring); a plain sparse factorization of K (D by m solves for m <= 2000) when
+    the QP has no usable local structure."""
 
     def __init__(self, qp: QP, factor=None, reduction=None, ksolve: str = "auto"):
         from dualfem.numerics.dual_operator import MatrixFreeDualOperator, choose_operator
