@@ -54,22 +54,23 @@ CALIBRATION = {
 #: RSS increase above (same runs): the report is scaled by the largest ratio of the runs with
 #: n >= 1e5 (1.42 at N = 256; 1.20 at N = 2048) when it refines the estimate
 PARDISO_REPORT = [(131838, 166, 236), (525822, 671, 911), (2100222, 2927, 3594), (8394750, 12597, 15076)]
-#: 3D, P1 tetrahedra (unit cube, clamped base): (n unknowns, nnz(L) of PARDISO with METIS): 14 k measured by
-#: iparm[17] here (tests/_three_d_qp.py, N = 16), the others /work/shared/notes/performance.md (45 k, 148 k,
-#: 346 k); the fit is 6.6 n^1.42 (670 k: 1.25e9 predicted)
-CALIBRATION_3D = [(13872, 5.04e6), (45000, 2.69e7), (148000, 1.5e8), (346000, 4.8e8)]
-#: bytes of peak RSS per entry of L: PARDISO's own peak report is 10-11 bytes per nnz(L) in 3D (N = 16, 24:
-#: 56 MB for 5.0e6, 271 MB for 2.7e7), 8 bytes per value plus indices and its copy of the matrix; x 1.2 the
-#: RSS/report ratio measured in 2D at large n (PARDISO_REPORT); the measured 3D peaks (5.7 GB at 346 k with
-#: the QP and scikit-fem's assembly) are below 12 x nnz(L) = 5.8 GB, so this over-estimates a little
+#: 3D, P1 tetrahedra (unit cube, clamped base): (n unknowns, nnz(L) of PARDISO with METIS): 14 k, 45 k and
+#: 148 k measured by iparm[17] here (tests/_three_d_qp.py, N = 16, 24, 36), 346 k from
+#: /work/shared/notes/performance.md; the fit is ~6.6 n^1.42 (670 k: ~1.2e9 predicted)
+CALIBRATION_3D = [(13872, 5.04e6), (45000, 2.69e7), (147852, 1.456e8), (346000, 4.8e8)]
+#: bytes of peak RSS per entry of L: PARDISO's own peak report is 9-11 bytes per nnz(L) in 3D (N = 16, 24,
+#: 36: 56 MB for 5.0e6, 271 MB for 2.7e7, 1.35 GB for 1.46e8), 8 bytes per value plus indices and its copy of
+#: the matrix; the measured RSS increase of factor + solve at 148 k was 1.39 GB (10.0 bytes per entry), and
+#: 5.7 GB at 346 k for the whole process (scikit-fem's assembly included) is below 12 x 4.8e8: 12 keeps ~20 %
 BYTES_PER_NNZ_L = 12.0
 #: the 3D build's per-unknown slope relative to the 2D fit (nnz per row of K: 81 against 18)
 BUILD_3D_FACTOR = 4.5
 #: extra peak of the AMG K-solve per unknown: the pyamg hierarchy (operator complexity ~1.5 with 6 rigid
 #: modes: the tentative and smoothed prolongators hold 6 columns per aggregate) and CG's vectors. Measured
-#: here: 87 MB at 86 k unknowns (1.0 kB per unknown); /work/shared/notes/performance.md: 4.2 GB at 346 k and
-#: 8 GB at 670 k for the whole process (scikit-fem assembly included); 2 kB keeps a margin
-AMG_BYTES_PER_UNKNOWN = 2048
+#: here (RSS increase of setup + one solve): 87 MB at 86 k unknowns, 333 MB at 148 k (2.25 kB per unknown);
+#: /work/shared/notes/performance.md: 4.2 GB at 346 k and 8 GB at 670 k for the whole process (scikit-fem's
+#: assembly included); 3 kB keeps a margin
+AMG_BYTES_PER_UNKNOWN = 3072
 #: multiply the estimate by this before comparing with the available memory (the least-squares
 #: fit follows the large runs: 18.1 GB estimated for 18.0 GB measured at N = 2048; it
 #: under-estimates N = 512 by 12 % and N = 256 (a 0.37 GB peak) by 13 %)
