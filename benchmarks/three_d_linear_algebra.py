@@ -7,6 +7,9 @@ Per size N and path, a fresh worker process (so its peak RSS is that path's) bui
 * ``floor``: the fastest factorization + one solve of K (PARDISO) when the 3D memory model
   (:func:`dualfem.numerics.memory.factor_bytes`, ``dim=3``) says it fits, else one AMG-CG solve
   (hierarchy setup + CG to 1e-8);
+* ``newton:amg``: :func:`dualfem.numerics.amg.full_space_newton` (semismooth Newton on all unknowns, its
+  K + B_A' C B_A systems by AMG-preconditioned CG; not a plugin) plus the certificate through the AMG
+  K-solves (:class:`dualfem.numerics.certify.KSolver` with ``ksolve="amg"``) and the evaluator's residuals;
 * ``<solver>:<operator>``: the solver through :func:`dualfem.experiments.runner.run` (setup, solve and
   certification, the runner's own KSolver: a factorization where one fits, else AMG-CG), e.g.
   ``pdas:amg``, ``pdas:matrix_free``, ``pdas:dense``; refused paths (the memory model) are reported.
@@ -33,7 +36,8 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-PATHS = ("floor", "pdas:dense", "pdas:matrix_free", "pdas:amg", "mprgp:amg", "uzawa_auto:amg", "penalty:amg")
+PATHS = ("floor", "newton:amg", "pdas:dense", "pdas:matrix_free", "pdas:amg", "mprgp:amg", "uzawa_auto:amg",
+         "penalty:amg")
 
 
 def _peak_mb() -> float:
@@ -62,6 +66,23 @@ def _floor(qp) -> dict:
             "amg_iterations": a.counters.iterations}
 
 
+def _newton(qp) -> dict:
+    from dualfem.core.evaluator import RESIDUALS, residuals
+    from dualfem.numerics.amg import full_space_newton
+    from dualfem.numerics.certify import KSolver, certified_error
+
+    t0 = time.perf_counter()
+    r = full_space_newton(qp)
+    t1 = time.perf_counter()
+    cert = certified_error(qp, r.x, r.mu, KSolver(qp, ksolve="amg"))
+    res = residuals(qp, r.x, r.mu)
+    t2 = time.perf_counter()
+    ok = r.converged and max(res[k] for k in RESIDUALS) <= 1e-9 and cert["value"] <= 1e-9
+    return {"status": "certified" if ok else f"not certified ({r.message})", "setup": 0.0, "solve": t1 - t0,
+            "certify": t2 - t1, "certificate": cert["value"], "amg_iterations": r.cg_iterations,
+            "k_solves": r.al_steps, "message": f"{r.newton_steps} Newton steps, {r.hierarchies} hierarchies"}
+
+
 def worker(N: int, path: str) -> dict:
     """One row: build the QP of size N and run ``path`` (in this process)."""
     sys.path.insert(0, str(REPO / "tests"))
@@ -74,6 +95,8 @@ def worker(N: int, path: str) -> dict:
     row: dict = {"N": N, "n": qp.n, "m": qp.m, "path": path, "assembly": time.perf_counter() - t0}
     if path == "floor":
         row.update(_floor(qp))
+    elif path == "newton:amg":
+        row.update(_newton(qp))
     else:
         solver, op = path.split(":")
         s = run(solver, qp, {"operator": op})
@@ -124,8 +147,9 @@ def main() -> int:
         if not 2 <= N <= 200:
             ap.error(f"--N must lie in [2, 200], got {N}")
     for p in a.paths:
-        if p != "floor" and (":" not in p or p.split(":")[1] not in ("auto", "dense", "matrix_free", "amg")):
-            ap.error(f"--paths: 'floor' or SOLVER:OPERATOR (operator auto, dense, matrix_free, amg), got {p!r}")
+        ops = ("auto", "dense", "matrix_free", "amg")
+        if p not in ("floor", "newton:amg") and (":" not in p or p.split(":")[1] not in ops):
+            ap.error(f"--paths: 'floor', 'newton:amg' or SOLVER:OPERATOR (operator {', '.join(ops)}), got {p!r}")
     rows_file = a.out.with_suffix(".rows.jsonl")
     rows = [json.loads(line) for line in rows_file.read_text().splitlines() if line.strip()] \
         if rows_file.exists() else []

@@ -176,7 +176,7 @@ def test_certificate_without_a_factorization():
 
 def test_runner_certifies_on_amg_when_no_factorization_fits(monkeypatch):
     monkeypatch.setattr(memory, "AMG_BYTES_PER_UNKNOWN", 1024)        # as in the test above
-    qp = box_qp(12)
+    qp = box_qp(10)
     est = dop.estimates(qp)
     monkeypatch.setattr(memory, "available_bytes", lambda: (est["amg"] + est["matrix_free"]) // 2)
     s = run("pdas", qp, {})
@@ -213,3 +213,31 @@ def test_check_fits_before_assembly_knows_3d_and_amg():
         memory.check_fits(Scene(), max_bytes=2e9)         # neither
     Scene.dim = 2
     memory.check_fits(Scene(), max_bytes=16e9)            # 2D: the factorization fits
+
+
+def test_full_space_newton_by_amg_is_certified():
+    from dualfem.numerics.amg import full_space_newton
+
+    qp = _qp()
+    ref = run("pdas", qp, {"operator": "dense"})
+    r = full_space_newton(qp)
+    assert r.converged and r.message == "active set settled", r.message
+    assert 1 <= r.newton_steps <= 10 and r.hierarchies == r.newton_steps and r.al_steps >= r.newton_steps
+    assert _energy_rel(qp, r.x, ref.x) < 1e-10
+    assert np.abs(r.mu - ref.multipliers).max() < 1e-9 * np.abs(ref.multipliers).max()
+    c = certified_error(qp, r.x, r.mu, KSolver(qp, ksolve="amg"))
+    assert c["value"] < 1e-9 and c["multipliers"] < 1e-9
+    capped = full_space_newton(qp, max_newton=1)          # one step is not the answer here: said so
+    assert not capped.converged and "no convergence" in capped.message
+
+
+@pytest.mark.parametrize("delta", [1e-5, 1e-9])
+def test_full_space_newton_on_a_2d_scene(delta):
+    from dualfem.core.scene import load_scene
+    from dualfem.numerics.amg import full_space_newton
+
+    qp = load_scene("f2", {"N": 32, "delta": delta}).build()      # 3 rigid modes from the 2D geometry
+    r = full_space_newton(qp)
+    ref = run("pdas", qp, {"operator": "dense"})
+    assert r.converged and _energy_rel(qp, r.x, ref.x) < 1e-9
+    assert certified_error(qp, r.x, r.mu, KSolver(qp, ksolve="amg"))["value"] < 1e-9

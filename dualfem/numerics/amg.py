@@ -37,7 +37,8 @@ import scipy.sparse as sp
 from dualfem.core.errors import MissingDependency, install_hint
 from dualfem.numerics.pcg import pcg
 
-__all__ = ["AmgKSolve", "AmgCounters", "amg_for", "inner_rtol", "rigid_body_modes", "require_pyamg"]
+__all__ = ["AmgKSolve", "AmgCounters", "FullSpaceResult", "amg_for", "full_space_newton", "inner_rtol",
+           "rigid_body_modes", "require_pyamg"]
 
 #: the K-solve's relative residual per unit of the outer (dual solver's) relative tolerance
 INNER_RATIO = 1e-3
@@ -179,7 +180,12 @@ class AmgKSolve:
             if self.n <= 64:
                 theta = float(np.linalg.eigvalsh(self.K.toarray())[0])
             else:
-                w = spla.lobpcg(self.K, X, M=self.M, largest=False, tol=1e-4, maxiter=100)[0]
+                import warnings
+
+                scale = float(np.abs(self.K.diagonal()).max())
+                with warnings.catch_warnings():       # not converged to tol: the Ritz value is still an upper one
+                    warnings.simplefilter("ignore", UserWarning)
+                    w = spla.lobpcg(self.K, X, M=self.M, largest=False, tol=1e-6 * scale, maxiter=100)[0]
                 theta = float(np.min(w))
             self._lam = max(theta, 0.0) / LAMBDA_SAFETY
             self.counters.time_s["lambda_min"] = time.perf_counter() - t0
@@ -209,3 +215,93 @@ def amg_for(qp, store=None, rtol: float = RTOL) -> AmgKSolve:
         hit = AmgKSolve(K, rigid_body_modes(qp.geometry, qp.n), rtol)
         store.put(key, hit)      # type: ignore[arg-type]  (the store holds any K-solver by key)
     return hit  # type: ignore[return-value]
+
+
+# --------------------------------------------------------------------------- full-space semismooth Newton
+#: the augmented-Lagrangian penalty of :func:`full_space_newton`: C_j = AL_SCALE / D_jj (lumped) on the active
+#: set, so each AL step divides the constraint error by ~1 + AL_SCALE lambda_min(Jacobi-scaled D_AA)
+AL_SCALE = 1e3
+
+
+@dataclass
+class FullSpaceResult:
+    """What :func:`full_space_newton` returns: the displacements, the contact forces (mu >= 0, K x - F = B'mu
+    to the CG residual), whether the active set settled, and the work done."""
+
+    x: np.ndarray
+    mu: np.ndarray
+    converged: bool
+    newton_steps: int = 0
+    al_steps: int = 0
+    hierarchies: int = 0
+    cg_iterations: int = 0
+    message: str = ""
+    time_s: dict = field(default_factory=dict)
+
+
+def lumped_delassus_diagonal(K: sp.csr_matrix, B: sp.csr_matrix) -> np.ndarray:
+    """|b_j|^4 / (b_j'K b_j): a lower bound of D_jj = b_j'K^-1 b_j (Cauchy-Schwarz), no solve."""
+    bb = np.asarray(B.multiply(B).sum(axis=1)).ravel()
+    bKb = np.asarray((B @ K).multiply(B).sum(axis=1)).ravel()
+    d = np.where(bKb > 0, bb ** 2 / np.where(bKb > 0, bKb, 1.0), 0.0)
+    pos = d[d > 0]
+    return np.where(d > 0, d, pos.mean() if pos.size else 1.0)
+
+
+def full_space_newton(qp, tol: float = 1e-12, rtol: float = 1e-11, max_newton: int = 50, max_al: int = 30,
+                      al_scale: float = AL_SCALE) -> FullSpaceResult:
+    """Semismooth Newton (primal-dual active set) on all unknowns, without a factorization and without D.
+
+    Step k: the active set A = {mu - c B x > 0} (c = 1 / mean of the lumped diag D), then the KKT system
+    ``K x - B_A' mu_A = F, B_A x = 0`` (mu = 0 off A) by the augmented Lagrangian on
+    ``H = K + B_A' C B_A`` (C = ``al_scale`` / D_jj lumped): x = H^-1 (F + B_A' lam), lam <- lam - C B_A x,
+    each H^-1 by CG preconditioned with a smoothed-aggregation hierarchy of H (rigid-body modes; one per
+    Newton step) to ``rtol``, warm-started, until max|B_A x| <= ``tol`` max|x|. Stops when the active set
+    repeats (then mu_A > 0 and B x >= 0 off A: the KKT conditions hold to the inner accuracy). At the end
+    ``K x - F - B'mu`` is H's CG residual. Measured on tests/_three_d_qp.py: 3-5 Newton steps, 3-4 AL steps
+    each (14 k unknowns: 1.6 s; 148 k: 35 s, against ~100 AMG K-solves of pdas on the amg operator).
+    Not a solver plugin (yet): the caller certifies the answer (:mod:`dualfem.numerics.certify`)."""
+    t0 = time.perf_counter()
+    K, B, F = sp.csr_matrix(qp.K), sp.csr_matrix(qp.B), np.asarray(qp.F, float)
+    modes = rigid_body_modes(qp.geometry, qp.n)
+    dD = lumped_delassus_diagonal(K, B)
+    c = 1.0 / dD.mean() if dD.size else 1.0
+    x = amg_for(qp).solve(F, rtol=rtol)
+    mu = np.zeros(qp.m)
+    out = FullSpaceResult(x, mu, False)
+    seen: set[bytes] = set()
+    last = b""
+    for k in range(max_newton + 1):
+        A = (mu - c * (B @ x)) > 0
+        key = np.packbits(A).tobytes()
+        if k and key in seen:
+            out.converged = key == last
+            out.message = ("active set settled" if out.converged else
+                           f"active set cycles (a set of step {k} met before)")
+            break
+        if k == max_newton:
+            out.message = f"no convergence in {max_newton} Newton steps"
+            break
+        seen.add(key)
+        last = key
+        out.newton_steps += 1
+        if not A.any():
+            x, mu = amg_for(qp).solve(F, x0=x, rtol=rtol), np.zeros(qp.m)
+            continue
+        C = np.where(A, al_scale / dD, 0.0)
+        H = (K + B.T @ sp.diags(C) @ B).tocsr()
+        h = AmgKSolve(H, modes, rtol)
+        out.hierarchies += 1
+        lam = np.where(A, mu, 0.0)
+        for _ in range(max_al):
+            x = h.solve(F + B.T @ lam, x0=x)
+            out.al_steps += 1
+            r = B @ x
+            lam = np.where(A, lam - C * r, 0.0)
+            if np.abs(r[A]).max(initial=0.0) <= tol * max(np.abs(x).max(initial=0.0), 1e-300):
+                break
+        out.cg_iterations += h.counters.iterations
+        mu = lam
+    out.x, out.mu = x, np.maximum(mu, 0.0)
+    out.time_s["total"] = time.perf_counter() - t0
+    return out

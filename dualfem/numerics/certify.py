@@ -152,6 +152,15 @@ class KSolver:
             if hints is not None:
                 self.op._diag = hints.diagonal
                 self.op.face_preconditioner = hints.face_preconditioner
+            if kind == "amg":
+                # no factorization: D_AA^-1 by the augmented Lagrangian on K + B_A'C B_A (one AMG hierarchy, a
+                # few CG solves: 13 K-solves against 31 by CG on D_AA, 14 k unknowns), and the lumped diagonal
+                # of D (no sampled solves) unless the solver's operator knew a better one
+                from dualfem.numerics.amg import lumped_delassus_diagonal
+
+                self.op.face = "factor"
+                if self.op._diag is None:
+                    self.op._diag = lumped_delassus_diagonal(qp.K.tocsr(), qp.B.tocsr())
             return
         try:
             self.red = LocalReduction(qp, factor=factor)
