@@ -241,3 +241,9 @@ def test_full_space_newton_on_a_2d_scene(delta):
     ref = run("pdas", qp, {"operator": "dense"})
     assert r.converged and _energy_rel(qp, r.x, ref.x) < 1e-9
     assert certified_error(qp, r.x, r.mu, KSolver(qp, ksolve="amg"))["value"] < 1e-9
+
+
+def test_operator_amg_without_pyamg_is_a_skip_naming_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyamg", None)
+    s = run("pdas", _qp(), {"operator": "amg"})
+    assert str(s.status) == "skipped" and "dualfem[amg]" in s.message

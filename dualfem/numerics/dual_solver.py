@@ -12,7 +12,7 @@ certificate in the QP's store). Plugins import it from here, never from each oth
 """
 from __future__ import annotations
 
-from dualfem.core.errors import InputError
+from dualfem.core.errors import InputError, MissingDependency
 from dualfem.core.solver import Solver
 from dualfem.numerics.dual_operator import OPERATORS, DualOperator, check_operator, choose_operator, make_operator
 from dualfem.numerics.factor import from_param
@@ -32,7 +32,7 @@ class DualOperatorSolver(Solver):
     def skip(self, qp) -> str | None:
         try:
             choose_operator(qp, self.params["operator"], backend=from_param(self))
-        except InputError as exc:
+        except (InputError, MissingDependency) as exc:    # no operator fits; operator=amg without pyamg
             return str(exc)
         return None
 
