@@ -167,7 +167,7 @@ class DualOperator(ABC):
     #: the exact LocalReduction (dense operator) for refinement and the certificate, else None
     reduction = None
     #: relative accuracy of the K-solves behind apply / b0 / x_of (0: a factorization, exact to rounding;
-    #: the AMG K-solve's relative residual otherwise): solvers do not stop below what it allows
+    #: the AMG K-solve's relative residual otherwise; reported, so a caller can see what it may ask for)
     accuracy: float = 0.0
     #: why this operator was chosen (set by :func:`make_operator`)
     chosen_because: str = ""
