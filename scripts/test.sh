@@ -6,7 +6,7 @@ set -uo pipefail
 cd "$(dirname "$0")/.."
 . scripts/_env.sh
 "$PY" -m pip install -q --upgrade pip >/dev/null || exit 1
-EXTRAS="test,parallel,xdmf,gmsh,analysis,testset,html"
+EXTRAS="test,parallel,xdmf,gmsh,analysis,testset,html,amg"
 case "$(uname -m)" in x86_64|AMD64) EXTRAS="$EXTRAS,pardiso" ;; esac   # MKL PARDISO wheels: x86-64 only
 "$PY" -m pip install -q -e ".[$EXTRAS]" || exit 1
 # the qpsolvers backends (qp_<backend> solvers): tested where they install; a backend without a wheel

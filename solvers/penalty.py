@@ -138,7 +138,8 @@ class _SparseSpace:
     def __init__(self, op, qp, factor=None, keep: int = 4):
         self.qp, self.op = qp, op
         self.Q, self.q, self.B = qp.K.tocsr(), np.asarray(qp.F, float), op.B
-        self.nm = NewtonMatrix(qp.K, qp.B, factor, keep=keep)
+        self.nm = op.newton_matrix(keep) if getattr(op, "ksolve", "factor") == "amg" \
+            else NewtonMatrix(qp.K, qp.B, factor, keep=keep)
         self.I = np.asarray(qp.local_dofs) if np.size(qp.local_dofs) else slice(None)
         self.refinements = 0
 

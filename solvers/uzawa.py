@@ -276,7 +276,8 @@ class _SparseSpace:
     def __init__(self, qp, op, factor: str | None = None, keep: int = 4):
         self.qp, self.op = qp, op
         self.Q, self.q, self.B = qp.K.tocsr(), np.asarray(qp.F, float), op.B
-        self.nm = NewtonMatrix(qp.K, qp.B, factor, keep=keep)
+        self.nm = op.newton_matrix(keep) if getattr(op, "ksolve", "factor") == "amg" \
+            else NewtonMatrix(qp.K, qp.B, factor, keep=keep)
 
     @property
     def factorizations(self) -> int:

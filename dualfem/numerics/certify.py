@@ -26,6 +26,24 @@ order. :func:`certified_error` returns both and their minimum.
 by the evaluator's ``primal`` residual). Unlike the KKT residuals it is a bound on the error in x
 itself, so it certifies a reference solution. ``r'K^-1 r`` uses the cached factorization of
 K_fixed through :meth:`dualfem.numerics.linalg.LocalReduction.k_solve`.
+
+**Without a factorization** (3D, where none of K fits: :class:`KSolver` with AMG K-solves,
+:mod:`dualfem.numerics.amg`), every K^-1 is a CG solve with a *true* residual s = b - Kz recorded
+(computed by a product with K after CG). What is then guaranteed:
+
+* the evaluator's KKT residuals (stationarity, primal, dual, complementarity) are computed from
+  (x, mu) with products only: exact to rounding, as on every path (rigorous);
+* the duality-gap bound uses r'K^-1 r <= (|z|_K + |s|_2 / sqrt(lambda_min(K)))^2 (z the computed
+  K^-1 r, |z|_K from one product): rigorous *given* a lower bound of lambda_min(K);
+* the active-set value |dx|_K gets the energy-norm errors of its two K-solves (z and K^-1 B'dmu) added,
+  each <= |s|_2 / sqrt(lambda_min), and the gap margin of the verification their effect on the gaps,
+  max_j |b_j|_2 |s|_2 / lambda_min each;
+* lambda_min(K) is *estimated*: LOBPCG's smallest Ritz value preconditioned by the AMG hierarchy (an
+  upper bound of lambda_min, in practice equal to it to 1e-4: 0.0884 against ARPACK's 0.0884 on 14 k
+  unknowns) divided by :data:`dualfem.numerics.amg.LAMBDA_SAFETY` = 2. So the widened certificate is
+  an estimate, rigorous if LOBPCG found the smallest eigenvalue within that factor. The K-solves of
+  the certificate run to :data:`CERT_K_RTOL`: the widening is then far below the certified values
+  (the residual r of a good answer is itself tiny, and s is 1e-12 of it).
 """
 from __future__ import annotations
 
@@ -100,10 +118,13 @@ class KSolver:
     ``QP.store``, :func:`dualfem.numerics.linalg.store_of`); the matrix-free operator
     (:class:`dualfem.numerics.dual_operator.MatrixFreeDualOperator`: one factorization of the whole K,
     found in the same store when a matrix-free solver made it, D_AA^-1 by preconditioned CG) when the
-    dense reduction does not fit (:func:`dualfem.numerics.dual_operator.choose_operator`); a plain sparse
-    factorization of K (D by m solves for m <= 2000) when the QP has no usable local structure."""
+    dense reduction does not fit (:func:`dualfem.numerics.dual_operator.choose_operator`); the matrix-free
+    operator with AMG K-solves (``ksolve="amg"``, or auto when no factorization of K fits: the hierarchy
+    from the QP's store, solves to :data:`CERT_K_RTOL`, their true residuals recorded for the widened
+    bounds of the module docstring); a plain sparse factorization of K (D by m solves for m <= 2000) when
+    the QP has no usable local structure."""
 
-    def __init__(self, qp: QP, factor=None, reduction=None):
+    def __init__(self, qp: QP, factor=None, reduction=None, ksolve: str = "auto"):
         from dualfem.numerics.dual_operator import MatrixFreeDualOperator, choose_operator
         from dualfem.numerics.linalg import LocalReduction
 
@@ -111,34 +132,87 @@ class KSolver:
         self.red = None
         self.op: MatrixFreeDualOperator | None = None
         self._D: np.ndarray | None = None
+        #: the largest true residual |b - K z|_2 of the AMG K-solves since :meth:`reset_k_error` (0: exact)
+        self.k_residual = 0.0
         hints = reduction if isinstance(reduction, OperatorHints) else None
         if reduction is not None and type(reduction) is LocalReduction and reduction.qp is qp:
             self.red = reduction          # a solver's reduction of this very QP: same factorization, reused
             return
         kind = "dense"
-        if qp.m:
+        if ksolve == "amg":
+            kind = "amg"
+        elif qp.m:
             try:
                 kind = choose_operator(qp, "auto", backend=getattr(factor, "name", factor))[0]
-            except InputError as exc:     # neither operator fits: the certificate is unavailable, said so
+            except InputError as exc:     # no operator fits: the certificate is unavailable, said so
                 raise RuntimeError(str(exc)) from exc
-        if kind == "matrix_free":
-            self.op = MatrixFreeDualOperator(qp, factor)
+        if kind in ("matrix_free", "amg"):
+            self.op = MatrixFreeDualOperator(qp, factor, ksolve="factor" if kind == "matrix_free" else "amg",
+                                             k_rtol=CERT_K_RTOL)
             if hints is not None:
                 self.op._diag = hints.diagonal
                 self.op.face_preconditioner = hints.face_preconditioner
+            if kind == "amg":
+                # no factorization: D_AA^-1 by the augmented Lagrangian on K + B_A'C B_A (one AMG hierarchy, a
+                # few CG solves: 13 K-solves against 31 by CG on D_AA, 14 k unknowns), and the lumped diagonal
+                # of D (no sampled solves) unless the solver's operator knew a better one
+                from dualfem.numerics.amg import lumped_delassus_diagonal
+
+                self.op.face = "factor"
+                if self.op._diag is None:
+                    self.op._diag = lumped_delassus_diagonal(qp.K.tocsr(), qp.B.tocsr())
             return
         try:
             self.red = LocalReduction(qp, factor=factor)
         except Exception:  # noqa: BLE001 - any structure problem: a plain sparse factorization of K
             self._lu = _SparseK(qp, factor)
 
+    @property
+    def amg(self) -> bool:
+        """True when the K-solves are AMG-preconditioned CG (inexact: see the module docstring)."""
+        return self.op is not None and self.op.ksolve == "amg"
+
+    def _note(self) -> None:
+        if self.amg:
+            self.k_residual = max(self.k_residual, float(np.max(self.op.fact.last_abs, initial=0.0)))
+
+    def k_error(self) -> tuple[float, float]:
+        """(energy-norm, 2-norm) error estimates of one K-solve since :meth:`reset_k_error`: |s|/sqrt(lam),
+        |s|/lam with |s| the largest true residual and lam the estimate of lambda_min(K); (0, 0) when exact."""
+        if not self.amg or self.k_residual == 0.0:
+            return 0.0, 0.0
+        lam = self.op.fact.lambda_min()
+        if lam <= 0:
+            return float("inf"), float("inf")
+        return self.k_residual / np.sqrt(lam), self.k_residual / lam
+
+    def reset_k_error(self) -> None:
+        self.k_residual = 0.0
+
     def __call__(self, r: np.ndarray) -> np.ndarray:
         if self.op is not None:
-            return self.op.k_solve(r)
+            z = self.op.k_solve(r)
+            self._note()
+            return z
         return self.red.k_solve(r) if self.red is not None else self._lu.solve(r)
 
+    def apply(self, v: np.ndarray) -> np.ndarray:
+        """D v through the operator (its K-solve's residual recorded)."""
+        out = self.op.apply(v)
+        self._note()
+        return out
+
     def quad(self, r: np.ndarray) -> tuple[float, np.ndarray]:
-        """(r'K^-1 r, B K^-1 r): one solve of K_fixed with the reduction, one of K otherwise."""
+        """(r'K^-1 r, B K^-1 r): one solve of K_fixed with the reduction, one of K otherwise. With AMG
+        K-solves, an upper estimate (|z|_K + |s|_2 / sqrt(lambda_min))^2 (module docstring)."""
+        if self.amg:
+            z = self.op.k_solve(np.asarray(r, float))
+            s = float(np.max(self.op.fact.last_abs, initial=0.0))
+            self.k_residual = max(self.k_residual, s)
+            lam = self.op.fact.lambda_min() if s > 0 else 1.0
+            zKz = max(float(z @ (self.qp.K @ z)), 0.0)
+            e = s / np.sqrt(lam) if lam > 0 else float("inf")
+            return (np.sqrt(zKz) + e) ** 2, self.op.B @ z
         if self.op is not None:
             return self.op.k_quad(r)
         if self.red is not None:
@@ -208,10 +282,15 @@ class _Face:
         self.rtol = self.cg_rtol
         return out
 
-    def apply(self, v: np.ndarray) -> np.ndarray:
-        """D v (all rows)."""
-        return self.D @ v if self.D is not None else self.op.apply(v)
+    def apply(self, v: np.ndarray, ksolve=None) -> np.ndarray:
+        """D v (all rows; through ``ksolve`` when given, so that its K-solve error is recorded)."""
+        if self.D is not None:
+            return self.D @ v
+        return ksolve.apply(v) if isinstance(ksolve, KSolver) and ksolve.op is not None else self.op.apply(v)
 
+
+#: relative residual of the certificate's AMG K-solves (where no factorization of K fits)
+CERT_K_RTOL = 1e-12
 
 #: relative tolerance of the matrix-free certificate's CG on D_AA. The step (dx, dmu) it computes is a
 #: correction: a relative error e of dmu changes the measured distance |dx|_K by a relative O(e) (an
@@ -286,6 +365,8 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
         return nan
     ksolve = ksolve or solver_for(qp)
     mu = np.asarray(mu, float)
+    if isinstance(ksolve, KSolver) and _quad is None:
+        ksolve.reset_k_error()
     op = getattr(ksolve, "op", None)
     D = ksolve.delassus() if qp.m else np.zeros((0, 0))
     gap = qp.B @ x
@@ -306,12 +387,16 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
             dmu[A] = face.solve(-(gap[A] - Bz[A]))
         except (np.linalg.LinAlgError, ValueError):
             return nan
-    Ddmu = face.apply(dmu) if face is not None else np.zeros_like(dmu)
+    Ddmu = face.apply(dmu, ksolve) if face is not None else np.zeros_like(dmu)
     Bdx = -Bz + Ddmu
     gap1 = gap + Bdx
     mu1 = mu_A + dmu
     step_mu = max(np.abs(dmu).max(initial=0.0), np.abs(mu - mu_A).max(initial=0.0))
-    step_gap = np.abs(Bdx).max(initial=0.0)
+    # AMG K-solves (no factorization): the two solves of the step (z, K^-1 B'dmu) are off by at most e_K each
+    # in the energy norm and move the gaps by at most max_j |b_j| e_2 each (module docstring: an estimate)
+    e_K, e_2 = ksolve.k_error() if isinstance(ksolve, KSolver) else (0.0, 0.0)
+    bmax = float(np.sqrt(np.max(np.asarray(qp.B.multiply(qp.B).sum(axis=1)), initial=0.0))) if e_2 else 0.0
+    step_gap = np.abs(Bdx).max(initial=0.0) + 2.0 * bmax * e_2
     err_mu = float(np.abs(mu - mu1).max(initial=0.0)) / force_scale(qp, mu1)
     if (A.any() and mu1[A].min() <= margin * step_mu) or ((~A).any() and gap1[~A].min() <= margin * step_gap):
         # not verified to first order (x's error is not |dx|); the multipliers of the set are still the
@@ -326,7 +411,7 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     nx = size_energy(qp, x, _Kx)
     if nx == 0.0:
         return float("nan"), err_mu
-    return step_size(rKr, Bz, dmu, Ddmu) / nx, err_mu
+    return (step_size(rKr, Bz, dmu, Ddmu) + 2.0 * e_K) / nx, err_mu
 
 
 def multiplier_floor(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None) -> float:
@@ -367,6 +452,7 @@ def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | Non
     """
     ksolve = ksolve or solver_for(qp)
     quad = Kx = None
+    ksolve.reset_k_error()
     if _finite(x, mu):
         mu = np.asarray(mu, float)
         Kx = qp.K @ x

@@ -27,12 +27,19 @@ Two implementations:
 * :class:`MatrixFreeDualOperator` (``"matrix_free"``): one sparse factorization of the whole K
   (the QP's :class:`~dualfem.numerics.linalg.FactorStore`, shared with the certificate); each
   product D v is one solve. No m x m matrix exists; D_AA^-1 is applied by preconditioned CG
-  (Jacobi, warm-started), whose iterations are counted.
+  (Jacobi, warm-started), whose iterations are counted. Its K-solves (``ksolve``) are the factorization
+  (``"factor"``) or, where no factorization of K fits (3D), CG preconditioned by smoothed-aggregation AMG
+  with the rigid-body modes (``"amg"``, :mod:`dualfem.numerics.amg`; the ``operator="amg"`` of the dual
+  solvers) to a relative residual ``k_rtol`` (:func:`dualfem.numerics.amg.
+  inner_rtol` of the solver's declared tolerance: 1e-3 x it), so D v, b0 and x(mu) are known to about that
+  accuracy (:attr:`DualOperator.accuracy`) instead of to rounding.
 
 :func:`make_operator` builds the one asked for; ``"auto"`` picks by size and memory
 (:func:`choose_operator`): dense while the local unknowns |I| satisfy |I|^2 <= :data:`CROSSOVER_RATIO` n
-(and |I| <= :data:`CROSSOVER_LOCAL`) and the dense blocks fit in memory, matrix-free otherwise; a
-refusal names the sizes, the estimates, the memory available and the other operator.
+(and |I| <= :data:`CROSSOVER_LOCAL`) and the dense blocks fit in memory, matrix-free otherwise, and
+matrix-free with AMG K-solves (``"amg"``) when no factorization of K fits (the memory model knows the
+dimension: :func:`dualfem.numerics.memory.factor_bytes`); a refusal names the sizes, the estimates, the
+memory available and the other operators.
 """
 from __future__ import annotations
 
@@ -49,7 +56,9 @@ from dualfem.numerics.linalg import factor_whole
 from dualfem.numerics.pcg import pcg
 
 #: the operator names of the dual solvers' ``operator`` parameter
-OPERATORS = ("auto", "dense", "matrix_free")
+OPERATORS = ("auto", "dense", "matrix_free", "amg")
+#: how the matrix-free operator applies K^-1: a sparse factorization, or AMG-preconditioned CG
+KSOLVES = ("factor", "amg")
 #: ``auto`` takes the dense reduction while |I|^2 <= CROSSOVER_RATIO * n (n unknowns, |I| local unknowns):
 #: the dense phases cost ~|I|^3 flops and a 2D sparse factorization ~n^1.5, so the crossover is a ratio
 #: of |I|^2 to n. Measured (benchmarks/results/operator_crossover.md, pdas setup + solve, medians of 3,
@@ -105,6 +114,7 @@ class OperatorCounters:
     face_solves: int = 0       #: D_AA^-1 rhs computed
     cg_iterations: int = 0     #: CG iterations of the matrix-free face solves
     al_steps: int = 0          #: augmented-Lagrangian steps of the factorized face solves
+    amg_iterations: int = 0    #: CG iterations of the AMG K-solves (ksolve="amg")
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -156,6 +166,9 @@ class DualOperator(ABC):
 
     #: the exact LocalReduction (dense operator) for refinement and the certificate, else None
     reduction = None
+    #: relative accuracy of the K-solves behind apply / b0 / x_of (0: a factorization, exact to rounding;
+    #: the AMG K-solve's relative residual otherwise; reported, so a caller can see what it may ask for)
+    accuracy: float = 0.0
     #: why this operator was chosen (set by :func:`make_operator`)
     chosen_because: str = ""
 
@@ -243,10 +256,15 @@ class MatrixFreeDualOperator(DualOperator):
 
     kind = "matrix_free"
 
-    def __init__(self, qp: QP, factor=None, store=None, face: str = "cg"):
+    def __init__(self, qp: QP, factor=None, store=None, face: str = "cg", ksolve: str = "factor",
+                 k_rtol: float | None = None):
         super().__init__(qp)
         if face not in FACE_METHODS:
             raise InputError(f"face solve method must be one of {', '.join(FACE_METHODS)}, got {face!r}")
+        if ksolve not in KSOLVES:
+            raise InputError(f"ksolve must be one of {', '.join(KSOLVES)}, got {ksolve!r}")
+        #: "factor" (one sparse factorization of K) or "amg" (AMG-preconditioned CG to k_rtol)
+        self.ksolve = ksolve
         #: how D_AA^-1 is applied: "cg" (preconditioned CG, one K-solve per iteration) or "factor" (one
         #: factorization of K + B_A' C B_A per set, augmented-Lagrangian refinement: a few solves)
         self.face = face
@@ -254,7 +272,18 @@ class MatrixFreeDualOperator(DualOperator):
         self._newton = None
         t0 = time.perf_counter()
         before = _factorizations(qp, store)
-        self.fact = factor_whole(qp, factor, store)
+        if ksolve == "amg":
+            from dualfem.numerics.amg import RTOL, amg_for
+
+            #: relative residual of every AMG K-solve (|r - K z| <= k_rtol |r|)
+            self.k_rtol = float(RTOL if k_rtol is None else k_rtol)
+            self.accuracy = self.k_rtol
+            self.fact = amg_for(qp, store)
+            self._its0 = self.fact.counters.iterations
+        else:
+            self.k_rtol = 0.0
+            self.fact = factor_whole(qp, factor, store)
+        self._x_last: np.ndarray | None = None       # warm start of x_of (AMG)
         self.counters.factorizations = _factorizations(qp, store) - before
         self.B = qp.B.tocsr()
         self.BT = self.B.T.tocsr()
@@ -267,8 +296,12 @@ class MatrixFreeDualOperator(DualOperator):
         self.face_preconditioner = None
         self.time_s["setup"] = time.perf_counter() - t0
 
-    def _solve(self, b: np.ndarray) -> np.ndarray:
+    def _solve(self, b: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
         self.counters.solves += 1 if b.ndim == 1 else b.shape[1]
+        if self.ksolve == "amg":
+            z = self.fact.solve(b, x0=x0, rtol=self.k_rtol)
+            self.counters.amg_iterations = self.fact.counters.iterations - self._its0
+            return z
         return self.fact.solve(b)
 
     @property
@@ -285,7 +318,10 @@ class MatrixFreeDualOperator(DualOperator):
         return self.B @ self._solve(self.BT @ v)
 
     def x_of(self, mu):
-        return self._solve(self.qp.F + self.BT @ np.asarray(mu, float))
+        x = self._solve(self.qp.F + self.BT @ np.asarray(mu, float), x0=self._x_last)
+        if self.ksolve == "amg":
+            self._x_last = x.copy()          # the next x(mu) starts from this one (mu changes little)
+        return x
 
     def k_solve(self, r):
         return self._solve(np.asarray(r, float))
@@ -348,12 +384,19 @@ class MatrixFreeDualOperator(DualOperator):
         self.counters.cg_iterations += its
         return sol, its, stats["kappa"]
 
-    def newton_matrix(self):
-        """The :class:`dualfem.numerics.newton_matrix.NewtonMatrix` of K and B (made on first use)."""
+    def newton_matrix(self, keep: int = 2):
+        """The :class:`dualfem.numerics.newton_matrix.NewtonMatrix` of K and B (made on first use; with AMG
+        K-solves its systems are AMG-preconditioned CG too, to this operator's ``k_rtol``)."""
         if self._newton is None:
             from dualfem.numerics.newton_matrix import NewtonMatrix
 
-            self._newton = NewtonMatrix(self.qp.K, self.B, self._factor_name, keep=2)
+            if self.ksolve == "amg":
+                from dualfem.numerics.amg import rigid_body_modes
+
+                self._newton = NewtonMatrix(self.qp.K, self.B, "amg", keep=keep,
+                                            modes=rigid_body_modes(self.qp.geometry, self.qp.n), rtol=self.k_rtol)
+            else:
+                self._newton = NewtonMatrix(self.qp.K, self.B, self._factor_name, keep=keep)
         return self._newton
 
     def _face_by_factor(self, A: np.ndarray, g: np.ndarray, rtol: float) -> np.ndarray:
@@ -398,6 +441,10 @@ class MatrixFreeDualOperator(DualOperator):
     def info(self) -> dict:
         out = super().info()
         out["face_method"] = self.face
+        out["ksolve"] = self.ksolve
+        if self.ksolve == "amg":
+            out["k_rtol"] = self.k_rtol
+            out["amg"] = {**self.fact.info, **self.fact.counters.as_dict()}
         if self._newton is not None:
             out.update(self._newton.info())
         return out
@@ -417,18 +464,25 @@ def dense_extra_bytes(n_local: int, m: int) -> int:
     return 8 * (2 * n_local * n_local + n_local * m + m * m)
 
 
+def qp_dim(qp: QP) -> int:
+    """The QP's space dimension (``geometry.dim``; 2 without a geometry)."""
+    return int(qp.geometry.dim) if qp.geometry is not None else 2
+
+
 def estimates(qp: QP, backend: str | None = None) -> dict:
     """Extra peak memory (bytes, x the model's SAFETY) of each operator for a QP the process already holds:
-    the factorization (:func:`dualfem.numerics.memory.factor_bytes`) plus, dense, the dense blocks
-    (:func:`dense_extra_bytes`), matrix-free, a few n-vectors. Compared with the memory available now."""
+    the factorization (:func:`dualfem.numerics.memory.factor_bytes`, of the QP's dimension) plus, dense, the
+    dense blocks (:func:`dense_extra_bytes`), matrix-free, a few n-vectors; amg: the AMG hierarchy
+    (:func:`dualfem.numerics.memory.amg_bytes`) and a few n-vectors. Compared with the memory available now."""
     from dualfem.numerics.factor import get_default
-    from dualfem.numerics.memory import SAFETY, factor_bytes
+    from dualfem.numerics.memory import SAFETY, amg_bytes, factor_bytes
 
     backend = backend or get_default()
-    base = factor_bytes(max(qp.n, 1), backend)
+    base = factor_bytes(max(qp.n, 1), backend, dim=qp_dim(qp))
     nI = int(np.asarray(qp.local_dofs).size)
     return {"dense": int(SAFETY * (base + dense_extra_bytes(nI, qp.m))),
-            "matrix_free": int(SAFETY * (base + 8 * 8 * qp.n))}
+            "matrix_free": int(SAFETY * (base + 8 * 8 * qp.n)),
+            "amg": int(SAFETY * (amg_bytes(max(qp.n, 1)) + 8 * 16 * qp.n))}
 
 
 def choose_operator(qp: QP, asked: str = "auto", limit_bytes: int | None = None,
@@ -453,6 +507,13 @@ def choose_operator(qp: QP, asked: str = "auto", limit_bytes: int | None = None,
         return InputError(f"operator={kind}: {sizes}: needs about {est[kind] / 1e9:.1f} GB, available "
                           f"{have / 1e9:.1f} GB; operator={other} needs about {est[other] / 1e9:.1f} GB")
 
+    if asked == "amg":
+        from dualfem.numerics.amg import require_pyamg
+
+        require_pyamg()
+        if est["amg"] > have:
+            raise refuse("amg", "matrix_free")
+        return "amg", "asked"
     if asked == "dense":
         if nI > MAX_LOCAL:
             raise InputError(f"operator=dense: {sizes}: the dense reduced matrix would exceed {MAX_LOCAL}^2 "
@@ -463,7 +524,7 @@ def choose_operator(qp: QP, asked: str = "auto", limit_bytes: int | None = None,
         return "dense", "asked"
     if asked == "matrix_free":
         if est["matrix_free"] > have:
-            raise refuse("matrix_free", "dense")
+            raise refuse("matrix_free", "amg")
         return "matrix_free", "asked"
     limit = int(min(CROSSOVER_LOCAL, MAX_LOCAL, np.sqrt(CROSSOVER_RATIO * qp.n)))
     if nI <= limit and est["dense"] <= have:
@@ -471,13 +532,29 @@ def choose_operator(qp: QP, asked: str = "auto", limit_bytes: int | None = None,
     if est["matrix_free"] <= have:
         return "matrix_free", f"auto: {nI} local unknowns > {limit}" if nI > limit \
             else "auto: the dense blocks do not fit in memory"
+    from dualfem.numerics.memory import amg_installed
+
+    if est["amg"] <= have and amg_installed():
+        return "amg", (f"auto: no factorization of K fits ({est['matrix_free'] / 1e9:.1f} GB estimated, "
+                       f"{have / 1e9:.1f} GB available)")
+    hint = "" if amg_installed() else " (operator=amg needs pyamg: pip install 'dualfem[amg]')"
     raise InputError(f"operator=auto: {sizes}: neither operator fits: dense about {est['dense'] / 1e9:.1f} GB, "
-                     f"matrix_free about {est['matrix_free'] / 1e9:.1f} GB, available {have / 1e9:.1f} GB")
+                     f"matrix_free about {est['matrix_free'] / 1e9:.1f} GB, amg about {est['amg'] / 1e9:.1f} GB, "
+                     f"available {have / 1e9:.1f} GB{hint}")
 
 
-def make_operator(qp: QP, operator: str = "auto", factor=None, store=None) -> DualOperator:
-    """The dual operator of ``qp`` (``operator`` in :data:`OPERATORS`; see :func:`choose_operator`)."""
+def make_operator(qp: QP, operator: str = "auto", factor=None, store=None, tol: float | None = None) -> DualOperator:
+    """The dual operator of ``qp`` (``operator`` in :data:`OPERATORS`; see :func:`choose_operator`). ``amg``
+    is the matrix-free operator (``kind`` "matrix_free") with AMG K-solves to the relative residual
+    :func:`dualfem.numerics.amg.inner_rtol` (``tol``), ``tol`` the dual solver's declared relative tolerance."""
     kind, why = choose_operator(qp, operator, backend=getattr(factor, "name", factor))
-    op = DenseDualOperator(qp, factor, store) if kind == "dense" else MatrixFreeDualOperator(qp, factor, store)
+    if kind == "dense":
+        op: DualOperator = DenseDualOperator(qp, factor, store)
+    elif kind == "amg":
+        from dualfem.numerics.amg import RTOL, inner_rtol
+
+        op = MatrixFreeDualOperator(qp, factor, store, ksolve="amg", k_rtol=RTOL if tol is None else inner_rtol(tol))
+    else:
+        op = MatrixFreeDualOperator(qp, factor, store)
     op.chosen_because = why
     return op

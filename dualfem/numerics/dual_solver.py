@@ -1,7 +1,9 @@
 """Base class of the solver plugins that work on the contact dual through a :class:`DualOperator`.
 
-:class:`DualOperatorSolver` adds the parameters ``operator`` (``auto`` | ``dense`` | ``matrix_free``,
-:data:`dualfem.numerics.dual_operator.OPERATORS`) and ``factor`` (the factorization backend) to a
+:class:`DualOperatorSolver` adds the parameters ``operator`` (``auto`` | ``dense`` | ``matrix_free`` |
+``amg``, :data:`dualfem.numerics.dual_operator.OPERATORS`; ``amg``: matrix-free with K-solves by
+AMG-preconditioned CG to 1e-3 x the solver's declared tolerance, :mod:`dualfem.numerics.amg`) and
+``factor`` (the factorization backend) to a
 :class:`~dualfem.core.solver.Solver`; ``skip`` answers with the operator choice's refusal (a QP for
 which no operator fits the memory), ``setup`` builds ``self.op`` (:func:`make_operator`) and
 publishes the dense path's :class:`~dualfem.numerics.linalg.LocalReduction` as ``self.reduction``
@@ -10,7 +12,7 @@ certificate in the QP's store). Plugins import it from here, never from each oth
 """
 from __future__ import annotations
 
-from dualfem.core.errors import InputError
+from dualfem.core.errors import InputError, MissingDependency
 from dualfem.core.solver import Solver
 from dualfem.numerics.dual_operator import OPERATORS, DualOperator, check_operator, choose_operator, make_operator
 from dualfem.numerics.factor import from_param
@@ -30,11 +32,11 @@ class DualOperatorSolver(Solver):
     def skip(self, qp) -> str | None:
         try:
             choose_operator(qp, self.params["operator"], backend=from_param(self))
-        except InputError as exc:
+        except (InputError, MissingDependency) as exc:    # no operator fits; operator=amg without pyamg
             return str(exc)
         return None
 
     def setup(self, qp) -> None:
         self.qp = qp
-        self.op = make_operator(qp, self.params["operator"], factor=from_param(self))
+        self.op = make_operator(qp, self.params["operator"], factor=from_param(self), tol=self.tolerance)
         self.reduction = self.op.reduction

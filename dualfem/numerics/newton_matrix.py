@@ -22,6 +22,11 @@ analysis is only an ordering). When the backend reports the factor's size at ana
 (``NewtonMatrix.counters``, a :class:`NewtonCounters`) say what was done: analyses, numeric factorizations, reuses of a
 kept factor, solves, seconds per phase.
 
+Without a factorization (``factor="amg"``, where none of K fits: 3D): each coefficient vector gets a
+pyamg smoothed-aggregation hierarchy of H(c) (near-nullspace ``modes``: the rigid-body modes) kept in the
+same slots, and H(c)^-1 rhs is AMG-preconditioned CG to the relative residual ``rtol``
+(:class:`dualfem.numerics.amg.AmgKSolve`); ``counters.factorizations`` then counts hierarchies.
+
 Memory: one factor of K + B'B per slot, about the size of K's (B couples only the unknowns of the two
 faces of a defect node, which K's interface term couples already: nnz(K + B'B) = nnz(K) + 1,536 of
 343,288 on a 25 k-unknown scene with 64 cracks) plus the pattern and M.
@@ -84,6 +89,12 @@ class _PardisoSlots(PardisoFactorization):
         super().free()
 
 
+class _AmgBackend:
+    """The name of the amg mode where a backend is reported."""
+
+    name = "amg"
+
+
 def _canonical(A: sp.spmatrix) -> sp.csr_matrix:
     A = sp.csr_matrix(A, dtype=float, copy=True)
     A.sum_duplicates()
@@ -98,8 +109,12 @@ class NewtonMatrix:
     process-wide choice, :func:`dualfem.numerics.factor.choose`), ``keep``: numeric factors kept.
     """
 
-    def __init__(self, K: sp.spmatrix, B: sp.spmatrix, factor: str | Backend | None = None, keep: int = 4):
-        self.backend = choose_backend(factor)
+    def __init__(self, K: sp.spmatrix, B: sp.spmatrix, factor: str | Backend | None = None, keep: int = 4,
+                 modes: np.ndarray | None = None, rtol: float | None = None):
+        #: "amg": AMG-preconditioned CG per coefficient vector instead of a factorization (module docstring)
+        self.amg = isinstance(factor, str) and factor == "amg"
+        self.modes, self.rtol = modes, rtol
+        self.backend = _AmgBackend() if self.amg else choose_backend(factor)
         ensure_threads()
         t0 = time.perf_counter()
         K, B = _canonical(K), _canonical(B)
@@ -137,7 +152,7 @@ class NewtonMatrix:
         self._slots: OrderedDict[bytes, int] = OrderedDict()
         #: PARDISO: one analysis, ``keep`` numeric factors in one object; other backends: one object per slot
         self._shared = _PardisoSlots(self.keep) if self.backend.name == "pardiso" else None
-        self._facts: list[Factorization] = []
+        self._facts: list = []
         self.counters = NewtonCounters()
         self.counters.time_s["pattern"] = time.perf_counter() - t0
 
@@ -162,13 +177,15 @@ class NewtonMatrix:
         if hit is not None:
             self._slots.move_to_end(key)
             self.counters.reuses += 1
-            return self._select(hit)
+            return self._facts[hit] if self.amg else self._select(hit)
         ts = self.counters.time_s
         H = self.matrix(c)
         if len(self._slots) >= self.keep:
             _, slot = self._slots.popitem(last=False)
         else:
             slot = len(self._slots)
+        if self.amg:
+            return self._amg_slot(slot, key, H)
         fact = self._select(slot)
         if not fact.n:                          # never analyzed (PARDISO: one analysis for every slot)
             t0 = time.perf_counter()
@@ -182,6 +199,21 @@ class NewtonMatrix:
         self.counters.factorizations += 1
         self._slots[key] = slot
         return fact
+
+    def _amg_slot(self, slot: int, key: bytes, H: sp.csr_matrix):
+        """A new AMG hierarchy of H in ``slot`` (the amg mode's 'factorization')."""
+        from dualfem.numerics.amg import RTOL, AmgKSolve
+
+        t0 = time.perf_counter()
+        solver = AmgKSolve(H, self.modes, RTOL if self.rtol is None else self.rtol)
+        while len(self._facts) <= slot:
+            self._facts.append(None)
+        self._facts[slot] = solver
+        ts = self.counters.time_s
+        ts["factorize"] = ts.get("factorize", 0.0) + time.perf_counter() - t0
+        self.counters.factorizations += 1
+        self._slots[key] = slot
+        return solver
 
     def _fit_keep(self, fact: Factorization) -> None:
         """Keep no more factors than half the memory available holds (PARDISO reports a factor's size
@@ -224,6 +256,7 @@ class NewtonMatrix:
     def free(self) -> None:
         """Release the kept factors."""
         for f in ([self._shared] if self._shared is not None else []) + self._facts:
-            f.free()
+            if f is not None:
+                f.free()
         self._slots.clear()
         self._facts.clear()
