@@ -29,6 +29,7 @@ K-solves to ``rtol = INNER_RATIO x tol`` (1e-3 x: pdas's 1e-9 -> 1e-12), clipped
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -236,6 +237,7 @@ class FullSpaceResult:
     hierarchies: int = 0
     cg_iterations: int = 0
     message: str = ""
+    timed_out: bool = False
     time_s: dict = field(default_factory=dict)
 
 
@@ -249,7 +251,8 @@ def lumped_delassus_diagonal(K: sp.csr_matrix, B: sp.csr_matrix) -> np.ndarray:
 
 
 def full_space_newton(qp, tol: float = 1e-12, rtol: float = 1e-11, max_newton: int = 50, max_al: int = 30,
-                      al_scale: float = AL_SCALE) -> FullSpaceResult:
+                      al_scale: float = AL_SCALE, deadline: float | None = None,
+                      report: Callable[[int, np.ndarray, np.ndarray], None] | None = None) -> FullSpaceResult:
     """Semismooth Newton (primal-dual active set) on all unknowns, without a factorization and without D.
 
     Step k: the active set A = {mu - c B x > 0} (c = 1 / mean of the lumped diag D), then the KKT system
@@ -260,7 +263,10 @@ def full_space_newton(qp, tol: float = 1e-12, rtol: float = 1e-11, max_newton: i
     repeats (then mu_A > 0 and B x >= 0 off A: the KKT conditions hold to the inner accuracy). At the end
     ``K x - F - B'mu`` is H's CG residual. Measured on tests/_three_d_qp.py: 3-5 Newton steps, 3-4 AL steps
     each (14 k unknowns: 1.6 s; 148 k: 35 s, against ~100 AMG K-solves of pdas on the amg operator).
-    Not a solver plugin (yet): the caller certifies the answer (:mod:`dualfem.numerics.certify`)."""
+    ``deadline``: a ``time.perf_counter()`` value after which it stops (``timed_out``) between two AL steps;
+    ``report(k, x, mu)``: called with each Newton step's iterate (the solver plugin's iterate hook).
+    The solver plugin is ``solvers/newton_amg.py``; the caller certifies the answer
+    (:mod:`dualfem.numerics.certify`)."""
     t0 = time.perf_counter()
     K, B, F = sp.csr_matrix(qp.K), sp.csr_matrix(qp.B), np.asarray(qp.F, float)
     modes = rigid_body_modes(qp.geometry, qp.n)
@@ -272,6 +278,11 @@ def full_space_newton(qp, tol: float = 1e-12, rtol: float = 1e-11, max_newton: i
     seen: set[bytes] = set()
     last = b""
     for k in range(max_newton + 1):
+        if report is not None:
+            report(k, x, np.maximum(mu, 0.0))
+        if deadline is not None and time.perf_counter() > deadline:
+            out.timed_out, out.message = True, f"time limit reached after {k} Newton steps"
+            break
         A = (mu - c * (B @ x)) > 0
         key = np.packbits(A).tobytes()
         if k and key in seen:
@@ -294,6 +305,8 @@ def full_space_newton(qp, tol: float = 1e-12, rtol: float = 1e-11, max_newton: i
         out.hierarchies += 1
         lam = np.where(A, mu, 0.0)
         for _ in range(max_al):
+            if deadline is not None and time.perf_counter() > deadline:
+                break
             x = h.solve(F + B.T @ lam, x0=x)
             out.al_steps += 1
             r = B @ x
