@@ -257,8 +257,10 @@ def _check_simple(key: str, Q: np.ndarray, tol: float) -> None:
         if dist.min() <= tol:
             j = int(np.argmin(dist))
             raise InputError(f"{key}: edges {ia[j]} and {ib[j]} cross or touch: the polygon must be simple")
-    turn = np.cross(np.roll(E[:, 1] - E[:, 0], 1, axis=0), E[:, 1] - E[:, 0])
-    fold = (np.abs(turn) <= 1e-12) & ((np.roll(E[:, 1] - E[:, 0], 1, axis=0) * (E[:, 1] - E[:, 0])).sum(1) < 0)
+    d, d_prev = E[:, 1] - E[:, 0], np.roll(E[:, 1] - E[:, 0], 1, axis=0)
+    turn = d_prev[:, 0] * d[:, 1] - d_prev[:, 1] * d[:, 0]
+    fold = (np.abs(turn) <= 1e-12 * np.linalg.norm(d, axis=1) * np.linalg.norm(d_prev, axis=1)) \
+        & ((d_prev * d).sum(axis=1) < 0)
     if fold.any():
         raise InputError(f"{key}: the polygon folds back on itself at vertex {int(np.argmax(fold))}")
 
