@@ -67,16 +67,27 @@ def _presets() -> tuple[dict[str, tuple[str, dict[str, Any]]], list[str]]:
     return out, conflicts
 
 
-def library() -> dict[str, Path]:
-    """The scene library (the repository's ``scenes/`` folder, installed as ``dualfem.scenes``): name -> file."""
+def library(dim: int | None = None) -> dict[str, Path]:
+    """The scene library (the repository's ``scenes/`` folder, installed as ``dualfem.scenes``): name -> file;
+    with ``dim``, only the scenes of that dimension (a file's ``dim`` key, default 2)."""
     import importlib.resources
 
     try:
         root = importlib.resources.files("dualfem.scenes")
     except ModuleNotFoundError:
         return {}
-    return {Path(str(p)).stem: Path(str(p)) for p in sorted(root.iterdir(), key=lambda p: p.name)
-            if p.name.endswith(".toml")}
+    out = {Path(str(p)).stem: Path(str(p)) for p in sorted(root.iterdir(), key=lambda p: p.name)
+           if p.name.endswith(".toml")}
+    return out if dim is None else {k: p for k, p in out.items() if scene_dim(p) == dim}
+
+
+def scene_dim(path: Path) -> int:
+    """The ``dim`` key of a scene file (2 when absent or unreadable)."""
+    try:
+        d = tomllib.loads(path.read_text(encoding="utf-8")).get("dim", 2)
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return 2
+    return d if isinstance(d, int) and not isinstance(d, bool) else 2
 
 
 def describe(path: Path) -> str:

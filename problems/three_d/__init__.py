@@ -14,8 +14,14 @@ at the centre, normal +z. Nodes strictly inside a defect are doubled, its front 
 discretised with nodal areas w_j (lumped): K = K_el + sum_j (w_j / delta_j) |u_j^+ - u_j^-|^2 (all
 three components), B row j = nu_j . (u_j^+ - u_j^-), the "+" copy on the side nu_j points to.
 
-Supports and loads: the bottom face z = 0 clamped, the traction ``load`` x ``load_scale`` on the
-top face z = height (:mod:`.supports`). ``rotate_deg`` / ``rotate_axis``: a rigid rotation of the
+Supports and loads: without the keys ``boundary``, ``body_force``, ``remote_stress`` the bottom face
+z = 0 is clamped and the traction ``load`` x ``load_scale`` acts on the top face z = height
+(:mod:`.supports`); with any of them, those keys say it all (:mod:`dualfem.problems._boundary`:
+``[[boundary]]`` tables with ``side`` = left, right, front, back, bottom, top, ``support`` and/or
+``traction``; ``body_force``; ``remote_stress`` (3 x 3): sigma.n on every side without a support, and
+without any support only the rigid-body motions are removed at six components of extreme nodes), all
+times ``load_scale``, and ``load`` must keep its default. A defect's ``face_pressure`` (a number or an
+expression in x, y, z) pushes both of its faces apart. ``rotate_deg`` / ``rotate_axis``: a rigid rotation of the
 whole scene (body, defects, loads, supports) about the box's centre, counter-clockwise about the
 axis (right-hand rule); the mesh is made in the reference frame and rotated.
 
@@ -40,6 +46,7 @@ from dualfem.core.qp import QP
 from dualfem.core.registry import register_problem
 from dualfem.numerics.linalg import freeze
 
+from .. import _boundary as bd
 from .assemble import free_dofs, interface, stiffness
 from .cut import Cut3, cut
 from .geometry import Surface, check_apart, parse_defects
@@ -95,6 +102,9 @@ class ThreeD(Problem):
         "rotate_deg": 0.0,
         "rotate_axis": (0.0, 0.0, 1.0),
         "defects": (),
+        "boundary": (),
+        "body_force": "",
+        "remote_stress": "",
     }
     presets = {"three_d": {}}
     update_keys = ("delta", "load", "load_scale")
@@ -138,8 +148,19 @@ class ThreeD(Problem):
                 raise InputError(f"delta of defect {i} ({s.delta:g}) is too small for E = {p['E']:g} and the box: "
                                  f"delta * E / max(width, depth, height) = {ratio:.1e} must be "
                                  f">= {MIN_DELTA_E_OVER_L:g}")
-        with np.errstate(all="ignore"):
-            self._traction = resolve_load(p["load"], p["width"])
+        self._loads = bd.parse_loads(p, 3)
+        if self._loads is None:
+            with np.errstate(all="ignore"):
+                self._traction = resolve_load(p["load"], p["width"])
+        elif p["load"] != self.defaults["load"]:
+            raise InputError(f"load ({p['load']!r}) is the top traction of a scene without boundary, body_force "
+                             f"and remote_stress; with them give it as [[boundary]] side = 'top', traction = [...]")
+        if p["rotate_deg"] and self._loads is not None and any(sd.support == "roller" for sd in self._loads.sides):
+            raise InputError("rotate_deg with a roller support: the roller's normal would not be a coordinate axis "
+                             "after the rotation; rotate a scene with clamped or free sides only")
+        self._face_pressure = [None if s.face_pressure is None else
+                               bd.parse_scalar(s.face_pressure, f"defects[{i}].face_pressure", 3, box)
+                               for i, s in enumerate(self._surfaces)]
 
     @property
     def box(self) -> tuple[float, float, float]:
@@ -193,9 +214,11 @@ class ThreeD(Problem):
             return a
         p = self.params
         c, pts, _ = self.cut()
-        tol = 1e-9 * max(self.box)
-        fixed = np.zeros((3, pts.shape[1]), bool)
-        fixed[:, np.abs(c.points[2]) <= tol] = True                  # the bottom face, reference frame
+        if self._loads is None:
+            fixed = np.zeros((3, pts.shape[1]), bool)
+            fixed[:, np.abs(c.points[2]) <= 1e-9 * max(self.box)] = True      # the bottom face, reference frame
+        else:
+            fixed = bd.fixed_mask(self._loads, pts, self._sides())
         node_dofs = free_dofs(fixed)
         n = int(node_dofs.max()) + 1
         lam, mu = lame(p["E"], p["nu"], "strain")
@@ -211,11 +234,38 @@ class ThreeD(Problem):
         self.shared.assemblies += 1
         return a
 
+    def _sides(self) -> dict[str, np.ndarray]:
+        """The boundary triangles (3, k) of each side of the box (reference frame; computed once)."""
+        shared = self.shared.data
+        if shared.get("sides") is None:
+            c, _, _ = self.cut()
+            shared["sides"] = bd.box_sides(c.points, c.tets, self.box)
+        return shared["sides"]
+
     def nodal_load(self) -> np.ndarray:
-        """Nodal forces (3, n_nodes) of the top traction, in the rotated frame."""
-        c, _, top = self.cut()
-        F = traction_forces(c.points, top, self._traction, float(self.params["load_scale"]))
-        return self.rotation() @ F
+        """Nodal forces (3, n_nodes) in the rotated frame: the top traction ``load`` (legacy) or the keys of
+        :mod:`dualfem.problems._boundary`, plus the defects' face pressures, times ``load_scale``."""
+        c, pts, top = self.cut()
+        scale = float(self.params["load_scale"])
+        R = self.rotation()
+        if self._loads is None:
+            F = R @ traction_forces(c.points, top, self._traction, scale)
+        else:
+            F = R @ bd.nodal_forces(self._loads, c.points, c.tets, self._sides(), scale)
+        if any(f is not None for f in self._face_pressure):
+            a = self._delta_free()
+            normals = np.asarray(a["maps"]["defect_normals"]).T
+            pressure = np.zeros(c.lower.size)
+            for k, f in enumerate(self._face_pressure):
+                j = np.flatnonzero(c.defect_id == k)
+                if f is not None and j.size:
+                    pressure[j] = f(c.points[:, c.lower[j]])[0]
+            if not np.all(np.isfinite(pressure)):
+                raise InputError("face_pressure gives NaN or infinite values on a defect; it must be finite there")
+            F += bd.face_pressure_forces(c.upper, c.lower, normals, c.weights, scale * pressure, pts.shape[1])
+        if self._loads is not None:
+            bd.check_balance(self._loads, pts, self._sides(), F)
+        return F
 
     def build(self) -> QP:
         """Assemble K (elastic + interface/delta), F (top traction), B (normal jumps); the delta-free

@@ -1,8 +1,10 @@
 """Defect surfaces of a 3D scene (``[[defects]]`` tables with ``shape``): parsing, checks, sampling.
 
 Every length is in the scene's length unit, every point in the reference (unrotated) frame of the
-box (0, width) x (0, depth) x (0, height). Keys per shape (all required unless a default is given;
-each table may also hold ``delta``, the fracture parameter of that defect, default the scene's):
+box (0, width) x (0, depth) x (0, height). Keys per shape below (all required); every table may
+also hold ``delta`` (the fracture parameter of that defect; default the scene's) and ``face_pressure``
+(stress units, a number or an expression in x, y, z: a pressure pushing both faces apart,
+:func:`dualfem.problems._boundary.face_pressure_forces`).
 
 * ``shape = "disk"``: ``center`` [x, y, z], ``normal`` [nx, ny, nz] (any non-zero length),
   ``radius``. The "+" face is the side ``normal`` points to.
@@ -58,6 +60,7 @@ class Surface:
     b: float = 0.0
     R: float = 0.0
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    face_pressure: object = None
 
     @property
     def half_angle(self) -> float:
@@ -180,7 +183,7 @@ def parse_surface(i: int, table, default_delta: float) -> Surface:
     shape = table["shape"]
     if shape not in SHAPES:
         raise InputError(f"defects[{i}].shape must be one of {', '.join(SHAPES)}, got {shape!r}")
-    allowed = {"shape", "delta", *_KEYS[shape]}
+    allowed = {"shape", "delta", "face_pressure", *_KEYS[shape]}
     extra = sorted(set(table) - allowed)
     if extra:
         raise InputError(f"defects[{i}]: unknown key {extra[0]!r} for shape {shape!r}; allowed: "
@@ -190,6 +193,13 @@ def parse_surface(i: int, table, default_delta: float) -> Surface:
         raise InputError(f"defects[{i}]: shape {shape!r} needs {', '.join(_KEYS[shape])}; {missing[0]!r} is missing")
     key = f"defects[{i}]."
     delta = _positive(key + "delta", table.get("delta", default_delta))
+    s = _parse_shape(i, table, shape, delta)
+    s.face_pressure = table.get("face_pressure")
+    return s
+
+
+def _parse_shape(i: int, table: dict, shape: str, delta: float) -> Surface:
+    key = f"defects[{i}]."
     if shape == "polygon":
         return _parse_polygon(i, table["points"], delta)
     c = _vector(key + "center", table["center"])
