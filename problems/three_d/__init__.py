@@ -234,6 +234,14 @@ class ThreeD(Problem):
         self.shared.assemblies += 1
         return a
 
+    def _load_label(self) -> str:
+        """The load in the QP's name: the ``load`` key (legacy), else the general keys given."""
+        p = self.params
+        if self._loads is None:
+            return p["load"] if isinstance(p["load"], str) else "custom"
+        keys = [k for k in ("boundary", "body_force", "remote_stress") if p[k] not in ("", (), [], None)]
+        return "+".join(keys)
+
     def _sides(self) -> dict[str, np.ndarray]:
         """The boundary triangles (3, k) of each side of the box (reference frame; computed once)."""
         shared = self.shared.data
@@ -287,13 +295,14 @@ class ThreeD(Problem):
         params["defects"] = "; ".join(_label(s) for s in self._surfaces)
         geometry = GeometryPart(3, a["points"], c.tets, nd)
         return QP(K=K, F=F, B=B, weights=c.weights.copy(), K_fixed=a["K_el"], local_dofs=a["local"],
-                  name=f"three_d[{p['load'] if isinstance(p['load'], str) else 'custom'}]", params=params,
+                  name=f"three_d[{self._load_label()}]", params=params,
                   maps=dict(a["maps"]), geometry=geometry,
                   units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
                   material=MaterialPart(float(p["E"]), float(p["nu"]), "strain"))
 
 
 def _label(s: Surface) -> str:
+    """One defect as text (``QP.params["defects"]``)."""
     def v(x) -> str:
         return "[" + ", ".join(f"{c:.6g}" for c in x) + "]"
 
