@@ -9,9 +9,9 @@
 * Into compressed form without scipy's COO conversion: the node pairs i < j of all tetrahedra (6
   per tetrahedron) are sorted once (:func:`node_pattern`), each of the 9 block components summed
   onto them (and the diagonal blocks onto the nodes) with ``np.bincount``, the 3 x 3 blocks turned
-  into CSR by scipy's BSR conversion (canonical: sorted, no duplicates), K = U + U' + D, and the
-  fixed unknowns masked out. K is symmetric: its CSR arrays are its
-  CSC arrays.
+  into CSR by scipy's BSR conversion (canonical: sorted, no duplicates) with each block row laid out
+  as [transposed lower blocks, diagonal, upper blocks], and the fixed unknowns dropped. K is
+  symmetric: its CSR arrays are its CSC arrays.
 * Interface term: sum_j coef_j |u_j^+ - u_j^-|^2 (all three components), B row j = nu_j . (u_j^+ - u_j^-).
 """
 from __future__ import annotations
@@ -59,7 +59,9 @@ def stiffness(p: np.ndarray, t: np.ndarray, lam: float, mu: float, node_dofs: np
 
     Symmetry halves the work: each tetrahedron's corners are sorted by node id, its 6 off-diagonal
     blocks (i < j) summed onto the distinct pairs (one argsort of 6 nt keys) and its 4 diagonal
-    blocks onto the nodes (no sort); K = U + U' + D in CSR (scipy's linear-time sums)."""
+    blocks onto the nodes (no sort); the symmetric block matrix is laid out directly (:func:`_symmetric`),
+    after dropping the nodes whose every component is fixed (the usual clamp), and single fixed
+    components are masked out (:func:`_restrict`)."""
     nn = p.shape[1]
     g, vol = gradients(p, t)
     g *= np.sqrt(vol)
@@ -83,12 +85,47 @@ def stiffness(p: np.ndarray, t: np.ndarray, lam: float, mu: float, node_dofs: np
             V[:, r, c] = np.bincount(pos, weights=w.ravel(), minlength=rows.size)
             Vd[:, r, c] = np.bincount(node, weights=wd.ravel(), minlength=nn)
     del pos, ga, gb, dot, dd
-    indptr = np.searchsorted(rows, np.arange(nn + 1))
-    U = sp.bsr_matrix((V, cols, indptr), shape=(3 * nn, 3 * nn)).tocsr()
-    D = sp.bsr_matrix((Vd, np.arange(nn), np.arange(nn + 1)), shape=(3 * nn, 3 * nn)).tocsr()
-    A = U + U.T.tocsr() + D
-    A.sort_indices()
-    return _restrict(A, node_dofs, n)
+    nd = np.asarray(node_dofs, dtype=np.int64)
+    whole = (nd >= 0).all(axis=0) | (nd < 0).all(axis=0)
+    if whole.all() and not (nd >= 0).all():          # supports fix whole nodes: drop them at block level
+        free = (nd >= 0).all(axis=0)
+        keep = free[rows] & free[cols]
+        rank = np.cumsum(free) - 1
+        rows, cols, V, Vd = rank[rows[keep]], rank[cols[keep]], V[keep], Vd[free]
+        nn = int(free.sum())
+        nd = np.arange(3 * nn).reshape(nn, 3).T
+    return _restrict(_symmetric(rows, cols, V, Vd, nn), nd, n)
+
+
+def _symmetric(rows: np.ndarray, cols: np.ndarray, V: np.ndarray, Vd: np.ndarray, nn: int) -> sp.csr_matrix:
+    """The symmetric 3 nn x 3 nn CSR matrix (canonical) with blocks V[s] at node pair (rows[s], cols[s])
+    (rows < cols, row-major sorted), their transposes at (cols[s], rows[s]) and Vd[i] at (i, i): every
+    block row is [lower blocks, diagonal, upper blocks], already sorted by column (the lower ones by a
+    counting sort on their column, through scipy's CSR -> CSC), then scipy's BSR -> CSR."""
+    nU = np.bincount(rows, minlength=nn)
+    nL = np.bincount(cols, minlength=nn)
+    ptr = np.zeros(nn + 1, np.int64)
+    np.cumsum(nL + 1 + nU, out=ptr[1:])
+    k = np.arange(rows.size)
+    # lower blocks: the pairs ordered by (col, row)
+    startU = np.r_[0, np.cumsum(nU)[:-1]]
+    startL = np.r_[0, np.cumsum(nL)[:-1]]
+    oL = sp.csr_matrix((k + 1, cols, np.r_[0, np.cumsum(nU)]), shape=(nn, nn)).tocsc().data - 1
+    cL = cols[oL]
+    posL = ptr[cL] + (k - startL[cL])
+    posU = ptr[rows] + nL[rows] + 1 + (k - startU[rows])
+    posD = ptr[:-1] + nL
+    B = np.empty((int(ptr[-1]), 3, 3))
+    bcol = np.empty(int(ptr[-1]), np.int64)
+    B[posL] = V[oL].transpose(0, 2, 1)
+    bcol[posL] = rows[oL]
+    B[posU] = V
+    bcol[posU] = cols
+    B[posD] = Vd
+    bcol[posD] = np.arange(nn)
+    A = sp.bsr_matrix((B, bcol, ptr), shape=(3 * nn, 3 * nn)).tocsr()
+    A.has_sorted_indices = True
+    return A
 
 
 def _restrict(A: sp.csr_matrix, node_dofs: np.ndarray, n: int) -> sp.csc_matrix:
