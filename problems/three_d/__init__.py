@@ -34,6 +34,7 @@ front nodes of every defect and ``defect_front_id`` (k,) their defects.
 """
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -136,6 +137,11 @@ class ThreeD(Problem):
         if p["tip_size"] > h:
             raise InputError(f"tip_size must be in [0, mesh_size] = [0, {h:g}], got {p['tip_size']:g}")
         tables = p["defects"]
+        if isinstance(tables, str) and tables.strip()[:1] in "[{":     # --set defects='[{"shape": ...}]' (JSON)
+            try:
+                tables = json.loads(tables)
+            except ValueError:
+                raise InputError(f"defects must be a list of tables (from --set: JSON), got {tables!r}") from None
         if isinstance(tables, (list, tuple)) and len(tables) == 0:
             tables = [{"shape": "disk", "center": [w / 2 for w in box], "normal": [0.0, 0.0, 1.0],
                        "radius": 0.25 * min(box[0], box[1])}]

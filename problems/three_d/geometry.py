@@ -302,7 +302,7 @@ def _sample_polygon(s: Surface, spacing: float) -> np.ndarray:
 def parse_defects(tables, default_delta: float, box: tuple[float, float, float]) -> list[Surface]:
     """Every ``[[defects]]`` table parsed and checked to lie strictly inside the box (its exact extent)."""
     if not isinstance(tables, (list, tuple)) or not tables:
-        raise InputError("a 3D scene needs [[defects]] tables (shape = disk, ellipse, polygon or cap), got none")
+        raise InputError(f"defects must be [[defects]] tables (shape = disk, ellipse, polygon or cap), got {tables!r}")
     if len(tables) > MAX_DEFECTS:
         raise InputError(f"defects: at most {MAX_DEFECTS} defects in a 3D scene, got {len(tables)}")
     surfaces = [parse_surface(i, t, default_delta) for i, t in enumerate(tables)]
