@@ -83,3 +83,16 @@ def test_penny_crack_closes_under_compression_with_the_remote_pressure():
     assert evaluator.contact_set(qp, sol.x).all()
     assert sol.multipliers.sum() / qp.weights.sum() == pytest.approx(1.0, rel=0.02)
     assert np.abs(qp.pressure(sol.multipliers) - 1.0).max() < 0.1
+
+
+def test_face_pressure_opens_the_penny_like_remote_tension():
+    """Superposition: a pressure p on both faces of the crack in an unloaded body opens it exactly as the
+    remote tension p does (their difference is the uncracked body's uniform state, exact in P1)."""
+    zero = [[0.0] * 3 for _ in range(3)]
+    disk = {"shape": "disk", "center": [5.0, 5.0, 5.0], "normal": [0.0, 0.0, 1.0], "radius": 1.0}
+    a = load_scene("penny", {"remote_stress": zero, "defects": [{**disk, "face_pressure": 1.0}]}).build()
+    b = load_scene("penny", {}).build()
+    sa, sb = run("pdas", a), run("pdas", b)
+    assert sa.ok and sb.ok
+    ja, jb = a.B @ sa.x, b.B @ sb.x
+    assert jb.min() > 0 and np.abs(ja - jb).max() <= 1e-8 * jb.max()
