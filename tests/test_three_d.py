@@ -184,6 +184,8 @@ def test_interface_term_and_B():
     ({"defects": [{"shape": "sphere"}]}, "shape must be one of"),
     ({"mesh_size": 1e-3}, r"tetrahedra \(limit"),
     ({"mesh_size": 0.1, "tip_size": 1e-4}, "tip_size must be in"),
+    ({"mesh_size": 0.1, "surface_size": 1e-3}, r"surface_size must be in \[0\.0"),
+    ({"mesh_size": 0.1, "surface_size": 0.2}, r"surface_size must be in \[0, mesh_size\]"),
     ({"mesh": "structured"}, "mesh must be gmsh"),
     ({"rotate_axis": [0, 0, 0]}, "rotate_axis"),
     ({"nu": 0.5}, "nu"),

@@ -3,10 +3,11 @@
 Body: the box (0, width) x (0, depth) x (0, height), isotropic linear elasticity (E, nu; no plane
 assumption: the 3D law itself), P1 tetrahedra of a gmsh mesh (``mesh = "gmsh"``, the only mesh in
 3D; ``mesh_size``, 0 = min(width, depth, height) / N; ``tip_size`` at the defect fronts, 0 =
-mesh_size) with every defect surface embedded (:mod:`.mesh`). Defects: ``[[defects]]`` tables with
-``shape`` = ``disk``, ``ellipse``, ``polygon`` or ``cap`` and an optional per-defect ``delta``
-(keys and normals: :mod:`.geometry`); without tables the disk of radius 0.25 x min(width, depth)
-at the centre, normal +z. Nodes strictly inside a defect are doubled, its front is not
+mesh_size; ``surface_size`` on the defect surfaces, 0 = no refinement there) with every defect
+surface embedded (:mod:`.mesh`). Defects: ``[[defects]]`` tables with ``shape`` = ``disk``,
+``ellipse``, ``polygon`` or ``cap`` and an optional per-defect ``delta`` (keys and normals:
+:mod:`.geometry`); without tables the disk of radius 0.25 x min(width, depth) at the centre,
+normal +z. Nodes strictly inside a defect are doubled, its front is not
 (:mod:`.cut`). Energy, one term per defect d:
 
     Pi(v) = 1/2 a(v, v) - (f, v) + sum_d 1/(2 delta_d) int_gamma_d |[v]|^2,   [v_nu] >= 0 on every gamma_d,
@@ -100,6 +101,7 @@ class ThreeD(Problem):
         "mesh": "gmsh",
         "mesh_size": 0.0,
         "tip_size": 0.0,
+        "surface_size": 0.0,
         "rotate_deg": 0.0,
         "rotate_axis": (0.0, 0.0, 1.0),
         "defects": (),
@@ -128,14 +130,16 @@ class ThreeD(Problem):
             raise InputError(f"mesh must be {' or '.join(MESHES)} in 3D, got {p['mesh']!r}")
         p["mesh_size"] = check_positive("mesh_size", p["mesh_size"], allow_zero=True)
         p["tip_size"] = check_positive("tip_size", p["tip_size"], allow_zero=True)
+        p["surface_size"] = check_positive("surface_size", p["surface_size"], allow_zero=True)
         self._axis = _vector3("rotate_axis", p["rotate_axis"])
         p["rotate_axis"] = tuple(float(c) for c in self._axis)
         box = self.box
         h = self.mesh_size
         if h > min(box):
             raise InputError(f"mesh_size must be in (0, min(width, depth, height)] = (0, {min(box):g}], got {h:g}")
-        if p["tip_size"] > h:
-            raise InputError(f"tip_size must be in [0, mesh_size] = [0, {h:g}], got {p['tip_size']:g}")
+        for k in ("tip_size", "surface_size"):
+            if p[k] > h:
+                raise InputError(f"{k} must be in [0, mesh_size] = [0, {h:g}], got {p[k]:g}")
         tables = p["defects"]
         if isinstance(tables, str) and tables.strip()[:1] in "[{":     # --set defects='[{"shape": ...}]' (JSON)
             try:
@@ -146,8 +150,9 @@ class ThreeD(Problem):
             tables = [{"shape": "disk", "center": [w / 2 for w in box], "normal": [0.0, 0.0, 1.0],
                        "radius": 0.25 * min(box[0], box[1])}]
         self._surfaces: list[Surface] = parse_defects(tables, p["delta"], box)
-        check_size(box, h, self.tip_size, sum(s.front_length() for s in self._surfaces), self._size_label())
-        check_apart(self._surfaces, self.tip_size or h)
+        check_size(box, h, self.tip_size, sum(s.front_length() for s in self._surfaces), self._size_label(),
+                   self.surface_size, sum(s.area() for s in self._surfaces))
+        check_apart(self._surfaces, min(self.tip_size or h, self.surface_size or h))
         for i, s in enumerate(self._surfaces):
             ratio = s.delta * p["E"] / max(box)
             if ratio < MIN_DELTA_E_OVER_L:
@@ -182,6 +187,11 @@ class ThreeD(Problem):
         t = float(self.params["tip_size"])
         return t if 0 < t < self.mesh_size else None
 
+    @property
+    def surface_size(self) -> float | None:
+        t = float(self.params["surface_size"])
+        return t if 0 < t < self.mesh_size else None
+
     def _size_label(self) -> str:
         p = self.params
         return f"mesh_size={self.mesh_size:g}" if p["mesh_size"] else \
@@ -190,7 +200,8 @@ class ThreeD(Problem):
     def size_estimate(self) -> tuple[int, str]:
         """Unknowns before meshing: 3 per node, about 5.5 tetrahedra per node (20 % margin for the doubling)."""
         tets = estimate_tetrahedra(self.box, self.mesh_size, self.tip_size,
-                                   sum(s.front_length() for s in self._surfaces))
+                                   sum(s.front_length() for s in self._surfaces), self.surface_size,
+                                   sum(s.area() for s in self._surfaces))
         return int(3 * 1.2 * tets / 5.5) + 3, self._size_label()
 
     # ------------------------------------------------------------------ mesh
@@ -202,7 +213,7 @@ class ThreeD(Problem):
         triangles); computed once per :class:`~dualfem.core.problem.Shared`."""
         shared = self.shared.data
         if shared.get("cut") is None:
-            m = mesh_box(self.box, self._surfaces, self.mesh_size, self.tip_size)
+            m = mesh_box(self.box, self._surfaces, self.mesh_size, self.tip_size, self.surface_size)
             c = cut(m.points, m.tets, m.faces, self._surfaces)
             from .assemble import boundary_faces
 

@@ -6,7 +6,8 @@ vertices; a cap cut from ``addSphere``), then ``occ.fragment`` makes the surface
 of the volume, so the tetrahedral mesh conforms to them: every defect is a set of mesh
 triangles. Element size ``mesh_size``, and ``tip_size`` near the defect fronts (their rim curves):
 a Distance/Threshold field, ``tip_size`` within ``tip_size`` of a front, growing linearly with
-slope ``GRADE`` to ``mesh_size``.
+slope ``GRADE`` to ``mesh_size``; optionally ``surface_size`` near the defect surfaces themselves
+(the same kind of field on their distance; where both apply, the smaller size).
 
 Size control before anything is meshed: :func:`estimate_tetrahedra` (regular tetrahedra of the
 local size, the fronts' refined tubes added) must stay below :data:`MAX_TETRAHEDRA`
@@ -52,27 +53,39 @@ def _tube(mesh_size: float, tip_size: float) -> tuple[float, float]:
     return tip_size, tip_size + (mesh_size - tip_size) / GRADE
 
 
-def estimate_tetrahedra(box, mesh_size: float, tip_size: float | None, front_length: float) -> int:
+def _refined(mesh_size: float, size: float, shape: str) -> float:
+    """Extra tetrahedra (over the count at mesh_size) per unit length of a front (``shape = "tube"``) or per
+    unit area of one side of a surface (``"slab"``), refined to ``size`` growing with slope GRADE."""
+    d0, d1 = _tube(mesh_size, size)
+    r = np.linspace(d0, d1, 401)
+    s = size + (mesh_size - size) * (r - d0) / (d1 - d0)
+    f = (2 * np.pi * r if shape == "tube" else 1.0) * (1 / s ** 3 - 1 / mesh_size ** 3)
+    grow = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(r)))
+    near = (np.pi * d0 ** 2 if shape == "tube" else d0) * (1 / size ** 3 - 1 / mesh_size ** 3)
+    return _FILL * _TET_PER_VOLUME * (grow + near)
+
+
+def estimate_tetrahedra(box, mesh_size: float, tip_size: float | None, front_length: float,
+                        surface_size: float | None = None, area: float = 0.0) -> int:
     """About how many tetrahedra: the volume over regular tetrahedra of size ``mesh_size``, plus a tube of
-    refined elements (size ``tip_size`` growing to ``mesh_size``) around fronts of total length ``front_length``.
+    refined elements (size ``tip_size`` growing to ``mesh_size``) around fronts of total length
+    ``front_length`` and slabs (size ``surface_size``) on both sides of defects of total ``area``.
     Overflow-safe (capped at 1e30)."""
     with np.errstate(all="ignore"):
         vol = float(np.prod(np.asarray(box, dtype=float)))
         count = _FILL * _TET_PER_VOLUME * vol / mesh_size ** 3
         if tip_size is not None and tip_size < mesh_size and front_length > 0:
-            d0, d1 = _tube(mesh_size, tip_size)
-            r = np.linspace(d0, d1, 401)
-            size = tip_size + (mesh_size - tip_size) * (r - d0) / (d1 - d0)
-            f = 2 * np.pi * r * (1 / size ** 3 - 1 / mesh_size ** 3)
-            ring = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(r)))
-            core = np.pi * d0 ** 2 * (1 / tip_size ** 3 - 1 / mesh_size ** 3)
-            count += _FILL * _TET_PER_VOLUME * front_length * (ring + core)
+            count += front_length * _refined(mesh_size, tip_size, "tube")
+        if surface_size is not None and surface_size < mesh_size and area > 0:
+            count += 2 * area * _refined(mesh_size, surface_size, "slab")
     return int(count) if count < 1e30 else int(1e30)
 
 
-def check_size(box, mesh_size: float, tip_size: float | None, front_length: float, label: str) -> int:
-    """The estimated tetrahedron count, or InputError naming mesh_size / tip_size and its allowed range."""
-    est = estimate_tetrahedra(box, mesh_size, tip_size, front_length)
+def check_size(box, mesh_size: float, tip_size: float | None, front_length: float, label: str,
+               surface_size: float | None = None, area: float = 0.0) -> int:
+    """The estimated tetrahedron count, or InputError naming mesh_size, tip_size or surface_size and its
+    allowed range (the first of them, in this order, that makes the count exceed MAX_TETRAHEDRA)."""
+    est = estimate_tetrahedra(box, mesh_size, tip_size, front_length, surface_size, area)
     if est <= MAX_TETRAHEDRA:
         return est
     vol = float(np.prod(box))
@@ -81,15 +94,22 @@ def check_size(box, mesh_size: float, tip_size: float | None, front_length: floa
     if estimate_tetrahedra(box, mesh_size, None, 0.0) > MAX_TETRAHEDRA:
         raise InputError(f"{label} gives about {n} tetrahedra (limit {MAX_TETRAHEDRA:,}) on the "
                          f"{' x '.join(f'{b:g}' for b in box)} box: mesh_size must be >= {lo:.3g}")
-    a, b = math.log(tip_size or mesh_size), math.log(mesh_size)
+    tip_too = estimate_tetrahedra(box, mesh_size, tip_size, front_length) > MAX_TETRAHEDRA
+    name, given = ("tip_size", tip_size) if tip_too else ("surface_size", surface_size)
+
+    def count(size: float) -> int:
+        return estimate_tetrahedra(box, mesh_size, size, front_length) if tip_too else \
+            estimate_tetrahedra(box, mesh_size, tip_size, front_length, size, area)
+
+    a, b = math.log(given or mesh_size), math.log(mesh_size)
     for _ in range(60):
         mid = 0.5 * (a + b)
-        if estimate_tetrahedra(box, mesh_size, math.exp(mid), front_length) > MAX_TETRAHEDRA:
+        if count(math.exp(mid)) > MAX_TETRAHEDRA:
             a = mid
         else:
             b = mid
-    raise InputError(f"{label}, tip_size={tip_size:g} gives about {n} tetrahedra (limit {MAX_TETRAHEDRA:,}): "
-                     f"tip_size must be in [{math.exp(b):.3g}, {mesh_size:g}]")
+    raise InputError(f"{label}, {name}={given:g} gives about {n} tetrahedra (limit {MAX_TETRAHEDRA:,}): "
+                     f"{name} must be in [{math.exp(b):.3g}, {mesh_size:g}]")
 
 
 def _import_gmsh():
@@ -132,7 +152,8 @@ def _surface(gmsh, s: Surface) -> int:
     return caps[0]
 
 
-def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | None) -> BoxMesh:
+def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | None,
+             surface_size: float | None = None) -> BoxMesh:
     """The tetrahedral mesh of the box with every surface embedded (see the module docstring)."""
     gmsh = _import_gmsh()
     owner = not gmsh.isInitialized()
@@ -152,7 +173,7 @@ def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | N
             raise InputError("the defects must neither cut the box's sides nor each other (gmsh split a defect "
                              "surface or the volume)")
         front = sorted({abs(t) for p in pieces for _, t in gmsh.model.getBoundary([(2, p[0])], oriented=False)})
-        _fields(gmsh, mesh_size, tip_size, front)
+        _fields(gmsh, mesh_size, tip_size, front, surface_size, [p[0] for p in pieces])
         gmsh.model.mesh.generate(3)
         return _extract(gmsh, [p[0] for p in pieces])
     finally:
@@ -162,22 +183,33 @@ def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | N
             gmsh.model.remove()
 
 
-def _fields(gmsh, mesh_size: float, tip_size: float | None, front: list[int]) -> None:
+def _fields(gmsh, mesh_size: float, tip_size: float | None, front: list[int],
+            surface_size: float | None = None, surfaces: list[int] | None = None) -> None:
+    """Size mesh_size; tip_size near the front curves and surface_size near the defect surfaces (each a
+    Distance/Threshold pair; the smaller of them where both apply)."""
     gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
-    if tip_size is None or tip_size >= mesh_size or not front:
-        return
-    d0, d1 = _tube(mesh_size, tip_size)
     fld = gmsh.model.mesh.field
-    dist = fld.add("Distance")
-    fld.setNumbers(dist, "CurvesList", front)
-    fld.setNumber(dist, "Sampling", 200)
-    thr = fld.add("Threshold")
-    fld.setNumber(thr, "InField", dist)
-    fld.setNumber(thr, "SizeMin", tip_size)
-    fld.setNumber(thr, "SizeMax", mesh_size)
-    fld.setNumber(thr, "DistMin", d0)
-    fld.setNumber(thr, "DistMax", d1)
-    fld.setAsBackgroundMesh(thr)
+    fields = []
+    for size, kind, tags in ((tip_size, "CurvesList", front), (surface_size, "SurfacesList", surfaces or [])):
+        if size is None or size >= mesh_size or not tags:
+            continue
+        d0, d1 = _tube(mesh_size, size)
+        dist = fld.add("Distance")
+        fld.setNumbers(dist, kind, tags)
+        fld.setNumber(dist, "Sampling", 200)
+        thr = fld.add("Threshold")
+        fld.setNumber(thr, "InField", dist)
+        fld.setNumber(thr, "SizeMin", size)
+        fld.setNumber(thr, "SizeMax", mesh_size)
+        fld.setNumber(thr, "DistMin", d0)
+        fld.setNumber(thr, "DistMax", d1)
+        fields.append(thr)
+    if len(fields) == 2:
+        both = fld.add("Min")
+        fld.setNumbers(both, "FieldsList", fields)
+        fields = [both]
+    if fields:
+        fld.setAsBackgroundMesh(fields[0])
 
 
 def _extract(gmsh, surface_tags: list[int]) -> BoxMesh:
