@@ -45,6 +45,14 @@ def test_cut_doubles_interior_nodes_and_keeps_the_front(four):
     rim = c.points[:, c.front[c.front_id == 0]].T - surfaces[0].center
     assert np.allclose(np.linalg.norm(rim - np.outer(rim @ surfaces[0].normal, surfaces[0].normal), axis=1), 0.18,
                        rtol=1e-6)
+    # the ellipse's semi-axis a = 0.08 lies along its direction, b = 0.16 across; the polygon runs counter-
+    # clockwise seen from +z, so its normal is +z (right-hand rule); the cap's normal at its apex is its axis
+    e = c.points[:, c.front[c.front_id == 1]].T - surfaces[1].center
+    d = np.array([0.0, 1.0, 0.0])
+    assert np.abs(e @ d).max() == pytest.approx(0.08, rel=1e-2)
+    assert np.abs(e @ np.cross(surfaces[1].normal, d)).max() == pytest.approx(0.16, rel=1e-2)
+    assert np.allclose(surfaces[2].normal, [0, 0, 1])
+    assert np.allclose(surfaces[3].normal_at(np.array([[0.72, 0.72, 0.30]])), [[0, 0, 1]])
     # the cut's own checks hold: no tetrahedron touches both copies, each copy has tetrahedra
     check_cut(c)
     count = np.bincount(c.tets.ravel(), minlength=c.points.shape[1])
