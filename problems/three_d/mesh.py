@@ -174,7 +174,11 @@ def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | N
                              "surface or the volume)")
         front = sorted({abs(t) for p in pieces for _, t in gmsh.model.getBoundary([(2, p[0])], oriented=False)})
         _fields(gmsh, mesh_size, tip_size, front, surface_size, [p[0] for p in pieces])
-        gmsh.model.mesh.generate(3)
+        try:
+            gmsh.model.mesh.generate(3)
+        except Exception as exc:  # noqa: BLE001 - gmsh raises a bare Exception with its last error message
+            raise InputError(f"gmsh could not mesh the box with its defects (mesh_size={mesh_size:g}, tip_size="
+                             f"{tip_size or mesh_size:g}): {exc}; try other sizes or move the defects apart") from None
         return _extract(gmsh, [p[0] for p in pieces])
     finally:
         if owner:
