@@ -30,6 +30,9 @@ more nodes. Keys:
   ends), inside the body: 0 <= x0 < x1 <= width, 0 <= y0 < y1 <= height.
 * ``mesh_size`` = ``tip_size`` = 0.01 by default (``tip_size`` < ``mesh_size`` refines around the
   2 x ``cracks`` tips).
+* ``face_pressure`` (default none): a pressure on both faces of every crack, a number or an expression
+  in x, y (stress units; > 0 pushes the faces apart: docs/loads.md). The supports and loads keys of
+  ``thin_defect`` (``[[boundary]]``, ``body_force``, ``remote_stress``) apply as they do there.
 
 From the command line a range or the region is one value: ``--set crack_length=[0.01,0.04]``,
 ``--set region=[[0.2,0.2],[0.8,0.8]]`` (or ``0.01,0.04``).
@@ -64,6 +67,7 @@ import numpy as np
 from dualfem.core.errors import InputError, check_int, check_positive
 from dualfem.core.registry import register_problem
 
+from ._boundary import parse_scalar
 from ._segments import near_segment_pairs
 from .thin_defect import ThinDefect
 
@@ -285,8 +289,10 @@ class Fractured(ThinDefect):
         "min_gap": 0.0,
         "seed": 0,
         "region": None,              # None: the whole body
+        "face_pressure": None,       # None: no pressure on the cracks' faces
     }
     presets = {"fractured": {}}
+    update_keys = (*ThinDefect.update_keys, "face_pressure")
     #: the gmsh algorithm (a key of dualfem.problems.gmsh_mesh.ALGORITHMS) and the uniform refinements
     #: after it (mesh_with_defects's refine)
     gmsh_algorithm = "frontal_unsmoothed"
@@ -316,7 +322,12 @@ class Fractured(ThinDefect):
         p["min_gap"], p["cracks"] = gap, n
         p["region"] = parse_region(p["region"], p["width"], p["height"]).tolist()
         self.crack_points = seg                  # (cracks, 2, 2): first and last point of each crack
-        self._defects = [{"points": s, "curve": "polyline", "delta": p["delta"]} for s in seg]
+        fp = p["face_pressure"]
+        if isinstance(fp, str) and not fp.strip():
+            fp = None
+        pressure = None if fp is None else parse_scalar(fp, "face_pressure", 2, (p["width"], p["height"]))
+        self._defects = [{"points": s, "curve": "polyline", "delta": p["delta"], "face_pressure": pressure}
+                         for s in seg]
         self._check_defects_and_load()
 
     def _gmsh_options(self) -> dict:
@@ -326,7 +337,7 @@ class Fractured(ThinDefect):
 
     def with_params(self, **changes: Any) -> Fractured:
         new = type(self)(**{**self._user, **changes})
-        if set(changes) <= set(self.update_keys):
+        if self._shares_with(new, changes):
             new.shared = self.shared
         return new
 
@@ -334,5 +345,7 @@ class Fractured(ThinDefect):
         qp = super().build()
         for k in _HIDDEN:                        # provenance: this problem's keys (cracks, seed, ...), not the list
             qp.params.pop(k, None)
+        if self.params["face_pressure"] is None:
+            qp.params.pop("face_pressure", None)
         qp.name = qp.name.replace("thin_defect", "fractured", 1)
         return qp

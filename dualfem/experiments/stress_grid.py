@@ -100,8 +100,33 @@ def _scaled_defects(tables, length: float, stress: float) -> list[dict]:
             t["points"] = [[float(c) * length for c in pt] for pt in t["points"]]
         if "delta" in t:
             t["delta"] = float(t["delta"]) * length / stress
+        if isinstance(t.get("face_pressure"), str) and length != 1:
+            t["face_pressure"] = _scaled_expression(t["face_pressure"], length)
         out.append(t)
     return out
+
+
+def _scaled_loads(out: dict, d: dict, length: float) -> None:
+    """The supports-and-loads keys (docs/loads.md) for coordinates ``length`` times larger, into ``out``:
+    expressions evaluated at the unscaled coordinates; a body force (force per volume: stress / length)
+    divided by ``length`` (``load_scale`` carries the stress); tractions and the remote stress are stresses."""
+    def value(v):
+        return json.loads(v) if isinstance(v, str) and v.strip()[:1] in "[{" else v
+
+    def expr(v):
+        return _scaled_expression(v, length) if isinstance(v, str) else v
+
+    if length == 1:
+        return
+    bf = value(d.get("body_force"))
+    if isinstance(bf, (list, tuple)):
+        out["body_force"] = [f"({expr(v)}) / {float(length)!r}" if isinstance(v, str) else float(v) / length
+                             for v in bf]
+    tables = value(d.get("boundary"))
+    if isinstance(tables, (list, tuple)) and tables:
+        out["boundary"] = [{**t, "traction": [expr(v) for v in value(t["traction"])]}
+                           if isinstance(t, dict) and isinstance(value(t.get("traction")), (list, tuple)) else t
+                           for t in tables]
 
 
 def scene_in_units(base: dict, stress: float, length: float, problem: str = "thin_defect") -> dict:
@@ -111,7 +136,9 @@ def scene_in_units(base: dict, stress: float, length: float, problem: str = "thi
     of every ``[[defects]]`` table, ``mesh_size`` and ``tip_size`` are lengths (x ``length``); delta
     (the scene's and each defect's own) is a length per stress (the interface pressure is [u]/delta).
     A load expression in ``x``, ``y`` is rewritten so that it is evaluated at the unscaled
-    coordinates (the paper's f1/f2/f3 already scale with ``width``); a Python function is refused.
+    coordinates (the paper's f1/f2/f3 already scale with ``width``); a Python function is refused;
+    so are the expressions of ``[[boundary]]`` tractions and ``face_pressure``, and ``body_force`` (a
+    stress per length) is divided by ``length`` (:func:`_scaled_loads`).
     signorini: E is a stress; width, height, the indentation and the obstacle's gap are lengths
     (the gap expression in ``x`` becomes ``length * g(x / length)``). In both, x maps by ``length``
     and the nodal forces mu by ``stress * length``.
@@ -144,6 +171,7 @@ def scene_in_units(base: dict, stress: float, length: float, problem: str = "thi
         out.pop("defect", None)
     else:
         out["defect"] = [[float(c) * length for c in pt] for pt in np.asarray(d["defect"], dtype=float)]
+    _scaled_loads(out, d, length)
     load = d["load"]
     if callable(load):
         raise InputError("scene_in_units: a load given as a Python function cannot be converted to other units")

@@ -2,11 +2,22 @@
 
 Body: the rectangle (0, width) x (0, height) (unit square by default), isotropic linear
 elasticity (E, nu; ``plane = "strain"`` by default, ``"stress"`` supported: the paper does not
-say which it used), clamped on the bottom side x2 = 0, a traction on the top side x2 = height
-(:mod:`dualfem.problems.loads`), other sides free. Defects: polylines (or splines, gmsh mesh only)
-strictly inside the body; the normal nu of a defect is its tangent, from its first to its last
-point, turned by +90 degrees (so for the default horizontal defect nu = (0, 1) and the "+" face
-is the upper one); see :mod:`.cut`. Energy (paper, section 1), one term per defect d:
+say which it used). Supports and loads: by default (the paper's scenes) clamped on the bottom side
+x2 = 0, a traction ``load`` on the top side x2 = height (:mod:`dualfem.problems.loads`), other sides
+free; with any of the keys ``boundary`` (``[[boundary]]`` tables: ``side`` = left | right | bottom |
+top, ``support`` = clamp | roller | free, ``traction`` = [t1, t2] of numbers or expressions in x, y),
+``body_force`` ([b1, b2], force per volume) or ``remote_stress`` ([[s11, s12], [s12, s22]]: the
+traction sigma.n on every side without a support; no support at all = only the rigid-body motions
+removed) the scene's own supports and loads instead, and ``load`` is not used
+(:mod:`dualfem.problems._boundary`, docs/loads.md). Each ``[[defects]]`` table may carry a
+``face_pressure`` (a number or an expression in x, y; > 0 pushes the faces apart, the "+" copy of
+node j gets +p_j w_j nu_j). ``load_scale`` multiplies every load. Tractions are forces per area on
+the body's outer surface, in the reference frame (before ``rotate_deg``).
+
+Defects: polylines (or splines, gmsh mesh only) strictly inside the body; the normal nu of a
+defect is its tangent, from its first to its last point, turned by +90 degrees (so for the
+default horizontal defect nu = (0, 1) and the "+" face is the upper one); see :mod:`.cut`.
+Energy (paper, section 1), one term per defect d:
 
     Pi(v) = 1/2 a(v, v) - (f, v) + sum_d 1/(2 delta_d) int_gamma_d |[v]|^2,   [v_nu] >= 0 on every gamma_d.
 
@@ -16,16 +27,18 @@ along grid edges) or ``"gmsh"`` (unstructured, defects embedded; :mod:`dualfem.p
 ``mesh_size`` (gmsh target element size; 0 = min(width, height) / N), ``tip_size`` (gmsh size
 at the defect tips; 0 = mesh_size), ``rotate_deg`` (rigid counter-clockwise rotation of the whole
 scene about the body's centre: body, defects, loads and supports; the mesh is generated once in
-the reference frame and rotated; the clamped and loaded sides are those of the reference frame),
+the reference frame and rotated; the supported and loaded sides are those of the reference frame;
+a roller on a rotated body is refused),
 and ``defects`` (TOML ``[[defects]]`` tables: ``points`` = [[x, y], ...] in the reference frame,
-``curve`` = "polyline" | "spline", optional ``delta``). Without ``defects`` the single segment
+``curve`` = "polyline" | "spline", optional ``delta`` and ``face_pressure``). Without ``defects`` the single segment
 ``defect = [[x1, y1], [x2, y2]]`` is used.
 
 P1 elements; nodes strictly inside a defect are doubled (tips not); the interface integral uses
 the trapezoid rule. Units are whatever the inputs use (paper: MPa and a unit length). The QP and
 its multiplier convention are described in :mod:`dualfem.qp`. ``QP.maps``: ``nodes`` (2, n),
-``triangles`` (3, nt), ``node_dofs`` (2, n; -1 = clamped), per constrained defect node j (row j
-of B) ``defect_lower``/``defect_upper`` (node ids of the - / + copies), ``defect_id``,
+``triangles`` (3, nt), ``node_dofs`` (2, n; -1 = fixed: clamped, a roller's normal component or a
+rigid-body removal), per constrained defect node j (row j of B) ``defect_lower``/``defect_upper``
+(node ids of the - / + copies), ``defect_id``,
 ``defect_s`` (arc length from the defect's first point), ``defect_normals``/``defect_tangents``
 (2, m); ``defect_tips`` (first and last node of each defect, flat); and, for a single straight
 defect, ``normal`` and ``tangent`` (2,).
@@ -42,6 +55,7 @@ from dualfem.core.qp import QP
 from dualfem.core.registry import register_problem
 from dualfem.numerics.linalg import freeze
 
+from .. import _boundary as bd
 from ..loads import resolve_load
 from .assemble import boundary_edges_on, free_dofs, interface, stiffness, traction_vector
 from .cut import Cut, cut
@@ -85,10 +99,14 @@ class ThinDefect(Problem):
         "tip_size": 0.0,
         "rotate_deg": 0.0,
         "defects": (),
+        "boundary": (),
+        "body_force": None,
+        "remote_stress": None,
     }
     presets = {"f1": {"load": "f1"}, "f2": {"load": "f2"}, "f3": {"load": "f3"}}
     #: keys that keep the mesh and K_el: ``with_params`` / a Workspace's ``update`` reuse the delta-free assembly
-    update_keys = ("delta", "load", "load_scale")
+    #: (``boundary`` only while the supports stay the same: :meth:`with_params`)
+    update_keys = ("delta", "load", "load_scale", "boundary", "body_force", "remote_stress")
 
     def validate(self) -> None:
         tables = self.params["defects"]        # the size is the first thing to know: before the defects are parsed
@@ -135,7 +153,9 @@ class ThinDefect(Problem):
             check_size(p["width"], p["height"], h, tip, 2 * n_defects, label)
 
     def _check_defects_and_load(self) -> None:
-        """Each defect's delta against E and the body size; the load resolved."""
+        """Each defect's delta against E and the body size; the loads: ``[[boundary]]``, ``body_force``,
+        ``remote_stress`` (:mod:`dualfem.problems._boundary`; ``self._loads``, None without them: the legacy
+        bottom clamp and top traction ``load``, resolved into ``self._traction``)."""
         p = self.params
         for i, d in enumerate(self._defects):
             # the interface stiffness ~ 1/delta must not swamp the elastic stiffness ~ E beyond double
@@ -146,8 +166,39 @@ class ThinDefect(Problem):
                                  f"size: delta * E / max(width, height) = {ratio:.1e} must be "
                                  f">= {MIN_DELTA_E_OVER_L:g} "
                                  f"(below it the defect is glued to double precision)")
-        with np.errstate(all="ignore"):  # a NaN-producing expression is refused below, without warnings
-            self._traction = resolve_load(p["load"], p["width"])
+        self._loads: bd.LoadSpec | None = bd.parse_loads(p, 2)
+        self._traction = None
+        if self._loads is None:
+            with np.errstate(all="ignore"):  # a NaN-producing expression is refused below, without warnings
+                self._traction = resolve_load(p["load"], p["width"])
+            return
+        default = type(self).defaults["load"]
+        if not _same_load(p["load"], default):
+            raise InputError(f"load = {_load_label(p['load'])} (the top traction of a scene without supports and "
+                             f"loads of its own) cannot be combined with {', '.join(bd.KEYS)}: give the top "
+                             f"traction as a [[boundary]] table (side = 'top', traction = [t1, t2]) and leave load "
+                             f"at its default {default!r} (no preset scene that sets it, such as f1 or f3)")
+        rollers = [s.side for s in self._loads.sides if s.support == "roller"]
+        if rollers and float(p["rotate_deg"]) != 0.0:
+            raise InputError(f"boundary: a roller support (side {rollers[0]}) fixes the normal component of a side, "
+                             f"which on a body rotated by rotate_deg = {p['rotate_deg']:g} is not a component of "
+                             f"the unknowns; use rotate_deg = 0 or a clamp")
+
+    def _support_key(self) -> tuple | None:
+        """What the fixed unknowns depend on beyond the mesh: None (the legacy bottom clamp) or the supports."""
+        return None if self._loads is None else \
+            tuple(sorted((s.side, s.support) for s in self._loads.sides if s.support != "free"))
+
+    def _shares_with(self, new: ThinDefect, changes: dict) -> bool:
+        """Whether ``new`` (this scene with ``changes``) may reuse this one's delta-free assembly: only
+        :attr:`update_keys` changed and the supports (hence the fixed unknowns) are the same."""
+        return set(changes) <= set(self.update_keys) and new._support_key() == self._support_key()
+
+    def with_params(self, **changes) -> ThinDefect:
+        new = type(self)(**{**self.params, **changes})
+        if self._shares_with(new, changes):
+            new.shared = self.shared
+        return new
 
     def size_estimate(self) -> tuple[int, str]:
         """Unknowns before assembly: 2 per grid node (structured), or from the gmsh element size."""
@@ -218,8 +269,54 @@ class ThinDefect(Problem):
         y = c.points[1]
         return np.flatnonzero(np.abs(y) <= tol), np.abs(y - p["height"]) <= tol
 
+    def _box_sides(self) -> dict[str, np.ndarray]:
+        """Boundary edges per side of the doubled mesh (reference frame), computed once per Shared."""
+        shared = self.shared.data
+        if shared.get("box_sides") is None:
+            c, _ = self.cut()
+            shared["box_sides"] = bd.box_sides(c.points, c.triangles, (self.params["width"], self.params["height"]))
+        return shared["box_sides"]
+
     def nodal_load(self) -> np.ndarray:
-        """Nodal forces (2, nnodes) of the top traction, in the rotated frame."""
+        """Nodal forces (2, nnodes) of every load (the legacy top traction ``load``, or the ``[[boundary]]``
+        tractions, ``remote_stress`` and ``body_force``; the defects' ``face_pressure``), times
+        ``load_scale``, in the rotated frame."""
+        p = self.params
+        c, pts = self.cut()
+        R = rotation(float(p["rotate_deg"]))
+        if self._loads is None:
+            Fn = self._top_traction()
+        else:
+            Fn = bd.nodal_forces(self._loads, c.points, c.triangles, self._box_sides(), float(p["load_scale"]))
+            Fn = Fn if p["rotate_deg"] == 0 else R @ Fn
+        if any(d.get("face_pressure") is not None for d in self._defects):
+            Fn = Fn + bd.face_pressure_forces(c.upper, c.lower, R @ c.normals, c.weights,
+                                           float(p["load_scale"]) * self._pressures(c), pts.shape[1])
+        if self._loads is not None:
+            bd.check_balance(self._loads, pts, self._box_sides(), Fn)
+        return Fn
+
+    def _pressures(self, c: Cut) -> np.ndarray:
+        """The face pressure (m,) at each constrained defect node (0 on defects without one), evaluated at
+        the nodes' reference coordinates; InputError when not finite there."""
+        out = np.zeros(c.lower.size)
+        fields: dict[int, tuple] = {}
+        for k, d in enumerate(self._defects):
+            f = d.get("face_pressure")
+            if f is not None:
+                fields.setdefault(id(f), (f, []))[1].append(k)
+        for f, ks in fields.values():
+            sel = np.flatnonzero(np.isin(c.defect_id, ks))
+            with np.errstate(all="ignore"):
+                val = f(c.points[:, c.lower[sel]])[0]
+            if not np.all(np.isfinite(val)):
+                raise InputError(f"{f.key} = {f.values[0]!r} gives NaN or infinite values on its defect; it must "
+                                 f"be finite there")
+            out[sel] = val
+        return out
+
+    def _top_traction(self) -> np.ndarray:
+        """Nodal forces (2, nnodes) of the legacy top traction ``load``, in the rotated frame."""
         p = self.params
         c, _ = self.cut()
         edges = boundary_edges_on(c.points, c.triangles, self._sides(c)[1])
@@ -262,7 +359,10 @@ class ThinDefect(Problem):
         p = self.params
         c, pts = self.cut()
         lam, mu = lame(p["E"], p["nu"], p["plane"])
-        node_dofs = free_dofs(self._sides(c)[0], pts.shape[1])
+        if self._loads is None:
+            node_dofs = free_dofs(self._sides(c)[0], pts.shape[1])
+        else:
+            node_dofs = bd.dof_numbering(bd.fixed_mask(self._loads, pts, self._box_sides()))
         n = int(node_dofs.max()) + 1
         K_el = stiffness(pts, c.triangles, lam, mu, node_dofs, n)
         R = rotation(float(p["rotate_deg"]))
@@ -283,14 +383,20 @@ class ThinDefect(Problem):
         delta-free assembly (a sweep over delta assembles it once). Each QP gets its own copy."""
         p = self.params
         last = a.get("F")
-        if last is None or not (_same_load(last[0], p["load"]) and last[1] == p["load_scale"]):
+        key = self._loads_key()
+        if last is None or not (_same_load(last[0], p["load"]) and last[1] == p["load_scale"] and last[2] == key):
             node_dofs = a["maps"]["node_dofs"]
             Fn = self.nodal_load()
             F = np.zeros(a["n"])
             free = node_dofs >= 0
             F[node_dofs[free]] = Fn[free]
-            last = a["F"] = (p["load"], p["load_scale"], F)
-        return last[2].copy()
+            last = a["F"] = (p["load"], p["load_scale"], key, F)
+        return last[3].copy()
+
+    def _loads_key(self) -> tuple:
+        """What F depends on beyond ``load`` and ``load_scale``: the new loads and the face pressures."""
+        return (None if self._loads is None else self._loads.label(),
+                tuple(None if d.get("face_pressure") is None else d["face_pressure"].values for d in self._defects))
 
     @staticmethod
     def _stiffness(a: dict, coef: np.ndarray) -> tuple:
@@ -314,6 +420,11 @@ class ThinDefect(Problem):
             a["B"], a["J"] = B.copy(), [j.copy() for j in J]
         return K, B, J
 
+    def _qp_name(self) -> str:
+        load = self.params["load"]
+        return "thin_defect[loads]" if self._loads is not None else \
+            f"thin_defect[{load if isinstance(load, str) else 'custom'}]"
+
     def build(self) -> QP:
         """Assemble K (elastic + interface/delta), F (top traction), B (normal jumps).
 
@@ -332,13 +443,15 @@ class ThinDefect(Problem):
             tau = (pb - pa) / np.linalg.norm(pb - pa)
             maps["normal"], maps["tangent"] = R @ np.array([-tau[1], tau[0]]), R @ tau
         params = {k: (v if isinstance(v, (int, float, str)) else str(np.asarray(v).tolist()))
-                  for k, v in p.items() if not callable(v) and k != "defects"}
+                  for k, v in p.items() if not callable(v) and k != "defects" and k not in bd.KEYS}
         if isinstance(p["defects"], (list, tuple)) and len(p["defects"]):
             params["defects"] = defects_label(self._defects)
+        if self._loads is not None:
+            params["loads"] = self._loads.label()
         self.jump_operators = J
         geometry = GeometryPart(2, maps.pop("nodes"), maps.pop("triangles"), maps.pop("node_dofs"))
         return QP(K=K, F=self._load_vector(a), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],
-                  name=f"thin_defect[{p['load'] if isinstance(p['load'], str) else 'custom'}]",
+                  name=self._qp_name(),
                   params=params, maps=maps, geometry=geometry,
                   units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
                   material=MaterialPart(float(p["E"]), float(p["nu"]), str(p["plane"])))

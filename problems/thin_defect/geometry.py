@@ -5,6 +5,8 @@ import numpy as np
 
 from dualfem.core.errors import InputError, check_positive
 
+from .._boundary import parse_scalar
+
 CURVES = ("polyline", "spline")
 #: defects of one scene, and points of one defect (the geometric checks are pairwise)
 MAX_DEFECTS = 64
@@ -83,15 +85,17 @@ def _check_inside(key: str, pts: np.ndarray, width: float, height: float) -> Non
 
 def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height: float,
                   mesh: str) -> list[dict]:
-    """The defects as dicts {points (k, 2), curve, delta}; ``defect`` when ``tables`` is empty.
+    """The defects as dicts {points (k, 2), curve, delta, face_pressure}; ``defect`` when ``tables`` is empty.
 
     Checks: each table has ``points`` (>= 2 distinct consecutive points strictly inside the body),
-    ``curve`` in CURVES (``"spline"`` needs ``mesh = "gmsh"``), ``delta`` > 0; unknown keys refused.
+    ``curve`` in CURVES (``"spline"`` needs ``mesh = "gmsh"``), ``delta`` > 0, optional ``face_pressure``
+    (a number or an expression in x, y, finite in the body: :func:`dualfem.problems._boundary.parse_scalar`;
+    None when not given); unknown keys refused.
     Whether defects touch or cross is checked by the mesher (gmsh) or on the grid (structured).
     """
     if tables is None or (isinstance(tables, (list, tuple)) and len(tables) == 0):
         _check_inside("defect", defect, width, height)
-        return [{"points": defect, "curve": "polyline", "delta": delta}]
+        return [{"points": defect, "curve": "polyline", "delta": delta, "face_pressure": None}]
     if not isinstance(tables, (list, tuple)) or not all(isinstance(t, dict) for t in tables):
         raise InputError("defects must be a list of tables ([[defects]] in TOML) with points = [[x, y], ...], "
                          f"optional curve and delta; got {tables!r}")
@@ -100,9 +104,9 @@ def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height
     out = []
     for k, tab in enumerate(tables):
         key = f"defects[{k}]"
-        unknown = sorted(set(tab) - {"points", "curve", "delta"})
+        unknown = sorted(set(tab) - {"points", "curve", "delta", "face_pressure"})
         if unknown:
-            raise InputError(f"{key}: unknown key {unknown[0]!r}; allowed: points, curve, delta")
+            raise InputError(f"{key}: unknown key {unknown[0]!r}; allowed: points, curve, delta, face_pressure")
         if "points" not in tab:
             raise InputError(f"{key}.points is missing: give points = [[x, y], ...]")
         pts = _points(f"{key}.points", tab["points"])
@@ -118,11 +122,15 @@ def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height
                              f"got {dv!r}")
         d = check_positive(f"{key}.delta", dv)
         _check_inside(f"{key}.points", pts, width, height)
-        out.append({"points": pts, "curve": curve, "delta": d})
+        fp = tab.get("face_pressure")
+        pressure = None if fp is None else parse_scalar(fp, f"{key}.face_pressure", 2, (width, height))
+        out.append({"points": pts, "curve": curve, "delta": d, "face_pressure": pressure})
     return out
 
 
 def defects_label(defects: list[dict]) -> str:
     """A compact, JSON-like text of the defects (for ``QP.params``)."""
     return "[" + ", ".join(f"{{points: {np.round(d['points'], 12).tolist()}, curve: {d['curve']}, "
-                           f"delta: {d['delta']:g}}}" for d in defects) + "]"
+                           f"delta: {d['delta']:g}"
+                           + (f", face_pressure: {d['face_pressure'].values[0]!r}" if d.get("face_pressure") else "")
+                           + "}" for d in defects) + "]"
