@@ -425,7 +425,7 @@ def test_shipped_specs_are_valid():
     scenes = expand_scenes(spec)
     from dualfem.core.scene import library
 
-    assert {s.scene for s in scenes} == {"f1", "f2", "f3"} | set(library())   # the scene library too
+    assert {s.scene for s in scenes} == {"f1", "f2", "f3"} | set(library(dim=2))   # the 2D scene library too
     assert {1e-1, 1e-3, 1e-5, 1e-7, 1e-9} <= {s.params.get("delta") for s in scenes}
     assert max(s.params.get("N", 0) for s in scenes) >= 512
 

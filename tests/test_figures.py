@@ -121,7 +121,8 @@ def test_report_figures_small(tmp_path):
                     progress=lambda m: None, scene_overrides={"mesh_size": 0.1})
     images = re.findall(r"\(figures/([^)]+\.png)\)", text)
     # deformed bodies, jump/faces/pressure, the scene library, three histories
-    assert len(images) == 5 + 3 + len(library()) + 3 and sum(n.startswith("scene_") for n in images) == len(library())
+    assert len(images) == 5 + 3 + len(library(dim=2)) + 3 and sum(n.startswith("scene_") for n in images) \
+        == len(library(dim=2))
     for name in images:
         assert (tmp_path / "figures" / name).stat().st_size > 1000
     assert "| f2 |" in text and "Agreement of the Uzawa solutions" in text
@@ -263,11 +264,11 @@ def test_report_scene_library_section(tmp_path):
     from dualfem.reports.figures import _scenes_section
 
     items = library_runs("pdas", lambda m: None, {"mesh_size": 0.1})
-    assert [it["name"] for it in items] == list(library())
+    assert [it["name"] for it in items] == list(library(dim=2))
     (tmp_path / "figures").mkdir()
     text = "\n".join(_scenes_section({"scenes": items, "exact": "pdas"}, tmp_path / "figures", 300.0, 40))
     images = re.findall(r"\(figures/([^)]+\.png)\)", text)
-    assert images == [f"scene_{name}.png" for name in library()]
+    assert images == [f"scene_{name}.png" for name in library(dim=2)]
     for name in images:
         assert (tmp_path / "figures" / name).stat().st_size > 1000
     two = next(it["row"] for it in items if it["name"] == "two_defects")

@@ -19,7 +19,8 @@ from dualfem.problems.gmsh_mesh import (
 
 gmsh = pytest.importorskip("gmsh")
 
-SCENES = sorted((Path(__file__).resolve().parents[1] / "scenes").glob("*.toml"))
+SCENES = sorted(p for p in (Path(__file__).resolve().parents[1] / "scenes").glob("*.toml")
+                if tomllib.loads(p.read_text(encoding="utf-8")).get("dim", 2) == 2)     # the 2D mesher's scenes
 KINKED = [{"points": [[0.2, 0.3], [0.5, 0.45], [0.8, 0.45]], "curve": "polyline"}]
 CURVED = [{"points": [[0.2, 0.45], [0.5, 0.6], [0.8, 0.45]], "curve": "spline"}]
 TWO = [{"points": [[0.15, 0.35], [0.45, 0.4]], "curve": "polyline"},

@@ -318,7 +318,8 @@ class QP:
         if geometry_keys and qp.geometry is None:
             raise InputError(f"{where} holds map_{geometry_keys[0]} but not a consistent mesh: map_nodes (2 or 3, "
                              f"n_nodes), map_triangles and map_node_dofs are needed together")
-        check_maps(qp.maps, qp.m, None if qp.geometry is None else qp.geometry.nodes.shape[1], where)
+        check_maps(qp.maps, qp.m, None if qp.geometry is None else qp.geometry.nodes.shape[1], where,
+                   dim=2 if qp.geometry is None else qp.geometry.dim)
         qp.check()
         return qp
 

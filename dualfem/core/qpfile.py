@@ -184,10 +184,11 @@ def check_params(params: dict, where: str) -> None:
 
 
 #: the documented maps that are vectors (a .mat file stores them as 1 x k)
-VECTOR_MAPS = ("defect_upper", "defect_lower", "defect_s", "defect_id", "defect_tips", "normal", "tangent")
+VECTOR_MAPS = ("defect_upper", "defect_lower", "defect_s", "defect_id", "defect_tips", "normal", "tangent",
+               "defect_front", "defect_front_id")
 
 
-def check_maps(maps: dict, m: int, n_nodes: int | None, where: str) -> None:
+def check_maps(maps: dict, m: int, n_nodes: int | None, where: str, dim: int = 2) -> None:
     """The documented defect maps (``map_*`` arrays of an exported file; what post-processing and the
     VTK writer read), if present: shapes, dtypes and index ranges. InputError naming the array.
 
@@ -195,6 +196,8 @@ def check_maps(maps: dict, m: int, n_nodes: int | None, where: str) -> None:
     ``defect_id`` (m,) in [0, number of defects) (= len(defect_tips) / 2 when the tips are given);
     ``defect_tips`` (2 per defect,) node ids; ``defect_normals``/``defect_tangents`` (2, m) finite;
     ``normal``/``tangent`` (2,) finite. ``n_nodes``: the mesh's node count (None: not checked).
+    With ``dim = 3`` (a 3D mesh): ``defect_normals`` (m, 3) finite, ``defect_front`` (k,) node ids and
+    ``defect_front_id`` (k,) defect numbers (one per front node).
     """
 
     def arr(k: str, kinds: str, shape: tuple) -> np.ndarray | None:
@@ -229,6 +232,15 @@ def check_maps(maps: dict, m: int, n_nodes: int | None, where: str) -> None:
         raise InputError(f"map 'defect_id' of {where} must hold defect numbers in [0, {max(ndef, 1)})"
                          f"{' (2 tips per defect in defect_tips)' if tips is not None else ''}, "
                          f"got values in [{ids.min()}, {ids.max()}]")
+    if dim == 3:
+        arr("defect_normals", "iuf", (m, 3))
+        front = arr("defect_front", "iu", (-1,))
+        nodes("defect_front", front)
+        fid = arr("defect_front_id", "iu", (-1,))
+        if (front is None) != (fid is None) or (front is not None and fid is not None and front.size != fid.size):
+            raise InputError(f"maps 'defect_front' and 'defect_front_id' of {where} must be given together, "
+                             f"of equal lengths")
+        return
     for k in ("defect_normals", "defect_tangents"):
         arr(k, "iuf", (2, m))
     for k in ("normal", "tangent"):

@@ -16,6 +16,8 @@ from dualfem.core.registry import builtin_names, get_problem, problems
 #: one place the framework names a scene; report studies reproducing the paper name the paper's
 #: loads in :mod:`dualfem.experiments.paper`.
 DEFAULT_SCENE = "f2"
+#: the problem plugin of a scene file without ``problem`` or ``scene``, by its ``dim`` key (default 2)
+DIM_PROBLEMS = {2: "thin_defect", 3: "three_d"}
 
 
 class PresetConflictWarning(UserWarning):
@@ -65,16 +67,27 @@ def _presets() -> tuple[dict[str, tuple[str, dict[str, Any]]], list[str]]:
     return out, conflicts
 
 
-def library() -> dict[str, Path]:
-    """The scene library (the repository's ``scenes/`` folder, installed as ``dualfem.scenes``): name -> file."""
+def library(dim: int | None = None) -> dict[str, Path]:
+    """The scene library (the repository's ``scenes/`` folder, installed as ``dualfem.scenes``): name -> file;
+    with ``dim``, only the scenes of that dimension (a file's ``dim`` key, default 2)."""
     import importlib.resources
 
     try:
         root = importlib.resources.files("dualfem.scenes")
     except ModuleNotFoundError:
         return {}
-    return {Path(str(p)).stem: Path(str(p)) for p in sorted(root.iterdir(), key=lambda p: p.name)
-            if p.name.endswith(".toml")}
+    out = {Path(str(p)).stem: Path(str(p)) for p in sorted(root.iterdir(), key=lambda p: p.name)
+           if p.name.endswith(".toml")}
+    return out if dim is None else {k: p for k, p in out.items() if scene_dim(p) == dim}
+
+
+def scene_dim(path: Path) -> int:
+    """The ``dim`` key of a scene file (2 when absent or unreadable)."""
+    try:
+        d = tomllib.loads(path.read_text(encoding="utf-8")).get("dim", 2)
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return 2
+    return d if isinstance(d, int) and not isinstance(d, bool) else 2
 
 
 def describe(path: Path) -> str:
@@ -141,7 +154,8 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
                                  f"built-in scenes: {', '.join(sorted(pre))}")
             pname, params = pre[base]
         else:
-            pname, params = "thin_defect", {}
+            # the dimension picks the problem (--set dim=3 over the file's dim)
+            pname, params = _dim_problem(overrides.get("dim", data.get("dim", 2)), spec), {}
         pname = data.pop("problem", pname)
         _check_toml_types(spec, get_problem(pname).defaults, data)
         params.update(data)
@@ -150,6 +164,8 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
                          f"library ({', '.join(sorted(lib)) or 'none installed'}) or a path to a .toml scene file "
                          f"or a .npz/.mat QP file")
     params.update(overrides)
+    if "dim" in params and "dim" not in get_problem(pname).defaults:
+        _drop_dim(params, spec)
     cls = get_problem(pname)
     from dualfem.core.quiet import plugin_output
 
@@ -165,6 +181,25 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
                 raise
             raise InputError(f"problem plugin {pname!r} ({cls.__module__}.{cls.__qualname__}) failed to "
                              f"create the scene: {type(exc).__name__}: {exc}") from None
+
+
+def _dim_problem(dim: Any, where: str) -> str:
+    """The problem plugin of a scene of dimension ``dim`` (:data:`DIM_PROBLEMS`); InputError for another value."""
+    try:
+        d = int(dim) if float(dim) == int(float(dim)) and not isinstance(dim, bool) else None
+    except (TypeError, ValueError, OverflowError):
+        d = None
+    if d not in DIM_PROBLEMS:
+        raise InputError(f"dim in {where!r} must be one of {', '.join(map(str, DIM_PROBLEMS))}, got {dim!r}")
+    return DIM_PROBLEMS[d]
+
+
+def _drop_dim(params: dict[str, Any], where: str) -> None:
+    """A problem without a ``dim`` key is 2D: ``dim = 2`` is accepted (and dropped), any other value refused."""
+    dim = params.pop("dim")
+    if _dim_problem(dim, where) != DIM_PROBLEMS[2]:
+        raise InputError(f"dim = {dim!r} in {where!r}: this scene's problem is 2D; a 3D scene is a scene file with "
+                         f"dim = 3 (without 'scene = ...'), the library's 3D scenes or 'dualfem solve three_d'")
 
 
 def build_qp(problem: Problem) -> QP:

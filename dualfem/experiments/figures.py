@@ -176,7 +176,7 @@ def library_runs(solver: str, progress: Callable[[str], None], overrides: dict |
     with ``overrides``, e.g. a coarser ``mesh_size`` for tests): QP, Solution and a picture row
     with the number of defects, their deltas, the unknowns and the solve time."""
 
-    lib = library()
+    lib = library(dim=2)               # the 2D scenes (3D scenes have no picture here yet)
     unknown = sorted(set(names or ()) - set(lib))
     if unknown:
         raise InputError(f"unknown library scene {unknown[0]!r}; the library has {', '.join(lib) or 'none'}")

@@ -1,0 +1,330 @@
+"""3D elastic bodies with defect surfaces as a QP (the thin-defect model of the 2D scenes, in 3D).
+
+Body: the box (0, width) x (0, depth) x (0, height), isotropic linear elasticity (E, nu; no plane
+assumption: the 3D law itself), P1 tetrahedra of a gmsh mesh (``mesh = "gmsh"``, the only mesh in
+3D; ``mesh_size``, 0 = min(width, depth, height) / N; ``tip_size`` at the defect fronts, 0 =
+mesh_size; ``surface_size`` on the defect surfaces, 0 = no refinement there) with every defect
+surface embedded (:mod:`.mesh`). Defects: ``[[defects]]`` tables with ``shape`` = ``disk``,
+``ellipse``, ``polygon`` or ``cap`` and an optional per-defect ``delta`` (keys and normals:
+:mod:`.geometry`); without tables the disk of radius 0.25 x min(width, depth) at the centre,
+normal +z. Nodes strictly inside a defect are doubled, its front is not
+(:mod:`.cut`). Energy, one term per defect d:
+
+    Pi(v) = 1/2 a(v, v) - (f, v) + sum_d 1/(2 delta_d) int_gamma_d |[v]|^2,   [v_nu] >= 0 on every gamma_d,
+
+discretised with nodal areas w_j (lumped): K = K_el + sum_j (w_j / delta_j) |u_j^+ - u_j^-|^2 (all
+three components), B row j = nu_j . (u_j^+ - u_j^-), the "+" copy on the side nu_j points to.
+
+Supports and loads: without the keys ``boundary``, ``body_force``, ``remote_stress`` the bottom face
+z = 0 is clamped and the traction ``load`` x ``load_scale`` acts on the top face z = height
+(:mod:`.supports`); with any of them, those keys say it all (:mod:`dualfem.problems._boundary`:
+``[[boundary]]`` tables with ``side`` = left, right, front, back, bottom, top, ``support`` and/or
+``traction``; ``body_force``; ``remote_stress`` (3 x 3): sigma.n on every side without a support, and
+without any support only the rigid-body motions are removed at six components of extreme nodes), all
+times ``load_scale``, and ``load`` must keep its default. A defect's ``face_pressure`` (a number or an
+expression in x, y, z) pushes both of its faces apart. ``rotate_deg`` / ``rotate_axis``: a rigid rotation of the
+whole scene (body, defects, loads, supports) about the box's centre, counter-clockwise about the
+axis (right-hand rule); the mesh is made in the reference frame and rotated.
+
+The QP: ``geometry = GeometryPart(3, nodes (3, n_nodes), tetrahedra (4, n_tets), node_dofs (3,
+n_nodes))``; ``material = MaterialPart(E, nu, "strain")`` (3D elasticity is plane strain's law
+without the reduction: ``plane`` means nothing in 3D and is not a scene key); ``maps``:
+``defect_upper``/``defect_lower`` (m,) node ids of the "+" / "-" copies of constrained node j (row
+j of B), ``defect_id`` (m,), ``defect_normals`` (m, 3) unit "+" normals, ``defect_front`` (k,) the
+front nodes of every defect and ``defect_front_id`` (k,) their defects.
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from dualfem.core.elasticity import lame
+from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
+from dualfem.core.parts import GeometryPart, MaterialPart, UnitsPart
+from dualfem.core.problem import Problem
+from dualfem.core.qp import QP
+from dualfem.core.registry import register_problem
+from dualfem.numerics.linalg import freeze
+
+from .. import _boundary as bd
+from .assemble import free_dofs, interface, stiffness
+from .cut import Cut3, cut
+from .geometry import Surface, check_apart, parse_defects
+from .mesh import check_size, estimate_tetrahedra, mesh_box
+from .rotation import rotation_matrix
+from .supports import face_on, resolve_load, traction_forces
+
+#: smallest delta * E / max(width, depth, height) accepted (as in 2D: below it a defect is glued)
+MIN_DELTA_E_OVER_L = 1e-12
+MESHES = ("gmsh",)
+
+
+def _vector3(key: str, value) -> np.ndarray:
+    if isinstance(value, str):
+        try:
+            value = [float(s) for s in value.strip().strip("[]()").replace(" ", ",").split(",") if s]
+        except ValueError:
+            raise InputError(f"{key} must be 3 numbers [x, y, z], got {value!r}") from None
+    if not isinstance(value, (list, tuple, np.ndarray)) or len(value) != 3 \
+            or any(isinstance(c, bool) for c in value):
+        raise InputError(f"{key} must be 3 numbers [x, y, z], got {value!r}")
+    try:
+        v = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{key} must be 3 numbers [x, y, z], got {value!r}") from None
+    if not np.all(np.isfinite(v)) or not np.linalg.norm(v) > 0:
+        raise InputError(f"{key} must be a finite non-zero vector [x, y, z], got {value!r}")
+    return v
+
+
+@register_problem
+class ThreeD(Problem):
+    """Elastic box with defect surfaces (disks, ellipses, polygons, spherical caps), P1 tetrahedra (gmsh)."""
+
+    name = "three_d"
+    description = "3D elastic box with defect surfaces (disk, ellipse, polygon, spherical cap), gmsh tetrahedra"
+    requires = ("gmsh",)
+    extra = "gmsh"
+    defaults = {
+        "dim": 3,
+        "N": 10,
+        "delta": 1e-5,
+        "E": 69000.0,
+        "nu": 0.3,
+        "load": "f2",
+        "load_scale": 1.0,
+        "width": 1.0,
+        "depth": 1.0,
+        "height": 1.0,
+        "mesh": "gmsh",
+        "mesh_size": 0.0,
+        "tip_size": 0.0,
+        "surface_size": 0.0,
+        "rotate_deg": 0.0,
+        "rotate_axis": (0.0, 0.0, 1.0),
+        "defects": (),
+        "boundary": (),
+        "body_force": "",
+        "remote_stress": "",
+    }
+    presets = {"three_d": {}}
+    update_keys = ("delta", "load", "load_scale")
+
+    # ------------------------------------------------------------ validation
+    def validate(self) -> None:
+        p = self.params
+        if p["dim"] != 3:
+            raise InputError(f"dim must be 3 for the three_d problem (2D scenes: thin_defect), got {p['dim']!r}")
+        p["N"] = check_int("N", p["N"], 2, 1000)
+        p["delta"] = check_positive("delta", p["delta"])
+        p["E"] = check_positive("E", p["E"])
+        p["nu"] = check_open_interval("nu", p["nu"], -1.0, 0.5)
+        for k in ("width", "depth", "height"):
+            p[k] = check_positive(k, p[k])
+        for k in ("load_scale", "rotate_deg"):
+            if isinstance(p[k], bool) or not isinstance(p[k], (int, float)) or not math.isfinite(p[k]):
+                raise InputError(f"{k} must be a finite number, got {p[k]!r}")
+        if p["mesh"] not in MESHES:
+            raise InputError(f"mesh must be {' or '.join(MESHES)} in 3D, got {p['mesh']!r}")
+        p["mesh_size"] = check_positive("mesh_size", p["mesh_size"], allow_zero=True)
+        p["tip_size"] = check_positive("tip_size", p["tip_size"], allow_zero=True)
+        p["surface_size"] = check_positive("surface_size", p["surface_size"], allow_zero=True)
+        self._axis = _vector3("rotate_axis", p["rotate_axis"])
+        p["rotate_axis"] = tuple(float(c) for c in self._axis)
+        box = self.box
+        h = self.mesh_size
+        if h > min(box):
+            raise InputError(f"mesh_size must be in (0, min(width, depth, height)] = (0, {min(box):g}], got {h:g}")
+        for k in ("tip_size", "surface_size"):
+            if p[k] > h:
+                raise InputError(f"{k} must be in [0, mesh_size] = [0, {h:g}], got {p[k]:g}")
+        tables = p["defects"]
+        if isinstance(tables, str) and tables.strip()[:1] in "[{":     # --set defects='[{"shape": ...}]' (JSON)
+            try:
+                tables = json.loads(tables)
+            except ValueError:
+                raise InputError(f"defects must be a list of tables (from --set: JSON), got {tables!r}") from None
+        if isinstance(tables, (list, tuple)) and len(tables) == 0:
+            tables = [{"shape": "disk", "center": [w / 2 for w in box], "normal": [0.0, 0.0, 1.0],
+                       "radius": 0.25 * min(box[0], box[1])}]
+        self._surfaces: list[Surface] = parse_defects(tables, p["delta"], box)
+        check_size(box, h, self.tip_size, sum(s.front_length() for s in self._surfaces), self._size_label(),
+                   self.surface_size, sum(s.area() for s in self._surfaces))
+        check_apart(self._surfaces, min(self.tip_size or h, self.surface_size or h))
+        for i, s in enumerate(self._surfaces):
+            ratio = s.delta * p["E"] / max(box)
+            if ratio < MIN_DELTA_E_OVER_L:
+                raise InputError(f"delta of defect {i} ({s.delta:g}) is too small for E = {p['E']:g} and the box: "
+                                 f"delta * E / max(width, depth, height) = {ratio:.1e} must be "
+                                 f">= {MIN_DELTA_E_OVER_L:g}")
+        self._loads = bd.parse_loads(p, 3)
+        if self._loads is None:
+            with np.errstate(all="ignore"):
+                self._traction = resolve_load(p["load"], p["width"])
+        elif p["load"] != self.defaults["load"]:
+            raise InputError(f"load ({p['load']!r}) is the top traction of a scene without boundary, body_force "
+                             f"and remote_stress; with them give it as [[boundary]] side = 'top', traction = [...]")
+        if p["rotate_deg"] and self._loads is not None and any(sd.support == "roller" for sd in self._loads.sides):
+            raise InputError("rotate_deg with a roller support: the roller's normal would not be a coordinate axis "
+                             "after the rotation; rotate a scene with clamped or free sides only")
+        self._face_pressure = [None if s.face_pressure is None else
+                               bd.parse_scalar(s.face_pressure, f"defects[{i}].face_pressure", 3, box)
+                               for i, s in enumerate(self._surfaces)]
+
+    @property
+    def box(self) -> tuple[float, float, float]:
+        p = self.params
+        return float(p["width"]), float(p["depth"]), float(p["height"])
+
+    @property
+    def mesh_size(self) -> float:
+        return float(self.params["mesh_size"] or min(self.box) / self.params["N"])
+
+    @property
+    def tip_size(self) -> float | None:
+        t = float(self.params["tip_size"])
+        return t if 0 < t < self.mesh_size else None
+
+    @property
+    def surface_size(self) -> float | None:
+        t = float(self.params["surface_size"])
+        return t if 0 < t < self.mesh_size else None
+
+    def _size_label(self) -> str:
+        p = self.params
+        return f"mesh_size={self.mesh_size:g}" if p["mesh_size"] else \
+            f"mesh_size=0 (min(width, depth, height)/N = {self.mesh_size:g} with N={p['N']})"
+
+    def size_estimate(self) -> tuple[int, str]:
+        """Unknowns before meshing: 3 per node, about 5.5 tetrahedra per node (20 % margin for the doubling)."""
+        tets = estimate_tetrahedra(self.box, self.mesh_size, self.tip_size,
+                                   sum(s.front_length() for s in self._surfaces), self.surface_size,
+                                   sum(s.area() for s in self._surfaces))
+        return int(3 * 1.2 * tets / 5.5) + 3, self._size_label()
+
+    # ------------------------------------------------------------------ mesh
+    def rotation(self) -> np.ndarray:
+        return rotation_matrix(self._axis, float(self.params["rotate_deg"]))
+
+    def cut(self) -> tuple[Cut3, np.ndarray, np.ndarray]:
+        """(the doubled mesh in the reference frame, its rotated node coordinates, the uncut mesh's top-face
+        triangles); computed once per :class:`~dualfem.core.problem.Shared`."""
+        shared = self.shared.data
+        if shared.get("cut") is None:
+            m = mesh_box(self.box, self._surfaces, self.mesh_size, self.tip_size, self.surface_size)
+            c = cut(m.points, m.tets, m.faces, self._surfaces)
+            from .assemble import boundary_faces
+
+            tol = 1e-9 * max(self.box)
+            top = face_on(m.points, boundary_faces(m.tets), 2, self.box[2], tol)
+            centre = np.array(self.box)[:, None] / 2
+            shared["cut"] = (c, self.rotation() @ (c.points - centre) + centre, top)
+        return shared["cut"]
+
+    # -------------------------------------------------------------- assembly
+    def _delta_free(self) -> dict:
+        """Mesh, DOF maps, K_el and maps: what depends neither on delta nor on the load (shared, read-only)."""
+        a = self.shared.data.get("delta_free")
+        if a is not None:
+            return a
+        p = self.params
+        c, pts, _ = self.cut()
+        if self._loads is None:
+            fixed = np.zeros((3, pts.shape[1]), bool)
+            fixed[:, np.abs(c.points[2]) <= 1e-9 * max(self.box)] = True      # the bottom face, reference frame
+        else:
+            fixed = bd.fixed_mask(self._loads, pts, self._sides())
+        node_dofs = free_dofs(fixed)
+        n = int(node_dofs.max()) + 1
+        lam, mu = lame(p["E"], p["nu"], "strain")
+        K_el = stiffness(pts, c.tets, lam, mu, node_dofs, n)
+        local = np.unique(np.concatenate([node_dofs[:, c.upper].ravel(), node_dofs[:, c.lower].ravel()]))
+        R = self.rotation()
+        maps = {"defect_upper": c.upper, "defect_lower": c.lower, "defect_id": c.defect_id,
+                "defect_normals": np.ascontiguousarray((R @ c.normals).T), "defect_front": c.front,
+                "defect_front_id": c.front_id}
+        a = {"cut": c, "points": pts, "node_dofs": node_dofs, "n": n, "K_el": K_el, "local": local, "maps": maps}
+        freeze(K_el.data, K_el.indices, K_el.indptr, local, node_dofs, pts, *maps.values())
+        self.shared.data["delta_free"] = a
+        self.shared.assemblies += 1
+        return a
+
+    def _load_label(self) -> str:
+        """The load in the QP's name: the ``load`` key (legacy), else the general keys given."""
+        p = self.params
+        if self._loads is None:
+            return p["load"] if isinstance(p["load"], str) else "custom"
+        keys = [k for k in ("boundary", "body_force", "remote_stress") if p[k] not in ("", (), [], None)]
+        return "+".join(keys)
+
+    def _sides(self) -> dict[str, np.ndarray]:
+        """The boundary triangles (3, k) of each side of the box (reference frame; computed once)."""
+        shared = self.shared.data
+        if shared.get("sides") is None:
+            c, _, _ = self.cut()
+            shared["sides"] = bd.box_sides(c.points, c.tets, self.box)
+        return shared["sides"]
+
+    def nodal_load(self) -> np.ndarray:
+        """Nodal forces (3, n_nodes) in the rotated frame: the top traction ``load`` (legacy) or the keys of
+        :mod:`dualfem.problems._boundary`, plus the defects' face pressures, times ``load_scale``."""
+        c, pts, top = self.cut()
+        scale = float(self.params["load_scale"])
+        R = self.rotation()
+        if self._loads is None:
+            F = R @ traction_forces(c.points, top, self._traction, scale)
+        else:
+            F = R @ bd.nodal_forces(self._loads, c.points, c.tets, self._sides(), scale)
+        if any(f is not None for f in self._face_pressure):
+            a = self._delta_free()
+            normals = np.asarray(a["maps"]["defect_normals"]).T
+            pressure = np.zeros(c.lower.size)
+            for k, f in enumerate(self._face_pressure):
+                j = np.flatnonzero(c.defect_id == k)
+                if f is not None and j.size:
+                    pressure[j] = f(c.points[:, c.lower[j]])[0]
+            if not np.all(np.isfinite(pressure)):
+                raise InputError("face_pressure gives NaN or infinite values on a defect; it must be finite there")
+            F += bd.face_pressure_forces(c.upper, c.lower, normals, c.weights, scale * pressure, pts.shape[1])
+        if self._loads is not None:
+            bd.check_balance(self._loads, pts, self._sides(), F)
+        return F
+
+    def build(self) -> QP:
+        """Assemble K (elastic + interface/delta), F (top traction), B (normal jumps); the delta-free
+        part is reused across builds of this instance and those :meth:`with_params` derives for new
+        ``update_keys``."""
+        p = self.params
+        a = self._delta_free()
+        c = a["cut"]
+        delta = np.array([s.delta for s in self._surfaces])[c.defect_id]
+        normals = np.asarray(a["maps"]["defect_normals"]).T
+        K_par, B = interface(a["node_dofs"], c.lower, c.upper, normals, c.weights / delta, a["n"])
+        K = (a["K_el"] + K_par).tocsc()
+        nd = a["node_dofs"]
+        Fn = self.nodal_load()
+        F = np.zeros(a["n"])
+        F[nd[nd >= 0]] = Fn[nd >= 0]
+        params = {k: (v if isinstance(v, (int, float, str)) else str(np.asarray(v).tolist()))
+                  for k, v in p.items() if not callable(v) and k != "defects"}
+        params["defects"] = "; ".join(_label(s) for s in self._surfaces)
+        geometry = GeometryPart(3, a["points"], c.tets, nd)
+        return QP(K=K, F=F, B=B, weights=c.weights.copy(), K_fixed=a["K_el"], local_dofs=a["local"],
+                  name=f"three_d[{self._load_label()}]", params=params,
+                  maps=dict(a["maps"]), geometry=geometry,
+                  units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
+                  material=MaterialPart(float(p["E"]), float(p["nu"]), "strain"))
+
+
+def _label(s: Surface) -> str:
+    """One defect as text (``QP.params["defects"]``)."""
+    def v(x) -> str:
+        return "[" + ", ".join(f"{c:.6g}" for c in x) + "]"
+
+    if s.shape == "polygon":
+        return f"polygon {v(s.points.ravel())}"
+    if s.shape == "cap":
+        return f"cap centre {v(s.center)} axis {v(s.normal)} R {s.R:g} radius {s.a:g}"
+    return f"{s.shape} centre {v(s.center)} normal {v(s.normal)} axes {s.a:g}, {s.b:g}"
