@@ -197,7 +197,8 @@ def check_maps(maps: dict, m: int, n_nodes: int | None, where: str, dim: int = 2
     ``defect_tips`` (2 per defect,) node ids; ``defect_normals``/``defect_tangents`` (2, m) finite;
     ``normal``/``tangent`` (2,) finite. ``n_nodes``: the mesh's node count (None: not checked).
     With ``dim = 3`` (a 3D mesh): ``defect_normals`` (m, 3) finite, ``defect_front`` (k,) node ids and
-    ``defect_front_id`` (k,) defect numbers (one per front node).
+    ``defect_front_id`` (k,) defect numbers (one per front node), ``defect_faces`` (3, n_faces) node ids
+    of the defect surfaces' triangles on the "-" face (output: VTK, figures).
     """
 
     def arr(k: str, kinds: str, shape: tuple) -> np.ndarray | None:
@@ -240,6 +241,8 @@ def check_maps(maps: dict, m: int, n_nodes: int | None, where: str, dim: int = 2
         if (front is None) != (fid is None) or (front is not None and fid is not None and front.size != fid.size):
             raise InputError(f"maps 'defect_front' and 'defect_front_id' of {where} must be given together, "
                              f"of equal lengths")
+        faces = arr("defect_faces", "iu", (3, np.asarray(maps.get("defect_faces", np.zeros((3, 0)))).shape[-1]))
+        nodes("defect_faces", faces)
         return
     for k in ("defect_normals", "defect_tangents"):
         arr(k, "iuf", (2, m))

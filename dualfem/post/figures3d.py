@@ -104,28 +104,33 @@ def plot_cut(qp, sol, *, origin=None, normal=None, ax=None, scale: float = 0.0):
     d = defect_fields3d(qp, sol.x)
     rows = np.flatnonzero(d["defect_id"] == d["defect_id"].min())
     c, e1, e2 = plane_frame(d["points"][rows], d["normal"][rows])
+    n_def = np.cross(e1, e2)
+    if normal is None:        # the plane through the defect's centre spanned by e1 and its normal: the
+        normal, a1, a2 = e2, e1, n_def      # defect is the horizontal line, its normal points up
+    else:
+        normal = np.asarray(normal, float) / np.linalg.norm(normal)
+        a1 = np.cross(normal, np.eye(3)[int(np.argmin(np.abs(normal)))])
+        a1 /= np.linalg.norm(a1)
+        a2 = np.cross(normal, a1)
     origin = c if origin is None else np.asarray(origin, float)
-    normal = e2 if normal is None else np.asarray(normal, float)
     polys, tets, bary = plane_cut(g.nodes, g.cells, origin, normal)
     if scale:
         from dualfem.post.fields import nodal_displacement
 
         u = nodal_displacement(qp, sol.x)
         polys = polys + scale * np.einsum("kva,aki->kvi", bary, u[g.cells[:, tets]])
-    nv = np.asarray(normal, float) / np.linalg.norm(normal)
-    a1 = np.cross(nv, np.eye(3)[int(np.argmin(np.abs(nv)))])
-    a1 /= np.linalg.norm(a1)
-    a2 = np.cross(nv, a1)
+    nv = np.asarray(normal, float)
     xy = np.stack([(polys - origin) @ a1, (polys - origin) @ a2], axis=-1)
     vm = stresses3d(qp, sol.x)["von_mises"][tets]
     ax = ax or plt.figure(figsize=(5, 4.4), layout="constrained").add_subplot()
-    pc = PolyCollection(xy, array=vm, cmap=FIELD_CMAP, edgecolors="none")
+    pc = PolyCollection(xy, array=vm, cmap=FIELD_CMAP, edgecolors="face", linewidths=0.2)
     ax.add_collection(pc)
     ax.autoscale_view()
     ax.set_aspect("equal")
     near = np.abs((d["points"] - origin) @ nv) < 0.5 * np.ptp(xy[..., 0]) / max(np.sqrt(len(tets)), 1)
     pts = d["points"][near]
     ax.plot((pts - origin) @ a1, (pts - origin) @ a2, "w.", ms=2, label="defect nodes")
-    ax.figure.colorbar(pc, ax=ax, shrink=0.8, label="von Mises (units of E)")
-    ax.set_title("cut through the body", fontsize=9)
+    ax.figure.colorbar(pc, ax=ax, shrink=0.8, label="von Mises stress (units of E)")
+    ax.set_title("cut through the body across defect 0 (its normal up)" if scale == 0 else
+                 f"cut through the body, displacements x {scale:g}", fontsize=9)
     return ax

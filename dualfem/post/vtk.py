@@ -73,8 +73,8 @@ def check_qp(qp) -> None:
     if g.node_dofs.shape[0] != g.dim:
         raise InputError(f"--vtk/--xdmf write {g.dim}-D displacements: geometry.node_dofs (map_node_dofs) must have "
                          f"{g.dim} rows (one per component), got shape {g.node_dofs.shape}")
-    check_maps(qp.maps, qp.m, g.nodes.shape[1], "the QP")
-    if "defect_upper" in qp.maps and not ("defect_lower" in qp.maps and "defect_s" in qp.maps):
+    check_maps(qp.maps, qp.m, g.nodes.shape[1], "the QP", dim=g.dim)
+    if "defect_upper" in qp.maps and not ("defect_lower" in qp.maps and ("defect_s" in qp.maps or g.dim == 3)):
         raise InputError("the defect maps of the QP need defect_upper, defect_lower and defect_s together")
 
 

@@ -244,7 +244,7 @@ class ThreeD(Problem):
         R = self.rotation()
         maps = {"defect_upper": c.upper, "defect_lower": c.lower, "defect_id": c.defect_id,
                 "defect_normals": np.ascontiguousarray((R @ c.normals).T), "defect_front": c.front,
-                "defect_front_id": c.front_id}
+                "defect_front_id": c.front_id, "defect_faces": c.faces}
         a = {"cut": c, "points": pts, "node_dofs": node_dofs, "n": n, "K_el": K_el, "local": local, "maps": maps}
         freeze(K_el.data, K_el.indices, K_el.indptr, local, node_dofs, pts, *maps.values())
         self.shared.data["delta_free"] = a

@@ -46,7 +46,9 @@ class Cut3:
     """The doubled mesh. ``points`` (3, n_nodes), ``tets`` (4, n_tets); per constrained node j (m of them,
     defect by defect): ``lower``/``upper`` node ids, ``defect_id``, ``normals`` (3, m) unit "+" normals,
     ``weights`` (m,) nodal areas; ``front`` (k,) the front nodes of every defect and ``front_id`` (k,) theirs;
-    ``area`` (n_defects,) each defect's meshed area."""
+    ``area`` (n_defects,) each defect's meshed area; ``faces`` (3, n_faces) the defects' surface triangles as
+    node ids of the "-" face (the original nodes: the front single, the "+" copy of node ``lower[j]`` is
+    ``upper[j]``), for output (VTK, figures)."""
 
     points: np.ndarray
     tets: np.ndarray
@@ -58,6 +60,7 @@ class Cut3:
     front: np.ndarray
     front_id: np.ndarray
     area: np.ndarray
+    faces: np.ndarray | None = None
 
 
 def _surface_nodes(points: np.ndarray, faces: np.ndarray, surf: Surface, k: int):
@@ -113,7 +116,7 @@ def cut(points: np.ndarray, tets: np.ndarray, faces: list[np.ndarray], surfaces:
     c = Cut3(points=np.hstack([points, points[:, lower]]), tets=out, lower=lower, upper=upper, defect_id=ids,
              normals=normals, weights=np.concatenate([p[3] for p in parts]), front=front,
              front_id=np.concatenate([np.full(p[1].size, k) for k, p in enumerate(parts)]),
-             area=np.array([p[4] for p in parts]))
+             area=np.array([p[4] for p in parts]), faces=np.hstack(faces).astype(np.int64))
     check_cut(c)
     return c
 

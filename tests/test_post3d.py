@@ -1,0 +1,73 @@
+"""3D post-processing: stresses per tetrahedron, defect fields, plane cuts, VTU output and the solve figure."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dualfem.core.scene import load_scene
+from dualfem.experiments.runner import run
+from dualfem.post.fields3d import defect_fields3d, plane_cut, stresses3d, tet_gradients
+
+
+@pytest.fixture(scope="module")
+def penny():
+    qp = load_scene("penny", {}).build()
+    sol = run("pdas", qp)
+    assert str(sol.status) in ("solved", "Status.SOLVED")
+    return qp, sol
+
+
+def test_far_field_stress_is_the_remote_stress_and_the_crack_opens(penny):
+    qp, sol = penny
+    st = stresses3d(qp, sol.x)
+    X = qp.geometry.nodes[:, qp.geometry.cells].mean(axis=1)          # centroids
+    far = np.linalg.norm(X - 5.0, axis=0) > 3.5                        # a radius 1 crack at the cube's centre
+    assert np.median(st["s33"][far]) == pytest.approx(1.0, rel=0.05)   # remote sigma_zz = 1
+    assert np.median(np.abs(st["s11"][far])) < 0.1
+    d = defect_fields3d(qp, sol.x, sol.multipliers)
+    assert d["opening"].min() > 0 and np.all(d["pressure"] == 0)
+    r = np.hypot(d["points"][:, 0] - 5, d["points"][:, 1] - 5)
+    assert d["opening"][np.argmin(r)] == pytest.approx(d["opening"].max(), rel=0.2)   # widest at the centre
+    assert d["slip"].max() < 0.2 * d["opening"].max()
+
+
+def test_plane_cut_sections_have_the_area_of_the_box_section(penny):
+    qp, _ = penny
+    g = qp.geometry
+    polys, tets, bary = plane_cut(g.nodes, g.cells, [5.0, 5.0, 5.37], [0, 0, 1])
+    a = 0.5 * (np.linalg.norm(np.cross(polys[:, 1] - polys[:, 0], polys[:, 2] - polys[:, 0]), axis=1)
+               + np.linalg.norm(np.cross(polys[:, 2] - polys[:, 0], polys[:, 3] - polys[:, 0]), axis=1))
+    assert a.sum() == pytest.approx(100.0, rel=1e-9)                  # the 10 x 10 section
+    P = np.einsum("kva,iak->kvi", bary, g.nodes[:, g.cells[:, tets]])
+    assert np.abs(P - polys).max() < 1e-12
+    _, vol = tet_gradients(g.nodes, g.cells)
+    assert vol.sum() == pytest.approx(1000.0, rel=1e-9)
+
+
+def test_vtu_holds_tetrahedra_and_both_defect_faces(penny, tmp_path):
+    meshio = pytest.importorskip("meshio")
+    from dualfem.post.vtk import write_outputs
+
+    qp, sol = penny
+    (path,) = write_outputs(qp, sol, vtk=str(tmp_path / "p.vtu"))
+    m = meshio.read(path)
+    blocks = {c.type: c.data for c in m.cells}
+    nf = np.asarray(qp.maps["defect_faces"]).shape[1]
+    assert blocks["tetra"].shape == (qp.geometry.cells.shape[1], 4) and blocks["triangle"].shape == (2 * nf, 3)
+    opening = m.point_data["opening"]
+    assert np.allclose(opening[qp.maps["defect_upper"]], opening[qp.maps["defect_lower"]])
+    assert np.nanmin(opening) > 0 and np.isnan(opening).sum() == m.points.shape[0] - 2 * qp.m
+    face = m.cell_data["face"]
+    assert set(np.unique(face[1])) == {-1, 1} and np.all(face[0] == 0)
+    # the "+" triangles use the "+" copies: none of their nodes is a "-" copy
+    plus = blocks["triangle"][:nf]
+    assert not np.isin(plus, qp.maps["defect_lower"]).any()
+
+
+def test_solve_figure_writes_maps_and_cut(tmp_path):
+    from dualfem.cli import main
+
+    out = tmp_path / "penny.png"
+    assert main(["solve", "penny", "--quiet", "--figure", str(out)]) == 0
+    assert out.stat().st_size > 10_000 and (tmp_path / "penny_cut.png").stat().st_size > 10_000
+    assert main(["solve", "penny", "--quiet", "--figure", str(tmp_path / "x.gif")]) == 2
