@@ -407,6 +407,7 @@ def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: An
         try:
             ks = KSolver(qp, reduction=reduction)
             sol.info["certificate"] = certified_error(qp, sol.x, sol.multipliers, ks)
+            sol.info["certificate"]["path"] = ks.path
             cm = sol.info["certificate"].get("multipliers", float("nan"))
             if np.isfinite(cm) and cm > tol:      # only then: the rounding floor of mu* costs one more solve
                 sol.info["certificate"]["multipliers_floor"] = multiplier_floor(qp, sol.x, sol.multipliers, ks)
@@ -476,7 +477,8 @@ def summary(qp: QP, sol: Solution) -> dict:
         cert = sol.info.get("certificate")
         if cert:
             out["certificate"] = {k: v for k, v in cert.items()
-                                  if k in ("value", "bound", "active_set", "multipliers", "multipliers_floor")}
+                                  if k in ("value", "bound", "active_set", "multipliers", "multipliers_floor",
+                                           "path")}
     else:
         out.update({"energy": None, "max_jump": None, "n_contact": None, "residuals": None})
     return out

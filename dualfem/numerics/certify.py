@@ -168,6 +168,15 @@ class KSolver:
             self._lu = _SparseK(qp, factor)
 
     @property
+    def path(self) -> str:
+        """The linear algebra of the certificate: ``dense`` (Schur complement onto the defect unknowns),
+        ``matrix_free`` (one sparse factorization of K), ``amg`` (AMG-preconditioned CG, no factorization)
+        or ``sparse`` (a plain factorization of K, no local structure)."""
+        if self.op is not None:
+            return "amg" if self.op.ksolve == "amg" else "matrix_free"
+        return "dense" if self.red is not None else "sparse"
+
+    @property
     def amg(self) -> bool:
         """True when the K-solves are AMG-preconditioned CG (inexact: see the module docstring)."""
         return self.op is not None and self.op.ksolve == "amg"

@@ -160,8 +160,15 @@ def _log_axes(ax, minor_labels: bool = True) -> None:
     if ax.get_yscale() != "log":
         ax.set_yscale("log")
     lo, hi = ax.get_xlim()
-    if minor_labels and hi < 10 * lo:     # within one decade: no major tick, so label the minor ones
-        ax.xaxis.set_minor_formatter(FormatStrFormatter("%g"))
+    if minor_labels and hi < 10 * lo:     # within about one decade: label the minor ticks at 2, 3 and 5 x 10^k
+        from matplotlib.ticker import FuncFormatter
+
+        def minor(v: float, _pos) -> str:
+            lead = round(v / 10 ** math.floor(math.log10(v))) if v > 0 else 0
+            return f"{v:g}" if lead in (2, 3, 5) else ""
+
+        ax.xaxis.set_minor_formatter(FuncFormatter(minor))
+        ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
     else:
         ax.xaxis.set_minor_formatter(NullFormatter())
     ax.grid(True, which="major", alpha=0.3)
