@@ -187,7 +187,8 @@ class MPRGPSolver(DualOperatorSolver):
         "verbose": False,         # keep a per-iteration history
         "operator": "auto",       # dual operator: dense reduction, matrix_free (K-solves), auto (by size, memory)
         "factor": "auto",         # K factorization: auto (--factor/DUALFEM_FACTOR/fastest) or a backend
-        "precond": "auto",        # auto (dirichlet if matrix_free, else none) | none | jacobi | lumped | dirichlet
+        "precond": "auto",        # auto (matrix_free: dirichlet in 2D, lumped in 3D; else none) | none | jacobi |
+                                  # lumped | dirichlet
         "layers": 4,              # precond=dirichlet: rings of elements of the local Schur complements
         "gamma": 1.0,             # proportioning parameter Gamma > 0
         "alpha_factor": 1.8,      # expansion steplength alpha = alpha_factor / |D|_est, in (0, 2]
@@ -207,8 +208,9 @@ class MPRGPSolver(DualOperatorSolver):
     def setup(self, qp) -> None:
         super().setup(qp)
         op, kind = self.op, self.params["precond"]
-        if kind == "auto":
-            kind = "dirichlet" if op.kind == "matrix_free" else "none"
+        if kind == "auto":     # the Dirichlet preconditioner's local Schur complements are too large in 3D
+            three_d = qp.geometry is not None and qp.geometry.dim == 3
+            kind = ("lumped" if three_d else "dirichlet") if op.kind == "matrix_free" else "none"
         self.precond_kind = kind
         self.scale = self.precond = None
         self.norm = 0.0

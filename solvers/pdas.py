@@ -89,7 +89,8 @@ class PDASSolver(DualOperatorSolver):
                                   # reference does)
         "factor": "auto",         # K factorization: auto (--factor/DUALFEM_FACTOR/fastest) or a backend
         "operator": "auto",       # dual operator: dense reduction, matrix_free (K-solves), auto (by size, memory)
-        "precond": "auto",        # matrix-free CG on the Newton systems: auto = dirichlet (FETI's, per crack) | jacobi
+        "precond": "auto",        # matrix-free CG on the Newton systems: auto = dirichlet (FETI's, per crack; 2D) or
+                                  # jacobi (3D) | dirichlet | jacobi
         "layers": 4,              # precond=dirichlet: rings of elements of the local Schur complements
         "newton": "cg",           # matrix-free Newton systems D_AA mu_A = -b0_A: "cg" (Jacobi-PCG with D, warm-
                                   # started) or "factor" (one factorization of K + B_A'C B_A per set, augmented-
@@ -152,7 +153,10 @@ class PDASSolver(DualOperatorSolver):
         super().setup(qp)
         if self.op.kind == "matrix_free":
             self.op.face = self.params["newton"]
-            if self.params["precond"] in ("auto", "dirichlet"):
+            # auto: FETI's Dirichlet preconditioner in 2D; in 3D the local Schur complements of a surface's
+            # element layers are large (8.4 s of setup at 36 k unknowns, minutes at 150 k): Jacobi there
+            three_d = qp.geometry is not None and qp.geometry.dim == 3
+            if self.params["precond"] == "dirichlet" or (self.params["precond"] == "auto" and not three_d):
                 self.op.face_preconditioner = dirichlet_inverse(qp, int(self.params["layers"]))
 
     def _tol(self) -> float:
