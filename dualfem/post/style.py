@@ -47,7 +47,7 @@ MAX_SERIES = 10
 #: the families, in the order facets are drawn, with the registered solvers each holds (in the
 #: order they take the palette's colours). Names are those of ``dualfem list``.
 FAMILIES: dict[str, tuple[str, ...]] = {
-    "dual": ("uzawa", "uzawa_auto", "pdas", "mprgp", "penalty", "dual_gradient"),
+    "dual": ("uzawa", "uzawa_auto", "pdas", "mprgp", "penalty", "dual_gradient", "newton_amg"),
     "interior point": ("clarabel", "qp_clarabel", "cvxpy", "qp_piqp", "qp_ecos", "qp_cvxopt", "qp_sip",
                        "qp_qtqp", "qp_qpax", "qp_kvxopt", "qp_hpipm", "qp_qpswift", "qp_mosek", "qp_gurobi",
                        "qp_copt"),
