@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from .._pattern import distinct_pairs
+
 
 def shape_gradients(p: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """x- and y-derivatives (3, nt) of the three P1 basis functions, and the areas (nt,)."""
@@ -83,18 +85,7 @@ def node_pattern(t: np.ndarray, nn: int) -> tuple[np.ndarray, np.ndarray, np.nda
     keys[...] = t[:, None, :]
     keys *= nn
     keys += t[None, :, :]
-    keys = keys.ravel()
-    order = np.argsort(keys, kind="stable")
-    sk = keys[order]
-    del keys
-    new = np.empty(sk.size, dtype=bool)
-    new[:1] = True
-    np.not_equal(sk[1:], sk[:-1], out=new[1:])
-    pos = np.empty(sk.size, dtype=np.intp)
-    pos[order] = np.cumsum(new) - 1
-    del order
-    rows, cols = np.divmod(sk[new], nn)
-    return rows, cols, pos
+    return distinct_pairs(keys.ravel(), nn, stable=True)
 
 
 def _expand(rows: np.ndarray, cols: np.ndarray, vals, node_dofs: np.ndarray, nn: int, n: int) -> sp.csc_matrix:

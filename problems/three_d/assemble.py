@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from .._pattern import distinct_pairs
+
 
 def gradients(p: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Gradients (4, 3, nt) of the four P1 hat functions of each tetrahedron, and the volumes (nt,).
@@ -37,18 +39,7 @@ def gradients(p: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def node_pattern(a: np.ndarray, b: np.ndarray, nn: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The distinct node pairs (a, b) (arrays of one shape, node ids < nn), sorted: (rows, cols) in
     row-major order and, for each entry of ``a.ravel()``, the index of its pair. One argsort of int64 keys."""
-    keys = a.astype(np.int64).ravel() * nn + b.ravel()
-    order = np.argsort(keys)
-    sk = keys[order]
-    del keys
-    new = np.empty(sk.size, dtype=bool)
-    new[:1] = True
-    np.not_equal(sk[1:], sk[:-1], out=new[1:])
-    pos = np.empty(sk.size, dtype=np.intp)
-    pos[order] = np.cumsum(new) - 1
-    del order
-    rows, cols = np.divmod(sk[new], nn)
-    return rows, cols, pos
+    return distinct_pairs(a.astype(np.int64).ravel() * nn + b.ravel(), nn)
 
 
 _PAIRS = np.triu_indices(4, 1)          # the 6 corner pairs a < b of a tetrahedron
