@@ -71,3 +71,13 @@ def test_solve_figure_writes_maps_and_cut(tmp_path):
     assert main(["solve", "penny", "--quiet", "--figure", str(out)]) == 0
     assert out.stat().st_size > 10_000 and (tmp_path / "penny_cut.png").stat().st_size > 10_000
     assert main(["solve", "penny", "--quiet", "--figure", str(tmp_path / "x.gif")]) == 2
+
+
+def test_stress_grid_on_a_3d_scene_has_no_2d_keys():
+    """The nu axis sets plane strain only where the problem has the key: a 3D scene's tasks build."""
+    from dualfem.core.scene import load_scene as load
+    from dualfem.experiments.stress_grid import build_grid
+
+    tasks = build_grid(["pdas"], quick=True, axes=("nu",), scene_name="penny")
+    assert tasks and all("plane" not in t.scene for t in tasks)
+    assert load("penny", {"nu": tasks[0].scene["nu"]}).params["nu"] == tasks[0].scene["nu"]

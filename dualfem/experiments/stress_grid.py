@@ -311,9 +311,13 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] | 
             for s in solver_names:
                 add("load", {"load_scale": ls}, scene, s, ref=ref)
     if "nu" in axes:
+        from dualfem.core.registry import problems as registered
+
+        cls = registered().get(problem)         # plane strain where the problem has the key (2D), 3D as it is
+        plane = {"plane": "strain"} if cls is None or "plane" in cls.defaults else {}
         for nu in NUS:
             for s in solver_names:
-                add("nu", {"nu": nu}, {**base, "nu": nu, "plane": "strain"}, s)
+                add("nu", {"nu": nu}, {**base, "nu": nu, **plane}, s)
     if "N" in axes:
         top = max_n or (128 if quick else 1024)
         prev: dict[str, str] = {}
