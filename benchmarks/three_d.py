@@ -35,7 +35,7 @@ CASES = ("tension", "compression", "shear")
 #: the size table beyond the validation rows: (level, extra runs, all under tension): the floor at each level
 #: of the size table, pdas (the dual path) where a factorization still fits, a ~670 k-unknown newton_amg
 SIZES = (("0.35:0.01:0.05", ("floor", "pdas")), ("0.2:0.005:0.03", ("floor",)),
-         ("0.18:0.005:0.03", ("floor", "newton_amg")))
+         ("0.18:0.005:0.03", ("floor", "newton_amg")), ("0.17:0.005:0.03", ("newton_amg",)))
 TIMEOUT = 1800
 
 
