@@ -12,8 +12,8 @@ Multipliers mu_j >= 0 are the lid's nodal forces; ``weights`` the nodal areas of
 The QP carries ``GeometryPart(dim=3, nodes (3, n), cells (4, nt), node_dofs (3, n))``, a
 ``LocalPart(K_fixed = K, dofs = the constrained unknowns)`` and the material.
 
-The stiffness is assembled by a vectorised one-point rule (P1 strains are constant per tetrahedron),
-in chunks, checked against scikit-fem's assembly in tests/test_amg.py.
+The stiffness is the 3D problem's assembly (problems/three_d/assemble.py), checked against
+scikit-fem's in tests/test_amg.py.
 """
 from __future__ import annotations
 
@@ -33,34 +33,19 @@ def unknowns(N: int, Nz: int | None = None) -> int:
     return 3 * (N + 1) ** 2 * Nz
 
 
-def elasticity_matrix(nodes: np.ndarray, cells: np.ndarray, E: float, nu: float,
-                      chunk: int = 50_000) -> sp.csr_matrix:
-    """Stiffness (3 n_nodes square, node-major: unknown 3 i + c) of P1 elasticity on tetrahedra.
+def elasticity_matrix(nodes: np.ndarray, cells: np.ndarray, E: float, nu: float) -> sp.csc_matrix:
+    """Stiffness (3 n_nodes square, node-major: unknown 3 i + c) of P1 elasticity on tetrahedra: the 3D
+    problem's vectorised assembly (:func:`dualfem.problems.three_d.assemble.stiffness`) with every node free,
+    on the tetrahedra oriented positively as it requires (the stiffness does not depend on the orientation)."""
+    from dualfem.core.elasticity import lame
+    from dualfem.problems.three_d.assemble import gradients, stiffness
 
-    Ke[3a + i, 3b + j] = vol (lam g_a,i g_b,j + G g_a,j g_b,i + G delta_ij g_a . g_b), g_a the gradient of
-    the barycentric coordinate of vertex a (constant per tetrahedron), lam and G Lame's constants."""
-    lam, G = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    t = np.array(cells, dtype=np.int64)
+    _, vol = gradients(nodes, t)
+    t[:, vol < 0] = t[[0, 2, 1, 3]][:, vol < 0]
+    lam, G = lame(E, nu, "strain")
     nn = nodes.shape[1]
-    K = sp.csr_matrix((3 * nn, 3 * nn))
-    for s in range(0, cells.shape[1], chunk):
-        t = cells[:, s:s + chunk]
-        X = nodes[:, t]                                   # (3, 4, nt)
-        J = np.transpose(X[:, 1:, :] - X[:, :1, :], (2, 1, 0))   # (nt, 3 edges, 3 coords)
-        vol = np.abs(np.linalg.det(J)) / 6.0
-        Ji = np.linalg.inv(J)                             # columns: gradients of lambda_1..3
-        g = np.empty((t.shape[1], 4, 3))
-        g[:, 1:, :] = np.transpose(Ji, (0, 2, 1))
-        g[:, 0, :] = -g[:, 1:, :].sum(axis=1)
-        gg = np.einsum("tai,tbj->taibj", g, g)            # g_a,i g_b,j
-        Ke = lam * gg + G * np.transpose(gg, (0, 1, 4, 3, 2))
-        dot = np.einsum("tai,tbi->tab", g, g)
-        Ke += G * dot[:, :, None, :, None] * np.eye(3)[None, None, :, None, :]
-        Ke *= vol[:, None, None, None, None]
-        dofs = (3 * t.T[:, :, None] + np.arange(3)[None, None, :]).reshape(-1, 12)     # (nt, 12)
-        rows = np.repeat(dofs, 12, axis=1).ravel()
-        cols = np.tile(dofs, (1, 12)).ravel()
-        K = K + sp.csr_matrix((Ke.reshape(-1), (rows, cols)), shape=K.shape)
-    return K
+    return stiffness(nodes, t, lam, G, np.arange(3 * nn).reshape(nn, 3).T, 3 * nn)
 
 
 def box_qp(N: int, Nz: int | None = None, height: float = 1.0, E: float = 1000.0, nu: float = 0.3,
