@@ -29,7 +29,7 @@ E, NU, A, SIGMA, TAU, C = 1000.0, 0.3, 1.0, 1.0, 0.5, 5.0
 G = E / (2 * (1 + NU))
 
 
-def _level(text: str) -> tuple[float, float, float]:
+def parse_level(text: str) -> tuple[float, float, float]:
     parts = [float(x) for x in text.split(":")] + [0.0, 0.0]
     return parts[0], parts[1], parts[2]
 
@@ -40,40 +40,48 @@ def _l2(qp, r, value, exact) -> float:
     return float(np.sqrt(np.sum(w * (value[k] - exact[k]) ** 2) / np.sum(w * exact[k] ** 2)))
 
 
-def solve_case(case: str, h: float, tip: float, solver: str, surface: float = 0.0) -> dict:
-    from dualfem.core.scene import load_scene
-    from dualfem.experiments.runner import run
-
+def scene(case: str, h: float, tip: float, surface: float = 0.0) -> dict:
+    """The penny scene's parameters for one load case and mesh level."""
     stress = {"tension": [[0, 0, 0], [0, 0, 0], [0, 0, SIGMA]],
               "compression": [[0, 0, 0], [0, 0, 0], [0, 0, -SIGMA]],
               "shear": [[0, 0, TAU], [0, 0, 0], [TAU, 0, -SIGMA]]}[case]
-    t0 = time.perf_counter()
-    qp = load_scene("penny", {"mesh_size": h, "tip_size": tip, "surface_size": surface, "E": E, "nu": NU,
-                              "delta": 1e3, "remote_stress": [[float(x) for x in row] for row in stress]}).build()
-    t_build = time.perf_counter() - t0
-    sol = run(solver, qp)
-    t_solve = time.perf_counter() - t0 - t_build
+    return {"mesh_size": h, "tip_size": tip, "surface_size": surface, "E": E, "nu": NU, "delta": 1e3,
+            "remote_stress": [[float(x) for x in row] for row in stress]}
+
+
+def errors(case: str, qp, sol) -> dict:
+    """The case's errors against the closed forms (module docstring): ``error`` and ``w0_ratio`` (tension) or
+    ``closure`` (compression, shear); nothing without an answer."""
+    if sol.x is None:
+        return {}
     nodes = qp.geometry.nodes
     lo, up = qp.maps["defect_lower"], qp.maps["defect_upper"]
     r = np.hypot(nodes[0, lo] - C, nodes[1, lo] - C)
     root = np.sqrt(np.maximum(A * A - r * r, 0.0))
-    out = {"case": case, "mesh_size": h, "tip_size": tip, "surface_size": surface, "n": qp.n, "m": qp.m,
-           "status": str(sol.status), "build_s": t_build, "solve_s": t_solve}
-    if sol.x is None:
-        return out
     jump = qp.B @ sol.x
+    closure = float(np.abs(jump).max() / np.abs(sol.x).max())
     if case == "tension":
         w = 8 * (1 - NU ** 2) * SIGMA / (np.pi * E) * root
-        out.update(error=_l2(qp, r, jump, w), w0_ratio=float(jump.max() / w.max()))
-    elif case == "compression":
-        out.update(closure=float(np.abs(jump).max() / np.abs(sol.x).max()),
-                   error=float(sol.multipliers.sum() / qp.weights.sum() / SIGMA - 1.0))
-    else:
-        nd = qp.geometry.node_dofs
-        slip = sol.x[nd[0, up]] - sol.x[nd[0, lo]]
-        exact = 8 * (1 - NU) * TAU / (np.pi * (2 - NU) * G) * root
-        out.update(error=_l2(qp, r, slip, exact), closure=float(np.abs(jump).max() / np.abs(sol.x).max()))
-    return out
+        return {"error": _l2(qp, r, jump, w), "w0_ratio": float(jump.max() / w.max())}
+    if case == "compression":
+        return {"closure": closure, "error": float(sol.multipliers.sum() / qp.weights.sum() / SIGMA - 1.0)}
+    nd = qp.geometry.node_dofs
+    slip = sol.x[nd[0, up]] - sol.x[nd[0, lo]]
+    exact = 8 * (1 - NU) * TAU / (np.pi * (2 - NU) * G) * root
+    return {"error": _l2(qp, r, slip, exact), "closure": closure}
+
+
+def solve_case(case: str, h: float, tip: float, solver: str, surface: float = 0.0) -> dict:
+    from dualfem.core.scene import load_scene
+    from dualfem.experiments.runner import run
+
+    t0 = time.perf_counter()
+    qp = load_scene("penny", scene(case, h, tip, surface)).build()
+    t_build = time.perf_counter() - t0
+    sol = run(solver, qp)
+    t_solve = time.perf_counter() - t0 - t_build
+    return {"case": case, "mesh_size": h, "tip_size": tip, "surface_size": surface, "n": qp.n, "m": qp.m,
+            "status": str(sol.status), "build_s": t_build, "solve_s": t_solve, **errors(case, qp, sol)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -90,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
           "| note |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for text in a.levels:
-        h, tip, surface = _level(text)
+        h, tip, surface = parse_level(text)
         for case in a.cases:
             row = solve_case(case, h, tip, a.solver, surface)
             rows.append(row)

@@ -47,20 +47,13 @@ def worker(spec: dict) -> dict:
     """One run in this process: build the penny at ``spec['level']`` for ``spec['case']``, run ``spec['solver']``
     (or the floor), certify, measure the errors against the closed forms."""
     sys.path.insert(0, str(HERE))
-    import numpy as np
     import penny
 
     from dualfem.core.scene import load_scene
     from dualfem.experiments.runner import run
 
-    h, tip, surface = penny._level(spec["level"])
-    stress = {"tension": [[0, 0, 0], [0, 0, 0], [0, 0, penny.SIGMA]],
-              "compression": [[0, 0, 0], [0, 0, 0], [0, 0, -penny.SIGMA]],
-              "shear": [[0, 0, penny.TAU], [0, 0, 0], [penny.TAU, 0, -penny.SIGMA]]}[spec["case"]]
     t0 = time.perf_counter()
-    qp = load_scene("penny", {"mesh_size": h, "tip_size": tip, "surface_size": surface, "E": penny.E,
-                              "nu": penny.NU, "delta": 1e3,
-                              "remote_stress": [[float(x) for x in r] for r in stress]}).build()
+    qp = load_scene("penny", penny.scene(spec["case"], *penny.parse_level(spec["level"]))).build()
     out = {**spec, "n": qp.n, "m": qp.m, "assembly_s": time.perf_counter() - t0}
     if spec["solver"] == "floor":
         return {**out, **_floor(qp), "peak_mb": _peak_mb()}
@@ -71,24 +64,7 @@ def worker(spec: dict) -> dict:
                certificate_path=cert.get("path"), operator=sol.info.get("operator"),
                ksolve=sol.info.get("ksolve", "amg" if spec["solver"] == "newton_amg" else None),
                peak_mb=_peak_mb())
-    if sol.x is None:
-        return out
-    nodes, lo, up = qp.geometry.nodes, qp.maps["defect_lower"], qp.maps["defect_upper"]
-    r = np.hypot(nodes[0, lo] - penny.C, nodes[1, lo] - penny.C)
-    root = np.sqrt(np.maximum(penny.A ** 2 - r ** 2, 0.0))
-    jump = qp.B @ sol.x
-    closure = float(np.abs(jump).max() / np.abs(sol.x).max())
-    if spec["case"] == "tension":
-        w = 8 * (1 - penny.NU ** 2) * penny.SIGMA / (np.pi * penny.E) * root
-        out.update(error=penny._l2(qp, r, jump, w), w0_ratio=float(jump.max() / w.max()))
-    elif spec["case"] == "compression":
-        out.update(closure=closure, error=float(sol.multipliers.sum() / qp.weights.sum() / penny.SIGMA - 1.0))
-    else:
-        nd = qp.geometry.node_dofs
-        slip = sol.x[nd[0, up]] - sol.x[nd[0, lo]]
-        exact = 8 * (1 - penny.NU) * penny.TAU / (np.pi * (2 - penny.NU) * penny.G) * root
-        out.update(error=penny._l2(qp, r, slip, exact), closure=closure)
-    return out
+    return {**out, **penny.errors(spec["case"], qp, sol)}
 
 
 def _floor(qp) -> dict:
