@@ -61,7 +61,7 @@ class NewtonAmg(Solver):
             status = Status.TIME_LIMIT
         elif res.converged:
             status = Status.SOLVED
-        elif "cycles" in res.message:
+        elif res.cycled:
             status = Status.STAGNATION
         else:
             status = Status.MAX_ITER

@@ -238,6 +238,8 @@ class FullSpaceResult:
     cg_iterations: int = 0
     message: str = ""
     timed_out: bool = False
+    #: the active set came back to one of an earlier step that was not the last (no convergence)
+    cycled: bool = False
     time_s: dict = field(default_factory=dict)
 
 
@@ -287,6 +289,7 @@ def full_space_newton(qp, tol: float = 1e-12, rtol: float = 1e-11, max_newton: i
         key = np.packbits(A).tobytes()
         if k and key in seen:
             out.converged = key == last
+            out.cycled = not out.converged
             out.message = ("active set settled" if out.converged else
                            f"active set cycles (a set of step {k} met before)")
             break
