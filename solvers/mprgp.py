@@ -208,9 +208,8 @@ class MPRGPSolver(DualOperatorSolver):
     def setup(self, qp) -> None:
         super().setup(qp)
         op, kind = self.op, self.params["precond"]
-        if kind == "auto":     # the Dirichlet preconditioner's local Schur complements are too large in 3D
-            three_d = qp.geometry is not None and qp.geometry.dim == 3
-            kind = ("lumped" if three_d else "dirichlet") if op.kind == "matrix_free" else "none"
+        if kind == "auto":     # matrix-free: FETI's Dirichlet in 2D, the lumped one in 3D
+            kind = ("dirichlet" if dp.dirichlet_by_default(qp) else "lumped") if op.kind == "matrix_free" else "none"
         self.precond_kind = kind
         self.scale = self.precond = None
         self.norm = 0.0

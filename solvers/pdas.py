@@ -53,7 +53,7 @@ import numpy as np
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.numerics.dual_operator import FACE_METHODS
-from dualfem.numerics.dual_precond import dirichlet_inverse
+from dualfem.numerics.dual_precond import dirichlet_by_default, dirichlet_inverse
 from dualfem.numerics.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics.polish import refine_on_active_set
 
@@ -153,10 +153,8 @@ class PDASSolver(DualOperatorSolver):
         super().setup(qp)
         if self.op.kind == "matrix_free":
             self.op.face = self.params["newton"]
-            # auto: FETI's Dirichlet preconditioner in 2D; in 3D the local Schur complements of a surface's
-            # element layers are large (8.4 s of setup at 36 k unknowns, minutes at 150 k): Jacobi there
-            three_d = qp.geometry is not None and qp.geometry.dim == 3
-            if self.params["precond"] == "dirichlet" or (self.params["precond"] == "auto" and not three_d):
+            auto = self.params["precond"] == "auto"        # FETI's Dirichlet in 2D, Jacobi in 3D
+            if self.params["precond"] == "dirichlet" or (auto and dirichlet_by_default(qp)):
                 self.op.face_preconditioner = dirichlet_inverse(qp, int(self.params["layers"]))
 
     def _tol(self) -> float:
