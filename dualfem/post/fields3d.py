@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from dualfem.core.elasticity import lame
 from dualfem.core.errors import InputError
+from dualfem.numerics import p1
 from dualfem.post.fields import material, nodal_displacement
 
 VOIGT = ("s11", "s22", "s33", "s23", "s13", "s12")
@@ -31,20 +33,14 @@ def _geometry3d(qp):
 
 
 def tet_gradients(nodes: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Gradients of the four P1 shape functions per tetrahedron, shape (nt, 4, 3), and the volumes (nt,).
-
-    Degenerate (zero-volume) tetrahedra are refused (InputError)."""
-    X = nodes[:, tets]                       # (3, 4, nt)
-    J = np.stack([X[:, 1] - X[:, 0], X[:, 2] - X[:, 0], X[:, 3] - X[:, 0]], axis=2)   # (3, nt, 3): columns edges
-    J = np.moveaxis(J, 1, 0)                 # (nt, 3, 3), J[:, i, k] = (X_k+1 - X_0)_i
-    det = np.linalg.det(J)
-    if np.any(np.abs(det) <= 1e-300):
-        raise InputError(f"the mesh has {int(np.sum(np.abs(det) <= 1e-300))} degenerate tetrahedra")
-    Jinv = np.linalg.inv(J)                  # rows: gradients of the barycentric coordinates 1..3
-    grads = np.empty((tets.shape[1], 4, 3))
-    grads[:, 1:, :] = Jinv
-    grads[:, 0, :] = -Jinv.sum(axis=1)
-    return grads, np.abs(det) / 6.0
+    """Gradients of the four P1 shape functions per tetrahedron, shape (nt, 4, 3), and the volumes (nt,)
+    (:func:`dualfem.numerics.p1.tet_gradients`, any orientation). Degenerate (zero-volume) tetrahedra are
+    refused (InputError)."""
+    g, vol = p1.tet_gradients(nodes, tets)
+    vol = np.abs(vol)
+    if np.any(vol <= 1e-300):
+        raise InputError(f"the mesh has {int(np.sum(vol <= 1e-300))} degenerate tetrahedra")
+    return np.transpose(g, (2, 0, 1)), vol
 
 
 def strains3d(qp, x: np.ndarray) -> np.ndarray:
@@ -60,7 +56,7 @@ def strains3d(qp, x: np.ndarray) -> np.ndarray:
 def stresses3d(qp, x: np.ndarray, E: float | None = None, nu: float | None = None) -> dict[str, np.ndarray]:
     """Cauchy stress per tetrahedron (units of E): the six components (:data:`VOIGT`) and ``von_mises``."""
     E, nu, _ = material(qp, E, nu, "strain")
-    lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    lam, mu = lame(E, nu, "strain")             # plane strain's constants are those of 3D elasticity
     eps = strains3d(qp, x)
     tr = np.trace(eps, axis1=1, axis2=2)
     sig = 2 * mu * eps + lam * tr[:, None, None] * np.eye(3)

@@ -19,21 +19,16 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from dualfem.numerics.p1 import tet_gradients
+
 from .._pattern import distinct_pairs
 
 
 def gradients(p: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Gradients (4, 3, nt) of the four P1 hat functions of each tetrahedron, and the volumes (nt,).
-
-    ``t`` must be positively oriented (the mesh module orders every tetrahedron so)."""
-    x = p[:, t]                                                      # (3, 4, nt)
-    a, b, c = (x[:, k] - x[:, 0] for k in (1, 2, 3))                 # (3, nt)
-    bc, ca, ab = np.cross(b, c, axis=0), np.cross(c, a, axis=0), np.cross(a, b, axis=0)
-    det = (a * bc).sum(axis=0)
-    g = np.empty((4, 3, t.shape[1]))
-    g[1], g[2], g[3] = bc / det, ca / det, ab / det
-    g[0] = -(g[1] + g[2] + g[3])
-    return g, det / 6.0
+    """Gradients (4, 3, nt) of the four P1 hat functions of each tetrahedron, and the volumes (nt,)
+    (:func:`dualfem.numerics.p1.tet_gradients`). ``t`` must be positively oriented (the mesh module orders
+    every tetrahedron so)."""
+    return tet_gradients(p, t)
 
 
 def node_pattern(a: np.ndarray, b: np.ndarray, nn: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
