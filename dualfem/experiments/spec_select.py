@@ -190,8 +190,11 @@ def _select_scenes(blocks: Any, picks: tuple[Pick, ...]) -> list[dict]:
 
 def _unique(blocks: list[dict]) -> list[dict]:
     """The blocks without repeats (two spec blocks restricted to one scene can become the same)."""
-    seen: list[dict] = []
-    return [b for b in blocks if not (b in seen or seen.append(b))]
+    out: list[dict] = []
+    for b in blocks:
+        if b not in out:
+            out.append(b)
+    return out
 
 
 def effective_text(data: dict, source: str, sel: Selection) -> str:

@@ -67,13 +67,10 @@ def stresses3d(qp, x: np.ndarray, E: float | None = None, nu: float | None = Non
 
 
 def defect_normals(qp) -> np.ndarray:
-    """The unit normals of the defect nodes as (m, 3), whichever way the QP stores them."""
+    """The unit normals of the defect nodes, (m, 3) (a 3D QP's ``maps['defect_normals']``)."""
     nrm = np.asarray(qp.maps.get("defect_normals"), dtype=float)
-    m = qp.m
-    if nrm.shape == (3, m) and m != 3:
-        nrm = nrm.T
-    if nrm.shape != (m, 3):
-        raise InputError(f"maps['defect_normals'] must have shape (m, 3) or (3, m) with m = {m}, got {nrm.shape}")
+    if nrm.shape != (qp.m, 3):
+        raise InputError(f"maps['defect_normals'] must have shape (m, 3) with m = {qp.m}, got {nrm.shape}")
     return nrm
 
 

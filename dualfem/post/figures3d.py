@@ -26,11 +26,15 @@ def plane_frame(points: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np
     nv = normals.mean(axis=0)
     if np.linalg.norm(nv) < 1e-12:
         nv = normals[0]
-    nv = nv / np.linalg.norm(nv)
-    trial = np.eye(3)[int(np.argmin(np.abs(nv)))]
-    e1 = np.cross(nv, trial)
+    return (c, *plane_basis(nv))
+
+
+def plane_basis(normal) -> tuple[np.ndarray, np.ndarray]:
+    """An orthonormal pair (e1, e2) spanning the plane orthogonal to ``normal``, with e1 x e2 = its direction."""
+    nv = np.asarray(normal, float) / np.linalg.norm(normal)
+    e1 = np.cross(nv, np.eye(3)[int(np.argmin(np.abs(nv)))])
     e1 /= np.linalg.norm(e1)
-    return c, e1, np.cross(nv, e1)
+    return e1, np.cross(nv, e1)
 
 
 def _surface(qp, d: dict, k: int):
@@ -109,9 +113,7 @@ def plot_cut(qp, sol, *, origin=None, normal=None, ax=None, scale: float = 0.0):
         normal, a1, a2 = e2, e1, n_def      # defect is the horizontal line, its normal points up
     else:
         normal = np.asarray(normal, float) / np.linalg.norm(normal)
-        a1 = np.cross(normal, np.eye(3)[int(np.argmin(np.abs(normal)))])
-        a1 /= np.linalg.norm(a1)
-        a2 = np.cross(normal, a1)
+        a1, a2 = plane_basis(normal)
     origin = c if origin is None else np.asarray(origin, float)
     polys, tets, bary = plane_cut(g.nodes, g.cells, origin, normal)
     if scale:

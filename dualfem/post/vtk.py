@@ -139,12 +139,17 @@ def _defect_edges(d: dict, nodal: dict) -> tuple[np.ndarray, dict, np.ndarray, n
             ids.append(np.full(idx.size - 1, k_def, dtype=np.int32))
             face.append(np.full(idx.size - 1, sign, dtype=np.int32))
             for k, v in nodal.items():
-                pair = np.stack([v[idx][:-1], v[idx][1:]])
-                with np.errstate(invalid="ignore"):
-                    cnt = np.sum(np.isfinite(pair), axis=0)
-                    vals[k].append(np.where(cnt > 0, np.nansum(pair, axis=0) / np.maximum(cnt, 1), np.nan))
+                vals[k].append(finite_mean(np.stack([v[idx][:-1], v[idx][1:]])))
     return (np.vstack(edges).astype(np.int64), {k: np.concatenate(v) for k, v in vals.items()},
             np.concatenate(ids), np.concatenate(face))
+
+
+def finite_mean(a: np.ndarray) -> np.ndarray:
+    """Column means of ``a`` over its finite entries (NaN where a column has none): a cell's value from
+    its nodes' (an undefined pressure ignored)."""
+    with np.errstate(invalid="ignore"):
+        cnt = np.sum(np.isfinite(a), axis=0)
+        return np.where(cnt > 0, np.nansum(a, axis=0) / np.maximum(cnt, 1), np.nan)
 
 
 def write_vtu(path: str | os.PathLike, qp, sol=None, *, post: Post | None = None) -> Path:

@@ -27,6 +27,7 @@ def to_meshio3d(qp, sol):
     g = qp.geometry
     npts = g.nodes.shape[1]
     from dualfem.post.fields import nodal_displacement
+    from dualfem.post.vtk import finite_mean
 
     u = nodal_displacement(qp, sol.x)
     st = stresses3d(qp, sol.x)
@@ -64,8 +65,7 @@ def to_meshio3d(qp, sol):
             r = row_of[f]
             for k in NODAL:         # the front: opening and slip 0, pressure undefined (ignored in the mean)
                 vals = np.where(r >= 0, np.asarray(d[k], float)[np.maximum(r, 0)], np.nan if k == "pressure" else 0.0)
-                cnt = np.sum(np.isfinite(vals), axis=0)
-                v = np.where(cnt > 0, np.nansum(vals, axis=0) / np.maximum(cnt, 1), np.nan)
+                v = finite_mean(vals)
                 cell_data[k] = [np.full(ntet, np.nan), np.concatenate([v, v])]
             did = d["defect_id"][np.max(r, axis=0)].astype(np.int32)
             cell_data["defect_id"] = [np.full(ntet, -1, dtype=np.int32), np.concatenate([did, did])]
