@@ -68,27 +68,12 @@ def worker(spec: dict) -> dict:
 
 
 def _floor(qp) -> dict:
-    import numpy as np
+    """The floor (benchmarks/three_d_linear_algebra.floor_solve) in this report's row fields."""
+    from three_d_linear_algebra import floor_solve
 
-    from dualfem.numerics.linalg import sparse_factor
-    from dualfem.numerics.memory import SAFETY, available_bytes, factor_bytes
-
-    t0 = time.perf_counter()
-    if SAFETY * factor_bytes(qp.n, "pardiso", dim=3) <= available_bytes():
-        f = sparse_factor(qp.K, "pardiso")
-        t1 = time.perf_counter()
-        x = f.solve(qp.F)
-        kind = "pardiso"
-    else:
-        from dualfem.numerics.amg import amg_for
-
-        h = amg_for(qp)
-        t1 = time.perf_counter()
-        x = h.solve(qp.F, rtol=1e-8)
-        kind = "amg-cg"
-    t2 = time.perf_counter()
-    res = float(np.abs(qp.K @ x - qp.F).max() / np.abs(qp.F).max())
-    return {"status": kind, "setup_s": t1 - t0, "solve_s": t2 - t1, "residual": res}
+    f = floor_solve(qp)
+    return {"status": "pardiso" if f["status"] == "pardiso" else "amg-cg", "setup_s": f["setup"],
+            "solve_s": f["solve"], "residual": f["residual"]}
 
 
 def _runs(levels, sizes) -> list[dict]:
