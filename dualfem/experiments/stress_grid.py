@@ -243,6 +243,14 @@ def r_set_by_user(params: dict) -> bool:
     return params.get("r_rule", "fixed") in ("fixed", "scaled")
 
 
+def _plane_strain(problem: str) -> dict:
+    """``{"plane": "strain"}`` for a problem with that key (2D), else nothing (3D elasticity as it is)."""
+    from dualfem.core.registry import problems as registered
+
+    cls = registered().get(problem)
+    return {"plane": "strain"} if cls is None or "plane" in cls.defaults else {}
+
+
 def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] | None = None,
                time_limit: float | None = None, max_n: int | None = None, scene: dict | None = None,
                scene_name: str | None = None) -> list[Task]:
@@ -311,10 +319,7 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] | 
             for s in solver_names:
                 add("load", {"load_scale": ls}, scene, s, ref=ref)
     if "nu" in axes:
-        from dualfem.core.registry import problems as registered
-
-        cls = registered().get(problem)         # plane strain where the problem has the key (2D), 3D as it is
-        plane = {"plane": "strain"} if cls is None or "plane" in cls.defaults else {}
+        plane = _plane_strain(problem)
         for nu in NUS:
             for s in solver_names:
                 add("nu", {"nu": nu}, {**base, "nu": nu, **plane}, s)
