@@ -42,7 +42,6 @@ TO_CREATE = {"problems/membrane.py", "solvers/my_pg.py"}
 STALE_UNTIL_REGENERATED = {
     ("reports/benchmark.md", "dualfem.linalg.clear_cache"): "dualfem.numerics.linalg.store_of",
     ("reports/breadth.md", "dualfem.linalg.clear_cache"): "dualfem.numerics.linalg.store_of",
-    ("reports/figures.md", "dualfem.figures"): "dualfem.post.figures",
     ("reports/stress_breadth/stability.md", "dualfem.scaling"): "dualfem.numerics.scaling",
 }
 
