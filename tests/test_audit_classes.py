@@ -188,18 +188,19 @@ def test_refused_bench_into_an_existing_folder_changes_nothing(tmp_path, bad, ca
 
 
 # ------------------------------------------------------------------ uzawa_auto's outer iterations
-#: where uzawa_auto needs more than 30 outer iterations; the README's uzawa_auto row says so and why
+#: where uzawa_auto needs more than 30 outer iterations; the uzawa_auto row of docs/solvers.md says so and why
 UZAWA_AUTO_SLOW: set[tuple[str, float, int]] = set()     # none since tol = 1e-9 (was f1 at delta = 1e-9)
 
 
 @pytest.mark.parametrize("load", ["f1", "f2", "f3"])
-def test_uzawa_auto_outer_iterations_or_the_readme_says_why(load):
-    readme = next(ln for ln in (ROOT / "README.md").read_text().splitlines() if ln.startswith("| `uzawa_auto`"))
+def test_uzawa_auto_outer_iterations_or_the_solver_page_says_why(load):
+    page = (ROOT / "docs" / "solvers.md").read_text()
+    readme = next(ln for ln in page.splitlines() if ln.startswith("| `uzawa_auto`"))
     for N in (16, 32, 64):
         for delta in (1e-5, 1e-9):
             sol = run("uzawa_auto", load_scene(load, {"N": N, "delta": delta}).build())
             if (load, delta, N) in UZAWA_AUTO_SLOW:
-                assert sol.status != Status.SOLVED or sol.iterations["outer"] > 30, "fixed? update README and this test"
+                assert sol.status != Status.SOLVED or sol.iterations["outer"] > 30, "fixed? update docs/solvers.md"
                 assert f"{load} at delta = {delta:.0e}".replace("e-0", "e-") + f", N = {N}" in readme
             else:
                 assert sol.status == Status.SOLVED and sol.iterations["outer"] <= 30, (load, N, delta, sol.iterations)

@@ -1,5 +1,5 @@
 """The rooms import in one direction only, function-local imports included (see tests/_imports.py and
-the README's Layout), the core imports no plugin, solver plugins do not import each other, and the
+docs/layout.md), the core imports no plugin, solver plugins do not import each other, and the
 built-in plugins are found through entry points like third-party ones (their names reserved)."""
 from __future__ import annotations
 

@@ -1,4 +1,6 @@
-"""One source of numbers: every performance figure the README quotes is in the report it names.
+"""One source of numbers: every performance figure the README and docs/ quote is in the report named.
+
+The texts (:func:`documents`): README.md and docs/*.md (the README's reference parts live there).
 
 A *statement* of the README is a table row, or a clause of a prose paragraph or list item (split at
 "; " and at sentence ends); code blocks are skipped. A *quantity* is a number or a range of numbers
@@ -21,6 +23,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from pathlib import Path
+
+import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -108,7 +112,7 @@ def numbers_in(path: Path) -> set[str]:
     return {_norm(n) for n in NUMBER.findall(path.read_text(encoding="utf-8"))}
 
 
-def check(readme: str, root: Path = REPO) -> list[str]:
+def check(readme: str, root: Path = REPO, name: str = "README") -> list[str]:
     """One message per quoted number that is not in any report its statement names (empty: all agree)."""
     bad = []
     cache: dict[str, set[str]] = {}
@@ -125,24 +129,38 @@ def check(readme: str, root: Path = REPO) -> list[str]:
         for q in qs:
             for n in (q.group("a"), q.group("b")):
                 if n is not None and _norm(n) not in have:
-                    bad.append(f"README line {st.line}: {q.group(0).strip()!r} ({n} not in "
+                    bad.append(f"{name} line {st.line}: {q.group(0).strip()!r} ({n} not in "
                                f"{', '.join(named)}): {st.text[:160]}")
     return bad
 
 
-def unsourced(readme: str) -> list[str]:
+def unsourced(readme: str, name: str = "README") -> list[str]:
     """Statements with a quoted time, memory or floor ratio that name no report."""
     out = []
     for st in statements(readme):
         qs = [q for q in quantities(st.text) if q.group("unit").strip() in ("s", "ms", "GB", "MB", "x the floor")]
         if qs and not reports_named(st):
-            out.append(f"README line {st.line}: {', '.join(q.group(0).strip() for q in qs)}: {st.text}")
+            out.append(f"{name} line {st.line}: {', '.join(q.group(0).strip() for q in qs)}: {st.text}")
     return out
 
 
 # ------------------------------------------------------------------------------------------ tests
-def test_readme_numbers_are_the_reports_numbers():
-    bad = check((REPO / "README.md").read_text(encoding="utf-8"))
+def documents() -> list[Path]:
+    """README.md and every page of docs/."""
+    return [REPO / "README.md", *sorted(REPO.glob("docs/*.md"))]
+
+
+#: the pages that hold what was the README's reference part (its performance statements name their report
+#: like the README's own); the older pages (testset.md's size tables, three_d.md's notes, ...) are checked
+#: by the first test only
+REFERENCE_PAGES = ("README.md", "docs/cli.md", "docs/conventions.md", "docs/layout.md", "docs/linear_algebra.md",
+                   "docs/reports.md", "docs/solvers.md")
+
+
+@pytest.mark.parametrize("path", documents(), ids=lambda p: p.relative_to(REPO).as_posix())
+def test_quoted_numbers_are_the_reports_numbers(path):
+    rel = path.relative_to(REPO).as_posix()
+    bad = check(path.read_text(encoding="utf-8"), name=rel)
     assert not bad, "\n".join(bad)
 
 
@@ -153,10 +171,17 @@ NOT_MEASUREMENTS = {
 }
 
 
-def test_readme_performance_statements_name_their_report():
-    left = [u for u in unsourced((REPO / "README.md").read_text(encoding="utf-8"))
+@pytest.mark.parametrize("rel", REFERENCE_PAGES)
+def test_performance_statements_name_their_report(rel):
+    left = [u for u in unsourced((REPO / rel).read_text(encoding="utf-8"), name=rel)
             if not any(k in u for k in NOT_MEASUREMENTS)]
     assert not left, "\n".join(left)
+
+
+def test_the_reference_pages_exist_and_are_linked_from_the_readme():
+    readme = (REPO / "README.md").read_text(encoding="utf-8")
+    for rel in REFERENCE_PAGES[1:]:
+        assert (REPO / rel).exists() and f"]({rel})" in readme, rel
 
 
 def test_checker_catches_a_wrong_number(tmp_path):

@@ -157,13 +157,13 @@ def test_no_module_level_reuse_state():
     assert not hasattr(td, "_ASSEMBLY") and not hasattr(td, "clear_assembly_cache")
 
 
-def test_readme_example_runs(capsys):
-    """The README's five-line sweep (at a small N)."""
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
+def test_linear_algebra_page_example_runs(capsys):
+    """The five-line sweep of docs/linear_algebra.md (at a small N)."""
+    text = (ROOT / "docs" / "linear_algebra.md").read_text(encoding="utf-8")
     block = next(b.split("```", 1)[0] for b in text.split("```python\n")[1:] if "dualfem.workspace" in b)
     assert len([ln for ln in block.splitlines() if ln.strip()]) == 5
     ns: dict = {}
-    exec(block.replace('"N": 256', '"N": 12'), ns)      # noqa: S102 - the project's own README
+    exec(block.replace('"N": 256', '"N": 12'), ns)      # noqa: S102 - the project's own docs
     ws = ns["ws"]
     assert (ws.assemblies, ws.factorizations) == (1, 1)
     assert capsys.readouterr().out.count("solved") == 3
