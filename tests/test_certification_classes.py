@@ -16,6 +16,7 @@ import json
 
 import numpy as np
 import pytest
+from _backend import DEFAULT
 
 from dualfem.cli.main import main
 from dualfem.core import evaluator
@@ -167,9 +168,17 @@ def _rounding_ratio(qp, x, mu) -> float:
     return float(np.max(np.abs(r) / (np.finfo(float).eps * np.maximum(s, 1e-300))))
 
 
+#: SuperLU's reduced solve is not backward stable at nu = 0.4999 (f1, N = 16: stationarity 1.5e4 eps
+#: (|K||x| + |F| + |B'||mu|), 5.7e-9 > pdas's declared 1e-9, for a true error of 4.6e-11 against PARDISO's
+#: answer); pdas does not refine it, the step's exact size being below refine_tol (pdas: refine_tol=1e-16 reaches
+#: the floor, ratio 0.73): a pdas question, not a certificate one
+NOT_AT_THE_FLOOR_WITHOUT_PARDISO = pytest.mark.skipif(
+    DEFAULT != "pardiso", reason=f"pdas with {DEFAULT} at nu = 0.4999 is not at the rounding floor (needs PARDISO)")
+
+
 @pytest.mark.parametrize("scene, params", [
     ("f2", {"delta": 1e-12}), ("f1", {"delta": 1e-11}), ("f3", {"delta": 1e-12, "load_scale": 1e6}),
-    ("f2", {"delta": 1e3}), ("f1", {"nu": 0.4999})])
+    ("f2", {"delta": 1e3}), pytest.param("f1", {"nu": 0.4999}, marks=NOT_AT_THE_FLOOR_WITHOUT_PARDISO)])
 def test_a_backward_stable_exact_answer_is_not_demoted(scene, params):
     """pdas at its rounding floor: its stationarity residual (up to 2.6e-9 at delta = 1e-12: the rounding
     of K x with the 1/delta interface term) is within c eps (|K||x| + |F| + |B'||mu|) componentwise, the

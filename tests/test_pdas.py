@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from _backend import DEFAULT
 from _lcp import enumerate_lcp
 
 from dualfem.core import evaluator
@@ -72,10 +73,13 @@ def test_globalized_pdas_solves_the_cycling_case():
 
 
 def test_refinement_keeps_small_delta_accurate():
+    """Refinement never makes the answer worse, and PARDISO's reduced solve at delta = 1e-9 needs a step
+    (SuperLU's answer is already as accurate here: its steps do not lower the residual and are not kept)."""
     qp = load_scene("f1", {"N": 32, "delta": 1e-9}).build()
     raw = run("pdas", qp, {"refine": 0})
     ref = run("pdas", qp, {"refine_tol": 1e-16})
-    assert ref.info["refinement_steps"] >= 1
+    if DEFAULT == "pardiso":
+        assert ref.info["refinement_steps"] >= 1
     assert evaluator.kkt_error(ref.residuals) <= evaluator.kkt_error(raw.residuals)
     assert evaluator.kkt_error(ref.residuals) < 1e-11
 
