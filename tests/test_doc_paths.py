@@ -32,7 +32,7 @@ REPO = Path(__file__).resolve().parents[1]
 DOTTED = re.compile(r"(?<![\w./-])dualfem(?:\.[A-Za-z_]\w*)+")
 ROLE = re.compile(r":(?:mod|func|class|meth|data|attr|exc|obj):`~?(\.?[\w.]+)`")
 FROM_IMPORT = re.compile(r"\bfrom\s+(dualfem(?:\.\w+)*)\s+import\s+\(?\s*([\w\s,]+?)\s*\)?\s*(?:$|[;`#\n])", re.M)
-FILE = re.compile(r"(?<![\w/.-])((?:dualfem|problems|solvers|benchmarks|tests|scripts|docs|scenes|reports)"
+FILE = re.compile(r"(?<![\w/.-])((?:dualfem|problems|solvers|benchmarks|tests|scripts|docs|scenes|reports|examples)"
                   r"/[\w/.-]*\w\.(?:py|toml|md|sh|json|csv|npz))\b")
 
 #: files the plugin guide and its templates tell the reader to create (they do not exist here)
@@ -192,3 +192,17 @@ def test_readme_python_runs(tmp_path, monkeypatch):
     for i, code in enumerate(readme_python()):
         exec(compile(code, f"README.md python block {i + 1}", "exec"), namespace)  # noqa: S102
     assert namespace["sol"].status.value == "solved"
+
+
+def test_readme_scene_file_is_the_example_and_solves():
+    """The scene file the README shows in full is examples/plate.toml, byte for byte, and it solves with
+    its crack closed (the contact constraints active)."""
+    from dualfem.runner import run
+    from dualfem.scene import load_scene
+
+    shown = [code for lang, code in FENCE.findall((REPO / "README.md").read_text(encoding="utf-8")) if lang == "toml"]
+    path = REPO / "examples" / "plate.toml"
+    assert shown == [path.read_text(encoding="utf-8")]
+    qp = load_scene(str(path)).build()
+    sol = run("pdas", qp)
+    assert sol.status.value == "solved" and (sol.multipliers > 0).sum() > 0
