@@ -248,3 +248,52 @@ def check_maps(maps: dict, m: int, n_nodes: int | None, where: str, dim: int = 2
         arr(k, "iuf", (2, m))
     for k in ("normal", "tangent"):
         arr(k, "iuf", (2,))
+
+
+# ------------------------------------------------------------------ the two conventions of a QP file
+#: the ecosystem's names (qpsolvers, OSQP, Clarabel, ...): P, q, G, h, A, b, lb, ub
+QPSOLVERS_NAMES = ("P", "q", "G", "h", "A", "b", "lb", "ub")
+#: dualfem's own names: K, F, B, Bx_min (``dualfem export`` writes K, F, B: Bx_min = 0)
+OWN_NAMES = ("K", "F", "B", "Bx_min")
+#: what each convention's arrays mean (for messages and docs/export.md)
+CONVENTIONS = {
+    "qpsolvers": "qpsolvers' convention: minimize 1/2 x'Px + q'x subject to G x <= h, A x = b, lb <= x <= ub",
+    "dualfem": "dualfem's own convention: minimize 1/2 x'Kx - F'x subject to B x >= Bx_min (Bx_min omitted: 0)",
+}
+_MATRICES = ("P", "G", "A", "K", "B")
+_TRIPLET = ("data", "row", "col", "shape")
+
+
+def base_names(d: dict) -> set[str]:
+    """The QP names a file's arrays stand for: a matrix given as COO triplets (``P_data``, ...) counts as ``P``."""
+    out = set()
+    for k in d:
+        head, _, tail = k.rpartition("_")
+        out.add(head if head in _MATRICES and tail in _TRIPLET else k)
+    return out
+
+
+def convention(d: dict, where: str) -> str:
+    """``"qpsolvers"`` or ``"dualfem"``: the convention a QP file's array names declare (:data:`CONVENTIONS`).
+
+    Refused (InputError naming both conventions): a file holding names of both (it could be read either
+    way: qpsolvers' ``G x <= h`` or dualfem's ``B x >= Bx_min``), of neither, or an optional string array
+    ``convention`` that does not start with the convention its names declare.
+    """
+    names = base_names(d)
+    ours, theirs = [k for k in OWN_NAMES if k in names], [k for k in QPSOLVERS_NAMES if k in names]
+    both = f"{CONVENTIONS['qpsolvers']} (arrays {', '.join(QPSOLVERS_NAMES)}); {CONVENTIONS['dualfem']} (arrays " \
+           f"{', '.join(OWN_NAMES)}; what dualfem export writes)"
+    if ours and theirs:
+        raise InputError(f"{where} holds both an exported QP or dualfem's own arrays ({', '.join(ours)}) and the "
+                         f"arrays {', '.join(theirs)} of qpsolvers' convention: ambiguous, keep one convention. "
+                         f"The two: {both}")
+    if not ours and not theirs:
+        raise InputError(f"{where} holds no QP: write the arrays of one convention: {both}")
+    found = "dualfem" if ours else "qpsolvers"
+    if "convention" in d:
+        said = str(np.asarray(d["convention"]).ravel()[0]) if np.size(d["convention"]) else ""
+        if not said.strip().lower().startswith(found):
+            raise InputError(f"{where} says convention = {said!r}, but its arrays ({', '.join(ours or theirs)}) are "
+                             f"those of {CONVENTIONS[found]}: ambiguous, fix one")
+    return found
