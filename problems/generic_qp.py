@@ -25,8 +25,9 @@ string array ``convention`` that does not start with the convention its names de
 or ``dualfem``) is refused with a message naming both (:func:`dualfem.core.qpfile.convention`).
 
 File layout: every matrix (``P``, ``G``, ``A``, ``K``, ``B``) as a dense array, in a ``.mat`` file also
-as a sparse matrix, or as COO triplets ``M_data``, ``M_row``, ``M_col``, ``M_shape`` (0-based); ``.mat``
-files from ``scipy.io.savemat`` or MATLAB ``save -v7``.
+as a sparse matrix, as COO triplets ``M_data``, ``M_row``, ``M_col``, ``M_shape`` (0-based), or as CSC
+arrays ``M_data``, ``M_indices``, ``M_indptr``, ``M_shape`` (scipy's, as the public test set writes them,
+:mod:`dualfem.experiments.testset_files`); ``.mat`` files from ``scipy.io.savemat`` or MATLAB ``save -v7``.
 
 Validation (each failure is an :class:`~dualfem.errors.InputError` naming the array): before
 anything is decompressed, the shapes the file's headers declare must fit in the available memory
@@ -73,7 +74,7 @@ from dualfem.core.errors import InputError, check_positive
 from dualfem.core.parts import ShiftPart
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
-from dualfem.core.qpfile import check_dims, convention, coo_from_arrays, declared_arrays, read_arrays
+from dualfem.core.qpfile import check_dims, convention, coo_from_arrays, csc_from_arrays, declared_arrays, read_arrays
 from dualfem.core.registry import register_problem
 
 STORAGE = ("full", "upper", "lower")
@@ -97,14 +98,15 @@ def _read(path: Path) -> dict:
 
 def _matrix(d: dict, name: str, where: str, required: bool = True, rows: int | None = None,
             cols: int | None = None):
-    """A sparse matrix from a dense/sparse array ``name`` or COO triplets ``name_*`` (not both: ambiguous).
+    """A sparse matrix from a dense/sparse array ``name``, COO triplets or CSC arrays ``name_*`` (not both:
+    ambiguous).
 
     ``rows``/``cols``: the sizes implied by the other arrays (q's length), checked against the
     declared shape before anything of that shape is allocated."""
     keys = [f"{name}_{s}" for s in ("data", "row", "col", "shape")]
-    if name in d and any(k in d for k in keys):
+    if name in d and any(k in d for k in keys + [f"{name}_indices", f"{name}_indptr"]):
         raise InputError(f"{where} holds both the matrix {name!r} and the triplets "
-                         f"{', '.join(k for k in keys if k in d)}: ambiguous, keep one")
+                         f"{', '.join(k for k in d if k.startswith(name + '_'))}: ambiguous, keep one")
     if name in d:
         a = d[name]
         if sp.issparse(a):
@@ -118,6 +120,8 @@ def _matrix(d: dict, name: str, where: str, required: bool = True, rows: int | N
         if a.ndim != 2:
             raise InputError(f"array {name!r} in {where} must be 2-D, got shape {a.shape}")
         return sp.csc_matrix(a.astype(float))
+    if all(k in d for k in (f"{name}_data", f"{name}_indices", f"{name}_indptr", f"{name}_shape")):
+        return csc_from_arrays(d, name, where, rows=rows, cols=cols)
     if all(k in d for k in keys):
         return sp.csc_matrix(coo_from_arrays(d, name, where, rows=rows, cols=cols, against="the length of q"))
     if any(k in d for k in keys):
@@ -182,11 +186,11 @@ FREE_BOUND = 1e20
 
 
 def drop_free_rows(G: sp.csr_matrix, h: np.ndarray, where: str) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
-    """Rows ``G x >= h`` without those that can never bind (``h_j <= -FREE_BOUND`` or ``-inf``), and the
-    indices of the rows kept (into the stacked rows of the file, :func:`_qpsolvers_rows`). The readers
-    refuse NaN and a bound no x satisfies first, in the file's own convention. A merely loose bound
-    (1e8) is kept: it is a constraint, and whatever precision its shift costs shows up in the certified
-    status."""
+    """Rows ``G x >= h`` (dualfem's form, built by :func:`_qpsolvers_rows` / :func:`_own_rows`) without
+    those that can never bind (``h_j <= -FREE_BOUND`` or ``-inf``), and the indices of the rows kept
+    (into the stacked rows of the file). The readers refuse NaN and a bound no x satisfies first, in the
+    file's own convention. A merely loose bound (1e8) is kept: it is a constraint, and whatever
+    precision its shift costs shows up in the certified status."""
     if np.any(np.isnan(h)) or np.any(h == np.inf):
         raise InputError(f"the constraints of {where} hold NaN or a bound no x satisfies")
     keep = np.flatnonzero(h > -FREE_BOUND)

@@ -325,3 +325,43 @@ def test_a_stated_convention_that_agrees_is_accepted(tmp_path):
     P, q, G, h = _small()
     qp = load_scene(_write(tmp_path, P=P, q=q, G=G, h=h, convention="qpsolvers: G x <= h")).build()
     assert qp.m == 3
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".mat"])
+def test_export_in_qpsolvers_convention_is_the_same_qp(tmp_path, suffix):
+    """``dualfem export --convention qpsolvers``: P, q, G, h that qpsolvers itself solves to dualfem's answer,
+    and that dualfem reads back as the same QP."""
+    f = tmp_path / f"f2{suffix}"
+    assert main(["export", "f2", "--set", "N=8", "-o", str(f), "--convention", "qpsolvers"]) == 0
+    if suffix == ".npz":
+        d = dict(np.load(f))
+        P, G = (sp.coo_matrix((d[f"{m}_data"], (d[f"{m}_row"], d[f"{m}_col"])), shape=tuple(d[f"{m}_shape"]))
+                for m in ("P", "G"))
+    else:
+        d = scipy.io.loadmat(f)
+        P, G = d["P"], d["G"]
+    q, h = np.ravel(d["q"]), np.ravel(d["h"])
+    direct = load_scene("f2", {"N": 8}).build()
+    ref = run("pdas", direct)
+    res = _qpsolvers_solve(P.toarray(), q, G.toarray(), h)
+    np.testing.assert_allclose(res.x, ref.x, atol=1e-9 * np.abs(ref.x).max())
+    np.testing.assert_allclose(res.z, ref.multipliers, atol=1e-7 * np.abs(ref.multipliers).max())
+    back = load_scene(str(f)).build()
+    assert back.params["convention"] == "qpsolvers"
+    assert abs(back.K - direct.K).max() == 0 and np.array_equal(back.F, direct.F)
+    assert abs(back.B - direct.B).max() == 0
+
+
+def test_a_public_test_set_file_is_solved_as_it_is(tmp_path):
+    """The test set's CSC files in qpsolvers' convention (dualfem.experiments.testset_files) are read by qp_file."""
+    from dualfem.experiments.testset import qpsolvers_form
+    from dualfem.experiments.testset_files import write_qp
+
+    direct = load_scene("f2", {"N": 8}).build()
+    f = write_qp(tmp_path / "f2.npz", "f2", *qpsolvers_form(direct))
+    qp = load_scene(str(f)).build()
+    assert abs(qp.K - direct.K).max() == 0 and abs(qp.B - direct.B).max() == 0 and np.array_equal(qp.F, direct.F)
+    bad = dict(np.load(f))
+    bad["G_indptr"] = bad["G_indptr"][:-1]
+    with pytest.raises(InputError, match="G_indptr"):
+        load_scene(_write(tmp_path, **bad)).build()
