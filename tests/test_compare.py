@@ -218,3 +218,15 @@ def test_a_plugin_that_does_not_declare_reference_is_never_the_reference(qp, mon
     assert runs["zz_exact_plugin"]["grade"] == "correct"
     alone = compare_solvers(qp, ["zz_exact_plugin"])
     assert alone["reference"] is None and alone["runs"][0]["grade"] == "unverified"
+
+
+def test_a_bench_spec_may_not_name_an_undeclared_reference(monkeypatch):
+    from dualfem.core.errors import InputError
+    from dualfem.experiments.spec import parse_spec
+
+    monkeypatch.setitem(registry._SOLVERS, "zz_exact_plugin", _ExactPlugin)
+    base = {"scenes": [{"scene": ["f2"], "N": [8]}], "solvers": [{"name": "pdas"}]}
+    assert parse_spec({**base, "reference": {"solvers": ["clarabel"]}}).reference["solvers"] == ["clarabel"]
+    for name in ("zz_exact_plugin", "mprgp"):
+        with pytest.raises(InputError, match=rf"reference.solvers names '{name}', which does not declare reference"):
+            parse_spec({**base, "reference": {"solvers": [name, "pdas"]}})
