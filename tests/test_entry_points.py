@@ -67,6 +67,8 @@ def test_list_shows_third_party_plugins(plugin_env):
     d = json.loads(dualfem(plugin_env, "list", "--json").stdout)
     assert d["plugin_errors"] == []
     assert d["solvers"]["example_nnls"]["installed"] is True
+    assert d["solvers"]["example_nnls"]["family"] == "other" and d["solvers"]["example_nnls"]["reference"] is False
+    assert d["solvers"]["pdas"]["family"] == "dual" and d["solvers"]["pdas"]["reference"] is True
     assert "example_string" in d["problems"]
     assert d["scenes"]["string"]["problem"] == "example_string"
     text = dualfem(plugin_env, "list").stdout

@@ -95,11 +95,13 @@ def cmd_list(args) -> int:
     from dualfem.core.quiet import plugin_output
     from dualfem.core.registry import entry_point_errors, problems, solvers
     from dualfem.core.scene import describe, library, preset_conflicts, presets
+    from dualfem.post.style import family
 
     def describe_solver(c) -> dict:
         return {"installed": c.missing() is None, "missing": c.missing(), "description": c.description,
                 "exact": c.exact, "parameters": c.defaults, "allowed": c.allowed(),
-                "renamed": dict(getattr(c, "renamed", {}))}
+                "renamed": dict(getattr(c, "renamed", {})), "family": family(c.name),
+                "reference": bool(getattr(c, "reference", False) and c.exact)}
 
     def describe_problem(c) -> dict:
         return {"description": c.description, "installed": c.missing() is None, "missing": c.missing(),
