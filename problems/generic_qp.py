@@ -301,7 +301,7 @@ class QPFile(Problem):
         if conv == "dualfem" and "Bx_min" not in d and not any(_dense(d, k) for k in ("K", "B")):
             qp = QP.load(path)           # a file written by `dualfem export` / QP.save: B x >= 0
             qp.name = f"qp_file[{path.stem}]"
-            qp.params = {**qp.params, **{k: str(v) for k, v in p.items()}}
+            qp.params = {**qp.params, **{k: str(v) for k, v in p.items()}, "convention": conv}
             if p["check_definite"]:
                 check_definite(qp.K, where)
             return qp

@@ -113,7 +113,7 @@ def test_dualfem_export_file_round_trip(tmp_path):
     direct = load_scene("f2", {"N": 8}).build()
     qp = load_scene(str(f)).build()
     assert qp.key() == direct.key()
-    assert "node_dofs" in qp.maps
+    assert "node_dofs" in qp.maps and qp.params["convention"] == "dualfem"
 
 
 def test_cli_solve_npz(tmp_path, capsys):
