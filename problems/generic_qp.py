@@ -10,9 +10,10 @@ matrices from other codes: ``dualfem solve my_problem.npz --solver pdas``.
 
       minimize 1/2 x'Px + q'x   subject to   G x <= h,   A x = b,   lb <= x <= ub
 
-  A bound that can never bind (``h_j``, ``ub_j`` of +inf or >= 1e20, ``lb_j`` of -inf or <= -1e20, as
-  qpsolvers and OSQP read them) is no constraint. The multipliers in qpsolvers' signs (``z``, ``y``,
-  ``z_box`` with ``P x + q + G'z + A'y + z_box = 0``): :func:`qpsolvers_duals`.
+  An omitted ``h`` or ``b`` is 0. A bound that can never bind (``h_j``, ``ub_j`` of +inf or >= 1e20,
+  ``lb_j`` of -inf or <= -1e20, as qpsolvers and OSQP read them) is no constraint. The multipliers in
+  qpsolvers' signs (``z``, ``y``, ``z_box`` with ``P x + q + G'z + A'y + z_box = 0``):
+  :func:`qpsolvers_duals`.
 * **dualfem's own**: ``K, F, B`` and optionally ``Bx_min``::
 
       minimize 1/2 x'Kx - F'x   subject to   B x >= Bx_min   (Bx_min omitted: 0)

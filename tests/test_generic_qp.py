@@ -365,3 +365,15 @@ def test_a_public_test_set_file_is_solved_as_it_is(tmp_path):
     bad["G_indptr"] = bad["G_indptr"][:-1]
     with pytest.raises(InputError, match="G_indptr"):
         load_scene(_write(tmp_path, **bad)).build()
+
+
+def test_bounds_alone_and_box_constraints(tmp_path):
+    """lb alone is a cone after the shift (solved); lb and ub on the same unknowns are not (refused, saying so)."""
+    P, q = np.eye(3), np.array([1.0, -2.0, 0.5])
+    qp = load_scene(_write(tmp_path, P=P, q=q, lb=np.array([0.0, 0.0, -np.inf]))).build()
+    sol = run("pdas", qp)
+    assert sol.status == Status.SOLVED and np.allclose(original_x(qp, sol.x), [0.0, 2.0, -0.5], atol=1e-14)
+    with pytest.raises(InputError, match="box constraints"):
+        load_scene(_write(tmp_path, P=P, q=q, lb=np.zeros(3), ub=np.ones(3))).build()
+    with pytest.raises(InputError, match=r"lb\[1\] = 2 > ub\[1\] = 1"):
+        load_scene(_write(tmp_path, P=P, q=q, lb=np.array([0.0, 2.0, 0.0]), ub=np.ones(3))).build()
