@@ -87,6 +87,7 @@ class CvxpySolver(Solver):
     """cvxpy modelling layer over a chosen backend (default CLARABEL)."""
 
     name = "cvxpy"
+    family = "interior point"
     description = "cvxpy with a chosen backend (CLARABEL, OSQP, SCS, ... as installed)"
     requires = ("cvxpy",)
     tolerance = BACKEND_TOLERANCE["CLARABEL"]

@@ -46,6 +46,7 @@ class DualGradient(Solver):
     """Projected (optionally accelerated) gradient method on the dual of the contact QP."""
 
     name = "dual_gradient"
+    family = "dual"
     description = "projected gradient / FISTA on the dual (template solver; slow, small QPs only)"
     defaults = {
         "tol": 1e-10,          # stopping threshold on the evaluator's primal & complementarity residuals

@@ -177,6 +177,7 @@ class MPRGPSolver(DualOperatorSolver):
     """MPRGP on the contact dual (dense or matrix-free operator, preconditioned), with a final face polish."""
 
     name = "mprgp"
+    family = "dual"
     description = "MPRGP (Dostal's modified proportioning / reduced gradient projections) on the dual (exact)"
     tolerance = 1e-9
     exact = True

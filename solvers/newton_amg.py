@@ -23,6 +23,7 @@ class NewtonAmg(Solver):
     """Full-space semismooth Newton / augmented Lagrangian with AMG-CG inner solves (no factorization)."""
 
     name = "newton_amg"
+    family = "dual"
     description = "semismooth Newton on all unknowns, AL systems by AMG-preconditioned CG (no factorization: 3D)"
     defaults = {
         "tol": 1e-12,          # the AL steps stop when max |B_A x| <= tol max |x| (the active constraints met)

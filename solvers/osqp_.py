@@ -36,6 +36,7 @@ class OSQPSolver(Solver):
     """OSQP with tolerances, iteration cap, polishing and time limit exposed."""
 
     name = "osqp"
+    family = "first-order"
     description = "OSQP 1.x (ADMM) via its Python interface"
     requires = ("osqp",)
     tolerance = 1e-3

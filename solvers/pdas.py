@@ -68,6 +68,7 @@ class PDASSolver(DualOperatorSolver):
     """Semismooth Newton (primal-dual active set) on the reduced dual LCP, globalised."""
 
     name = "pdas"
+    family = "dual"
     description = "semismooth Newton / primal-dual active set on the defect unknowns (exact)"
     tolerance = 1e-9
     exact = True

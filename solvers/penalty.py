@@ -205,6 +205,7 @@ class PenaltySolver(DualOperatorSolver):
     """Quadratic penalty of the non-penetration constraint with rho-continuation."""
 
     name = "penalty"
+    family = "dual"
     description = "quadratic penalty, semismooth Newton + line search, continuation in rho (inexact)"
     exact = False
     # the x error follows the relative penetration (<= penetration_tol = 1e-10): measured

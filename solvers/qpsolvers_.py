@@ -69,6 +69,7 @@ class Backend:
     tolerance: float = 1e-3           # declared (measured) relative accuracy, see module doc
     notes: str = ""
     extra: Callable[[], dict] = field(default=lambda: {})
+    family: str = "interior point"    # Solver.family of its qp_ solver (dualfem.core.solver.SOLVER_FAMILIES)
 
 
 _BACKENDS: dict[str, Backend] = {
@@ -79,7 +80,7 @@ _BACKENDS: dict[str, Backend] = {
     "cvxopt": Backend("cvxopt", "cvxopt", dense=True, accuracy=lambda t: {"abstol": t, "reltol": t, "feastol": t},
                       max_iter="maxiters", tolerance=1e-4),
     "daqp": Backend("daqp", "daqp", dense=True, accuracy=_tols("primal_tol", "dual_tol"),
-                    max_iter="iter_limit", time_limit="time_limit", tolerance=1e-9),
+                    max_iter="iter_limit", time_limit="time_limit", tolerance=1e-9, family="active set"),
     "ecos": Backend("ecos", "ecos", dense=True, accuracy=_tols("abstol", "reltol", "feastol"),
                     max_iter="max_iters", tolerance=1e-2,
                     notes="loose: KKT error up to 6.5e-3 when it claims success at delta = 1e-9"),
@@ -87,39 +88,39 @@ _BACKENDS: dict[str, Backend] = {
                       time_limit="TimeLimit", notes="commercial"),
     "highs": Backend("highspy", "highspy", accuracy=_tols("primal_feasibility_tolerance", "dual_feasibility_tolerance"),
                      time_limit="time_limit", tolerance=1e-2,
-                     notes="loose: x error 1e-4..1.1e-3 whatever its feasibility tolerances"),
+                     notes="loose: x error 1e-4..1.1e-3 whatever its feasibility tolerances", family="active set"),
     "hpipm": Backend("hpipm_python", "hpipm_python", dense=True,
                      accuracy=_tols("tol_stat", "tol_eq", "tol_ineq", "tol_comp"), max_iter="iter_max"),
     "jaxopt_osqp": Backend("jaxopt", "jaxopt", dense=True, accuracy=_tols("tol"),
                            tolerance=1e-2, notes="pulls jax (run in float64); measured: x error 4e-13 but "
-                           "'not found' on f1, delta = 0.1"),
+                           "'not found' on f1, delta = 0.1", family="first-order"),
     "kvxopt": Backend("kvxopt", "kvxopt", dense=True, accuracy=_tols("abstol", "reltol", "feastol"),
                       max_iter="maxiters"),
     "mosek": Backend("mosek", "mosek", notes="commercial"),
-    "nppro": Backend("nppro", "nppro", dense=True, max_iter="MaxIter"),
+    "nppro": Backend("nppro", "nppro", dense=True, max_iter="MaxIter", family="active set"),
     "osqp": Backend("osqp", "osqp", accuracy=_tols("eps_abs", "eps_rel"), max_iter="max_iter",
-                    time_limit="time_limit", tolerance=1e-6),   # 9.2e-9 on thin_defect; certificate 4.9e-7 on
-                                                                  # the membrane of docs/plugins.md
+                    time_limit="time_limit", tolerance=1e-6,     # 9.2e-9 on thin_defect; certificate 4.9e-7
+                    family="first-order"),                        # on the membrane of docs/plugins.md
     "pdhcg": Backend("pdhcg", "pdhcg", accuracy=_tols("FeasibilityTol", "OptimalityTol"),
-                     max_iter="IterationLimit", time_limit="TimeLimit"),
+                     max_iter="IterationLimit", time_limit="TimeLimit", family="first-order"),
     "piqp": Backend("piqp", "piqp", accuracy=_tols("eps_abs", "eps_rel", "eps_duality_gap_abs", "eps_duality_gap_rel"),
                     max_iter="max_iter", tolerance=1e-4),
     "proxqp": Backend("proxsuite", "proxsuite", accuracy=lambda t: {"eps_abs": t, "eps_rel": 0.0},
-                      max_iter="max_iter", tolerance=1e-6),
+                      max_iter="max_iter", tolerance=1e-6, family="first-order"),
     "pyqpmad": Backend("pyqpmad", "pyqpmad", dense=True, accuracy=_tols("tolerance"), max_iter="max_iter",
-                       tolerance=1e-9),
+                       tolerance=1e-9, family="active set"),
     "qpalm": Backend("qpalm", "qpalm", accuracy=_tols("eps_abs", "eps_rel"), max_iter="max_iter",
-                     time_limit="time_limit", tolerance=1e-6),
+                     time_limit="time_limit", tolerance=1e-6, family="first-order"),
     "qpax": Backend("qpax", "qpax", dense=True, accuracy=_tols("solver_tol"),
                     tolerance=1e-2, notes="pulls jax (run in float64); its own iteration cap; measured: x "
                     "error 1e-14 but 'not found' on f1, delta = 0.1"),
-    "qpoases": Backend("qpoases", "qpoases", dense=True, accuracy=_tols("terminationTolerance")),
+    "qpoases": Backend("qpoases", "qpoases", dense=True, accuracy=_tols("terminationTolerance"), family="active set"),
     "qpswift": Backend("qpSWIFT", "qpSWIFT", dense=True, accuracy=_tols("ABSTOL", "RELTOL"), max_iter="MAXITER"),
     "qtqp": Backend("qtqp", "qtqp", accuracy=_tols("tol_feas", "tol_gap_abs", "tol_gap_rel"), max_iter="max_iter",
                     tolerance=1e-4),
-    "quadprog": Backend("quadprog", "quadprog", dense=True, tolerance=1e-9),
+    "quadprog": Backend("quadprog", "quadprog", dense=True, tolerance=1e-9, family="active set"),
     "scs": Backend("scs", "scs", accuracy=_tols("eps_abs", "eps_rel"), max_iter="max_iters",
-                   time_limit="time_limit_secs", tolerance=1e-8),
+                   time_limit="time_limit_secs", tolerance=1e-8, family="first-order"),
     "sip": Backend("sip_qp_python", "sip_qp_python", accuracy=_tols("eps_abs", "eps_rel"),
                    max_iter="max_iterations", time_limit="time_limit", tolerance=1e-5),
 }
@@ -278,6 +279,7 @@ def _make(backend: str) -> type[QpsolversSolver]:
     desc = f"{backend} via qpsolvers ({kind}; normalised QP; {lim}{''.join('; ' + n for n in notes)})"
     cls = type(f"Qp_{backend}", (QpsolversSolver,),
                {"name": f"qp_{backend}", "backend": backend, "description": desc, "tolerance": b.tolerance,
+                "family": b.family if backend in _BACKENDS else "other",
                 "__doc__": f"qpsolvers backend {backend!r}; declared tolerance {b.tolerance:g}. {b.notes}",
                 "__module__": __name__})
     return register_solver(cls)

@@ -336,6 +336,7 @@ class Uzawa(DualOperatorSolver):
     """Uzawa on the modified Lagrangian + generalized Newton-Armijo (the paper's method)."""
 
     name = "uzawa"
+    family = "dual"
     description = "Uzawa / modified Lagrangian + generalized Newton-Armijo (Zhiltsov & Maksimova 2023)"
     tolerance = 1e-6
     defaults = {

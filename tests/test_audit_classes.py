@@ -73,7 +73,7 @@ def test_reference_never_chooses_a_run_that_fails_its_residuals(monkeypatch):
 def test_shifted_qp_with_a_zero_solution(tmp_path, h, capsys):
     """min 1/2 |x|^2 s.t. x >= h: x* = max(h, 0). With h > 0 the shifted solution is exactly 0."""
     f = tmp_path / "z.npz"
-    np.savez(f, P=np.eye(3), q=np.zeros(3), G=np.eye(3), h=np.array(h))
+    np.savez(f, P=np.eye(3), q=np.zeros(3), G=-np.eye(3), h=-np.array(h))     # qpsolvers: -x <= -h
     names = [n for n in ("pdas", "mprgp", "clarabel", "osqp", "uzawa_auto") if registry.get_solver(n).missing() is None]
     assert main(["compare", str(f), "--solvers", ",".join(names), "--json"]) == 0
     # the last line: in-process, OSQP's "Polishing not needed" notice reaches the captured stdout

@@ -46,6 +46,11 @@ def _file(tmp_path, name="qp.npz", **arrays) -> str:
     return str(f)
 
 
+def _ge(tmp_path, P, q, G, h) -> str:
+    """A file of ``min 1/2 x'Px + q'x s.t. G x >= h``, written in qpsolvers' convention (-G x <= -h)."""
+    return _file(tmp_path, P=P, q=q, G=-np.asarray(G), h=-np.asarray(h))
+
+
 # ------------------------------------------------------------------ bounds that never bind
 @pytest.mark.parametrize("far", [-np.inf, -1e20, -1e25, -1e300])
 def test_rows_that_can_never_bind_are_no_constraint(tmp_path, far):
@@ -54,7 +59,7 @@ def test_rows_that_can_never_bind_are_no_constraint(tmp_path, far):
     P, q = _spd(6, 1)
     G = np.random.default_rng(2).standard_normal((4, 6))
     h = np.array([far, far, -1e21, far])
-    qp = load_scene(_file(tmp_path, P=P, q=q, G=G, h=h)).build()
+    qp = load_scene(_ge(tmp_path, P, q, G, h)).build()
     assert qp.m == 0 and list(qp.maps["constraint_rows"]) == []
     xs = -np.linalg.solve(P, q)
     for name in ("pdas", "uzawa_auto"):
@@ -71,7 +76,7 @@ def test_some_rows_dropped_the_rest_solved_and_multipliers_in_file_order(tmp_pat
     q = np.array([-1.0, -2.0, 0.5, 1.0, 3.0])
     G = np.eye(5)
     h = np.array([-np.inf, 0.0, 0.0, -1e30, 0.5])       # rows 1, 2, 4 are constraints
-    qp = load_scene(_file(tmp_path, P=P, q=q, G=G, h=h)).build()
+    qp = load_scene(_ge(tmp_path, P, q, G, h)).build()
     assert list(qp.maps["constraint_rows"]) == [1, 2, 4]
     sol = run("pdas", qp)
     assert sol.status == Status.SOLVED
@@ -79,8 +84,9 @@ def test_some_rows_dropped_the_rest_solved_and_multipliers_in_file_order(tmp_pat
     np.testing.assert_allclose(original_multipliers(qp, sol.multipliers), [0, 0, 0.5, 0, 3.5], atol=1e-14)
 
 
-@pytest.mark.parametrize("bad, needle", [(np.inf, r"\+inf"), (np.nan, "NaN")])
-def test_a_bound_of_plus_inf_or_nan_is_refused(tmp_path, bad, needle):
+@pytest.mark.parametrize("bad, needle", [(-np.inf, r"'h'.*-inf"), (np.nan, "'h'.*NaN")])
+def test_a_bound_of_minus_inf_or_nan_is_refused(tmp_path, bad, needle):
+    """qpsolvers' G x <= h with h_j = -inf (or NaN): no x satisfies it."""
     h = np.zeros(3)
     h[1] = bad
     with pytest.raises(InputError, match=needle):
@@ -97,7 +103,7 @@ def test_a_loose_bound_is_never_a_wrong_solved(tmp_path, loose):
     P, q = _spd(5, 7)
     xs = -np.linalg.solve(P, q)
     obj = 0.5 * q @ xs
-    f = _file(tmp_path, P=P, q=q, G=np.eye(5), h=np.full(5, loose))
+    f = _ge(tmp_path, P, q, np.eye(5), np.full(5, loose))
     qp = load_scene(f).build()
     for name in _exact():
         sol = run(name, qp)
@@ -115,7 +121,7 @@ def test_the_objective_of_a_shifted_qp_comes_from_the_users_unknowns(tmp_path):
     """min 1/2|x|^2 + q'x s.t. x >= -1e8: objective -3.125 exactly (was -4.0: the shift's constant 2e16
     cancelled against the energy of the shifted unknowns)."""
     q = np.array([-1.0, -2.0, 0.5, 1.0])
-    qp = load_scene(_file(tmp_path, P=np.eye(4), q=q, G=np.eye(4), h=np.full(4, -1e8))).build()
+    qp = load_scene(_ge(tmp_path, np.eye(4), q, np.eye(4), np.full(4, -1e8))).build()
     sol = run("pdas", qp)
     assert summary(qp, sol)["energy"] == -3.125
     assert original_objective(qp, sol.x) == -3.125

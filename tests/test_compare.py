@@ -197,3 +197,36 @@ def test_identical_answer_is_not_a_cross_check(qp, monkeypatch):
     ref = res["reference"]
     assert {ref["solver"], *ref["cross_check"]["identical_to_reference"]} == {"pdas", "test_clone"}
     assert ref["cross_check"]["solver"] == "clarabel" and ref["cross_check"]["agrees"]
+
+
+class _ExactPlugin(_FromPdas):
+    """A correct third-party solver (pdas's exact answer) that does not declare ``reference``."""
+
+    name = "zz_exact_plugin"
+    tolerance = 1e-9
+
+
+def test_a_plugin_that_does_not_declare_reference_is_never_the_reference(qp, monkeypatch):
+    """docs/plugins.md 1.5: the reference is chosen only among solvers declaring ``reference``, even when
+    an undeclared exact solver has the smaller certificate; it still serves as the cross-check."""
+    monkeypatch.setitem(registry._SOLVERS, "zz_exact_plugin", _ExactPlugin)
+    res = compare_solvers(qp, ["zz_exact_plugin", "clarabel"])
+    runs = {r["solver"]: r for r in res["runs"]}
+    assert runs["zz_exact_plugin"]["error_bound"] < runs["clarabel"]["error_bound"]     # it would have won
+    assert res["reference"]["solver"] == "clarabel"
+    assert res["reference"]["cross_check"]["solver"] == "zz_exact_plugin"
+    assert runs["zz_exact_plugin"]["grade"] == "correct"
+    alone = compare_solvers(qp, ["zz_exact_plugin"])
+    assert alone["reference"] is None and alone["runs"][0]["grade"] == "unverified"
+
+
+def test_a_bench_spec_may_not_name_an_undeclared_reference(monkeypatch):
+    from dualfem.core.errors import InputError
+    from dualfem.experiments.spec import parse_spec
+
+    monkeypatch.setitem(registry._SOLVERS, "zz_exact_plugin", _ExactPlugin)
+    base = {"scenes": [{"scene": ["f2"], "N": [8]}], "solvers": [{"name": "pdas"}]}
+    assert parse_spec({**base, "reference": {"solvers": ["clarabel"]}}).reference["solvers"] == ["clarabel"]
+    for name in ("zz_exact_plugin", "mprgp"):
+        with pytest.raises(InputError, match=rf"reference.solvers names '{name}', which does not declare reference"):
+            parse_spec({**base, "reference": {"solvers": [name, "pdas"]}})

@@ -36,7 +36,7 @@ FILE = re.compile(r"(?<![\w/.-])((?:dualfem|problems|solvers|benchmarks|tests|sc
                   r"/[\w/.-]*\w\.(?:py|toml|md|sh|json|csv|npz))\b")
 
 #: files the plugin guide and its templates tell the reader to create (they do not exist here)
-TO_CREATE = {"problems/membrane.py", "solvers/my_pg.py"}
+TO_CREATE = {"problems/membrane.py", "solvers/my_pg.py", "solvers/my_fista.py"}
 
 #: (report, old path): written before the module moved; the report's generator writes the new path
 STALE_UNTIL_REGENERATED = {

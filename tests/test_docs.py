@@ -177,7 +177,8 @@ def test_guide_has_blocks_of_every_kind():
 def test_templates_are_the_guide_blocks():
     files = {file_target(code): code for _, code in blocks() if file_target(code)}
     for target, tmpl in (("my-plugin/src/my_plugin/solver.py", "solver_template.py"),
-                         ("my-plugin/src/my_plugin/problem.py", "problem_template.py")):
+                         ("my-plugin/src/my_plugin/problem.py", "problem_template.py"),
+                         ("my-plugin/src/my_plugin/fista.py", "dual_solver_template.py")):
         text = (REPO / "docs" / "templates" / tmpl).read_text(encoding="utf-8")
         assert files[target] == "# file: " + target + "\n" + text, f"{target} differs from docs/templates/{tmpl}"
 

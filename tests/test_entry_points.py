@@ -67,6 +67,8 @@ def test_list_shows_third_party_plugins(plugin_env):
     d = json.loads(dualfem(plugin_env, "list", "--json").stdout)
     assert d["plugin_errors"] == []
     assert d["solvers"]["example_nnls"]["installed"] is True
+    assert d["solvers"]["example_nnls"]["family"] == "other" and d["solvers"]["example_nnls"]["reference"] is False
+    assert d["solvers"]["pdas"]["family"] == "dual" and d["solvers"]["pdas"]["reference"] is True
     assert "example_string" in d["problems"]
     assert d["scenes"]["string"]["problem"] == "example_string"
     text = dualfem(plugin_env, "list").stdout
@@ -110,6 +112,11 @@ assert np.all(c[(x > a + 2/64) & (x < 1 - a - 2/64)]) and not np.any(c[(x < a - 
 h = 1/64; T = 1.0
 end = T * (0.05 - s.x[0]) / h + T * (0.05 - s.x[-1]) / h
 assert abs(s.multipliers.sum() + end - 63 * h) < 1e-8, (s.multipliers.sum(), end)
+# figures: the plugin (no declared family) is drawn as "other", with a colour-and-marker pair of its own
+from dualfem.core.registry import solvers
+from dualfem.post import style
+st = style.styles(solvers())
+assert style.family("example_nnls") == "other" and len({(v.color, v.marker) for v in st.values()}) == len(st)
 print("OK")
 """
     r = subprocess.run([sys.executable, "-c", code], env=plugin_env, capture_output=True, text=True, timeout=300)
@@ -168,6 +175,11 @@ name = "dual_gradient"
 def test_third_party_plugins_run_in_compare(plugin_env, tmp_path):
     if not _has_command(plugin_env, "compare"):
         pytest.skip("the compare command is not available in this checkout")
-    r = dualfem(plugin_env, "compare", "string", "--set", "N=32", cwd=tmp_path, check=False)
+    r = dualfem(plugin_env, "compare", "string", "--set", "N=32", "--json", cwd=tmp_path, check=False)
     assert r.returncode == 0, r.stderr
-    assert "example_nnls" in r.stdout + r.stderr
+    d = json.loads(r.stdout.strip().splitlines()[-1])
+    runs = {x["solver"]: x for x in d["runs"]}
+    assert runs["example_nnls"]["grade"] == "correct", runs["example_nnls"]
+    # docs/plugins.md 1.5: an exact plugin that does not declare ``reference`` is never the reference
+    assert d["reference"]["solver"] in ("pdas", "clarabel"), d["reference"]
+

@@ -1,4 +1,5 @@
-"""The ``qp_file`` problem (problems/generic_qp.py): any QP min 1/2 x'Px + q'x s.t. Gx >= h."""
+"""The ``qp_file`` problem (problems/generic_qp.py): any QP in qpsolvers' convention min 1/2 x'Px + q'x
+s.t. Gx <= h (Ax = b, lb <= x <= ub), or in dualfem's own min 1/2 x'Kx - F'x s.t. Bx >= Bx_min."""
 import json
 
 import numpy as np
@@ -17,18 +18,19 @@ from dualfem.problems.generic_qp import original_objective, original_x
 
 
 def random_qp(n=25, m=8, seed=0):
+    """(P, q, G, h) of qpsolvers' ``min 1/2 x'Px + q'x s.t. G x <= h``."""
     rng = np.random.default_rng(seed)
     A = rng.standard_normal((n, n))
     P = A @ A.T + n * np.eye(n)
     return P, rng.standard_normal(n), rng.standard_normal((m, n)), rng.standard_normal(m)
 
 
-def kkt_original(P, q, G, h, x, mu):
-    """KKT residuals of the file's QP in its own variables (independent of the shift)."""
-    return (np.abs(P @ x + q - G.T @ mu).max() / max(np.abs(q).max(), 1e-300),
-            max(0.0, -(G @ x - h).min()),
-            max(0.0, -mu.min()),
-            np.abs(mu * (G @ x - h)).max())
+def kkt_original(P, q, G, h, x, z):
+    """KKT residuals of the file's QP (G x <= h, multipliers z >= 0) in its own variables."""
+    return (np.abs(P @ x + q + G.T @ z).max() / max(np.abs(q).max(), 1e-300),
+            max(0.0, (G @ x - h).max()),
+            max(0.0, -z.min()),
+            np.abs(z * (G @ x - h)).max())
 
 
 def reference_name():
@@ -56,7 +58,7 @@ def test_formats_load_the_same_qp(tmp_path, fmt):
     qp = load_scene(str(f)).build()
     assert qp.n == 25 and qp.m == 8
     np.testing.assert_allclose(qp.K.toarray(), P, rtol=1e-15)
-    np.testing.assert_allclose(qp.B.toarray(), G, rtol=1e-15)
+    np.testing.assert_allclose(qp.B.toarray(), -G, rtol=1e-15)         # G x <= h is -G x >= -h
     np.testing.assert_allclose(G @ qp.shift.x, h, atol=1e-12)
 
 
@@ -77,11 +79,11 @@ def test_nonzero_h_shift_solves_the_original_qp(tmp_path):
 
     Pi = np.linalg.inv(P)
     D = G @ Pi @ G.T
-    c = G @ Pi @ q + h                  # dual: min 1/2 mu'D mu - c'mu, mu >= 0
+    c = -G @ Pi @ q - h                 # dual: min 1/2 z'D z - c'z, z >= 0
     R = np.linalg.cholesky(D).T
-    mu, _ = nnls(R, np.linalg.solve(R.T, c))
-    np.testing.assert_allclose(sol.multipliers, mu, atol=1e-7 * np.abs(mu).max())
-    np.testing.assert_allclose(x, Pi @ (G.T @ mu - q), atol=1e-7 * np.abs(x).max())
+    z, _ = nnls(R, np.linalg.solve(R.T, c))
+    np.testing.assert_allclose(sol.multipliers, z, atol=1e-7 * np.abs(z).max())
+    np.testing.assert_allclose(x, -Pi @ (G.T @ z + q), atol=1e-7 * np.abs(x).max())
 
 
 def test_every_exact_solver_agrees_on_a_file(tmp_path):
@@ -111,7 +113,7 @@ def test_dualfem_export_file_round_trip(tmp_path):
     direct = load_scene("f2", {"N": 8}).build()
     qp = load_scene(str(f)).build()
     assert qp.key() == direct.key()
-    assert "node_dofs" in qp.maps
+    assert "node_dofs" in qp.maps and qp.params["convention"] == "dualfem"
 
 
 def test_cli_solve_npz(tmp_path, capsys):
@@ -150,8 +152,8 @@ def _write(tmp_path, **arrays):
     ("indefinite", "not positive definite"),
     ("neg_diag", "diagonal entry"),
     ("singular", "singular|not positive definite"),
-    ("box", "not in the range of G"),
-    ("no_G", "lacks the constraint matrix"),
+    ("box", "not in the range"),
+    ("no_G", "holds 'h' but not the matrix 'G'"),
     ("no_P", "lacks the matrix 'P'"),
     ("P_3d", "2-D"),
     ("coo_index", "outside"),
@@ -225,3 +227,153 @@ def test_missing_and_corrupt_files(tmp_path):
         get_problem("qp_file")()
     with pytest.raises(InputError, match="path"):
         get_problem("qp_file")(path="qp.txt")
+
+
+# ------------------------------------------------------------------ the two conventions (issue 33, item 4)
+def _qpsolvers_solve(P, q, G=None, h=None, A=None, b=None, lb=None, ub=None):
+    """The file's QP solved by qpsolvers itself (an exact dense active-set backend): independent of dualfem."""
+    qpsolvers = pytest.importorskip("qpsolvers")
+    backend = next((s for s in ("quadprog", "daqp", "pyqpmad") if s in qpsolvers.available_solvers), None)
+    if backend is None:
+        pytest.skip("no exact dense qpsolvers backend installed")
+
+    def big(v):             # quadprog takes no infinite bound
+        return None if v is None else np.where(np.isinf(v), np.sign(v) * 1e30, v)
+
+    res = qpsolvers.solve_problem(qpsolvers.Problem(P, q, G, big(h), A, b, big(lb), big(ub)), solver=backend)
+    assert res.found
+    return res
+
+
+def _small(seed=0, n=6, m=3):
+    rng = np.random.default_rng(seed)
+    M = rng.standard_normal((n, n))
+    return M @ M.T + n * np.eye(n), 5 * rng.standard_normal(n), rng.standard_normal((m, n)), rng.standard_normal(m)
+
+
+def test_a_qpsolvers_users_file_means_G_x_le_h(tmp_path):
+    """P, q, G, h are qpsolvers' G x <= h: the answer is qpsolvers' own (was: the mirrored G x >= h, `solved`,
+    off by about 1 in x on this 6-variable QP)."""
+    from dualfem.problems.generic_qp import qpsolvers_duals
+
+    P, q, G, h = _small()
+    f = tmp_path / "user.npz"
+    np.savez(f, P=P, q=q, G=G, h=h)
+    res = _qpsolvers_solve(P, q, G, h)
+    mirrored = _qpsolvers_solve(P, q, -G, -h)
+    assert np.abs(mirrored.x - res.x).max() > 0.1          # the two readings differ: the test can tell
+    qp = load_scene(str(f)).build()
+    assert qp.params["convention"] == "qpsolvers"
+    for name in ("pdas", "clarabel"):
+        sol = run(name, qp)
+        assert sol.status == Status.SOLVED, (name, sol.message)
+        np.testing.assert_allclose(original_x(qp, sol.x), res.x, atol=1e-7 * np.abs(res.x).max())
+        np.testing.assert_allclose(qpsolvers_duals(qp, sol.multipliers)["z"], res.z, atol=1e-6 * np.abs(res.z).max())
+        assert original_objective(qp, sol.x) == pytest.approx(res.obj, rel=1e-9)
+
+
+def test_equalities_and_bounds_in_qpsolvers_convention(tmp_path):
+    """A x = b, lb <= x <= ub (infinite entries: no bound) as qpsolvers reads them, multipliers in its signs."""
+    from dualfem.problems.generic_qp import qpsolvers_duals
+
+    P, q, G, _ = _small(seed=1, m=2)
+    h = np.array([0.3, np.inf])
+    A, b = np.random.default_rng(2).standard_normal((1, 6)), np.array([0.7])
+    lb, ub = np.full(6, -np.inf), np.full(6, np.inf)
+    lb[0], ub[3] = 0.1, 0.2
+    f = tmp_path / "eq.npz"
+    np.savez(f, P=P, q=q, G=G, h=h, A=A, b=b, lb=lb, ub=ub)
+    res = _qpsolvers_solve(P, q, G, h, A, b, lb, ub)
+    qp = load_scene(str(f)).build()
+    sol = run("clarabel", qp)
+    assert sol.status == Status.SOLVED, sol.message
+    np.testing.assert_allclose(original_x(qp, sol.x), res.x, atol=1e-7 * np.abs(res.x).max())
+    duals = qpsolvers_duals(qp, sol.multipliers)
+    scale = np.abs(q).max()
+    for k in ("z", "y", "z_box"):
+        np.testing.assert_allclose(duals[k], getattr(res, k), atol=1e-6 * scale)
+
+
+def test_dualfems_own_names_mean_B_x_ge_Bx_min(tmp_path):
+    """K, F, B, Bx_min: min 1/2 x'Kx - F'x s.t. B x >= Bx_min, the same QP as qpsolvers' (P, -F... ) mirror."""
+    P, q, G, h = _small(seed=3)
+    f = tmp_path / "own.npz"
+    np.savez(f, K=P, F=-q, B=-G, Bx_min=-h)
+    qp = load_scene(str(f)).build()
+    assert qp.params["convention"] == "dualfem"
+    res = _qpsolvers_solve(P, q, G, h)
+    sol = run("pdas", qp)
+    assert sol.status == Status.SOLVED, sol.message
+    np.testing.assert_allclose(original_x(qp, sol.x), res.x, atol=1e-7 * np.abs(res.x).max())
+
+
+@pytest.mark.parametrize("arrays, needle", [
+    ({"P": 1, "q": 1, "G": 1, "h": 1, "B": 1}, r"both .*\(B\) and the arrays P, q, G, h of qpsolvers.*ambiguous"),
+    ({"K": 1, "F": 1, "G": 1}, r"both .*\(K, F\) and the arrays G .*ambiguous.*G x <= h.*B x >= Bx_min"),
+    ({"P": 1, "q": 1, "G": 1, "convention": "dualfem"}, r"convention = 'dualfem'.*qpsolvers' convention"),
+    ({"x": 1}, r"holds no QP.*G x <= h.*B x >= Bx_min"),
+])
+def test_a_file_that_could_be_read_either_way_is_refused(tmp_path, arrays, needle):
+    P, q, G, h = _small()
+    full = {"P": P, "q": q, "G": G, "h": h, "K": P, "F": -q, "B": -G, "x": q}
+    a = {k: (v if isinstance(v, str) else full[k]) for k, v in arrays.items()}
+    with pytest.raises(InputError, match=needle):
+        load_scene(_write(tmp_path, **a)).build()
+
+
+def test_a_stated_convention_that_agrees_is_accepted(tmp_path):
+    P, q, G, h = _small()
+    qp = load_scene(_write(tmp_path, P=P, q=q, G=G, h=h, convention="qpsolvers: G x <= h")).build()
+    assert qp.m == 3
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".mat"])
+def test_export_in_qpsolvers_convention_is_the_same_qp(tmp_path, suffix):
+    """``dualfem export --convention qpsolvers``: P, q, G, h that qpsolvers itself solves to dualfem's answer,
+    and that dualfem reads back as the same QP."""
+    f = tmp_path / f"f2{suffix}"
+    assert main(["export", "f2", "--set", "N=8", "-o", str(f), "--convention", "qpsolvers"]) == 0
+    if suffix == ".npz":
+        d = dict(np.load(f))
+        P, G = (sp.coo_matrix((d[f"{m}_data"], (d[f"{m}_row"], d[f"{m}_col"])), shape=tuple(d[f"{m}_shape"]))
+                for m in ("P", "G"))
+    else:
+        d = scipy.io.loadmat(f)
+        P, G = d["P"], d["G"]
+    q, h = np.ravel(d["q"]), np.ravel(d["h"])
+    direct = load_scene("f2", {"N": 8}).build()
+    ref = run("pdas", direct)
+    res = _qpsolvers_solve(P.toarray(), q, G.toarray(), h)
+    np.testing.assert_allclose(res.x, ref.x, atol=1e-9 * np.abs(ref.x).max())
+    np.testing.assert_allclose(res.z, ref.multipliers, atol=1e-7 * np.abs(ref.multipliers).max())
+    back = load_scene(str(f)).build()
+    assert back.params["convention"] == "qpsolvers"
+    assert abs(back.K - direct.K).max() == 0 and np.array_equal(back.F, direct.F)
+    assert abs(back.B - direct.B).max() == 0
+
+
+def test_a_public_test_set_file_is_solved_as_it_is(tmp_path):
+    """The test set's CSC files in qpsolvers' convention (dualfem.experiments.testset_files) are read by qp_file."""
+    from dualfem.experiments.testset import qpsolvers_form
+    from dualfem.experiments.testset_files import write_qp
+
+    direct = load_scene("f2", {"N": 8}).build()
+    f = write_qp(tmp_path / "f2.npz", "f2", *qpsolvers_form(direct))
+    qp = load_scene(str(f)).build()
+    assert abs(qp.K - direct.K).max() == 0 and abs(qp.B - direct.B).max() == 0 and np.array_equal(qp.F, direct.F)
+    bad = dict(np.load(f))
+    bad["G_indptr"] = bad["G_indptr"][:-1]
+    with pytest.raises(InputError, match="G_indptr"):
+        load_scene(_write(tmp_path, **bad)).build()
+
+
+def test_bounds_alone_and_box_constraints(tmp_path):
+    """lb alone is a cone after the shift (solved); lb and ub on the same unknowns are not (refused, saying so)."""
+    P, q = np.eye(3), np.array([1.0, -2.0, 0.5])
+    qp = load_scene(_write(tmp_path, P=P, q=q, lb=np.array([0.0, 0.0, -np.inf]))).build()
+    sol = run("pdas", qp)
+    assert sol.status == Status.SOLVED and np.allclose(original_x(qp, sol.x), [0.0, 2.0, -0.5], atol=1e-14)
+    with pytest.raises(InputError, match="box constraints"):
+        load_scene(_write(tmp_path, P=P, q=q, lb=np.zeros(3), ub=np.ones(3))).build()
+    with pytest.raises(InputError, match=r"lb\[1\] = 2 > ub\[1\] = 1"):
+        load_scene(_write(tmp_path, P=P, q=q, lb=np.array([0.0, 2.0, 0.0]), ub=np.ones(3))).build()

@@ -1,15 +1,21 @@
 """dualfem.post.style: deterministic, distinct, colour-blind-safe series styles and solver families."""
 from __future__ import annotations
 
-from dualfem.core.registry import solvers
+import pytest
+
+from dualfem.core.registry import _SOLVERS as REGISTRY
+from dualfem.core.registry import builtin_names, register_solver, solvers
 from dualfem.post import style as S
+from dualfem.solver import Solver
 
 
-def test_every_registered_solver_has_a_family():
-    names = list(solvers())
-    assert names
-    unknown = [n for n in names if S.family(n) == "other"]
-    assert not unknown, f"registered solvers without a family in dualfem.post.style.FAMILIES: {unknown}"
+def test_every_builtin_solver_declares_a_family():
+    reg = solvers()
+    own = builtin_names("solver")
+    assert own
+    bad = [n for n in own if reg[n].family not in S.FAMILIES or reg[n].family == "other"]
+    assert not bad, f"built-in solvers without a declared Solver.family: {bad}"
+    assert all(S.family(n) == reg[n].family for n in own)
     assert S.family("uzawa") == "dual" and S.family("qp_scs") == "first-order"
     assert S.family("clarabel") == "interior point" and S.family("qp_daqp") == "active set"
     assert S.family("cvxpy:OSQP") == "first-order" and S.family("cvxpy") == "interior point"
@@ -62,4 +68,54 @@ def test_plotly_equivalents_cover_every_style():
         for ls in set(S.FAMILY_LINESTYLE.values()):
             p = S.Style("#0072B2", m, ls).plotly()
             assert p["symbol"] and p["dash"] in ("solid", "dash", "dashdot", "dot")
-    assert S.style("uzawa").plotly() == {"color": "#0072B2", "symbol": "circle", "dash": "solid", "edge": "#0072B2"}
+    first = S.registered_order()["dual"][0]
+    assert S.style(first).plotly() == {"color": "#0072B2", "symbol": "circle", "dash": "solid", "edge": "#0072B2"}
+
+
+@pytest.fixture
+def third_party():
+    """Two third-party solvers registered as a plug-in would be (one declaring its family, one not),
+    removed afterwards."""
+    solvers()          # the built-ins first, as the registry loads them
+
+    class Fista(Solver):
+        name, family, description = "zz_fista_plugin", "dual", "third-party test solver"
+
+    class Anon(Solver):
+        name, description = "aa_anon_plugin", "third-party test solver without a family"
+
+    before = S.styles(sorted(solvers()))
+    for cls in (Fista, Anon):
+        register_solver(cls)
+    yield before
+    for cls in (Fista, Anon):
+        REGISTRY.pop(cls.name, None)
+
+
+def test_a_plugin_declares_its_family_and_changes_no_builtin_style(third_party):
+    assert S.family("zz_fista_plugin") == "dual" and S.family("aa_anon_plugin") == "other"
+    assert S.family("zz_fista_plugin[tol=1e-3]") == "dual"
+    names = sorted(solvers())
+    a = S.styles(names)
+    own = builtin_names("solver")
+    assert own <= set(third_party) and all(a[n] == third_party[n] for n in own)    # built-ins keep their look
+    pairs = [(s.color, s.marker) for s in a.values()]
+    assert len(set(pairs)) == len(pairs)
+    assert a["zz_fista_plugin"].marker in S.FAMILY_MARKERS["dual"]
+    assert a["aa_anon_plugin"].marker in S.FAMILY_MARKERS["other"]
+    assert S.style("zz_fista_plugin") == a["zz_fista_plugin"] == S.styles(["zz_fista_plugin", "q"])["zz_fista_plugin"]
+
+
+def test_a_family_beyond_its_slots_stays_distinct():
+    solvers()
+    extra = []
+    for i in range(20):         # 15 built-in interior point solvers + 20: beyond the family's 16 slots
+        extra.append(register_solver(type(f"IP{i}", (Solver,), {"name": f"zz_ip_{i:02d}", "family": "interior point",
+                                                               "__module__": __name__})))
+    try:
+        a = S.styles(sorted(solvers()))
+        pairs = [(s.color, s.marker) for s in a.values()]
+        assert len(set(pairs)) == len(pairs)
+    finally:
+        for cls in extra:
+            REGISTRY.pop(cls.name, None)

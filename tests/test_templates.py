@@ -20,11 +20,11 @@ TEMPLATES = REPO / "docs" / "templates"
 
 @pytest.fixture
 def templates():
-    """Import both templates (they register themselves) and unregister them afterwards."""
+    """Import the templates (they register themselves) and unregister them afterwards."""
     registry._load()
     before_s, before_p = dict(registry._SOLVERS), dict(registry._PROBLEMS)
     mods = {}
-    for name in ("solver_template", "problem_template"):
+    for name in ("solver_template", "problem_template", "dual_solver_template"):
         spec = importlib.util.spec_from_file_location(f"_dualfem_tmpl_{name}", TEMPLATES / f"{name}.py")
         mod = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(mod)
@@ -45,6 +45,7 @@ def test_in_tree_copy_is_all_it_takes(tmp_path):
         (tmp_path / pkg).mkdir()
     shutil.copy(TEMPLATES / "solver_template.py", tmp_path / "solvers" / "my_pg.py")
     shutil.copy(TEMPLATES / "problem_template.py", tmp_path / "problems" / "membrane.py")
+    shutil.copy(TEMPLATES / "dual_solver_template.py", tmp_path / "solvers" / "my_fista.py")
     boot = ("import sys, dualfem.solvers, dualfem.problems; "
             f"dualfem.solvers.__path__.append({str(tmp_path / 'solvers')!r}); "
             f"dualfem.problems.__path__.append({str(tmp_path / 'problems')!r}); "
@@ -59,10 +60,12 @@ def test_in_tree_copy_is_all_it_takes(tmp_path):
 
     listing = json.loads(dualfem("list", "--json"))
     assert "my_pg" in listing["solvers"] and "membrane" in listing["problems"]
+    assert listing["solvers"]["my_fista"]["family"] == "dual" and not listing["solvers"]["my_fista"]["reference"]
     assert listing["scenes"]["membrane_heavy"]["problem"] == "membrane"
     for args in (["membrane_heavy", "--set", "N=8", "--solver", "my_pg"],
                  ["membrane", "--set", "N=8", "--solver", "dual_gradient"],
-                 ["f2", "--set", "N=8", "--solver", "my_pg"]):
+                 ["f2", "--set", "N=8", "--solver", "my_pg"],
+                 ["membrane_heavy", "--set", "N=8", "--solver", "my_fista", "-p", "operator=matrix_free"]):
         rec = json.loads(dualfem("solve", *args, "--json"))
         assert rec["status"] == "solved" and max(rec["residuals"].values()) < 1e-8, rec
 
@@ -140,3 +143,19 @@ def test_every_exact_solver_on_a_fully_constrained_problem(templates):
         assert s.status == "solved", (name, s.status, s.message)
         d = evaluator.compare(qp, s.x, s.multipliers, ref.x, ref.multipliers)
         assert d["x_energy"] < max(cls.tolerance, 1e-6), (name, d)
+
+
+@pytest.mark.parametrize("scene", ["f2", "signorini", "membrane"])
+def test_dual_solver_template_agrees_and_fails_honestly(templates, scene):
+    """FISTA on the dual operator (docs/templates/dual_solver_template.py), with either operator."""
+    from dualfem.core.scene import load_scene
+
+    qp = (templates["problem_template"].MembraneOverFloor(N=10, q=2.0) if scene == "membrane"
+          else load_scene(scene, {"N": 8})).build()
+    ref = run("pdas", qp)
+    tol = templates["dual_solver_template"].MyFista.tolerance
+    for operator in ("dense", "matrix_free"):
+        s = run("my_fista", qp, {"operator": operator})
+        d = evaluator.compare(qp, s.x, s.multipliers, ref.x, ref.multipliers)
+        assert s.ok and d["x_energy"] < tol, (operator, s.message, d)
+    assert run("my_fista", qp, {"max_iter": 1}).status == "max_iter"

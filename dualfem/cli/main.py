@@ -95,11 +95,13 @@ def cmd_list(args) -> int:
     from dualfem.core.quiet import plugin_output
     from dualfem.core.registry import entry_point_errors, problems, solvers
     from dualfem.core.scene import describe, library, preset_conflicts, presets
+    from dualfem.post.style import family
 
     def describe_solver(c) -> dict:
         return {"installed": c.missing() is None, "missing": c.missing(), "description": c.description,
                 "exact": c.exact, "parameters": c.defaults, "allowed": c.allowed(),
-                "renamed": dict(getattr(c, "renamed", {}))}
+                "renamed": dict(getattr(c, "renamed", {})), "family": family(c.name),
+                "reference": bool(getattr(c, "reference", False) and c.exact)}
 
     def describe_problem(c) -> dict:
         return {"description": c.description, "installed": c.missing() is None, "missing": c.missing(),
@@ -152,6 +154,9 @@ def _plugin_info(describe: Callable[[Any], dict], cls: Any) -> dict:
 def _cfg_export(p):
     add_scene_args(p)
     p.add_argument("-o", "--output", required=True, metavar="FILE", help="output .npz or .mat file")
+    p.add_argument("--convention", choices=("dualfem", "qpsolvers"), default="dualfem",
+                   help="array names: dualfem's own K, F, B (B x >= 0) with the mesh maps (default), or "
+                        "qpsolvers' P, q, G, h (G x <= h), the QP alone (docs/export.md)")
 
 
 @command("export", "write a scene's QP to .npz or .mat")(_cfg_export)
@@ -165,8 +170,14 @@ def cmd_export(args) -> int:
         raise InputError(f"-o must name a .npz or .mat file, got {args.output!r}")
     check_output_path(args.output, "-o")
     qp = build_qp(scene_from_args(args))
-    qp.save(args.output)
-    print(f"wrote {args.output}: n={qp.n} unknowns, m={qp.m} constraints", file=sys.stderr)
+    if args.convention == "qpsolvers":
+        from dualfem.core.qpfile import qpsolvers_arrays, save_arrays
+
+        save_arrays(args.output, qpsolvers_arrays(qp))
+    else:
+        qp.save(args.output)
+    names = "P, q, G, h: G x <= h" if args.convention == "qpsolvers" else "K, F, B: B x >= 0"
+    print(f"wrote {args.output}: n={qp.n} unknowns, m={qp.m} constraints ({names})", file=sys.stderr)
     return 0
 
 

@@ -5,6 +5,7 @@ problem and the VTK writer)."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -137,6 +138,38 @@ def coo_from_arrays(d: dict, name: str, where: str, rows: int | None = None,
     return sp.coo_matrix((data.astype(float), (row.astype(np.int64), col.astype(np.int64))), shape=(nr, nc))
 
 
+def csc_from_arrays(d: dict, name: str, where: str, rows: int | None = None,
+                    cols: int | None = None) -> sp.csc_matrix:
+    """A sparse matrix from scipy's CSC arrays ``name_data``, ``name_indices``, ``name_indptr``, ``name_shape``.
+
+    Refused (InputError naming the array) before any allocation: non-integer indices or shape, a shape
+    that disagrees with ``rows``/``cols`` or does not fit in memory, an ``indptr`` that is not
+    ``cols + 1`` non-decreasing offsets from 0 to the number of entries, row indices outside the shape,
+    non-finite data."""
+    data, ind, ptr, shape = (np.asarray(d[f"{name}_{s}"]).ravel() for s in ("data", "indices", "indptr", "shape"))
+    for s, a in (("indices", ind), ("indptr", ptr), ("shape", shape)):
+        if a.dtype.kind not in "iu":
+            raise InputError(f"array {name}_{s} in {where} must hold integers, got dtype {a.dtype}")
+    if data.dtype.kind not in "iuf":
+        raise InputError(f"array {name}_data in {where} must be numeric, got dtype {data.dtype}")
+    if shape.size != 2 or shape.min() < 0:
+        raise InputError(f"array {name}_shape in {where} must hold 2 sizes >= 0, got {shape.tolist()}")
+    nr, nc = int(shape[0]), int(shape[1])
+    for want, got, what in ((rows, nr, "rows"), (cols, nc, "columns")):
+        if want is not None and got != want:
+            raise InputError(f"{name} must have {want} {what} (the length of q), but {name}_shape in {where} "
+                             f"declares {got}")
+    check_dims(f"{name}_shape", (nr, nc), where)
+    if ptr.size != nc + 1 or ptr[0] != 0 or ptr[-1] != data.size or np.any(np.diff(ptr) < 0) or ind.size != data.size:
+        raise InputError(f"{name}_indptr/{name}_indices in {where} are not CSC arrays of {name}_shape = ({nr}, {nc}) "
+                         f"with {data.size} entries")
+    if ind.size and (ind.min() < 0 or ind.max() >= nr):
+        raise InputError(f"{name}_indices in {where} hold row indices outside {name}_shape = ({nr}, {nc})")
+    if not np.all(np.isfinite(data)):
+        raise InputError(f"array {name}_data in {where} contains NaN or infinite entries")
+    return sp.csc_matrix((data.astype(float), ind.astype(np.int64), ptr.astype(np.int64)), shape=(nr, nc))
+
+
 def export_matrix(d: dict, name: str, where: str, rows: int | None, cols: int) -> sp.spmatrix:
     """K or B of an exported file: COO triplets ``name_*`` (checked before allocating) and/or, in a
     .mat file, the sparse matrix ``name``; both present must be the same matrix (else ambiguous)."""
@@ -248,3 +281,95 @@ def check_maps(maps: dict, m: int, n_nodes: int | None, where: str, dim: int = 2
         arr(k, "iuf", (2, m))
     for k in ("normal", "tangent"):
         arr(k, "iuf", (2,))
+
+
+# ------------------------------------------------------------------ the two conventions of a QP file
+#: the ecosystem's names (qpsolvers, OSQP, Clarabel, ...): P, q, G, h, A, b, lb, ub
+QPSOLVERS_NAMES = ("P", "q", "G", "h", "A", "b", "lb", "ub")
+#: dualfem's own names: K, F, B, Bx_min (``dualfem export`` writes K, F, B: Bx_min = 0)
+OWN_NAMES = ("K", "F", "B", "Bx_min")
+#: what each convention's arrays mean (for messages and docs/export.md)
+CONVENTIONS = {
+    "qpsolvers": "qpsolvers' convention: minimize 1/2 x'Px + q'x subject to G x <= h, A x = b, lb <= x <= ub",
+    "dualfem": "dualfem's own convention: minimize 1/2 x'Kx - F'x subject to B x >= Bx_min (Bx_min omitted: 0)",
+}
+_MATRICES = ("P", "G", "A", "K", "B")
+_TRIPLET = ("data", "row", "col", "shape", "indices", "indptr")
+
+
+def base_names(d: dict) -> set[str]:
+    """The QP names a file's arrays stand for: a matrix given as COO triplets or CSC arrays (``P_data``, ...)
+    counts as ``P``."""
+    out = set()
+    for k in d:
+        head, _, tail = k.rpartition("_")
+        out.add(head if head in _MATRICES and tail in _TRIPLET else k)
+    return out
+
+
+def convention(d: dict, where: str) -> str:
+    """``"qpsolvers"`` or ``"dualfem"``: the convention a QP file's array names declare (:data:`CONVENTIONS`).
+
+    Refused (InputError naming both conventions): a file holding names of both (it could be read either
+    way: qpsolvers' ``G x <= h`` or dualfem's ``B x >= Bx_min``), of neither, or an optional string array
+    ``convention`` that does not start with the convention its names declare.
+    """
+    names = base_names(d)
+    ours, theirs = [k for k in OWN_NAMES if k in names], [k for k in QPSOLVERS_NAMES if k in names]
+    both = f"{CONVENTIONS['qpsolvers']} (arrays {', '.join(QPSOLVERS_NAMES)}); {CONVENTIONS['dualfem']} (arrays " \
+           f"{', '.join(OWN_NAMES)}; what dualfem export writes)"
+    if ours and theirs:
+        raise InputError(f"{where} holds both an exported QP or dualfem's own arrays ({', '.join(ours)}) and the "
+                         f"arrays {', '.join(theirs)} of qpsolvers' convention: ambiguous, keep one convention. "
+                         f"The two: {both}")
+    if not ours and not theirs:
+        raise InputError(f"{where} holds no QP: write the arrays of one convention: {both}")
+    found = "dualfem" if ours else "qpsolvers"
+    if "convention" in d:
+        said = str(np.asarray(d["convention"]).ravel()[0]) if np.size(d["convention"]) else ""
+        if not said.strip().lower().startswith(found):
+            raise InputError(f"{where} says convention = {said!r}, but its arrays ({', '.join(ours or theirs)}) are "
+                             f"those of {CONVENTIONS[found]}: ambiguous, fix one")
+    return found
+
+
+def qpsolvers_arrays(qp) -> dict[str, np.ndarray]:
+    """A QP in qpsolvers' names (``dualfem export --convention qpsolvers``): ``P = K``, ``q = -F``,
+    ``G = -B``, ``h = 0`` as COO triplets ``P_*``, ``G_*`` (0-based) and vectors, plus ``convention``
+    (:data:`CONVENTIONS`) and ``name``. A shifted QP (``qp.shift``: a QP file's ``h != 0``) is written in
+    its user's unknowns ``y = x + shift.x``: ``q = -shift.load`` (else ``-(F + K shift.x)``) and
+    ``h = -shift.rhs`` (else ``-B shift.x``)."""
+    P, G = sp.coo_matrix(qp.K), sp.coo_matrix(-qp.B)
+    q, h = -np.asarray(qp.F, dtype=float), np.zeros(qp.m)
+    s = qp.shift
+    if s is not None:
+        q = -(s.load if s.load is not None else qp.F + qp.K @ s.x)
+        h = -(s.rhs if s.rhs is not None else qp.B @ s.x)
+    return {"P_data": P.data, "P_row": P.row, "P_col": P.col, "P_shape": np.array(P.shape),
+            "G_data": G.data, "G_row": G.row, "G_col": G.col, "G_shape": np.array(G.shape),
+            "q": q, "h": h, "convention": np.array(CONVENTIONS["qpsolvers"]), "name": np.array(qp.name)}
+
+
+def save_arrays(path: str | Path, arrays: dict[str, Any]) -> Path:
+    """Write the arrays of :func:`qpsolvers_arrays` atomically: ``.npz`` as given (COO triplets); ``.mat``
+    with the matrices as MATLAB sparse matrices ``P``, ``G`` (1-based in MATLAB) instead of triplets."""
+    from dualfem.core.io import atomic_write
+
+    path = Path(path)
+    if path.suffix == ".npz":
+        def write(tmp: str) -> None:
+            with open(tmp, "wb") as fh:
+                np.savez_compressed(fh, **arrays)
+    elif path.suffix == ".mat":
+        import scipy.io
+
+        mat = {k: v for k, v in arrays.items() if k.rpartition("_")[0] not in _MATRICES}
+        for name in ("P", "G"):
+            if f"{name}_data" in arrays:
+                mat[name] = sp.csc_matrix(coo_from_arrays(arrays, name, str(path)))
+
+        def write(tmp: str) -> None:
+            scipy.io.savemat(tmp, mat, do_compression=True)
+    else:
+        raise InputError(f"output file must end in .npz or .mat, got {path.name!r}")
+    return atomic_write(path, write)

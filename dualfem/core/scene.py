@@ -135,7 +135,7 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
     if spec in pre:
         pname, params = pre[spec]
     elif Path(spec).suffix in (".npz", ".mat"):
-        # a QP file (generic ``min 1/2 x'Px + q'x s.t. Gx >= h`` or a ``dualfem export``): problems/generic_qp.py
+        # a QP file (qpsolvers' P, q, G, h: G x <= h, or dualfem's K, F, B: an export): problems/generic_qp.py
         pname, params = "qp_file", {"path": spec}
     elif spec.endswith(".toml") or Path(spec).is_file():
         path = Path(spec)

@@ -51,6 +51,11 @@ from dualfem.core.errors import InputError, missing_module
 from dualfem.core.qp import QP
 from dualfem.core.solution import Solution
 
+#: the solver families a solver may declare (``Solver.family``), in the order figures facet them:
+#: ``dual`` (methods on the contact dual), ``interior point`` (interior point / conic), ``first-order``
+#: (ADMM, proximal and augmented-Lagrangian methods), ``active set``, ``other``
+SOLVER_FAMILIES: tuple[str, ...] = ("dual", "interior point", "first-order", "active set", "other")
+
 
 class RenamedParameterWarning(DeprecationWarning):
     """A solver parameter was given by its old name (shown once per call site, even from the CLI)."""
@@ -76,6 +81,8 @@ class Solver:
     reference_rank: ClassVar[int] = 100
     #: parameters of a reference solve (merged over ``defaults``)
     reference_params: ClassVar[dict[str, Any]] = {}
+    #: the solver's family (one of :data:`SOLVER_FAMILIES`): figures derive its colour and marker from it
+    family: ClassVar[str] = "other"
     #: optional: the :class:`dualfem.numerics.linalg.LocalReduction` of the QP this solver built in
     #: ``setup``; the runner's certification then reuses its factorization and dense blocks
     #: (accepted only if it is exactly that class and belongs to the QP being certified)

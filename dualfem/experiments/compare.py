@@ -9,13 +9,14 @@ record bench and stress produce too, graded by the one policy :func:`dualfem.cor
 ``dualfem compare --json``) is a view of its Row (:func:`record`).
 
 Reference: chosen by the one reference policy (:mod:`dualfem.experiments.reference`): among the
-runs of *exact* solvers that claim success with an evaluator KKT error within their own declared
-tolerance, the one with the smallest a-posteriori energy-norm error certificate
+runs of the solvers that declare ``reference`` (``Solver.reference``, docs/plugins.md 1.5: a
+third-party solver never is one unless it says so) that claim success with an evaluator KKT error
+within their own declared tolerance, the one with the smallest a-posteriori energy-norm error certificate
 (:func:`dualfem.numerics.certify.certified_error`, computed from the QP alone: the smaller of the
 rigorous duality-gap bound on |x - x*|_K / |x|_K and, when the active set is verified with
 margins, the first-order size of an exact refinement step on it), ties broken by the KKT error,
 then time. The record's ``error_bound`` is that value, ``certificate`` holds both parts. It is
-cross-checked against the next best trusted run: their difference must lie within the second
+cross-checked against the next best trusted run of any exact solver: their difference must lie within the second
 one's declared tolerance plus both bounds. Runs whose x is bit-for-bit the reference's are listed
 (``identical_to_reference``) but skipped as cross-checks.
 
@@ -49,6 +50,7 @@ from dualfem.core.qp import QP
 from dualfem.core.registry import get_solver
 from dualfem.core.registry import solvers as registered
 from dualfem.core.solution import Solution, Status
+from dualfem.core.solver import reference_solvers
 from dualfem.experiments import reference
 from dualfem.experiments.row import Row
 from dualfem.experiments.runner import jsonable_params
@@ -181,8 +183,8 @@ def _reference_record(qp: QP, rows: list[Row], sols: dict[str, Solution], ref_na
         row.update(ref_solver=ref_name, ref_kkt=rrow.kkt_error, ref_bound=rrow["error_bound"])
     out: dict[str, Any] = {
         "solver": ref_name, "error_bound": rrow["error_bound"], "kkt_error": rrow.kkt_error,
-        "why": (f"exact solver with the smallest certified energy-norm error bound "
-                f"({rrow['error_bound']:.1e}) among exact solvers claiming success"),
+        "why": (f"reference solver with the smallest certified energy-norm error bound "
+                f"({rrow['error_bound']:.1e}) among the solvers declaring reference that claim success"),
         "cross_check": None,
     }
     # the cross-check is the best certified other exact run whose x is not bit-for-bit the
@@ -202,7 +204,9 @@ def _reference_record(qp: QP, rows: list[Row], sols: dict[str, Solution], ref_na
 def _choose_reference(rows: list[Row]) -> tuple[str | None, list[str]]:
     """The one reference policy (:mod:`dualfem.experiments.reference`) applied to the runs made:
     trusted runs (exact, solved, KKT error within the solver's own tolerance, finite certificate)
-    ranked by certificate, KKT error, time. Returns (reference, the other trusted runs in order)."""
+    ranked by certificate, KKT error, time; the reference is the first of them whose solver declares
+    ``reference`` (:func:`reference.may_serve`: a third-party solver never is unless it says so), the
+    others are the cross-check candidates. Returns (reference or None, the other trusted runs in order)."""
     ranked = []
     for r in rows:
         ok, _ = reference.trusted(r.status, r.exact, r.kkt_error, r.get("error_bound"), kkt_max=r.tol)
@@ -210,7 +214,8 @@ def _choose_reference(rows: list[Row]) -> tuple[str | None, list[str]]:
             ranked.append((reference.rank_key(r["error_bound"], r.kkt_error, r.total_s), r.solver))
     ranked.sort()
     names = [n for _, n in ranked]
-    return (names[0] if names else None), names[1:]
+    ref = next((n for n in names if reference.may_serve(n)), None)
+    return ref, [n for n in names if n != ref]
 
 
 def grade_record(rec: dict, ref: dict | None) -> str:
@@ -241,7 +246,9 @@ def table(result: dict) -> str:
         else:
             lines.append("cross-check: no second exact solver claimed success")
     else:
-        lines.append("reference: none (no exact solver claimed success with finite residuals)")
+        declared = ", ".join(n for n, _ in reference_solvers()) or "none registered"
+        lines.append(f"reference: none (no solver declaring reference claimed success with finite residuals; "
+                     f"reference solvers: {declared})")
     w = max([10] + [len(r["solver"]) for r in result["runs"]])
     hdr = (f"{'solver':{w}s} {'status':15s} {'grade':12s} {'iterations':22s} {'setup_s':>8s} {'solve_s':>8s} "
            f"{'energy':>17s} {'kkt':>8s} {'bound':>8s} {'tol':>7s} {'dx_K':>8s} {'dmu':>8s} {'contact':>7s}")

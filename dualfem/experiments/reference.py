@@ -67,6 +67,14 @@ def candidates(exclude: tuple[str, ...] = (), only: tuple[str, ...] | None = Non
             if n not in exclude and n in reg and reg[n].missing() is None and reg[n].exact]
 
 
+def may_serve(name: str) -> bool:
+    """True when the registered solver ``name`` may be a reference: its class declares ``reference``
+    and ``exact`` (docs/plugins.md 1.5). A name that is not registered may not."""
+    reg = solvers()
+    cls = reg.get(name)
+    return cls is not None and bool(getattr(cls, "reference", False)) and bool(cls.exact)
+
+
 def certificate(qp, x: np.ndarray | None, mu: np.ndarray | None, ksolve=None) -> float:
     """Certified relative energy-norm error of (x, mu); 0 for the exact zero answer of a zero load."""
 

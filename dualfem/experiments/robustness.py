@@ -58,8 +58,8 @@ def _huge_shape(d: Path) -> None:
 
 
 def _shifted_qp(d: Path) -> None:
-    # min 1/2 x^2  s.t.  x >= 1  (G x >= h with h = 1): solution x = 1, objective 0.5
-    np.savez(d / "qp.npz", P=np.array([[1.0]]), q=np.array([0.0]), G=np.array([[1.0]]), h=np.array([1.0]))
+    # min 1/2 x^2  s.t.  x >= 1  (qpsolvers' G x <= h with G = -1, h = -1): solution x = 1, objective 0.5
+    np.savez(d / "qp.npz", P=np.array([[1.0]]), q=np.array([0.0]), G=np.array([[-1.0]]), h=np.array([-1.0]))
 
 
 def _bad_nu_export(d: Path) -> None:

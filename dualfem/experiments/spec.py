@@ -255,6 +255,14 @@ def _parse_reference(s: Spec, data: dict) -> None:
     }
     if not s.reference["solvers"]:
         raise InputError("reference.solvers must name at least one exact solver")
+    from dualfem.core.registry import solvers
+
+    reg = solvers()
+    undeclared = [n for n in s.reference["solvers"] if n in reg and not (getattr(reg[n], "reference", False)
+                                                                          and reg[n].exact)]
+    if undeclared:      # docs/plugins.md 1.5: a solver is a reference only when its class says so
+        raise InputError(f"reference.solvers names {undeclared[0]!r}, which does not declare reference = True "
+                         f"(docs/plugins.md 1.5); the reference solvers: {', '.join(_declared_references())}")
 
 
 def _parse_floor(s: Spec, data: dict) -> None:

@@ -6,8 +6,8 @@ manifest, README and qpbenchmark ``TestSet`` module: :mod:`dualfem.experiments.t
 ``M_indptr``, ``M_shape`` (``scipy.sparse.csc_matrix((data, indices, indptr), shape)``; P holds both
 triangles), the vectors ``q`` and ``h``, ``name`` and ``convention`` (the string :data:`CONVENTION`).
 No ``lb``/``ub``, no ``A``/``b``: the clamped unknowns are eliminated. qpsolvers' convention is
-``G x <= h``; dualfem's own QP files read ``G x >= h``, so ``dualfem solve`` refuses these files (their
-matrices are CSC, not the COO triplets it reads) rather than solving the mirrored problem.
+``G x <= h``, which is also how ``dualfem solve FILE`` reads ``P, q, G, h`` (problems/generic_qp.py), so
+these files can be solved by every dualfem solver as they are.
 
 ``DIR/reference/NAME.npz`` (:func:`write_reference`): ``x`` (mm), ``z`` (qpsolvers' multipliers of
 ``G x <= h``: ``z = mu >= 0``, N per mm of thickness), ``objective`` (``1/2 x'Px + q'x``),

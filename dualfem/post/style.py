@@ -3,18 +3,19 @@
 * :data:`PALETTE`: the Okabe-Ito palette (Okabe & Ito 2008, "Color Universal Design"), eight colours
   distinguishable with the common colour-vision deficiencies, in the order series use them (the light
   yellow last: it is drawn with a darker marker edge, see :meth:`Style.kwargs`).
-* :func:`family`: the solver family of a registered solver name (or of a variant of one): ``dual``
-  (dualfem's own solvers on the dual), ``interior point`` (interior point / conic), ``first-order``
-  (ADMM, proximal and augmented-Lagrangian methods), ``active set``, and ``other`` for a name it does not
-  know (a plug-in).
+* :func:`family`: the solver family of a registered solver name (or of a variant of one): what its
+  class declares (``Solver.family``, one of :data:`FAMILIES`: ``dual``, ``interior point``,
+  ``first-order``, ``active set``, ``other``); ``other`` for a name that is not registered or a
+  declaration outside the list.
 * :func:`style` / :func:`styles`: a deterministic (colour, marker, line style) per solver. Each family
   owns its markers (dual: circles, interior point: squares, first-order: triangles, active set:
-  diamonds, other: stars) and line style (solid, dashed, dash-dot, dotted), and the solvers of a family
-  take the palette's colours in their order of :data:`FAMILIES` from the family's offset
-  (:data:`FAMILY_OFFSET`): two known solvers never share both colour and marker, in any figure. A name not
-  listed (a plug-in, a labelled variant) gets, in :func:`styles`, the first (colour, marker) pair of its
-  family's markers not taken by the other names of the same call: distinct within one figure, the same
-  for the same set of names.
+  diamonds, other: stars) and line style (solid, dashed, dash-dot, dotted). The registered solvers of
+  a family take the palette's colours from the family's offset (:data:`FAMILY_OFFSET`) in the order
+  of :func:`registered_order`: dualfem's own solvers by name, then third-party ones by name, so
+  installing a plug-in never changes a built-in solver's look, and two registered solvers never share
+  both colour and marker, in any figure. A name not registered (a labelled variant) gets, in
+  :func:`styles`, the first (colour, marker) pair of its family's markers not taken by the other names
+  of the same call: distinct within one figure, the same for the same set of names.
 * :data:`FIELD_CMAP` (``"viridis"``, perceptually uniform, colour-blind safe, legible in grey) for
   fields of one sign (von Mises stress, magnitudes, log errors); :data:`DIVERGING_CMAP` (``"RdBu_r"``,
   red positive, blue negative, centred on 0 by the caller) only for signed quantities whose sign is the
@@ -28,6 +29,8 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+
+from dualfem.core.solver import SOLVER_FAMILIES
 
 #: Okabe-Ito colours (blue, vermillion, bluish green, reddish purple, black, orange, sky blue, yellow):
 #: the pairs easiest to confuse (blue / sky blue, vermillion / orange) are far apart in this order;
@@ -44,17 +47,8 @@ DIVERGING_CMAP = "RdBu_r"
 #: most series one panel carries before a figure is faceted by family
 MAX_SERIES = 10
 
-#: the families, in the order facets are drawn, with the registered solvers each holds (in the
-#: order they take the palette's colours). Names are those of ``dualfem list``.
-FAMILIES: dict[str, tuple[str, ...]] = {
-    "dual": ("uzawa", "uzawa_auto", "pdas", "mprgp", "penalty", "dual_gradient", "newton_amg"),
-    "interior point": ("clarabel", "qp_clarabel", "cvxpy", "qp_piqp", "qp_ecos", "qp_cvxopt", "qp_sip",
-                       "qp_qtqp", "qp_qpax", "qp_kvxopt", "qp_hpipm", "qp_qpswift", "qp_mosek", "qp_gurobi",
-                       "qp_copt"),
-    "first-order": ("osqp", "qp_osqp", "qp_scs", "qp_proxqp", "qp_qpalm", "qp_jaxopt_osqp", "qp_pdhcg"),
-    "active set": ("qp_daqp", "qp_quadprog", "qp_pyqpmad", "qp_highs", "qp_qpoases", "qp_nppro"),
-    "other": (),
-}
+#: the families, in the order facets are drawn (``Solver.family`` declares one of them)
+FAMILIES: tuple[str, ...] = SOLVER_FAMILIES
 #: markers of each family: the first for its first eight solvers, the next for the following eight
 FAMILY_MARKERS: dict[str, tuple[str, ...]] = {
     "dual": ("o", "h"), "interior point": ("s", "P"), "first-order": ("^", "v"),
@@ -63,9 +57,8 @@ FAMILY_MARKERS: dict[str, tuple[str, ...]] = {
 #: line style of each family (curves and lines through tier points)
 FAMILY_LINESTYLE: dict[str, str] = {"dual": "-", "interior point": "--", "first-order": "-.",
                                     "active set": ":", "other": "--"}
-#: where each family starts in the first seven colours, chosen so that the solvers most often drawn
-#: together differ in colour too: dual uzawa blue, uzawa_auto vermillion, pdas green, mprgp purple,
-#: penalty black, dual_gradient orange; clarabel sky blue; osqp orange; qp_daqp green
+#: where each family starts in the first seven colours (so that the first solvers of different
+#: families differ in colour too)
 FAMILY_OFFSET: dict[str, int] = {"dual": 0, "interior point": 6, "first-order": 5, "active set": 2, "other": 3}
 #: cvxpy backends that are first-order methods (a cvxpy variant naming one is of that family)
 _CVXPY_FIRST_ORDER = ("OSQP", "SCS", "PIQP_ADMM")
@@ -98,14 +91,63 @@ _PLOTLY_SYMBOL = {"o": "circle", "h": "hexagon", "s": "square", "P": "cross", "^
 _PLOTLY_DASH = {"-": "solid", "--": "dash", "-.": "dashdot", ":": "dot"}
 
 
-def _known() -> dict[str, tuple[str, int]]:
-    return {name: (fam, i) for fam, names in FAMILIES.items() for i, name in enumerate(names)}
+def _declared(cls) -> str:
+    fam = getattr(cls, "family", "other")
+    return fam if isinstance(fam, str) and fam in FAMILIES else "other"
+
+
+def registered_order() -> dict[str, list[str]]:
+    """The registered solvers of each family (``Solver.family``) in the order they take the
+    family's slots: dualfem's own solvers by name, then the third-party ones by name."""
+    from dualfem.core.registry import builtin_names, solvers
+
+    reg, own = solvers(), builtin_names("solver")
+    out: dict[str, list[str]] = {f: [] for f in FAMILIES}
+    for name in sorted(reg, key=lambda n: (n not in own, n)):
+        out[_declared(reg[name])].append(name)
+    return out
+
+
+def _known() -> dict[str, str]:
+    return {name: fam for fam, names in registered_order().items() for name in names}
+
+
+def _capacity(fam: str) -> int:
+    return len(PALETTE) * len(FAMILY_MARKERS[fam])
+
+
+def _fixed() -> dict[str, Style]:
+    """The fixed style of every registered solver: the i-th of a family takes the family's slot i; one
+    beyond the family's slots (more than 16 solvers in one family) the first pair no solver before it took."""
+    out: dict[str, Style] = {}
+    late: list[tuple[str, str]] = []
+    for fam, names in registered_order().items():
+        for i, name in enumerate(names):
+            if i < _capacity(fam):
+                out[name] = _slot(fam, i)
+            else:
+                late.append((fam, name))
+    taken = {(s.color, s.marker) for s in out.values()}
+    for fam, name in late:
+        out[name] = _free(fam, taken, len(out))
+        taken.add((out[name].color, out[name].marker))
+    return out
+
+
+def _free(fam: str, taken: set, fallback: int) -> Style:
+    """The first slot of ``fam``, then of the other families, whose (colour, marker) is not taken."""
+    for f in [fam] + [f for f in FAMILIES if f != fam]:
+        pick = next((s for s in map(lambda i, f=f: _slot(f, i), range(_capacity(f)))
+                     if (s.color, s.marker) not in taken), None)
+        if pick is not None:
+            return pick
+    return _slot(fam, fallback)       # every pair taken: colours repeat, markers still cycle
 
 
 def base_solver(name: str) -> str | None:
-    """The registered solver a series name stands for: ``name`` itself when listed in
-    :data:`FAMILIES`, else the longest listed name it starts with followed by a separator
-    (``uzawa[r=10]`` -> ``uzawa``, ``cvxpy:OSQP`` -> ``cvxpy``); None when there is none."""
+    """The registered solver a series name stands for: ``name`` itself when registered, else the
+    longest registered name it starts with followed by a separator (``uzawa[r=10]`` -> ``uzawa``,
+    ``cvxpy:OSQP`` -> ``cvxpy``); None when there is none."""
     known = _known()
     if name in known:
         return name
@@ -114,14 +156,15 @@ def base_solver(name: str) -> str | None:
 
 
 def family(name: str) -> str:
-    """Family of a solver or variant name (a key of :data:`FAMILIES`; ``other`` when unknown).
+    """Family of a solver or variant name (one of :data:`FAMILIES`, as its solver class declares;
+    ``other`` when not registered).
     A cvxpy variant naming a first-order backend (OSQP, SCS) is ``first-order``."""
     base = base_solver(name)
     if base is None:
         return "other"
     if base == "cvxpy" and any(b in name[len(base):].upper() for b in _CVXPY_FIRST_ORDER):
         return "first-order"
-    return _known()[base][0]
+    return _known()[base]
 
 
 def _slot(fam: str, i: int) -> Style:
@@ -135,36 +178,26 @@ def _slot(fam: str, i: int) -> Style:
 
 
 def style(name: str) -> Style:
-    """The fixed style of a name listed in :data:`FAMILIES` (the same in every figure); for any
-    other name the style :func:`styles` gives it alone (its family's first slot)."""
-    known = _known()
-    if name in known:
-        return _slot(*known[name])
+    """The fixed style of a registered solver name (the same in every figure); for any other name
+    the style :func:`styles` gives it alone (its family's first slot)."""
+    fixed = _fixed()
+    if name in fixed:
+        return fixed[name]
     return styles([name])[name]
 
 
 def styles(names: Iterable[str]) -> dict[str, Style]:
-    """A style per name, no two sharing both colour and marker: listed names keep their fixed
+    """A style per name, no two sharing both colour and marker: registered names keep their fixed
     style; the others (sorted, those of a known family first) take the first free (colour, marker)
     pair of their family's slots, then of the other families' slots. Deterministic: the same
     names give the same styles."""
     names = sorted(set(names))
-    known = _known()
-    out = {n: _slot(*known[n]) for n in names if n in known}
+    fixed = _fixed()
+    out = {n: fixed[n] for n in names if n in fixed}
     taken = {(s.color, s.marker) for s in out.values()}
-    order = list(FAMILY_MARKERS)
-    for n in sorted((n for n in names if n not in known), key=lambda n: (family(n) == "other", n)):
-        fam = family(n)
-        for f in [fam] + [f for f in order if f != fam]:
-            slots = len(PALETTE) * len(FAMILY_MARKERS[f])
-            pick = next((s for s in map(lambda i, f=f: _slot(f, i), range(slots))
-                         if (s.color, s.marker) not in taken), None)
-            if pick is not None:
-                break
-        else:     # more than 80 unknown names in one figure: colours repeat, markers still cycle
-            pick = _slot(fam, len(out))
-        out[n] = pick
-        taken.add((pick.color, pick.marker))
+    for n in sorted((n for n in names if n not in fixed), key=lambda n: (family(n) == "other", n)):
+        out[n] = _free(family(n), taken, len(out))
+        taken.add((out[n].color, out[n].marker))
     return out
 
 
