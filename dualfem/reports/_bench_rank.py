@@ -96,15 +96,16 @@ def _tier_section(runs: list[dict], tier: str, tol: float, shift: float, deltas:
     L.append("")
     if len(deltas) > 1:
         per = {d: {s["variant"]: s for s in rank_table(runs, tier, tol, shift, d)[0]} for d in deltas}
-        L += [f"Per delta (tier {tier}): success rate / correct rate / shifted GM of time relative to the best "
-              "solver at that delta; rows in the order of the table above.", "",
+        L += [f"Per delta (tier {tier}): success rate / correct rate / shifted GM of the time of successes relative "
+              "to the best solver at that delta (`failed`: no success to time); rows in the order of the table "
+              "above.", "",
               "| solver | " + " | ".join(f"delta = {d:g}" for d in deltas) + " |", "|---" * (len(deltas) + 1) + "|"]
         for s in stats:
             cells = []
             for d in deltas:
                 x = per[d].get(s["variant"])
-                cells.append("" if x is None else f"{pct(x['success'])} / {pct(x['correct'])} / "
-                                                  f"{_fmt(x['sgm_rel'], '.2f')}")
+                time = _fmt(x['sgm_rel'], '.2f') if x is not None and x["n_timed"] else "failed"
+                cells.append("" if x is None else f"{pct(x['success'])} / {pct(x['correct'])} / {time}")
             L.append(f"| {s['variant']} | " + " | ".join(cells) + " |")
         L.append("")
     return L
