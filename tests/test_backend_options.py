@@ -63,3 +63,12 @@ def test_a_solver_without_the_hook_refuses_unknown_names():
 
     with pytest.raises(InputError, match="allowed: tol$"):
         Plain(rho=1)
+
+
+def test_cvxpy_takes_the_options_of_its_backend():
+    _needs("cvxpy")
+    _needs("osqp")
+    assert make_solver("cvxpy", {"solver": "OSQP", "rho": "0.2"}).params["rho"] == 0.2
+    with pytest.raises(InputError, match="'rho'"):
+        make_solver("cvxpy", {"solver": "CLARABEL", "rho": 0.2})     # not a Clarabel setting
+    assert "eps_abs" not in get_solver("cvxpy").backend_options({"solver": "OSQP"})   # dualfem sets it (tol)

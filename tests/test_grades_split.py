@@ -63,3 +63,13 @@ def test_x_grades_leave_the_multiplier_certificate_in_the_message():
     assert str(sol.status) == "solved" and "not graded" in sol.message
     sol = run("clarabel", qp, {"polish": False}, tol=1e-3)
     assert str(sol.status) == "inaccurate" and "multiplier" in sol.message
+
+
+def test_correct_rate_follows_the_tiers_grades():
+    from dualfem.reports._correct_rate import claim_stats
+
+    row = {"kind": "run", "status": "solved", "claimed_status": "solved", "kkt_error": 1e-9, "err_x_energy": 1e-9,
+           "err_multipliers": 1e-2, "ref_bound": 0.0, "tier": "mid", "tol": 1e-6}
+    assert claim_stats([{**row, "grades": "x"}], 1e-6)["certified"] == 1
+    st = claim_stats([{**row, "grades": "x,mu"}], 1e-6)
+    assert st["certified"] == 0 and st["silent_wrong"] == 1
