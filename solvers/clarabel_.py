@@ -28,12 +28,11 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.core import evaluator
 from dualfem.core.errors import InputError
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
-from dualfem.numerics.polish import active_set_polish
+from dualfem.numerics.polish import polish_if_better
 from dualfem.numerics.scaling import scale
 
 _STATUS = {
@@ -90,7 +89,7 @@ class ClarabelSolver(Solver):
     def backend_options(cls, params: dict) -> dict:
         """Clarabel's own ``DefaultSettings`` fields (``static_regularization_constant``,
         ``iterative_refinement_max_iter``, ...), read from the installed clarabel; set as given."""
-        from dualfem.solvers._backend_options import clarabel_options
+        from dualfem.numerics.backend_options import clarabel_options
 
         return clarabel_options()
 
@@ -160,16 +159,3 @@ def _check_settings(options: dict) -> None:
         except (TypeError, ValueError, AttributeError, OverflowError) as exc:
             raise InputError(f"parameter {k!r} of solver 'clarabel' (a Clarabel setting) was refused by "
                              f"Clarabel: {exc}") from None
-
-
-def polish_if_better(qp, x, z):
-    """Active-set polish (:func:`dualfem.numerics.polish.active_set_polish`); kept only if it is consistent
-    and lowers the evaluator's KKT error."""
-
-    before = evaluator.kkt_error(evaluator.residuals(qp, x, z))
-    out = active_set_polish(qp, x, z)
-    if out is not None:
-        xs, zs = out[0], out[1]
-        if evaluator.kkt_error(evaluator.residuals(qp, xs, zs)) < before:
-            return xs, zs, {"polished": True, "kkt_before_polish": before}
-    return x, z, {"polished": False, "kkt_before_polish": before}

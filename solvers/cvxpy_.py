@@ -128,7 +128,7 @@ class CvxpySolver(Solver):
     def backend_options(cls, params: dict) -> dict:
         """The options of the cvxpy backend named by ``solver`` (CLARABEL, OSQP, PIQP: read from the installed
         library), less those dualfem sets (accuracy, iteration cap, time limit); passed to ``Problem.solve``."""
-        from dualfem.solvers._backend_options import CVXPY_READERS
+        from dualfem.numerics.backend_options import CVXPY_READERS
 
         backend = str(params.get("solver", "")).upper()
         reader = CVXPY_READERS.get(backend)

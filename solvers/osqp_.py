@@ -71,7 +71,7 @@ class OSQPSolver(Solver):
     def backend_options(cls, params: dict) -> dict:
         """OSQP's own settings (``rho``, ``sigma``, ``alpha``, ``polish_refine_iter``, ...), read from the
         installed osqp; passed to ``OSQP.setup`` as given."""
-        from dualfem.solvers._backend_options import osqp_options
+        from dualfem.numerics.backend_options import osqp_options
 
         return osqp_options()
 

@@ -54,6 +54,7 @@ from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
+from dualfem.numerics.polish import polish_if_better
 from dualfem.numerics.scaling import scale
 
 #: default size above which dense backends are skipped (a dense n x n Hessian: 8 n^2 bytes and
@@ -185,7 +186,7 @@ class QpsolversSolver(Solver):
     def backend_options(cls, params: dict) -> dict:
         """The backend library's own options, where they can be read from it (clarabel, osqp, piqp);
         the names dualfem sets itself (its accuracy, iteration cap and time limit options) excluded."""
-        from dualfem.solvers._backend_options import QPSOLVERS_READERS
+        from dualfem.numerics.backend_options import QPSOLVERS_READERS
 
         reader = QPSOLVERS_READERS.get(cls.backend)
         if reader is None:
@@ -258,8 +259,6 @@ class QpsolversSolver(Solver):
         info = {"backend_solve_time_s": getattr(res, "solve_time", None),
                 "backend_build_time_s": getattr(res, "build_time", None)}
         if self.params["polish"] and status == Status.SOLVED:
-            from dualfem.solvers.clarabel_ import polish_if_better
-
             x, mu, pinfo = polish_if_better(self.qp, x, mu)
             info.update(pinfo)
             msg += "; polished" if pinfo["polished"] else "; polish refused (inconsistent or no better)"

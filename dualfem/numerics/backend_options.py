@@ -1,4 +1,4 @@
-"""The settings of the wrapped QP libraries, read from the installed library (for ``Solver.backend_options``).
+"""The settings of the wrapped QP libraries, read from the installed library (for Solver.backend_options).
 
 Each reader returns ``{option: default}`` for the options whose default is a plain bool, int, float or
 string (those a command line can give: ``-s 'osqp[rho=0.1]'``); enum- and list-valued settings are
