@@ -1,5 +1,14 @@
 """Clarabel (interior point) on ``min 1/2 x'Kx - F'x s.t. -Bx + s = 0, s >= 0``.
 
+**What it takes to meet a tolerance** (docs/solvers_tolerances.md): Clarabel's own tolerances
+(``tol`` = tol_gap_abs = tol_gap_rel = tol_feas) do not bound the certified error at small delta: at
+delta = 1e-9 its 'Solved' answer is 3e-6..9e-6 off in x (energy norm) and 1.3e-3..3.5e-3 in the
+multipliers at tol = 1e-10, and tighter settings end 'AlmostSolved'. The active-set ``polish`` removes
+that error (to rounding, ~1e-13) once the interior point stops at ``tol <= 1e-8``; stopped at 1e-4 or
+1e-6 the contact set it hands over is wrong at f2, N = 64, delta = 1e-9 and the polish is refused.
+Hence ``polish`` is on by default and :meth:`ClarabelSolver.tolerance_params` asks for ``tol = 1e-8``
+with the polish at every tier.
+
 Clarabel's KKT condition is ``Px + q + A'z = 0`` with ``z >= 0``; with ``A = -B`` and
 ``q = -F`` this is ``Kx - F = B'z``, so our nodal contact force is ``mu = z``. Only the upper
 triangle of K is passed. Clarabel's own residuals are not trusted (Clarabel.cpp issue 36): the
@@ -8,21 +17,22 @@ evaluator recomputes them.
 With ``scale=True`` (default) the QP is normalised first (:mod:`dualfem.numerics.scaling`); unscaled,
 Clarabel stops 'AlmostSolved' with a wrong contact set on these badly scaled matrices. Measured
 accuracy limit: at delta = 1e-9 Clarabel reports 'Solved' with x off by ~5e-6 (energy norm)
-from the certified solution, hence the declared tolerance 1e-5. ``polish=True`` (off by default:
-it is not part of Clarabel) re-solves the KKT system exactly on Clarabel's contact set and keeps
-it when its KKT error is smaller, like OSQP's polishing (error 1.6e-11 on that case).
+from the certified solution, hence the declared tolerance 1e-5 (what an unpolished answer is worth).
+``polish=True`` (the default; it is dualfem's, not part of Clarabel: ``polish=false`` gives Clarabel's
+own answer, as the reference solve does) re-solves the KKT system exactly on Clarabel's contact set and
+keeps it when its KKT error is smaller, like OSQP's polishing (``info["polished"]`` says which).
+Clarabel's own settings pass through as parameters (:meth:`ClarabelSolver.backend_options`).
 """
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.core import evaluator
 from dualfem.core.errors import InputError
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
-from dualfem.numerics.polish import active_set_polish
+from dualfem.numerics.polish import polish_if_better
 from dualfem.numerics.scaling import scale
 
 _STATUS = {
@@ -54,7 +64,7 @@ class ClarabelSolver(Solver):
     #: it for 1e-12 made it stop 'inaccurate' at delta <= 1e-6 on the stress grid
     reference = True
     reference_rank = 10
-    reference_params = {"max_iter": 500}
+    reference_params = {"max_iter": 500, "polish": False}   # the reference stays Clarabel's own answer
     defaults = {
         "tol": 1e-10,             # Clarabel's tol_gap_abs = tol_gap_rel = tol_feas
         "tol_ktratio": 1e-8,
@@ -64,7 +74,7 @@ class ClarabelSolver(Solver):
         "direct_solve_method": "qdldl",
         "verbose": False,
         "scale": True,
-        "polish": False,
+        "polish": True,           # dualfem's active-set polish (numerics.polish), kept only if it helps
     }
 
     renamed = {"tol_gap_abs": "tol", "tol_gap_rel": "tol", "tol_feas": "tol"}
@@ -74,10 +84,20 @@ class ClarabelSolver(Solver):
     def validate(self) -> None:
         if self.missing() is None:
             _check_direct_method(self.params["direct_solve_method"])
+            _check_settings({k: v for k, v in self.params.items() if k not in self.defaults})
+
+    @classmethod
+    def backend_options(cls, params: dict) -> dict:
+        """Clarabel's own ``DefaultSettings`` fields (``static_regularization_constant``,
+        ``iterative_refinement_max_iter``, ...), read from the installed clarabel; set as given."""
+        from dualfem.numerics.backend_options import clarabel_options
+
+        return clarabel_options()
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
-        return {"tol": tol}
+        """Any tier: the interior point to 1e-8, then the polish (measured, see the module docstring)."""
+        return {"tol": 1e-8, "polish": True}
 
     def setup(self, qp) -> None:
         import clarabel
@@ -101,7 +121,7 @@ class ClarabelSolver(Solver):
         x, z = self._scaled.unscale(np.array(sol.x), np.array(sol.z))
         info = {}
         if self.params["polish"] and status == Status.SOLVED:
-            x, z, info = _polish(self.qp, x, z)
+            x, z, info = polish_if_better(self.qp, x, z)
         return Solution(
             solver=self.name, status=status, x=x, multipliers=z,
             iterations={"ipm": int(sol.iterations)}, message=f"clarabel: {name}",
@@ -130,14 +150,13 @@ def _check_direct_method(method) -> None:
                          f"build provides (one of {', '.join(known)}), got {method!r}")
 
 
-def _polish(qp, x, z):
-    """Active-set polish (:func:`dualfem.numerics.polish.active_set_polish`); kept only if it is consistent
-    and lowers the evaluator's KKT error."""
+def _check_settings(options: dict) -> None:
+    """Refuse a backend option value Clarabel's settings object does not take (it says so only at setup)."""
+    import clarabel
 
-    before = evaluator.kkt_error(evaluator.residuals(qp, x, z))
-    out = active_set_polish(qp, x, z)
-    if out is not None:
-        xs, zs = out[0], out[1]
-        if evaluator.kkt_error(evaluator.residuals(qp, xs, zs)) < before:
-            return xs, zs, {"polished": True, "kkt_before_polish": before}
-    return x, z, {"polished": False, "kkt_before_polish": before}
+    for k, v in options.items():
+        try:
+            setattr(clarabel.DefaultSettings(), k, v)
+        except (TypeError, ValueError, AttributeError, OverflowError) as exc:
+            raise InputError(f"parameter {k!r} of solver 'clarabel' (a Clarabel setting) was refused by "
+                             f"Clarabel: {exc}") from None

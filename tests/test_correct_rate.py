@@ -69,8 +69,10 @@ def test_bench_ranking_per_tier_and_delta():
     assert [(s["variant"], s["success"]) for s in stats] == [("b", 0.8), ("a", 0.6)]
     text = "\n".join(ranking(rows + [{**bench_row("z", "s1", "skipped"), "message": "needs zlib"}], 10.0))
     assert "| 2 | a | 5 | 60 % | 4 | 3 | 75 % | 80 % | 1 silent wrong |" in text
-    assert "| a | 50 % / 67 % / 2.42 | 100 % / 100 % / 1.00 |" in text        # per delta: 1e-5, 1e-9
-    assert "| b | 100 % / 100 % / 1.00 | 0 % / - / 20.00 |" in text        # no claim: rate undefined
+    # per delta (1e-5, 1e-9): the time of successes only; a failed run is never charged a time (was: a's
+    # failures at the 10 s time limit made a 2.42 times slower than b at 1e-5, b "20.00" at 1e-9)
+    assert "| a | 50 % / 67 % / 1.00 | 100 % / 100 % / 1.00 |" in text
+    assert "| b | 100 % / 100 % / 2.00 | 0 % / - / failed |" in text        # no claim: rate undefined
     assert "`z` (needs zlib)" in text
 
 
@@ -107,3 +109,17 @@ def test_stress_solvers_all():
     assert _choice("--solvers", "y", ["x", "y"], "solver", "known") == ["y"]
     with pytest.raises(InputError, match="unknown solver 'z'"):
         _choice("--solvers", "x,z", ["x", "y"], "solver", "known")
+
+
+def test_failed_runs_are_failures_not_times_and_qpbenchmark_is_labelled():
+    """A solver that fails fast is shown as failed, not charged the time limit; qpbenchmark's convention
+    (failures at the time limit) is its own labelled column."""
+    rows = [bench_row("fast", f"s{i}", "solved", t=0.1) for i in range(1, 3)]
+    rows += [bench_row("fails", f"s{i}", "inaccurate", claimed="solved", kkt=1e-3, t=0.2) for i in range(1, 3)]
+    stats = {s["variant"]: s for s in rank_table(rows, "mid", TOL, shift=10.0)[0]}
+    assert stats["fails"]["n_timed"] == 0 and math.isnan(stats["fails"]["sgm"])
+    assert math.isclose(stats["fast"]["sgm"], 0.1)
+    assert math.isclose(stats["fails"]["sgm_qpb"], 10.0)            # qpbenchmark: at the time limit
+    text = "\n".join(ranking(rows, 10.0))
+    assert "qpbenchmark convention: failures at the time limit" in text
+    assert "| fails | 2 | 0 % |" in text and "failed (no success)" in text

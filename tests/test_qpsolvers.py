@@ -91,5 +91,6 @@ def test_settings_follow_the_vocabulary():
     cls = solvers()["qp_scs"]
     s = cls(tol=1e-7, max_iter=50, time_limit=3.0).settings()
     assert s == {"eps_abs": 1e-7, "eps_rel": 1e-7, "max_iters": 50, "time_limit_secs": 3.0}
-    assert cls.tolerance_params(1e-4) == {"tol": 1e-6}
+    assert cls.tolerance_params(1e-4) == {"tol": 1e-8, "polish": True}
+    assert cls.tolerance_params(1e-9) == {"tol": pytest.approx(1e-11), "polish": True}
     assert set(QpsolversSolver.defaults) >= {"tol", "max_iter", "time_limit", "verbose"}

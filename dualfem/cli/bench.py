@@ -13,7 +13,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from dualfem.cli.main import add_factor_arg, apply_factor, command
+from dualfem.cli.main import add_factor_arg, add_tol_arg, apply_factor, command
 from dualfem.core.errors import InputError
 
 
@@ -28,6 +28,7 @@ def _cfg(p):
                         "scene keys (a list is a grid dimension); repeatable")
     p.add_argument("-r", "--repeats", type=int, metavar="REPEATS", default=None,
                    help="timed repeats of every run and of the floor (overrides the spec)")
+    add_tol_arg(p)
     p.add_argument("--jobs", type=int, default=1, metavar="N",
                    help="parallel worker processes (joblib/loky); default 1 (timings are cleanest serially)")
     p.add_argument("--dask", metavar="ADDRESS", default=None,
@@ -63,9 +64,13 @@ def cmd_bench(args) -> int:
     from dualfem.core.errors import check_positive
 
     dask_timeout = check_positive("--dask-timeout", args.dask_timeout)
+    from dualfem.experiments.tolerance import check_tol
+
+    tol = check_tol(args.tol)
     opts = tuple(f"{flag} {shlex.quote(v)}" for flag, vals in (("-s", args.solver), ("-d", args.scene))
-                 for v in vals or ()) + ((f"-r {args.repeats}",) if args.repeats is not None else ())
-    selection = make_selection(args.solver, args.scene, args.repeats, opts)
+                 for v in vals or ()) + ((f"-r {args.repeats}",) if args.repeats is not None else ()) \
+        + ((f"--tol {tol:g}",) if tol is not None else ())
+    selection = make_selection(args.solver, args.scene, args.repeats, opts, tol)
     spec = load_spec(args.spec, selection)
     out = Path(args.out) if args.out else default_out("bench", spec.name)
     if sys.argv[1:2] == ["bench"]:

@@ -9,7 +9,7 @@ one JSON object on stdout; one progress line per finished solver goes to stderr.
 """
 from __future__ import annotations
 
-from dualfem.cli.main import add_factor_arg, add_scene_args, apply_factor, command, dumps, scene_from_args
+from dualfem.cli.main import add_factor_arg, add_scene_args, add_tol_arg, apply_factor, command, dumps, scene_from_args
 from dualfem.core.errors import InputError
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.core.scene import build_qp
@@ -22,6 +22,7 @@ def _cfg(p):
                    help="comma-separated solver names (default: every registered solver)")
     p.add_argument("-p", "--param", action="append", default=[], metavar="SOLVER.KEY=VALUE",
                    help="set a parameter of one solver, e.g. osqp.eps_abs=1e-6 (repeatable)")
+    add_tol_arg(p)
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
 
@@ -57,11 +58,14 @@ def cmd_compare(args) -> int:
             raise InputError(f"--solvers lists a solver twice: {args.solvers!r}")
     else:
         names = default_solvers()
+    from dualfem.experiments.tolerance import check_tol
+
+    tol = check_tol(args.tol)
     params = parse_solver_params(args.param, names)
     problem = scene_from_args(args)
     with c_stdout_to_stderr():
         qp = build_qp(problem)
-        result = compare_solvers(qp, names, params, progress=stderr_progress())
+        result = compare_solvers(qp, names, params, progress=stderr_progress(), tol=tol)
     if args.json:
         print(dumps(result))
     else:

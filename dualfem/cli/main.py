@@ -65,6 +65,14 @@ def add_param_args(p: argparse.ArgumentParser) -> None:
                    help="set a solver parameter (e.g. r=1e7, tol_outer=1e-5)")
 
 
+def add_tol_arg(p: argparse.ArgumentParser) -> None:
+    """``--tol T``: the certified tolerance (:mod:`dualfem.experiments.tolerance`)."""
+    p.add_argument("--tol", default=None, metavar="T",
+                   help="certify the answer to this relative energy-norm error of x, in (0, 1), and ask each solver "
+                        "for it (its tolerance_params); default: the solver's declared tolerance. -p tol=... is the "
+                        "solver's own stop rule")
+
+
 def scene_from_args(args: argparse.Namespace):
     """Problem instance from SCENE + --set."""
     from dualfem.core.scene import load_scene, parse_set
@@ -186,6 +194,7 @@ def _cfg_solve(p):
     add_scene_args(p)
     p.add_argument("--solver", default=DEFAULT_SOLVER, help=f"solver name (default {DEFAULT_SOLVER})")
     add_param_args(p)
+    add_tol_arg(p)
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.add_argument("--vtk", metavar="FILE.vtu", default=None,
                    help="also write the solution for ParaView (displacement, stresses, defect jump/pressure)")
@@ -201,11 +210,15 @@ def _cfg_solve(p):
 
 @command("solve", "solve one scene with one solver")(_cfg_solve)
 def cmd_solve(args) -> int:
+    from dualfem.core.registry import get_solver
     from dualfem.core.scene import parse_set
     from dualfem.core.solution import Status
     from dualfem.experiments.runner import make_solver, missing_reason, run, summary
+    from dualfem.experiments.tolerance import check_tol, explain, with_tolerance
 
-    solver = make_solver(args.solver, parse_set(args.param, "-p"))  # validate before the (slow) assembly
+    tol = check_tol(args.tol)
+    given = parse_set(args.param, "-p")
+    solver = make_solver(args.solver, with_tolerance(get_solver(args.solver), tol, given))  # before the assembly
     missing = missing_reason(solver)
     if missing:
         raise MissingDependency(missing)
@@ -236,7 +249,10 @@ def cmd_solve(args) -> int:
     hint = missing_fast_backend_hint(qp.n)
     if hint and not args.quiet:
         print(f"dualfem solve: note: {hint}", file=sys.stderr)
-    sol = run(solver, qp, progress=stages)
+    sol = run(solver, qp, progress=stages, tol=tol)
+    why = explain(sol, given, tol)
+    if why:
+        sol.message = f"{sol.message}; {why}" if sol.message else why
     rec = summary(qp, sol)
     rec["time_s"] = {**rec["time_s"], "assembly": t2 - t1, "total": time.perf_counter() - t0}
     rec["factor"] = factor

@@ -94,15 +94,19 @@ class Solver:
 
     def __init__(self, **params: Any) -> None:
         params = _apply_renames(self.name, self.renamed, params)
-        unknown = sorted(set(params) - set(self.defaults))
+        backend = _backend_options(self, params)
+        unknown = sorted(set(params) - set(self.defaults) - set(backend))
         if unknown:
             allowed = ", ".join(sorted(self.defaults)) or "(none)"
+            own = (f"; {self.name}'s backend options (from the installed library): {', '.join(sorted(backend))}"
+                   if backend else "")
             raise InputError(f"unknown parameter {unknown[0]!r} for solver {self.name!r}; "
-                             f"allowed: {allowed}")
+                             f"allowed: {allowed}{own}")
         merged = dict(self.defaults)
         words = self.allowed()
         for k, v in params.items():
-            merged[k] = _coerce(k, v, self.defaults[k], self.name, expect=words.get(k))
+            default = self.defaults[k] if k in self.defaults else backend[k]
+            merged[k] = _coerce(k, v, default, self.name, expect=words.get(k))
         self.params: dict[str, Any] = merged
         self.check_params()
         self.validate()
@@ -154,6 +158,19 @@ class Solver:
 
         Plugins map ``tol`` to their own options (e.g. OSQP's eps_abs/eps_rel); the default
         returns no change.
+        """
+        return {}
+
+    @classmethod
+    def backend_options(cls, params: dict[str, Any]) -> dict[str, Any]:
+        """The wrapped library's own settings this solver passes through, ``{name: default}``.
+
+        Read from the installed library (empty when it is missing or the solver wraps none, the
+        default); ``params``: the parameters given so far (a solver whose backend is a parameter, like
+        cvxpy's ``solver``, answers for that backend). A parameter that is neither in ``defaults`` nor
+        here is refused with both lists; one that is here is coerced to the type of the library's
+        default, kept in ``self.params`` under the library's name and handed to the library as given
+        (``-s 'osqp[rho=0.1]'``). Names in ``defaults`` or ``renamed`` keep dualfem's meaning.
         """
         return {}
 
@@ -286,6 +303,16 @@ def _fits(key: str, default: Any, spec: Any, solver: str) -> bool:
     except InputError:
         return False
     return True
+
+
+def _backend_options(solver: Solver, params: dict[str, Any]) -> dict[str, Any]:
+    """``solver.backend_options`` for the given parameters, less dualfem's own names (only asked when a
+    parameter is not in ``defaults``)."""
+    if not set(params) - set(solver.defaults):
+        return {}
+    given = {k: v for k, v in params.items() if k in solver.defaults}
+    opts = type(solver).backend_options({**solver.defaults, **given})
+    return {k: v for k, v in (opts or {}).items() if k not in solver.defaults and k not in solver.renamed}
 
 
 def _apply_renames(solver: str, renamed: dict[str, str], params: dict[str, Any]) -> dict[str, Any]:

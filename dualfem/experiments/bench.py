@@ -36,8 +36,8 @@ from dualfem.experiments.tasks import _canon, expand_scenes, expand_tasks, floor
 
 def _base_row(task: dict) -> Row:
     row = Row(run_id=task["run_id"], kind=task["kind"], started_utc=utc_now(), repeats_done=0)
-    for k in ("spec", "scene", "scene_key", "label", "solver", "variant", "tier", "tol", "repeats", "time_limit",
-              "cold_setup"):
+    for k in ("spec", "scene", "scene_key", "label", "solver", "variant", "tier", "tol", "grades", "repeats",
+              "time_limit", "cold_setup"):
         row[k] = task.get(k)
     row.solver_params = _canon(task.get("params", {}))
     for k, v in (task.get("scene_params") or {}).items():
@@ -97,6 +97,7 @@ def _execute_run(task: dict, qp, row: Row, tick) -> tuple[Row, dict | None]:
                solve_s=_median(solves), total_s=_median(total), setup_s_all=json.dumps(setups),
                solve_s_all=json.dumps(solves))
     row.set_residuals(sol.residuals, task.get("tol"))
+    row.set_certificate(sol.info.get("certificate"))
     if sol.x is not None and sol.residuals is not None and sol.residuals.get("finite"):
         if ref is None:
             row.message = (row.message + "; " if row.message else "") + "no certified reference: errors not measured"

@@ -60,7 +60,7 @@ from dualfem.numerics.certify import certified_error, solver_for
 #: deprecated alias of ``grade``)
 RUN_FIELDS = ("solver", "status", "grade", "verdict", "exact", "tolerance", "iterations", "energy", "time_s",
               "residuals", "kkt_error", "error_bound", "certificate", "diff", "n_contact", "message", "params",
-              "err_x_energy", "err_multipliers")
+              "err_x_energy", "err_multipliers", "grade_x", "grade_mu", "cert_x", "cert_mu")
 #: the deprecated ``verdict`` of each grade (see the module docstring)
 VERDICT_OF_GRADE = {"correct": "ok", "flagged": "wrong", "silent_wrong": "wrong", "failed": "failed",
                     "unverified": "unchecked", "skipped": "skipped", "timeout": "failed", "crashed": "failed"}
@@ -81,25 +81,27 @@ def default_solvers() -> list[str]:
 
 
 def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, dict] | None = None,
-                    progress: Callable[[str], None] | None = None) -> Comparison:
+                    progress: Callable[[str], None] | None = None, tol: float | None = None) -> Comparison:
     """Run ``names`` on ``qp``; return the comparison (see module docstring).
 
     ``params`` maps a solver name to its parameters. ``progress`` receives one line per finished
-    solver.
+    solver. ``tol``: the certified tolerance of every run (``--tol``, :mod:`dualfem.experiments.tolerance`:
+    each solver's ``tolerance_params(tol)`` under its ``params``); None: each solver's declared tolerance.
     """
     from dualfem.experiments.runner import make_solver
+    from dualfem.experiments.tolerance import with_tolerance
 
     if qp.n == 0:       # nothing to solve or cross-check (m = 0, no constraint, is an ordinary QP)
         raise InputError(f"compare needs a QP with at least one unknown; {qp.name!r} has n = 0")
     names = list(names) if names is not None else default_solvers()
     params = params or {}
-    insts = {nm: make_solver(nm, params.get(nm)) for nm in names}  # validate all before solving
+    insts = {nm: make_solver(nm, with_tolerance(get_solver(nm), tol, params.get(nm))) for nm in names}
     ksolve = solver_for(qp)
     rows: list[Row] = []
     sols: dict[str, Solution] = {}
     for nm, inst in insts.items():
         t0 = time.perf_counter()
-        row, sols[nm] = _run_one(qp, nm, inst, ksolve)
+        row, sols[nm] = _run_one(qp, nm, inst, ksolve, tol, params.get(nm))
         if sols[nm].info.get("qp_changed"):     # the runner's fingerprint: every later run would be void
             raise InputError(f"{sols[nm].message}; the comparison is stopped")
         rows.append(row)
@@ -118,14 +120,19 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     return out
 
 
-def _run_one(qp: QP, nm: str, inst, ksolve) -> tuple[Row, Solution]:
+def _run_one(qp: QP, nm: str, inst, ksolve, asked: float | None = None,
+             given: dict | None = None) -> tuple[Row, Solution]:
     """Solve with one solver; its row (not yet graded, no difference to a reference) and its solution."""
     from dualfem.experiments.runner import run
+    from dualfem.experiments.tolerance import explain
 
-    sol = run(inst, qp)           # hands the plugin a read-only view and checks qp's fingerprint afterwards
+    sol = run(inst, qp, tol=asked)  # hands the plugin a read-only view and checks qp's fingerprint afterwards
+    why = explain(sol, given, asked)
+    if why:
+        sol.message = f"{sol.message}; {why}" if sol.message else why
     finite = sol.residuals is not None and sol.residuals.get("finite", False)
     declared = sol.info.get("declared") or {}     # what the runner read and checked, not what the plugin says now
-    tol = float(declared.get("tolerance", get_solver(nm).tolerance))
+    tol = asked if asked is not None else float(declared.get("tolerance", get_solver(nm).tolerance))
     row = Row(kind="compare", run_id=f"compare:{nm}", scene=qp.name, n_unknowns=qp.n, n_constraints=qp.m,
               solver=nm, variant=nm, solver_params=jsonable_params(sol.params), tol=tol, status=str(sol.status),
               claimed_status=sol.info.get("claimed_status", str(sol.status)), message=sol.message,
@@ -147,6 +154,7 @@ def _run_one(qp: QP, nm: str, inst, ksolve) -> tuple[Row, Solution]:
                 cert = {"bound": float("nan"), "active_set": float("nan"), "value": float("nan"),
                         "error": f"{type(exc).__name__}: {exc}"}
         row["certificate"] = cert
+        row.set_certificate(cert)
         row["error_bound"] = 0.0 if reference.exact_zero(qp, sol.x, sol.multipliers) else cert["value"]
     return row, sol
 
@@ -166,6 +174,8 @@ def record(row: Row, ref: dict | None = None) -> dict[str, Any]:
         # errors against the reference (None without one): x in the energy norm, the multipliers
         # |mu - mu_ref|_inf / max(|mu_ref|_inf, |F|_inf)
         "err_x_energy": row.err_x_energy, "err_multipliers": row.err_multipliers,
+        # graded apart (dualfem.core.grade): the displacements, the multipliers, and their certificates
+        "grade_x": row.grade_x, "grade_mu": row.grade_mu, "cert_x": row.cert_x, "cert_mu": row.cert_mu,
     }
 
 
@@ -268,7 +278,8 @@ def table(result: dict) -> str:
             lines.append(f"  {msg}" if msg.startswith(r["solver"]) else f"  {r['solver']}: {msg}")
     lines.append("dx_K: relative energy-norm difference to the reference; dmu: multipliers, relative to "
                  "max(|mu_ref|, |F|); bound: certified relative energy-norm error bound (- where x is infeasible); "
-                 "tol: the solver's declared tolerance; contact: contact set vs the reference; grade: "
+                 "tol: the certified tolerance (--tol, else the solver's declared one); contact: contact set vs the "
+                 "reference; grade: "
                  "dualfem.core.grade (correct, failed, flagged, silent_wrong, unverified, skipped)")
     if result["silent_wrong"]:
         lines.append("SILENT WRONG ANSWER: " + ", ".join(result["silent_wrong"]) +

@@ -214,7 +214,7 @@ def timed_runs(task: dict, qp, name: str, params: dict, tick, warmup: bool, repe
         tick("warmup", task["hard_limit"])
         if task.get("cold_setup", True):
             linalg.store_of(qp).clear()
-        sol = run(name, qp, params, tol=task.get("tol"))
+        sol = run(name, qp, params, tol=task.get("tol"), grades=task.get("grades"))
         if sol.status in stop:     # nothing to time: report the warm-up as is
             return sol, [sol.time_s["setup"]], [sol.time_s["solve"]], 0, "from the warm-up run", None
     done = 0
@@ -226,7 +226,7 @@ def timed_runs(task: dict, qp, name: str, params: dict, tick, warmup: bool, repe
             earlier.append([(smp.iteration, smp.time_s) for smp in monitor.samples])
         monitor = None
         monitor = IterateMonitor(qp.n, qp.m) if task.get("curves") else None
-        sol = run(name, qp, params, tol=task.get("tol"), monitor=monitor)
+        sol = run(name, qp, params, tol=task.get("tol"), monitor=monitor, grades=task.get("grades"))
         setups.append(sol.time_s["setup"])
         solves.append(sol.time_s["solve"])
         statuses.append(str(sol.status))

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 from dualfem.core.evaluator import RESIDUALS
-from dualfem.core.grade import grade
+from dualfem.core.grade import combined, grade, grade_multipliers
 from dualfem.core.io import jsonable
 
 
@@ -40,6 +40,9 @@ class Row:
     status: str | None = None
     claimed_status: str | None = None
     grade: str | None = None
+    grades: str | None = None                # what the tier grades: "x" or "x,mu" (dualfem.core.grade)
+    grade_x: str | None = None               # the displacements' grade
+    grade_mu: str | None = None              # the multipliers' grade
     message: str = ""
     iterations: dict = field(default_factory=dict)
     main_iterations: float | None = None
@@ -64,6 +67,8 @@ class Row:
     err_x_max: float | None = None
     err_multipliers: float | None = None
     err_energy: float | None = None
+    cert_x: float | None = None              # the runner's certified energy-norm error bound of x
+    cert_mu: float | None = None             # its certified multiplier error, beyond the rounding floor of mu*
     contact_mismatch: int | None = None
     ref_solver: str | None = None
     ref_kkt: float | None = None
@@ -121,10 +126,43 @@ class Row:
         self.within_tol = bool(tol is not None and math.isfinite(tol) and self.kkt_error <= tol)
 
     def regrade(self) -> str:
-        """Set and return :attr:`grade` from the row's status, error, KKT error and tolerance."""
+        """Set :attr:`grade_x`, :attr:`grade_mu` and :attr:`grade` (returned) from the row's status, errors,
+        certificates, KKT error and tolerance (:mod:`dualfem.core.grade`).
+
+        ``grades`` None (compare, stress: runs certified at the declared tolerance, x and multipliers
+        both): the grade of the certified status and x's error, as before grades were separated. Under
+        ``"x,mu"`` a run the runner demoted for its multipliers alone
+        (claimed ``solved``, KKT error and certified x error within ``tol``, certified multiplier error
+        above it) keeps a ``grade_x`` of its x.
+        """
         tol = self.tol if self.tol is not None and math.isfinite(self.tol) else float("nan")
-        self.grade = grade(self.status or "error", self.err_x_energy, self.kkt_error, tol, self.ref_bound)
+        status = self.status or "error"
+        status_x = "solved" if self._demoted_for_multipliers(tol) else status
+        self.grade_x = grade(status_x, self.err_x_energy, self.kkt_error, tol, self.ref_bound)
+        self.grade_mu = grade_multipliers(status_x, self.err_multipliers, self.kkt_error, tol, self.ref_bound,
+                                          self.cert_mu)
+        self.grade = (grade(status, self.err_x_energy, self.kkt_error, tol, self.ref_bound) if not self.grades
+                      else combined(self.grade_x, self.grade_mu, self.grades))
         return self.grade
+
+    def _demoted_for_multipliers(self, tol: float) -> bool:
+        def fin(v: Any) -> bool:
+            return isinstance(v, (int, float)) and math.isfinite(v)
+
+        return bool(self.status == "inaccurate" and self.claimed_status == "solved" and fin(self.kkt_error)
+                    and self.kkt_error <= tol and fin(self.cert_mu) and self.cert_mu > tol
+                    and (not fin(self.cert_x) or self.cert_x <= tol))
+
+    def set_certificate(self, cert: dict | None) -> None:
+        """Copy the runner's certificate (``Solution.info["certificate"]``): ``cert_x`` its energy-norm
+        bound, ``cert_mu`` its multiplier error beyond the rounding floor of mu* (None when absent)."""
+        def ok(v: Any) -> bool:
+            return isinstance(v, (int, float)) and math.isfinite(v)
+
+        cert = cert if isinstance(cert, dict) else {}
+        val, mu, floor = cert.get("value"), cert.get("multipliers"), cert.get("multipliers_floor", 0.0)
+        self.cert_x = float(val) if ok(val) else None
+        self.cert_mu = max(float(mu) - (float(floor) if ok(floor) else 0.0), 0.0) if ok(mu) else None
 
     # ----------------------------------------------------------- serialisation
     def to_dict(self) -> dict:

@@ -76,7 +76,8 @@ def missing_reason(solver: Solver) -> str | None:
 
 
 def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, tol: float | None = None,
-        progress: Callable[[str, float], None] | None = None, monitor: Any = None) -> Solution:
+        progress: Callable[[str, float], None] | None = None, monitor: Any = None,
+        grades: str | None = None) -> Solution:
     """Solve ``qp`` with ``solver`` (an instance, or a registry name plus ``params``).
 
     ``tol``: the relative accuracy asked for (e.g. a benchmark tier, with the parameters of
@@ -86,7 +87,9 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
     each stage (setup, solve, certify) finishes. ``monitor``: an iterate monitor
     (:class:`dualfem.experiments.curves.IterateMonitor`) attached to the solver for ``solve()`` only
     (:meth:`dualfem.core.solver.Solver.report_iterate`); the time spent in it is not counted in the
-    solve time, and the answer returned becomes its last sample.
+    solve time, and the answer returned becomes its last sample. ``grades``: what ``tol`` certifies
+    (:data:`dualfem.core.grade.GRADED`): ``"x"`` leaves the multipliers' certificate out of the status
+    (it is still computed and reported), None or ``"x,mu"`` certifies both.
 
     Nothing the plugin says about itself is trusted (docs/plugins.md, sections 1.1-1.3):
 
@@ -127,7 +130,7 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
         monitor.finish(sol.x, sol.multipliers, att.solve_s)
     sol.params = _params(solver)
     sol.info["declared"] = {"tolerance": att.declared[0], "exact": att.declared[1]}
-    return _certified(qp, sol, att, tol, tick)
+    return _certified(qp, sol, att, tol, tick, grades != "x")
 
 
 @dataclass
@@ -203,12 +206,14 @@ def _attach(solver: Any, monitor: Any, t1: float, setup_s: float) -> bool:
     return monitor is not None
 
 
-def _certified(qp: QP, sol: Solution, att: _Attempt, tol: float | None, tick: Callable[[str, float], None]) -> Solution:
+def _certified(qp: QP, sol: Solution, att: _Attempt, tol: float | None, tick: Callable[[str, float], None],
+               multipliers: bool = True) -> Solution:
     """The evaluator's residuals and the certificate (to ``tol`` if asked, else the declared tolerance)."""
     attach_residuals(qp, sol)
     t3 = time.perf_counter()
     asked = None if tol is None or not np.isfinite(tol) else float(tol)
-    certify_status(qp, sol, att.declared[0] if asked is None else asked, att.declared[1], reduction=att.reduction)
+    certify_status(qp, sol, att.declared[0] if asked is None else asked, att.declared[1], reduction=att.reduction,
+                   multipliers=multipliers)
     bad = [k for k in (*evaluator.RESIDUALS, "energy") if sol.residuals is not None
            and not np.isfinite(sol.residuals.get(k, np.nan))]
     if sol.status == Status.SOLVED and bad:     # e.g. x = 1e308: K x overflows, NaN > tol is False
@@ -385,8 +390,12 @@ def fingerprint(qp: QP) -> dict[str, int]:
     return out
 
 
-def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: Any = None) -> Solution:
+def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: Any = None,
+                   multipliers: bool = True) -> Solution:
     """Demote an uncertified ``solved`` claim to ``inaccurate`` (see the module docstring).
+
+    ``multipliers=False``: a certified multiplier error above ``tol`` is reported in the message but
+    does not demote (a tier that grades x only, :mod:`dualfem.core.grade`).
 
     ``reduction``: the solver's LocalReduction of ``qp`` (``Solver.reduction``), reused if valid, or the hints of
     its matrix-free operator (:class:`dualfem.numerics.certify.OperatorHints`).
@@ -422,6 +431,9 @@ def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: An
         if np.isfinite(cert) and cert > tol:
             why = (f"certified energy-norm error bound {cert:.1e} exceeds the declared tolerance {tol:g} "
                    f"(residuals are within it)")
+        elif np.isfinite(cmu) and cmu > tol and not multipliers:
+            sol.message = (f"{sol.message}; " if sol.message else "") + \
+                f"certified multiplier error {cmu:.1e} exceeds {tol:g} (not graded: x only)"
         elif np.isfinite(cmu) and cmu > tol:
             why = (f"certified multiplier error {cmu:.1e} (|mu - mu*|_inf against the exact multipliers of the "
                    f"verified active set, relative to max(|mu*|, |F|), beyond their rounding floor "

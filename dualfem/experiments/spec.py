@@ -15,6 +15,8 @@ A sweep is described by a TOML spec (see ``benchmarks/default.toml``)::
                            # never read from a store; false: every run after the first reuses it
     curves = false         # true: record each run's error along its iterations (curves.csv beside
                            # results.csv, dualfem.experiments.curves); only solvers reporting iterates
+    grades = "x"           # what every tier grades: "x" (default: the displacements, energy norm) or
+                           # "x,mu" (the multipliers too); dualfem.core.grade says why
     [tiers]                # tolerance tiers -> each solver's Solver.tolerance_params(tol)
     low = 1e-3
     high = 1e-9
@@ -52,11 +54,12 @@ from pathlib import Path
 from typing import Any
 
 from dualfem.core.errors import InputError
+from dualfem.core.grade import DEFAULT_GRADES, check_grades
 from dualfem.core.solver import reference_solvers
 from dualfem.experiments.spec_select import Selection, apply_selection, effective_text
 
 SPEC_KEYS = {"name", "description", "repeats", "warmup", "time_limit", "guard_factor", "guard_slack",
-             "build_limit", "cold_setup", "curves", "tiers", "reference", "floor", "scenes", "solvers"}
+             "build_limit", "cold_setup", "curves", "tiers", "grades", "reference", "floor", "scenes", "solvers"}
 
 
 SCENE_KEYS_RESERVED = {"scene", "repeats", "warmup"}
@@ -96,6 +99,7 @@ class Spec:
     cold_setup: bool = True
     curves: bool = False
     tiers: dict[str, float] = field(default_factory=dict)
+    grades: str = DEFAULT_GRADES
     reference: dict[str, Any] = field(default_factory=dict)
     floor: dict[str, Any] = field(default_factory=dict)
     scenes: list[dict[str, Any]] = field(default_factory=list)
@@ -228,6 +232,11 @@ def _parse_top(s: Spec, data: dict) -> None:
         s.cold_setup = _bool("cold_setup", data["cold_setup"])
     if "curves" in data:
         s.curves = _bool("curves", data["curves"])
+    if "grades" in data:
+        try:
+            s.grades = check_grades(data["grades"])
+        except ValueError as exc:
+            raise InputError(str(exc)) from None
 
 
 def _parse_tiers(s: Spec, data: dict) -> None:

@@ -10,6 +10,8 @@
   restricted to SCENE; a scene the spec does not name is added as a new block. Each ``KEY=V`` replaces
   that scene key in those blocks (a list is a grid dimension, as in the spec).
 * ``-r REPEATS``: the timed repeats of every run and of the floor (top level and every block).
+* ``--tol T``: one tier ``tol = T`` instead of the spec's ``[tiers]`` (every solver block runs it): the
+  certified tolerance of every run (:mod:`dualfem.experiments.tolerance`).
 
 Values are TOML values (``1e-9``, ``true``, ``[16, 32]``, ``"f2"``); a bare word that is not one is a
 string (``backend=clarabel``). Commas inside brackets or quotes do not split. The result is the
@@ -48,9 +50,10 @@ class Selection:
     scenes: tuple[Pick, ...] = ()
     repeats: int | None = None
     options: tuple[str, ...] = field(default=(), compare=False)
+    tol: float | None = None
 
     def __bool__(self) -> bool:
-        return bool(self.solvers or self.scenes or self.repeats is not None)
+        return bool(self.solvers or self.scenes or self.repeats is not None or self.tol is not None)
 
 
 def parse_pick(text: str, option: str) -> Pick:
@@ -116,7 +119,7 @@ def _value(raw: str) -> Any:
 
 
 def make_selection(solvers: list[str] | None, scenes: list[str] | None, repeats: int | None,
-                   options: tuple[str, ...] = ()) -> Selection:
+                   options: tuple[str, ...] = (), tol: float | None = None) -> Selection:
     """The selection of the command line's ``-s``/``-d``/``-r`` options, each checked."""
     if repeats is not None:
         from dualfem.experiments.spec import MAX_REPEATS
@@ -124,7 +127,7 @@ def make_selection(solvers: list[str] | None, scenes: list[str] | None, repeats:
         if isinstance(repeats, bool) or not isinstance(repeats, int) or not 1 <= repeats <= MAX_REPEATS:
             raise InputError(f"-r/--repeats must be an integer in 1..{MAX_REPEATS}, got {repeats!r}")
     return Selection(tuple(parse_pick(s, "-s/--solver") for s in solvers or ()),
-                     tuple(parse_pick(d, "-d/--scene") for d in scenes or ()), repeats, tuple(options))
+                     tuple(parse_pick(d, "-d/--scene") for d in scenes or ()), repeats, tuple(options), tol)
 
 
 def apply_selection(data: dict, sel: Selection) -> dict:
@@ -141,6 +144,10 @@ def apply_selection(data: dict, sel: Selection) -> dict:
                 blk["repeats"] = sel.repeats
         if isinstance(out.get("floor"), dict) and "repeats" in out["floor"]:
             out["floor"]["repeats"] = sel.repeats
+    if sel.tol is not None:
+        out["tiers"] = {"tol": sel.tol}
+        for blk in _blocks(out.get("solvers")):
+            blk.pop("tiers", None)
     return out
 
 

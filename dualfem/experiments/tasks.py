@@ -131,6 +131,7 @@ def expand_tasks(spec: Spec, scenes: list[SceneSpec] | None = None) -> list[dict
                         params["time_limit"] = float(time_limit)
                     tol = spec.tiers.get(tier, float("nan"))
                     ident = {"scene": sc.key, "solver": name, "params": params, "tier": tier, "tol": tol,
+                             "grades": spec.grades,
                              "repeats": repeats, "warmup": sc.warmup, "cold": spec.cold_setup,
                              "time_limit": time_limit}
                     if spec.curves:         # a monitored run is its own run (its solve_s excludes the monitor)
@@ -138,6 +139,7 @@ def expand_tasks(spec: Spec, scenes: list[SceneSpec] | None = None) -> list[dict
                     task = {"kind": "run", "run_id": _hash(ident), "spec": spec.name, "scene": sc.scene,
                             "scene_params": sc.params, "scene_key": sc.key, "label": sc.label,
                             "solver": name, "variant": variant, "params": params, "tier": tier, "tol": tol,
+                            "grades": spec.grades,
                             "repeats": repeats, "warmup": sc.warmup, "cold_setup": spec.cold_setup,
                             "time_limit": time_limit, "hard_limit": hard_limit,
                             "build_limit": spec.build_limit, "curves": spec.curves}

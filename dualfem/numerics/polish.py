@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
+from dualfem.core import evaluator
 from dualfem.core.qp import QP
 from dualfem.numerics.certify import guess_active_set
 from dualfem.numerics.linalg import LocalReduction
@@ -92,3 +93,16 @@ def refine_on_active_set(qp: QP, red, x: np.ndarray, mu: np.ndarray, steps: int,
         x, Kx, mu, r0 = x1, Kx1, mu1, r1
         kept += 1
     return x, mu, kept
+
+
+def polish_if_better(qp: QP, x: np.ndarray, z: np.ndarray):
+    """(x, z, info): :func:`active_set_polish` of (x, z), kept only if it is consistent and lowers the
+    evaluator's KKT error (``info["polished"]`` says which; ``info["kkt_before_polish"]`` the error before).
+    Used by the clarabel and ``qp_<backend>`` plugins."""
+    before = evaluator.kkt_error(evaluator.residuals(qp, x, z))
+    out = active_set_polish(qp, x, z)
+    if out is not None:
+        xs, zs = out[0], out[1]
+        if evaluator.kkt_error(evaluator.residuals(qp, xs, zs)) < before:
+            return xs, zs, {"polished": True, "kkt_before_polish": before}
+    return x, z, {"polished": False, "kkt_before_polish": before}

@@ -4,9 +4,11 @@ For each tier (and each delta within it): success rate, qpbenchmark's correct ra
 claims (:mod:`dualfem.reports._correct_rate`), and the shifted geometric mean of time. Render
 only: everything comes from the rows of ``results.csv``.
 
-Time of a run = setup + solve (s). Shifted geometric mean (qpbenchmark): exp(mean(log(t + shift))) -
-shift over the scenes that every ranked solver of the table ran, a run that is not a success counted
-at its time limit; normalised to the best solver of the table (1.00 = best).
+Time of a run = setup + solve (s). A run that is not a success is shown as a failure (the success
+rate), never charged a time: the shifted geometric mean exp(mean(log(t + shift))) - shift of a solver
+is over its successful runs only, with their number beside it, normalised to the best solver of the
+table (1.00 = best). qpbenchmark's convention (every scene that all ranked solvers ran, a run that is
+not a success counted at its time limit) is a separate column labelled so.
 """
 from __future__ import annotations
 
@@ -43,17 +45,18 @@ def rank_table(runs: list[dict], tier: str, tol: float, shift: float,
     stats = []
     for var, d in by_var.items():
         st = claim_stats(d.values(), tol)
-        times = []
+        qpb = []
         for key in sorted(common):
             r = d[key]
-            ok = certified_correct(r, tol) and r["status"] != "time_limit"
             t, tl = _f(r.get("total_s")), _f(r.get("time_limit"))
-            times.append(t if ok and math.isfinite(t) else (tl if math.isfinite(tl) else t))
-        times = [t for t in times if math.isfinite(t)]
+            qpb.append(t if _success(r, tol) and math.isfinite(t) else (tl if math.isfinite(tl) else t))
+        qpb = [t for t in qpb if math.isfinite(t)]
+        times = [t for r in d.values() if _success(r, tol) and math.isfinite(t := _f(r.get("total_s")))]
         st.update(variant=var, n=st["runs"], success=st["success_rate"], correct=st["correct_rate"],
-                  sgm=_sgm(times, shift), gm=_sgm([max(t, 1e-6) for t in times], 0.0))
+                  n_timed=len(times), sgm=_sgm(times, shift), gm=_sgm([max(t, 1e-6) for t in times], 0.0),
+                  sgm_qpb=_sgm(qpb, shift))
         stats.append(st)
-    for key in ("sgm", "gm"):
+    for key in ("sgm", "gm", "sgm_qpb"):
         best = min((s[key] for s in stats if math.isfinite(s[key])), default=float("nan"))
         for s in stats:
             s[key + "_rel"] = s[key] / best if best and math.isfinite(best) and best > 0 else float("nan")
@@ -61,6 +64,11 @@ def rank_table(runs: list[dict], tier: str, tol: float, shift: float,
                               s["sgm"] if math.isfinite(s["sgm"]) else math.inf,
                               -(s["correct"] if math.isfinite(s["correct"]) else -1), s["variant"]))
     return stats, len(common)
+
+
+def _success(r: dict, tol: float) -> bool:
+    """A certified correct run within its time limit (the success rate's numerator)."""
+    return certified_correct(r, tol) and r["status"] != "time_limit"
 
 
 def _wrong(s: dict) -> str:
@@ -73,30 +81,40 @@ def _tier_section(runs: list[dict], tier: str, tol: float, shift: float, deltas:
     if not stats:
         return []
     L = [f"### tier {tier} (tol {tol:g})", "",
-         f"All deltas. Shifted geometric mean of time over the {ncommon} scenes every solver of this tier ran.", "",
+         "All deltas. Time: shifted geometric mean over each solver's successful runs (how many in brackets); "
+         f"the last column is qpbenchmark's convention over the {ncommon} scenes every solver of this tier ran, "
+         "a run that is not a success counted at its time limit.", "",
          "| rank | solver | runs | success rate | solved claims | certified correct | correct rate | claims agree "
-         "| wrong claims | shifted GM of time (rel.) | plain GM of time (rel.) |",
-         "|---|---|---|---|---|---|---|---|---|---|---|"]
+         "| wrong claims | shifted GM of time of successes (rel.) | plain GM (rel.) "
+         "| qpbenchmark convention: failures at the time limit (rel.) |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for i, s in enumerate(stats, 1):
         over = f" ({s['over_time']} over time)" if s["over_time"] else ""
         L.append(f"| {i} | {s['variant']} | {s['runs']} | {pct(s['success'])} | {s['claims']} | {s['certified']}{over} "
-                 f"| {pct(s['correct'])} | {pct(s['agree'])} | {_wrong(s)} | {_fmt(s['sgm_rel'], '.2f')} "
-                 f"({_fmt(s['sgm'])} s) | {_fmt(s['gm_rel'], '.2f')} |")
+                 f"| {pct(s['correct'])} | {pct(s['agree'])} | {_wrong(s)} | {_time(s)} | {_fmt(s['gm_rel'], '.2f')} "
+                 f"| {_fmt(s['sgm_qpb_rel'], '.2f')} ({_fmt(s['sgm_qpb'])} s) |")
     L.append("")
     if len(deltas) > 1:
         per = {d: {s["variant"]: s for s in rank_table(runs, tier, tol, shift, d)[0]} for d in deltas}
-        L += [f"Per delta (tier {tier}): success rate / correct rate / shifted GM of time relative to the best "
-              "solver at that delta; rows in the order of the table above.", "",
+        L += [f"Per delta (tier {tier}): success rate / correct rate / shifted GM of the time of successes relative "
+              "to the best solver at that delta (`failed`: no success to time); rows in the order of the table "
+              "above.", "",
               "| solver | " + " | ".join(f"delta = {d:g}" for d in deltas) + " |", "|---" * (len(deltas) + 1) + "|"]
         for s in stats:
             cells = []
             for d in deltas:
                 x = per[d].get(s["variant"])
-                cells.append("" if x is None else f"{pct(x['success'])} / {pct(x['correct'])} / "
-                                                  f"{_fmt(x['sgm_rel'], '.2f')}")
+                time = _fmt(x['sgm_rel'], '.2f') if x is not None and x["n_timed"] else "failed"
+                cells.append("" if x is None else f"{pct(x['success'])} / {pct(x['correct'])} / {time}")
             L.append(f"| {s['variant']} | " + " | ".join(cells) + " |")
         L.append("")
     return L
+
+
+def _time(s: dict) -> str:
+    if not s["n_timed"]:
+        return "failed (no success)"
+    return f"{_fmt(s['sgm_rel'], '.2f')} ({_fmt(s['sgm'])} s, {s['n_timed']} runs)"
 
 
 def tiers_of(runs: list[dict]) -> list[tuple[str, float]]:
@@ -114,9 +132,10 @@ def ranking(runs: list[dict], shift: float) -> list[str]:
     tiers = tiers_of(runs)
     deltas = deltas_of(runs)
     L = ["## Per tolerance tier and delta", "", DEFINITION + " " + SUCCESS, "",
-         f"Solvers are ranked by success rate, then by the shifted geometric mean of time (shift {shift:g} s; a run "
-         "that is not a success counts at its time limit), then by correct rate. *wrong claims* splits the checkable "
-         "solved claims that are not certified correct: *demoted* (dualfem's certification turned the claim into "
+         f"Solvers are ranked by success rate, then by the shifted geometric mean of time of their successful runs "
+         f"(shift {shift:g} s; a failed run is a failure, never a time), then by correct rate. "
+         "*wrong claims* splits the checkable solved claims that are not certified correct: *demoted* "
+         "(dualfem's certification turned the claim into "
          "`inaccurate`, or the run ended otherwise), *flagged* (status solved to the solver's declared tolerance, "
          "KKT residual above the tier's), *silent wrong* (residuals within tol, answer off the reference); "
          "*unverified* claims (no certified reference) are not wrong claims and not in the correct rate. A "

@@ -30,7 +30,7 @@ import math
 from collections.abc import Iterable
 from typing import Any
 
-from dualfem.core.grade import grade
+from dualfem.core.grade import combined, grade, grade_multipliers
 
 #: the correct rate in words (both reports print it)
 DEFINITION = (
@@ -39,7 +39,8 @@ DEFINITION = (
     "before dualfem certifies it) is `solved`, and *certified correct* means `dualfem.core.grade` grades it "
     "`correct`: dualfem's certification kept the claim (status still `solved`), the evaluator's largest KKT "
     "residual is <= tol, and the relative energy-norm error against the certified reference is <= tol + the "
-    "reference's certified bound; a claim is checkable unless no certified reference exists to measure its error "
+    "reference's certified bound (where the tier grades `x,mu`, the multipliers' error and certificate too); "
+    "a claim is checkable unless no certified reference exists to measure its error "
     "(*unverified*, counted apart). qpbenchmark's code averages `found == (found and within tolerances)` over "
     "every run; that number, 1 - wrong claims / runs, is the column *claims agree* (an honest failure agrees).")
 #: the success rate in words (bench report)
@@ -77,9 +78,20 @@ def certified_correct(r: Any, tol: float | None = None) -> bool:
     """Whether run ``r`` is graded ``correct``: at ``tol`` (regraded) or, with ``tol=None``, by its own grade."""
     if tol is None:
         return _get(r, "grade") == "correct"
+    return _grade_at(r, float(tol)) == "correct"
+
+
+def _grade_at(r: Any, tol: float) -> str:
+    """The run's grade regraded at ``tol``: x's, or the worse of x's and the multipliers' where the row's
+    tier grades ``"x,mu"`` (:mod:`dualfem.core.grade`)."""
     slack = _f(_get(r, "ref_bound"))
-    return grade(_certified_status(r), _f(_get(r, "err_x_energy")), _f(_get(r, "kkt_error")), float(tol),
-                 slack if math.isfinite(slack) else 0.0) == "correct"
+    slack = slack if math.isfinite(slack) else 0.0
+    status, kkt = _certified_status(r), _f(_get(r, "kkt_error"))
+    gx = grade(status, _f(_get(r, "err_x_energy")), kkt, tol, slack)
+    if _get(r, "grades") != "x,mu":
+        return gx
+    gmu = grade_multipliers(status, _f(_get(r, "err_multipliers")), kkt, tol, slack, _f(_get(r, "cert_mu")))
+    return combined(gx, gmu, "x,mu")
 
 
 def claim_stats(rows: Iterable[Any], tol: float | None = None) -> dict[str, Any]:
@@ -104,9 +116,7 @@ def claim_stats(rows: Iterable[Any], tol: float | None = None) -> dict[str, Any]
             out["certified"] += 1
             out["over_time"] += str(_get(r, "status")) == "time_limit"
             continue
-        g = _get(r, "grade") if tol is None else grade(
-            _certified_status(r), _f(_get(r, "err_x_energy")), _f(_get(r, "kkt_error")), float(tol),
-            _f(_get(r, "ref_bound")) if math.isfinite(_f(_get(r, "ref_bound"))) else 0.0)
+        g = _get(r, "grade") if tol is None else _grade_at(r, float(tol))
         key = {"flagged": "flagged", "silent_wrong": "silent_wrong", "unverified": "unverified"}.get(str(g), "demoted")
         out[key] += 1
     n, c = out["runs"], out["claims"]
