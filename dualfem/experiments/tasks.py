@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from dualfem.core.grade import DEFAULT_GRADES
 from dualfem.experiments.spec import SCENE_KEYS_RESERVED, Spec, _as_list, _grid
 
 
@@ -131,9 +132,10 @@ def expand_tasks(spec: Spec, scenes: list[SceneSpec] | None = None) -> list[dict
                         params["time_limit"] = float(time_limit)
                     tol = spec.tiers.get(tier, float("nan"))
                     ident = {"scene": sc.key, "solver": name, "params": params, "tier": tier, "tol": tol,
-                             "grades": spec.grades,
                              "repeats": repeats, "warmup": sc.warmup, "cold": spec.cold_setup,
                              "time_limit": time_limit}
+                    if spec.grades != DEFAULT_GRADES:   # the default keeps the run ids of earlier sweeps
+                        ident["grades"] = spec.grades
                     if spec.curves:         # a monitored run is its own run (its solve_s excludes the monitor)
                         ident["curves"] = True
                     task = {"kind": "run", "run_id": _hash(ident), "spec": spec.name, "scene": sc.scene,
