@@ -203,3 +203,21 @@ def test_help_names_no_deprecated_parameter_or_option(cmd, capsys):
     assert "-s SOLVER[KEY=V,...]" in text
     assert not [w for w in old if w in text], [w for w in old if w in text]
     assert "--solvers" not in text and "--param" not in text
+
+
+def test_report_help_names_each_kinds_default_output(capsys):
+    """``dualfem report --help`` lists every report kind's default output as that kind's own --help says it."""
+    from dualfem.cli.report import DEFAULT_OUTPUT, reports
+
+    assert set(DEFAULT_OUTPUT) == set(reports())
+    assert main(["report", "--help"]) == 0
+    top = " ".join(capsys.readouterr().out.split())
+    for kind, where in DEFAULT_OUTPUT.items():
+        assert f"{kind} {where}" in top.replace("- ", "-")
+        try:
+            rc = main(["report", kind, "--help"])
+        except SystemExit as exc:                    # a report kind's own argparse may exit after --help
+            rc = exc.code
+        assert rc in (0, None)
+        own = "".join(capsys.readouterr().out.split())        # argparse wraps (and may break at '-')
+        assert "".join((where.split(" (")[0] if kind == "robustness" else where).split()) in own, kind

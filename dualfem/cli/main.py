@@ -28,14 +28,17 @@ from dualfem.core.errors import InputError, MissingDependency
 DEFAULT_SOLVER = "uzawa_auto"
 #: the largest ``--max-memory`` accepted, in GB
 MAX_MEMORY_GB = 1e6
-_COMMANDS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {}
+_COMMANDS: dict[str, tuple[str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {}
+_DESCRIPTIONS: dict[str, str] = {}
 
 
-def command(name: str, help: str):
-    """Register a sub-command: decorate ``run(args) -> exit code``; ``configure`` adds options."""
+def command(name: str, help: str, description: str | None = None):
+    """Register a sub-command: decorate ``run(args) -> exit code``; ``configure`` adds options. ``help`` is
+    its line in ``dualfem --help``, ``description`` (default: ``help``) the head of ``dualfem NAME --help``."""
     def deco(configure):
         def wrap(run):
             _COMMANDS[name] = (help, configure, run)
+            _DESCRIPTIONS[name] = description or help
             return run
         return wrap
     return deco
@@ -334,7 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"dualfem {version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (help_, configure, _) in _COMMANDS.items():
-        configure(sub.add_parser(name, help=help_, description=help_))
+        configure(sub.add_parser(name, help=help_, description=_DESCRIPTIONS.get(name, help_)))
     return parser
 
 
