@@ -221,3 +221,23 @@ def test_report_help_names_each_kinds_default_output(capsys):
         assert rc in (0, None)
         own = "".join(capsys.readouterr().out.split())        # argparse wraps (and may break at '-')
         assert "".join((where.split(" (")[0] if kind == "robustness" else where).split()) in own, kind
+
+
+@pytest.mark.parametrize("argv,folder", [
+    (["--quick"], "quick"), (["--quick", "--scene", "two_defects"], "quick-two_defects"),
+    (["--scene", "scenes/curved.toml"], "full-curved")])
+def test_stress_default_folder_is_unique_per_scene(argv, folder, monkeypatch, capsys):
+    """The README's consecutive `stress --quick` and `stress --quick --scene two_defects` use two folders."""
+    import dualfem.experiments.stress as stress
+
+    monkeypatch.setattr(stress, "holds_results", lambda out: "a grid")   # every folder 'holds' a grid: refused
+    assert main(["stress", *argv]) == 2
+    assert f"--out 'dualfem-results/stress/{folder}' already holds results" in capsys.readouterr().err
+
+
+def test_bench_default_folder_is_unique_per_selection():
+    from dualfem.cli.bench import default_name
+
+    assert default_name("small", ()) == "small"
+    a, b = default_name("small", ("-s pdas",)), default_name("small", ("-s osqp",))
+    assert a != b and a.startswith("small-") and len(a) == len("small-") + 8
