@@ -141,6 +141,8 @@ def test_malformed_solver_selection_is_one_line_in_every_command(cmd, bad, tmp_p
     ("solve", "--max-memory", "nan", ["--max-memory", "(0, "]),
     ("compare", "--max-memory", "0", ["--max-memory", "(0, "]),
     ("testset", "--max-memory", "-3", ["--max-memory", "(0, "]),
+    ("testset", "--max-memory", "lots", ["--max-memory", "(0, "]),
+    ("solve", "--max-memory", "lots", ["--max-memory", "number of GB in (0, "]),
 ])
 def test_numeric_options_refused_in_one_line_with_range(cmd, flag, value, needles, tmp_path, capsys):
     argv = ["testset", "--out", str(tmp_path / "t")] if cmd == "testset" else _argv(cmd, tmp_path)
