@@ -26,6 +26,9 @@ class OneLineParser(argparse.ArgumentParser):
     """An ArgumentParser whose usage errors are one line on stderr (exit 2), not the usage text."""
 
     def error(self, message: str):  # type: ignore[override]
+        import re
+
+        message = re.sub(r"^argument (\S+): must ", r"\1 must ", message)   # "-r/--repeats must be ..."
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
@@ -83,11 +86,13 @@ def parse_solvers(values: list[str] | None, option: str = "-s/--solver") -> list
 
 def spelled(name: str, params: dict[str, Any]) -> str:
     """The ``-s`` spelling of a solver and its parameters, shell-quoted when it has any (for messages)."""
+    import json
     import shlex
 
     if not params:
         return name
-    return shlex.quote(f"{name}[{','.join(f'{k}={v}' for k, v in params.items())}]")
+    words = (f"{k}={v if isinstance(v, str) else json.dumps(v)}" for k, v in params.items())   # TOML spelling
+    return shlex.quote(f"{name}[{','.join(words)}]")
 
 
 def deprecated(args: argparse.Namespace, message: str) -> None:
