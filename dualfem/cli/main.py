@@ -333,7 +333,9 @@ def human_summary(rec: dict) -> str:
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser with every registered sub-command."""
     _import_commands()
-    parser = OneLineParser(prog="dualfem", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="dualfem", description="dualfem: the thin-defect crack model as a convex QP, solved "
+                           "by interchangeable solvers and certified by an evaluator that trusts none of them "
+                           "('dualfem COMMAND --help' for each command)")
     parser.add_argument("--version", action="version", version=f"dualfem {version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (help_, configure, _) in _COMMANDS.items():
