@@ -243,3 +243,8 @@ def test_bench_default_folder_is_unique_per_selection():
     assert default_name("small", ()) == "small"
     a, b = default_name("small", ("-s pdas",)), default_name("small", ("-s osqp",))
     assert a != b and a.startswith("small-") and len(a) == len("small-") + 8
+
+
+def test_unrecognized_arguments_are_named_by_their_command(capsys):
+    assert main(["list", "--json", "extra"]) == 2
+    _one_line_error(capsys, "list", "unrecognized arguments: extra")

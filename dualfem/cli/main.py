@@ -377,9 +377,13 @@ def main(argv: list[str] | None = None) -> int:
     closed = _open_std_streams()
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args, extra = parser.parse_known_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    if extra:                    # named by the command they were given to, as its other errors are
+        print(f"dualfem {args.command}: error: unrecognized arguments: {' '.join(extra)} (see 'dualfem "
+              f"{args.command} --help')", file=sys.stderr)
+        return 2
     if "stdout" in closed and getattr(args, "json", False):
         print(f"dualfem {args.command}: error: the standard output is closed: nowhere to write the JSON "
               f"object of --json", file=sys.stderr)
