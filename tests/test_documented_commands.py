@@ -2,15 +2,18 @@
 
 The commands are discovered from the files, not listed here: every line of a fenced ``bash``, ``sh``,
 ``shell`` or ``console`` block (in a block with ``$ `` prompts, only the prompted lines; the rest is
-output), in the order of the file; ``# comments`` and what follows a shell operator (``&&``, ``||``,
-``|``, ``;``, ``>``) are dropped. docs/plugins.md is executed by tests/test_docs.py (with the guide's
-plugin installed) and skipped here.
+output), in the order of the file; ``\\`` continues a line, ``# comments`` and what follows a shell
+operator (``&&``, ``||``, ``|``, ``;``, ``>``) are dropped, ``python -m dualfem`` is ``dualfem``, and
+``cat > FILE <<WORD`` writes its here-document to FILE. docs/plugins.md is executed by
+tests/test_docs.py (with the guide's plugin installed) and skipped here.
 
 ``dualfem`` commands run in-process (:func:`dualfem.cli.main.main`), those of one file in order in one
-scratch folder (holding ``benchmarks/`` and ``scenes/`` of the repository, and a ``*.toml`` scene a
-command names that does not exist: the file's first ``toml`` block, else a scene of the library of the
-file's dimension). Each must exit 0 with no traceback and no error line. To stay fast, these test-only
-changes are made, and each test says which mode it ran in:
+scratch folder (holding ``benchmarks/`` and ``scenes/`` of the repository, and a copy of any other of its
+folders a command names, e.g. ``examples/``). A ``*.toml`` file a command
+names that does not exist there is the doc's ``toml`` block naming it in its first line, else its first
+block of the kind (a sweep spec for ``bench``, else a scene), else a scene of the library of the doc's
+dimension. Each command must exit 0 with no traceback and no error line. To stay fast, these test-only
+changes are made, and each test prints the mode it ran in:
 
 * ``--set N=V`` with V > 8 runs with ``N=8``; ``/tmp/...`` paths go into the scratch folder;
 * ``full``: a scene whose estimated size is at most :data:`MAX_UNKNOWNS` unknowns is assembled and solved;
@@ -23,10 +26,10 @@ changes are made, and each test says which mode it ran in:
   is refused) and claimed; the sweep is not run. A later ``report`` over such a bench folder reads the
   committed results of :data:`COMMITTED_RESULTS`, copied into it.
 
-Other commands are not executed: ``bash scripts/X.sh`` is checked with ``bash -n``, ``pip install
-'dualfem[EXTRA]'`` names an extra of pyproject.toml, and shell set-up (``source``, ``cd``, ``cat``) and
-third-party tools (``python ...``) are only listed; a command of any other kind fails the test, so that
-a new kind is taught here rather than skipped.
+Other commands are not executed: ``bash scripts/X.sh`` is checked with ``bash -n``, ``pip install``
+must name extras of pyproject.toml, and the kinds of :data:`NOT_RUN` (shell set-up, third-party tools)
+are only listed; a command of any other kind fails the test, so that a new kind is taught here rather
+than skipped.
 """
 from __future__ import annotations
 
@@ -55,7 +58,8 @@ COMPARE_SOLVERS = ["pdas", "clarabel"]
 COMMITTED_RESULTS = ROOT / "benchmarks" / "results" / "target" / "results.csv"
 FENCE = re.compile(r"^```(\w*)[^\n]*\n(.*?)^```", re.S | re.M)
 NOT_RUN = {"source": "shell set-up", ".": "shell set-up", "cd": "shell set-up", "cat": "shell set-up",
-           "python": "a third-party tool", "python3": "a third-party tool"}
+           "ls": "shell set-up", "mkdir": "shell set-up", "export": "shell set-up", "git": "fetches the code",
+           "python": "a third-party tool", "python3": "a third-party tool", "pytest": "the test suite"}
 
 
 @dataclass(frozen=True)
@@ -65,6 +69,8 @@ class Documented:
     file: str
     line: int
     argv: tuple[str, ...]
+    #: the here-document of ``cat > FILE <<WORD`` (written to FILE before the next command)
+    body: str | None = None
 
     @property
     def id(self) -> str:
@@ -82,13 +88,33 @@ def documented_commands(path: Path) -> list[Documented]:
         first = text[:m.start(2)].count("\n") + 1
         lines = m.group(2).splitlines()
         prompted = any(ln.startswith("$ ") for ln in lines)
-        for i, ln in enumerate(lines):
+        i = 0
+        while i < len(lines):
+            start, ln = i, lines[i]
+            i += 1
             if prompted and not ln.startswith("$ "):
                 continue
-            words = shlex.split(ln[2:] if prompted else ln, comments=True)
-            cut = next((k for k, w in enumerate(words) if w in OPERATORS), len(words))
-            if words[:cut]:
-                out.append(Documented(rel, first + i, tuple(words[:cut])))
+            ln = ln[2:] if prompted else ln
+            while ln.endswith("\\") and i < len(lines):      # a continued line
+                ln = ln[:-1] + " " + lines[i].removeprefix("> ")
+                i += 1
+            here = re.search(r"<<-?\s*['\"]?(\w+)", ln)
+            body = None
+            if here:                                          # the here-document's body
+                ln, k = ln[:here.start()], i
+                while i < len(lines) and lines[i].strip() != here.group(1):
+                    i += 1
+                body, i = "".join(f"{x}\n" for x in lines[k:i]), i + 1
+                target = re.fullmatch(r"\s*cat\s*>\s*(\S+)\s*", ln)
+                if target:
+                    out.append(Documented(rel, first + start, ("cat", ">", target.group(1)), body))
+                    continue
+            words = shlex.split(ln, comments=True)
+            words = words[:next((k for k, w in enumerate(words) if w in OPERATORS), len(words))]
+            if words[:3] in (["python", "-m", "dualfem"], ["python3", "-m", "dualfem"]):
+                words = ["dualfem", *words[3:]]
+            if words:
+                out.append(Documented(rel, first + start, tuple(words)))
     return out
 
 
@@ -106,9 +132,12 @@ def test_commands_are_discovered_in_readme_and_docs():
 def test_discovery_reads_prompts_comments_and_operators(tmp_path):
     doc = tmp_path / "x.md"
     doc.write_text("```console\n$ dualfem list   # all\nproblems:\n$ cd d && python x.py\n```\n"
-                   "```python\nimport os\n```\n```bash\ndualfem solve f2 --set N=8 || true\n```\n")
+                   "```python\nimport os\n```\n```bash\ndualfem solve f2 --set N=8 || true\n"
+                   "cat > s.toml <<'EOF'\nN = 8\nEOF\npython -m dualfem solve s.toml \\\n  --json\n```\n")
     got = [(c.line, c.argv) for c in documented_commands_at(doc, tmp_path)]
-    assert got == [(2, ("dualfem", "list")), (4, ("cd", "d")), (10, ("dualfem", "solve", "f2", "--set", "N=8"))]
+    assert got == [(2, ("dualfem", "list")), (4, ("cd", "d")), (10, ("dualfem", "solve", "f2", "--set", "N=8")),
+                   (11, ("cat", ">", "s.toml")), (14, ("dualfem", "solve", "s.toml", "--json"))]
+    assert documented_commands_at(doc, tmp_path)[3].body == "N = 8\n"
 
 
 def documented_commands_at(path: Path, root: Path) -> list[Documented]:
@@ -163,19 +192,22 @@ def _tiny_argv(argv: list[str], cwd: Path) -> list[str]:
     return out
 
 
-def _scene_file(name: str, doc: Path, cwd: Path) -> None:
-    """Write a scene file the doc names but does not ship: its first toml block, else a library scene."""
+def _toml_file(name: str, doc: Path, cwd: Path, spec: bool) -> None:
+    """Write a ``.toml`` file a command names that neither the doc's commands nor the repository made: the
+    doc's ``toml`` block that names it in its first line, else its first block of that kind (a sweep spec
+    for ``bench``, else a scene), else (a scene) a library scene of the doc's dimension."""
     target = cwd / name
     if target.exists() or "/" in name:
         return
     text = doc.read_text(encoding="utf-8")
     blocks = [m.group(2) for m in FENCE.finditer(text) if m.group(1) == "toml"]
-    scenes = [b for b in blocks if "scene" in b or "defects" in b]
-    if scenes:
-        target.write_text(scenes[0], encoding="utf-8")
-        return
-    lib = "penny.toml" if re.search(r"dim\s*=\s*3", text) else "curved.toml"
-    target.write_text((ROOT / "scenes" / lib).read_text(encoding="utf-8"), encoding="utf-8")
+    named = [b for b in blocks if name in b.split("\n", 1)[0]]
+    kind = [b for b in blocks if ("[[solvers]]" in b or "[[scenes]]" in b) == spec]
+    if named or kind:
+        target.write_text((named or kind)[0], encoding="utf-8")
+    elif not spec:
+        lib = "penny.toml" if re.search(r"dim\s*=\s*3", text) else "curved.toml"
+        target.write_text((ROOT / "scenes" / lib).read_text(encoding="utf-8"), encoding="utf-8")
 
 
 def _patch_for_speed(monkeypatch) -> None:
@@ -207,8 +239,11 @@ def _run_dualfem(cmd: Documented, cwd: Path, monkeypatch, capsys) -> str:
 
     argv = _tiny_argv(list(cmd.argv[1:]), cwd)
     for a in argv:
+        top = a.split("/", 1)[0]
+        if "/" in a and not (cwd / top).exists() and (ROOT / top).is_dir() and top not in ("dualfem", "reports"):
+            shutil.copytree(ROOT / top, cwd / top)       # e.g. examples/plate.toml: a copy, never the repository's
         if a.endswith(".toml") and not a.startswith("-"):
-            _scene_file(a, ROOT / cmd.file, cwd)
+            _toml_file(a, ROOT / cmd.file, cwd, spec=argv[0] == "bench")
     modes: list[str] = []
     if argv[0] == "report":
         for a in argv[2:]:
@@ -233,8 +268,11 @@ def _run_dualfem(cmd: Documented, cwd: Path, monkeypatch, capsys) -> str:
     return " ".join(["full", *modes, *(f"(deprecated form: {w})" for w in old)])
 
 
-def _check_other(cmd: Documented) -> str:
+def _check_other(cmd: Documented, cwd: Path) -> str:
     argv = list(cmd.argv)
+    if cmd.body is not None:
+        (cwd / argv[2]).write_text(cmd.body, encoding="utf-8")
+        return f"wrote {argv[2]} (a here-document)"
     if argv[0] in ("bash", "sh") and len(argv) > 1 and argv[1].startswith("scripts/"):
         script = ROOT / argv[1]
         assert script.is_file(), f"{cmd.id}: {argv[1]} does not exist"
@@ -245,7 +283,7 @@ def _check_other(cmd: Documented) -> str:
     if argv[0] == "pip" and argv[1:2] == ["install"]:
         extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
         for a in argv[2:]:
-            m = re.fullmatch(r"dualfem\[([\w,-]+)\]", a)
+            m = re.fullmatch(r"(?:dualfem|\.)\[([\w,-]+)\]", a)
             if m:
                 missing = [e for e in m.group(1).split(",") if e not in extras]
                 assert not missing, f"{cmd.id}: pip install names unknown extras {missing}"
@@ -258,6 +296,6 @@ def _check_other(cmd: Documented) -> str:
 @pytest.mark.parametrize("cmd", RUN_HERE, ids=[c.id for c in RUN_HERE])
 def test_documented_command_works(cmd, workdirs, monkeypatch, capsys, record_property):
     cwd = workdirs(cmd.file)
-    mode = _run_dualfem(cmd, cwd, monkeypatch, capsys) if cmd.argv[0] == "dualfem" else _check_other(cmd)
+    mode = _run_dualfem(cmd, cwd, monkeypatch, capsys) if cmd.argv[0] == "dualfem" else _check_other(cmd, cwd)
     record_property("mode", mode)
     print(f"{cmd.id}: {' '.join(cmd.argv)} -> {mode}")
