@@ -68,14 +68,14 @@ def add_solver_option(p: argparse.ArgumentParser, help: str, default: Any = None
     p.add_argument("-s", "--solver", action="append", default=default, metavar=SOLVER_METAVAR, help=help)
 
 
-def parse_solvers(values: list[str] | None, option: str = "-s/--solver") -> list[tuple[str, dict[str, Any]]]:
+def parse_solvers(values: list[str] | str | None, option: str = "-s/--solver") -> list[tuple[str, dict[str, Any]]]:
     """``-s`` values -> ``[(solver name, {key: value})]`` (one parser for every command); a solver named
     twice is refused."""
     from dualfem.core.errors import InputError
     from dualfem.experiments.spec_select import parse_pick, solver_params
 
     out: list[tuple[str, dict[str, Any]]] = []
-    for text in values or ():
+    for text in [values] if isinstance(values, str) else values or ():      # one name (a Python caller)
         pick = parse_pick(text, option)
         if any(pick.name == name for name, _ in out):
             raise InputError(f"{option} names the solver {pick.name!r} twice (give its parameters in one "
