@@ -8,7 +8,8 @@ in the 2D mesh (``gmsh.model.mesh.embed``), so the mesh conforms to them: consec
 nodes are joined by a triangle edge. All defect points of a polyline are mesh nodes; for a
 spline only its two ends are (the interior points are control points of the curve). Optional
 refinement toward the tips: element size ``tip_size`` within ``tip_size`` of a tip, growing
-linearly (slope ``_GRADE``) to ``mesh_size``.
+linearly (slope ``_GRADE``) to ``mesh_size``; a ``tip_size >= mesh_size`` asks for nothing finer
+than the uniform mesh (no refinement: ``tip_size`` follows ``mesh_size``, :func:`effective_tip_size`).
 
 Before meshing the geometry is checked in numpy (splines on 64 samples per span): every
 defect strictly inside the body, no self-intersection, no two defects crossing or touching
@@ -229,6 +230,13 @@ def _tip_distances(mesh_size: float, tip_size: float) -> tuple[float, float]:
     return d_min, d_min + (mesh_size - tip_size) / _GRADE
 
 
+def effective_tip_size(mesh_size: float, tip_size: float | None) -> float | None:
+    """The element size near the tips: ``tip_size`` when it is below ``mesh_size``; else None (no
+    refinement: the uniform ``mesh_size`` already meets the bound ``tip_size``, so a default
+    ``tip_size`` follows a smaller ``mesh_size``)."""
+    return tip_size if tip_size is not None and tip_size < mesh_size else None
+
+
 def validate(width: float, height: float, defects: list[dict], mesh_size: float,
              tip_size: float | None = None, max_samples: int = MAX_SAMPLES) -> list[tuple[np.ndarray, str]]:
     """Check all inputs of :func:`mesh_with_defects` (no gmsh needed); return [(points, curve)].
@@ -240,9 +248,7 @@ def validate(width: float, height: float, defects: list[dict], mesh_size: float,
         raise InputError(f"mesh_size must be in (0, min(width, height)] = (0, {min(width, height):g}], "
                          f"got {mesh_size:g}")
     if tip_size is not None:
-        tip_size = check_positive("tip_size", tip_size)
-        if tip_size > mesh_size:
-            raise InputError(f"tip_size must be in (0, mesh_size] = (0, {mesh_size:g}], got {tip_size:g}")
+        tip_size = effective_tip_size(mesh_size, check_positive("tip_size", tip_size))
     if not isinstance(defects, (list, tuple)):
         raise InputError(f"defects must be a list of tables {{points, curve}}, got {type(defects).__name__}")
     check_size(width, height, mesh_size, tip_size, 2 * len(defects))

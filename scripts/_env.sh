@@ -11,3 +11,17 @@ else
 fi
 export PATH="$(dirname "$PY"):$PATH"
 export MPLBACKEND=Agg
+
+# quiet_pip ARGS...: "$PY" -m pip ARGS with its output (setuptools' build warnings, pip's notices) held
+# back; shown in full on stderr, with the exit status, only when pip fails.
+quiet_pip() {
+  local log rc=0
+  log="$(mktemp "${TMPDIR:-/tmp}/dualfem-pip.XXXXXX")" || { "$PY" -m pip "$@"; return; }
+  "$PY" -m pip "$@" >"$log" 2>&1 || rc=$?
+  if [ "$rc" -ne 0 ]; then
+    cat "$log" >&2
+    echo "pip $* failed (exit $rc): its output is above" >&2
+  fi
+  rm -f "$log"
+  return "$rc"
+}

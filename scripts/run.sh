@@ -5,10 +5,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 . scripts/_env.sh
-"$PY" -m pip install -q --upgrade pip >/dev/null
+quiet_pip install -q --upgrade pip
 EXTRAS="gmsh"
 case "$(uname -m)" in x86_64|AMD64) EXTRAS="$EXTRAS,pardiso" ;; esac   # MKL PARDISO wheels: x86-64 only
-"$PY" -m pip install -q -e ".[$EXTRAS]"
+quiet_pip install -q -e ".[$EXTRAS]"
 rc=0
 dualfem solve f2 --set N=64 --set delta=1e-5 "$@" || rc=$?
 if [ -z "${VIRTUAL_ENV:-}" ]; then     # installed into ./.venv: say how to reach the command from this shell

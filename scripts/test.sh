@@ -5,13 +5,13 @@
 set -uo pipefail
 cd "$(dirname "$0")/.."
 . scripts/_env.sh
-"$PY" -m pip install -q --upgrade pip >/dev/null || exit 1
+quiet_pip install -q --upgrade pip || exit 1
 EXTRAS="test,parallel,xdmf,gmsh,analysis,testset,html,amg"
 case "$(uname -m)" in x86_64|AMD64) EXTRAS="$EXTRAS,pardiso" ;; esac   # MKL PARDISO wheels: x86-64 only
-"$PY" -m pip install -q -e ".[$EXTRAS]" || exit 1
+quiet_pip install -q -e ".[$EXTRAS]" || exit 1
 # the qpsolvers backends (qp_<backend> solvers): tested where they install; a backend without a wheel
 # for this platform is reported NOT INSTALLED by dualfem and skipped by its tests, never a failure
-"$PY" -m pip install -q -e ".[qp]" || echo "note: some qpsolvers backends did not install (see above)" >&2
+quiet_pip install -q -e ".[qp]" || echo "note: some qpsolvers backends did not install (see above)" >&2
 # headless Chromium for the dashboard's browser test (tests/test_dashboard.py skips without it): installed
 # where allowed (apt-get, and root or passwordless sudo); never a failure of this script when it cannot be
 if ! command -v chromium >/dev/null 2>&1 && ! command -v chromium-browser >/dev/null 2>&1 \

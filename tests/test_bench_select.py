@@ -24,7 +24,9 @@ def test_parse_pick_values_and_nesting():
 
 
 @pytest.mark.parametrize("bad", ["pdas[tol=", "pdas[tol=1]]", "x y", "pdas[=1]", "pdas[tol=1,,r=2]",
-                                 "pdas[tol=1,tol=2]", "pdas[1x=3]", "", "a" * 20_000])
+                                 "pdas[tol=1,tol=2]", "pdas[1x=3]", "", "a" * 20_000, "pdas[", "pdas[ ",
+                                 "pdas]", "pdas[]", "pdas[tol=1][r=2]", "pdas[tol=]", "pdas[tol=\"1]",
+                                 "pdas[tol=[1,2]", "[tol=1]", "pdas[tol=1]x"])
 def test_parse_pick_refuses(bad):
     with pytest.raises(InputError, match=r"-s/--solver"):
         parse_pick(bad, "-s/--solver")
@@ -113,3 +115,12 @@ def test_docs_name_every_spec_key():
     assert not missing, f"docs/bench.md does not document: {missing}"
     for opt in ("-s SOLVER[KEY=V,...]", "-d SCENE[KEY=V,...]", "-r REPEATS"):
         assert opt in doc
+
+
+def test_solver_params_one_value_per_key():
+    from dualfem.experiments.spec_select import solver_params
+
+    assert solver_params(parse_pick("osqp[tol=1e-7,polish=true,backend=x]", "-s")) == {
+        "tol": 1e-7, "polish": True, "backend": "x"}
+    with pytest.raises(InputError, match=r"-s/--solver.*grid of 'dualfem bench'"):
+        solver_params(parse_pick("pdas[tol=[1e-6,1e-9]]", "-s/--solver"))

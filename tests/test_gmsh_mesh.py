@@ -231,7 +231,6 @@ def test_bad_defects_are_refused(defects, message):
     # sizes that overflow a float estimate are refused, not a ZeroDivisionError
     ({"mesh_size": 1e-200}, r"mesh_size=1e-200 gives about 1e\+30 triangles .*mesh_size must be in"),
     ({"tip_size": 1e-300}, r"tip_size=1e-300 gives about .*tip_size must be in"),
-    ({"tip_size": 0.06}, r"tip_size must be in \(0, mesh_size\] = \(0, 0.05\]"),
     ({"tip_size": 0.0}, "tip_size must be a finite number > 0"),
     ({"width": -1.0}, "width must be a finite number > 0"),
 ])
@@ -241,6 +240,17 @@ def test_bad_sizes_are_refused(kwargs, message):
         args["defects"] = _defs([[0.2, 0.2], [0.8, 0.3]])
     with pytest.raises(InputError, match=message):
         mesh_with_defects(**args)
+
+
+def test_tip_size_above_mesh_size_follows_mesh_size():
+    """A tip_size >= mesh_size (a default tip_size with a finer mesh_size) asks for nothing finer than the
+    uniform mesh: the same mesh as no tip_size, not an error."""
+    from dualfem.problems.gmsh_mesh import effective_tip_size
+
+    assert effective_tip_size(0.004, 0.01) is None and effective_tip_size(0.05, 0.01) == 0.01
+    plain = mesh_with_defects(1.0, 1.0, KINKED, 0.1)
+    coarse_tip = mesh_with_defects(1.0, 1.0, KINKED, 0.1, tip_size=0.25)
+    assert np.array_equal(plain.points, coarse_tip.points) and np.array_equal(plain.triangles, coarse_tip.triangles)
 
 
 def test_missing_gmsh_is_a_clear_error(monkeypatch):

@@ -13,30 +13,32 @@ import shlex
 import sys
 from pathlib import Path
 
-from dualfem.cli.main import add_factor_arg, add_tol_arg, apply_factor, command
+from dualfem.cli.main import add_factor_arg, add_tol_arg, apply_factor, command, max_threads
+from dualfem.cli.options import add_solver_option, float_in, int_in
 from dualfem.core.errors import InputError
+from dualfem.experiments.spec import MAX_REPEATS
 
 
 def _cfg(p):
     add_factor_arg(p)
     p.add_argument("spec", metavar="SPEC.toml", help="sweep spec (see benchmarks/default.toml)")
-    p.add_argument("-s", "--solver", action="append", metavar="SOLVER[KEY=V,...]", default=None,
-                   help="run only this solver's blocks of the spec (added when the spec has none), with these "
-                        "parameters (a list KEY=[a,b] is a grid); repeatable. See docs/bench.md")
+    add_solver_option(p, "run only this solver's blocks of the spec (added when the spec has none), with these "
+                         "parameters (a list KEY=[a,b] is a grid); repeatable. See docs/bench.md")
     p.add_argument("-d", "--scene", action="append", metavar="SCENE[KEY=V,...]", default=None,
                    help="run only this scene of the spec's [[scenes]] blocks (added when it has none), with these "
                         "scene keys (a list is a grid dimension); repeatable")
-    p.add_argument("-r", "--repeats", type=int, metavar="REPEATS", default=None,
+    p.add_argument("-r", "--repeats", type=int_in(1, MAX_REPEATS), metavar="REPEATS", default=None,
                    help="timed repeats of every run and of the floor (overrides the spec)")
     add_tol_arg(p)
-    p.add_argument("--jobs", type=int, default=1, metavar="N",
+    p.add_argument("--jobs", type=int_in(1, max_threads()), default=1, metavar="N",
                    help="parallel worker processes (joblib/loky); default 1 (timings are cleanest serially)")
     p.add_argument("--dask", metavar="ADDRESS", default=None,
                    help="send the tasks to this dask.distributed scheduler (e.g. tcp://10.0.0.1:8786)")
-    p.add_argument("--dask-timeout", metavar="SECONDS", default="20",
+    p.add_argument("--dask-timeout", metavar="SECONDS", type=float_in(0, 86400), default=20.0,
                    help="seconds to wait for the --dask scheduler before refusing its address (default 20)")
     p.add_argument("--out", metavar="DIR", default=None,
-                   help="results directory (default dualfem-results/bench/<spec name>); rerun to resume")
+                   help="results directory (default dualfem-results/bench/<spec name>, or "
+                        "<spec name>-<8 hex digits of the selection> with -s/-d/-r); rerun to resume")
     p.add_argument("--resume", action="store_true",
                    help="continue --out: finished rows are kept and not redone (a rerun without it does the same)")
     p.add_argument("--force", action="store_true",
@@ -45,6 +47,16 @@ def _cfg(p):
                    help="also redo finished runs whose status is not solved/inaccurate")
     p.add_argument("--no-progress-bar", action="store_true",
                    help="plain progress lines even on a terminal")
+
+
+def default_name(spec_name: str, options: tuple[str, ...]) -> str:
+    """The default results folder's name: the spec's name, and with a selection (``-s``/``-d``/``-r``)
+    the first 8 hex digits of its SHA-256 (so two selections of one spec never share a folder)."""
+    if not options:
+        return spec_name
+    import hashlib
+
+    return f"{spec_name}-{hashlib.sha256(' '.join(options).encode()).hexdigest()[:8]}"
 
 
 @command("bench", "run (or resume) a benchmark sweep: every solver, error against time")(_cfg)
@@ -63,7 +75,7 @@ def cmd_bench(args) -> int:
         raise InputError("--jobs and --dask exclude each other: the dask scheduler decides the parallelism")
     from dualfem.core.errors import check_positive
 
-    dask_timeout = check_positive("--dask-timeout", args.dask_timeout)
+    dask_timeout = check_positive("--dask-timeout", args.dask_timeout)    # also when called from Python
     from dualfem.experiments.tolerance import check_tol
 
     tol = check_tol(args.tol)
@@ -72,7 +84,7 @@ def cmd_bench(args) -> int:
         + ((f"--tol {tol:g}",) if tol is not None else ())
     selection = make_selection(args.solver, args.scene, args.repeats, opts, tol)
     spec = load_spec(args.spec, selection)
-    out = Path(args.out) if args.out else default_out("bench", spec.name)
+    out = Path(args.out) if args.out else default_out("bench", default_name(spec.name, opts))
     if sys.argv[1:2] == ["bench"]:
         command = "dualfem bench " + " ".join(shlex.quote(a) for a in sys.argv[2:])
     else:   # called through main(argv) from Python: rebuild it from the parsed arguments

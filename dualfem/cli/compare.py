@@ -1,15 +1,21 @@
-"""``dualfem compare SCENE [--set KEY=VALUE ...] [--solvers a,b,...] [--json]``.
+"""``dualfem compare SCENE [--set KEY=VALUE ...] [-s SOLVER[KEY=V,...] ...] [--json]``.
 
-Runs every registered solver (or the chosen ones) on one scene and cross-checks them against a
-certified reference (see :mod:`dualfem.experiments.compare`). Exit status: 0 unless a solver that claims
+Runs every registered solver (or the ones chosen with ``-s``, repeatable, each with its parameters:
+``-s pdas -s 'osqp[tol=1e-6,polish=true]'``) on one scene and cross-checks them against a certified
+reference (see :mod:`dualfem.experiments.compare`). Exit status: 0 unless a solver that claims
 success is wrong beyond its declared tolerance (a silent wrong answer: exit 1); input errors
-exit 2. Solver parameters: ``--param SOLVER.KEY=VALUE`` (e.g. ``--param osqp.eps_abs=1e-6``).
+exit 2. The deprecated forms ``--solvers A,B`` and ``--param SOLVER.KEY=VALUE`` still work (with a
+warning).
 Solver output written by C libraries to stdout is sent to stderr, so ``--json`` prints exactly
 one JSON object on stdout; one progress line per finished solver goes to stderr.
 """
 from __future__ import annotations
 
+import argparse
+from typing import Any
+
 from dualfem.cli.main import add_factor_arg, add_scene_args, add_tol_arg, apply_factor, command, dumps, scene_from_args
+from dualfem.cli.options import add_solver_option, deprecated, parse_solvers, spelled
 from dualfem.core.errors import InputError
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.core.scene import build_qp
@@ -18,10 +24,11 @@ from dualfem.core.scene import build_qp
 def _cfg(p):
     add_factor_arg(p)
     add_scene_args(p)
-    p.add_argument("--solvers", default=None, metavar="A,B,...",
-                   help="comma-separated solver names (default: every registered solver)")
-    p.add_argument("-p", "--param", action="append", default=[], metavar="SOLVER.KEY=VALUE",
-                   help="set a parameter of one solver, e.g. osqp.eps_abs=1e-6 (repeatable)")
+    add_solver_option(p, "a solver to run, with its parameters, e.g. -s pdas -s 'osqp[tol=1e-6]' (repeatable; "
+                         "default: every registered solver)")
+    # deprecated spellings (still accepted, with a warning): --solvers A,B and -p SOLVER.KEY=VALUE
+    p.add_argument("--solvers", default=None, metavar="A,B,...", help=argparse.SUPPRESS)
+    p.add_argument("-p", "--param", action="append", default=[], metavar="SOLVER.KEY=VALUE", help=argparse.SUPPRESS)
     add_tol_arg(p)
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
@@ -42,26 +49,51 @@ def parse_solver_params(items: list[str], names: list[str]) -> dict[str, dict[st
     return out
 
 
-@command("compare", "run several solvers on one scene and cross-check them against a certified reference")(_cfg)
-def cmd_compare(args) -> int:
-    apply_factor(args)
+def compare_choice(args: argparse.Namespace) -> tuple[list[str], dict[str, dict[str, Any]]]:
+    """The solvers of ``compare`` and their parameters: ``-s`` (one parser for every command), else the
+    deprecated ``--solvers``, else every registered solver; plus the deprecated ``-p SOLVER.KEY=V``."""
     from dualfem.core.registry import get_solver
-    from dualfem.experiments.compare import compare_solvers, default_solvers, stderr_progress, table
+    from dualfem.experiments.compare import default_solvers
 
+    if args.solver and args.solvers is not None:
+        raise InputError("-s/--solver and --solvers both choose the solvers: give them with -s only")
+    chosen = parse_solvers(args.solver)
     if args.solvers is not None:
         names = [s.strip() for s in args.solvers.split(",") if s.strip()]
         if not names:
             raise InputError("--solvers needs at least one solver name")
-        for nm in names:
-            get_solver(nm)  # InputError listing the known names
         if len(set(names)) != len(names):
             raise InputError(f"--solvers lists a solver twice: {args.solvers!r}")
-    else:
-        names = default_solvers()
+        chosen = [(n, {}) for n in names]
+    for nm, _ in chosen:
+        try:
+            get_solver(nm)  # InputError listing the known names
+        except InputError as exc:
+            raise InputError(f"{'--solvers' if args.solvers is not None else '-s/--solver'}: {exc}") from None
+    names = [n for n, _ in chosen] or default_solvers()
+    params = {n: dict(p) for n, p in chosen if p}
+    for nm, old in parse_solver_params(args.param, names).items():
+        both = sorted(set(old) & set(params.get(nm, {})))
+        if both:
+            raise InputError(f"-p {nm}.{both[0]}=... and -s {nm}[{both[0]}=...] both set {both[0]!r}: give it once")
+        params[nm] = {**params.get(nm, {}), **old}
+    if args.solvers is not None or args.param:
+        new = " ".join(f"-s {spelled(n, params.get(n, {}))}" for n in names)
+        deprecated(args, f"--solvers A,B and -p SOLVER.KEY=VALUE are deprecated: write {new}")
+    return names, params
+
+
+@command("compare", "run several solvers on one scene and cross-check them against a certified reference")(_cfg)
+def cmd_compare(args) -> int:
+    apply_factor(args)
+    from dualfem.experiments.compare import compare_solvers, stderr_progress, table
+    from dualfem.experiments.runner import make_solver
     from dualfem.experiments.tolerance import check_tol
 
     tol = check_tol(args.tol)
-    params = parse_solver_params(args.param, names)
+    names, params = compare_choice(args)
+    for nm, prm in params.items():
+        make_solver(nm, prm)        # a bad parameter is refused before the (slow) assembly
     problem = scene_from_args(args)
     with c_stdout_to_stderr():
         qp = build_qp(problem)

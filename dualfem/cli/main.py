@@ -11,19 +11,34 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from dualfem.cli.options import (
+    OneLineParser,
+    add_solver_option,
+    deprecated,
+    float_in,
+    int_in,
+    parse_solvers,
+    print_deprecations,
+    spelled,
+)
 from dualfem.cli.stages import Stages
 from dualfem.core.errors import InputError, MissingDependency
 
 #: the paper's method with r taken from the QP: scale-free (uzawa's r = 1e7 is in MPa per unit length)
 DEFAULT_SOLVER = "uzawa_auto"
-_COMMANDS: dict[str, tuple[Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {}
+#: the largest ``--max-memory`` accepted, in GB
+MAX_MEMORY_GB = 1e6
+_COMMANDS: dict[str, tuple[str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]]] = {}
+_DESCRIPTIONS: dict[str, str] = {}
 
 
-def command(name: str, help: str):
-    """Register a sub-command: decorate ``run(args) -> exit code``; ``configure`` adds options."""
+def command(name: str, help: str, description: str | None = None):
+    """Register a sub-command: decorate ``run(args) -> exit code``; ``configure`` adds options. ``help`` is
+    its line in ``dualfem --help``, ``description`` (default: ``help``) the head of ``dualfem NAME --help``."""
     def deco(configure):
         def wrap(run):
             _COMMANDS[name] = (help, configure, run)
+            _DESCRIPTIONS[name] = description or help
             return run
         return wrap
     return deco
@@ -33,8 +48,8 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
     """SCENE and ``--set KEY=VALUE`` (shared by every scene-taking command)."""
     p.add_argument("scene", metavar="SCENE", help="built-in scene (f1, f2, f3, ...: see 'dualfem list'), "
                    "a .toml scene file, or a .npz/.mat QP file")
-    p.add_argument("--max-memory", type=float, default=None, metavar="GB",
-                   help="memory a run may use (default: what the machine has available); a scene whose "
+    p.add_argument("--max-memory", type=float_in(0, MAX_MEMORY_GB, "GB"), default=None, metavar="GB",
+                   help="memory a run may use, in GB (default: what the machine has available); a scene whose "
                         "estimated peak exceeds it is refused before assembly")
     p.add_argument("--set", dest="set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene parameter (N, delta, plane, E, nu, load, ...)")
@@ -60,9 +75,9 @@ def apply_factor(args: argparse.Namespace) -> str:
 
 
 def add_param_args(p: argparse.ArgumentParser) -> None:
-    """``--param KEY=VALUE`` for solver parameters."""
-    p.add_argument("-p", "--param", action="append", default=[], metavar="KEY=VALUE",
-                   help="set a solver parameter (e.g. r=1e7, tol_outer=1e-5)")
+    """``-p/--param KEY=VALUE``: a solver parameter, the deprecated spelling of ``-s SOLVER[KEY=VALUE]``
+    (still accepted, with a warning; not shown in ``--help``)."""
+    p.add_argument("-p", "--param", action="append", default=[], metavar="KEY=VALUE", help=argparse.SUPPRESS)
 
 
 def add_tol_arg(p: argparse.ArgumentParser) -> None:
@@ -80,8 +95,8 @@ def scene_from_args(args: argparse.Namespace):
 
     problem = load_scene(args.scene, parse_set(args.set))
     mm = getattr(args, "max_memory", None)
-    if mm is not None and not (mm > 0 and mm < 1e6):
-        raise InputError(f"--max-memory must be a number of GB in (0, 1e6), got {mm!r}")
+    if mm is not None and not (mm > 0 and mm <= MAX_MEMORY_GB):
+        raise InputError(f"--max-memory must be a number of GB in (0, {MAX_MEMORY_GB:g}], got {mm!r}")
     check_fits(problem, None if mm is None else mm * 1e9)     # before any allocation
     return problem
 
@@ -192,7 +207,8 @@ def cmd_export(args) -> int:
 # -------------------------------------------------------------------------- solve
 def _cfg_solve(p):
     add_scene_args(p)
-    p.add_argument("--solver", default=DEFAULT_SOLVER, help=f"solver name (default {DEFAULT_SOLVER})")
+    add_solver_option(p, f"the solver and its parameters, e.g. -s pdas or -s 'uzawa[r=1e7,tol=1e-9]' (default "
+                         f"{DEFAULT_SOLVER}; 'dualfem list --json' shows each solver's parameters and ranges)")
     add_param_args(p)
     add_tol_arg(p)
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
@@ -202,7 +218,7 @@ def _cfg_solve(p):
     p.add_argument("--figure", metavar="FILE.png", default=None,
                    help="also draw the solution (.png/.pdf/.svg): 2D the deformed body and the jump; 3D the "
                         "opening, slip and pressure maps over each defect and a cut through the body (FILE_cut.png)")
-    p.add_argument("--threads", type=int, default=None, metavar="N",
+    p.add_argument("--threads", type=int_in(1, max_threads()), default=None, metavar="N",
                    help="threads for the factorization (default: all cores; dense phases use what is fastest)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     add_factor_arg(p)
@@ -211,14 +227,13 @@ def _cfg_solve(p):
 @command("solve", "solve one scene with one solver")(_cfg_solve)
 def cmd_solve(args) -> int:
     from dualfem.core.registry import get_solver
-    from dualfem.core.scene import parse_set
     from dualfem.core.solution import Status
     from dualfem.experiments.runner import make_solver, missing_reason, run, summary
     from dualfem.experiments.tolerance import check_tol, explain, with_tolerance
 
     tol = check_tol(args.tol)
-    given = parse_set(args.param, "-p")
-    solver = make_solver(args.solver, with_tolerance(get_solver(args.solver), tol, given))  # before the assembly
+    name, given = solve_choice(args)
+    solver = make_solver(name, with_tolerance(get_solver(name), tol, given))  # validate before the (slow) assembly
     missing = missing_reason(solver)
     if missing:
         raise MissingDependency(missing)
@@ -281,6 +296,32 @@ def cmd_solve(args) -> int:
     return 0 if sol.status == Status.SOLVED else 1
 
 
+def solve_choice(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:
+    """The one solver of ``solve``: ``-s SOLVER[KEY=V,...]`` (default :data:`DEFAULT_SOLVER`), plus the
+    deprecated ``-p KEY=V`` (merged; a key given both ways is refused)."""
+    from dualfem.core.scene import parse_set
+
+    chosen = parse_solvers(args.solver) or [(DEFAULT_SOLVER, {})]
+    if len(chosen) > 1:
+        raise InputError(f"-s/--solver: 'dualfem solve' runs one solver, got {len(chosen)} "
+                         f"({', '.join(n for n, _ in chosen)}): 'dualfem compare' runs several")
+    name, params = chosen[0]
+    old = parse_set(args.param, "-p")
+    both = sorted(set(old) & set(params))
+    if both:
+        raise InputError(f"-p {both[0]}=... and -s {name}[{both[0]}=...] both set {both[0]!r}: give it once, in -s")
+    if old:
+        deprecated(args, f"-p KEY=VALUE is deprecated: write -s {spelled(name, {**params, **old})}")
+    return name, {**params, **old}
+
+
+def max_threads() -> int:
+    """The largest ``--threads``: 4 x the cores of this machine."""
+    import os
+
+    return 4 * (os.cpu_count() or 1)
+
+
 def check_threads(n: int | None) -> int:
     """The thread count of ``--threads`` (default: every core of this machine), validated."""
     import os
@@ -318,11 +359,27 @@ def human_summary(rec: dict) -> str:
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser with every registered sub-command."""
     _import_commands()
-    parser = argparse.ArgumentParser(prog="dualfem", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="dualfem", description="dualfem: the thin-defect crack model as a convex QP, solved "
+                           "by interchangeable solvers and certified by an evaluator that trusts none of them "
+                           "('dualfem COMMAND --help' for each command)")
+    parser.add_argument("--version", action="version", version=f"dualfem {version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (help_, configure, _) in _COMMANDS.items():
-        configure(sub.add_parser(name, help=help_, description=help_))
+        configure(sub.add_parser(name, help=help_, description=_DESCRIPTIONS.get(name, help_)))
     return parser
+
+
+def version() -> str:
+    """The installed distribution's version (its metadata), else the package's ``__version__``."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as dist_version
+
+    try:
+        return dist_version("dualfem")
+    except PackageNotFoundError:
+        import dualfem
+
+        return str(getattr(dualfem, "__version__", "unknown"))
 
 
 def _import_commands() -> None:
@@ -346,9 +403,13 @@ def main(argv: list[str] | None = None) -> int:
     closed = _open_std_streams()
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args, extra = parser.parse_known_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    if extra:                    # named by the command they were given to, as its other errors are
+        print(f"dualfem {args.command}: error: unrecognized arguments: {' '.join(extra)} (see 'dualfem "
+              f"{args.command} --help')", file=sys.stderr)
+        return 2
     if "stdout" in closed and getattr(args, "json", False):
         print(f"dualfem {args.command}: error: the standard output is closed: nowhere to write the JSON "
               f"object of --json", file=sys.stderr)
@@ -357,6 +418,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         rc = run(args)
         sys.stdout.flush()       # a full disk behind `> file` shows here, not at interpreter exit
+        print_deprecations(args)
         return rc
     except (InputError, MissingDependency) as exc:
         print(f"dualfem {args.command}: error: {exc}", file=sys.stderr)

@@ -1,4 +1,5 @@
-"""``dualfem report KIND [ARGS...]``: regenerate a report in reports/.
+"""``dualfem report KIND [ARGS...]``: write a report (where each kind writes by default:
+:data:`DEFAULT_OUTPUT`, shown by ``dualfem report --help``).
 
 Report kinds are registered by the modules of ``dualfem/cli/reports/`` with :func:`register_report`;
 each kind is a function ``run(argv: list[str]) -> int`` with its own argparse, which runs the
@@ -38,12 +39,22 @@ def reports() -> dict[str, tuple[str, Callable[[list[str]], int]]]:
 
 
 def _cfg(p):
-    p.add_argument("kind", metavar="KIND", help="which report (see 'dualfem report list')")
+    p.add_argument("kind", metavar="KIND", help="which report ('dualfem report list' says what each one is)")
     p.add_argument("rest", nargs=argparse.REMAINDER, metavar="ARGS",
                    help="arguments of that report (see 'dualfem report KIND --help')")
 
 
-@command("report", "regenerate a report in reports/ (KIND: paper, bench, html, figures, ...)")(_cfg)
+#: where each report kind writes by default (each kind's own --help says the same; tests/test_cli.py checks it)
+DEFAULT_OUTPUT = {"bench": "dualfem-results/reports/benchmark.md", "html": "dualfem-results/reports/dashboard",
+                  "paper": "dualfem-results/reports/paper_tables.md", "figures": "dualfem-results/reports",
+                  "plugins": "dualfem-results/reports", "convergence": "dualfem-results/reports",
+                  "stability": "reports/stability.md", "robustness": "--out DIR (required)"}
+
+
+@command("report", "write a report from a study's results (KIND: 'dualfem report list')",
+         "write a report from a study's results; default outputs: " +
+         ", ".join(f"{k} {v}" for k, v in DEFAULT_OUTPUT.items()) +
+         " ('dualfem report KIND --help' for its options)")(_cfg)
 def cmd_report(args) -> int:
     kinds = reports()
     if args.kind == "list":

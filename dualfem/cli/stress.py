@@ -24,8 +24,8 @@ def _cfg(p):
     p.add_argument("--out", default=None, metavar="DIR",
                    help="results directory (results.csv, rows/, meta.json; a folder of runs.jsonl written by an "
                         "earlier version is read and, with --resume, continued); default dualfem-results/stress/quick "
-                        "or .../full (the committed grid is regenerated only with an explicit --out "
-                        "benchmarks/results/stress)")
+                        "or .../full, with --scene .../quick-SCENE or .../full-SCENE (the committed grid is "
+                        "regenerated only with an explicit --out benchmarks/results/stress)")
     p.add_argument("--scene", default=None, metavar="SCENE",
                    help="base scene of any registered problem: a scene of the library (e.g. two_defects), a preset "
                         "(e.g. signorini) or a .toml file (default: the paper's f2, N = 32, or 16 with --quick); it "
@@ -68,7 +68,9 @@ def cmd_stress(args) -> int:
     tl = None if args.time_limit is None else check_positive("--time-limit", args.time_limit)
     max_n = None if args.max_n is None else check_int("--max-n", args.max_n, 8, 4096)
     jobs = check_int("--jobs", args.jobs, 1, 4 * (os.cpu_count() or 1))
-    out = Path(args.out) if args.out else default_out("stress", "quick" if args.quick else "full")
+    grid = ("quick" if args.quick else "full") + ("-" + "".join(c if c.isalnum() or c in "_-" else "_" for c in
+                                                          Path(args.scene).stem)[:40] if args.scene else "")
+    out = Path(args.out) if args.out else default_out("stress", grid)     # one folder per grid and scene
     if out.exists() and not out.is_dir():
         raise InputError(f"--out must be a directory, {str(out)!r} is a file")
     held = stress.holds_results(out)

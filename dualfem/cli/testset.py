@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import sys
 
-from dualfem.cli.main import add_factor_arg, apply_factor, command
+from dualfem.cli.main import MAX_MEMORY_GB, add_factor_arg, apply_factor, command
+from dualfem.cli.options import float_in
 from dualfem.cli.stages import Stages
 from dualfem.core.errors import InputError
 
@@ -24,7 +25,7 @@ def _cfg(p):
     p.add_argument("--force", action="store_true",
                    help="write into a non-empty --out: the test set's files are written over, the problems of a "
                         "previous set that this one lacks removed, nothing else touched")
-    p.add_argument("--max-memory", type=float, default=None, metavar="GB",
+    p.add_argument("--max-memory", type=float_in(0, MAX_MEMORY_GB, "GB"), default=None, metavar="GB",
                    help="memory a scene may use (default: what the machine has available)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     add_factor_arg(p)
@@ -39,8 +40,8 @@ def cmd_testset(args) -> int:
 
     sizes = parse_sizes(args.sizes)
     mm = args.max_memory
-    if mm is not None and not (mm > 0 and mm < 1e6):
-        raise InputError(f"--max-memory must be a number of GB in (0, 1e6), got {mm!r}")
+    if mm is not None and not (mm > 0 and mm <= MAX_MEMORY_GB):
+        raise InputError(f"--max-memory must be a number of GB in (0, {MAX_MEMORY_GB:g}], got {mm!r}")
     apply_factor(args)
     stages = Stages("testset", quiet=args.quiet)
     with c_stdout_to_stderr():

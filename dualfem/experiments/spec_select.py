@@ -1,5 +1,8 @@
 """Select and override a sweep spec from the command line, as benchopt does (``-s``, ``-d``, ``-r``).
 
+:func:`parse_pick` is the one parser of the ``NAME[KEY=V,...]`` form: ``bench``'s ``-s``/``-d`` and the
+``-s`` of ``solve`` and ``compare`` (:func:`solver_params`) all go through it.
+
 ``dualfem bench SPEC -s SOLVER[KEY=V,...] -d SCENE[KEY=V,...] -r REPEATS``:
 
 * ``-s SOLVER[KEY=V,...]`` (repeatable): only the spec's ``[[solvers]]`` blocks of that name (or
@@ -62,21 +65,23 @@ def parse_pick(text: str, option: str) -> Pick:
         raise InputError(f"{option} must be NAME or NAME[KEY=VALUE,...] (at most {MAX_OPTION_CHARS:,} characters), "
                          f"got {text!r}"[:300])
     text = text.strip()
-    name, _, rest = text.partition("[")
+    name, bracket, rest = text.partition("[")
     name = name.strip()
     if not _NAME.match(name):
         raise InputError(f"{option} {text!r}: the name must be a solver or scene name (letters, digits, _ . / : + -), "
                          f"got {name!r}")
-    if not rest:
+    if not bracket:
         return Pick(name)
     if not rest.endswith("]"):
-        raise InputError(f"{option} {text!r}: the overrides must end with ']' (NAME[KEY=VALUE,...])")
+        raise InputError(f"{option} {text!r}: unbalanced '[': the overrides must end with ']' (NAME[KEY=VALUE,...])")
     overrides = []
     for item in _split_top(rest[:-1], option, text):
         key, eq, value = item.partition("=")
         key = key.strip()
         if not eq or not re.match(r"^[A-Za-z_][A-Za-z0-9_]*$", key):
             raise InputError(f"{option} {text!r}: {item.strip()!r} must be KEY=VALUE with KEY a parameter name")
+        if not value.strip():
+            raise InputError(f"{option} {text!r}: {key} has no value (KEY=VALUE; a string may be quoted: KEY=\"\")")
         overrides.append((key, _value(value.strip())))
     keys = [k for k, _ in overrides]
     dup = next((k for k in keys if keys.count(k) > 1), None)
@@ -128,6 +133,17 @@ def make_selection(solvers: list[str] | None, scenes: list[str] | None, repeats:
             raise InputError(f"-r/--repeats must be an integer in 1..{MAX_REPEATS}, got {repeats!r}")
     return Selection(tuple(parse_pick(s, "-s/--solver") for s in solvers or ()),
                      tuple(parse_pick(d, "-d/--scene") for d in scenes or ()), repeats, tuple(options), tol)
+
+
+def solver_params(pick: Pick, option: str = "-s/--solver") -> dict[str, Any]:
+    """The overrides of a ``-s`` pick as the parameters of one solver instance (``solve``, ``compare``):
+    ``{KEY: value}`` with TOML-typed values, which the solver's constructor validates (its error names
+    the allowed keys and ranges). A list value is a grid dimension, which only ``bench`` sweeps: refused."""
+    for key, value in pick.overrides:
+        if isinstance(value, (list, dict)):
+            raise InputError(f"{option} {pick.name}[{key}=...]: a list or table value is a grid of 'dualfem bench'; "
+                             f"here give one value per key")
+    return dict(pick.overrides)
 
 
 def apply_selection(data: dict, sel: Selection) -> dict:
