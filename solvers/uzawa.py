@@ -19,7 +19,9 @@ active set A = {lambda_j > 0},
 
 with s = 1 divided by ``step_factor`` until the Armijo test
 ``M(x - s d) <= M(x) - armijo_c * s * G'd`` holds, and the inner stop
-``||x^{m+1} - x^m|| / ||x^{m+1}|| < tol_inner``.
+``||x^{m+1} - x^m|| / max(||x^{m+1}||, s_F) < tol_inner`` (s_F the size the load sets:
+:func:`dualfem.core.evaluator.load_energy` in the energy norm, ``load_length`` in the Euclidean one; the
+test stays relative to the data when x* = 0).
 
 Choices where the paper is silent or misprinted (documented here once):
 
@@ -117,6 +119,7 @@ import scipy.linalg as la
 import scipy.sparse as sp
 
 from dualfem.core.errors import InputError
+from dualfem.core.evaluator import load_energy, load_length
 from dualfem.core.parts import UnitsPart
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
@@ -394,6 +397,9 @@ class Uzawa(DualOperatorSolver):
         p = self.params
         self.qp, self.op, self.reduction = qp, None, None
         self._mu, self._mu_info = None, {}
+        # the inner test's size has the evaluator's floor (the energy / length the load sets), so that a
+        # solution x* = 0 (a crack pushed shut, nothing else loaded) still has a scale: relative to the data
+        self._floor2 = (load_energy(qp) if p["inner_norm"] == "energy" else load_length(qp)) ** 2
         if p["linalg"] == "reduced":
             super().setup(qp)            # self.op (dense or matrix_free), self.reduction (dense only)
             if self.op.kind == "dense":
@@ -538,7 +544,7 @@ class Uzawa(DualOperatorSolver):
             steps.append(s)
             nz2 = sp_.norm2(z)
             ratio = s * np.sqrt(max(dQd, 0.0) if p["inner_norm"] == "energy" else float(d @ d)) \
-                / np.sqrt(max(nz2, 1e-300))
+                / np.sqrt(max(nz2, self._floor2, 1e-300))
             ratios.append(float(ratio))
             if ratio < p["tol_inner"]:
                 return z, steps, True, ""
