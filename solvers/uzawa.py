@@ -128,6 +128,8 @@ from dualfem.numerics.factor import from_param
 from dualfem.numerics.linalg import LocalReduction, sparse_factor
 from dualfem.numerics.newton_matrix import NewtonMatrix
 
+EPS = float(np.finfo(float).eps)
+
 #: the matrix-free path computes mu_min densely (one block of m products) up to this many rows
 DENSE_EIG_MAX = 32
 #: the paper's unit system (Zhiltsov & Maksimova 2023, section 5): E in MPa, the unit square
@@ -193,7 +195,7 @@ class _ReducedSpace:
         GW = self.dual_compliance(w)
         sw = np.sqrt(w)
         sym = (GW / w[None, :]) * sw[:, None] * sw[None, :]   # W^1/2 G W^1/2
-        return float(np.linalg.eigvalsh(0.5 * (sym + sym.T)).min()), {"mu_min_method": "dense eigvalsh"}
+        return _range_min(np.linalg.eigvalsh(0.5 * (sym + sym.T))), {"mu_min_method": "dense eigvalsh"}
 
     def qgrad(self, z):
         return self.Q @ z - self.q
@@ -226,6 +228,15 @@ class _ReducedSpace:
 
     def full(self, z):
         return self.red.full(z)
+
+
+def _range_min(ev: np.ndarray) -> float:
+    """The smallest eigenvalue of the dual compliance on its range: dependent or duplicated rows of B
+    (multipliers not unique) give eigenvalues 0 to rounding (below m eps max, numpy's rank threshold),
+    whose directions change no x; the dual is strongly concave on the rest, and r is chosen from that."""
+    top = float(ev.max(initial=0.0))
+    kept = ev[ev > ev.size * EPS * top]
+    return float(kept.min()) if kept.size else float(ev.min(initial=0.0))
 
 
 class _FullSpace:
@@ -316,7 +327,7 @@ class _SparseSpace:
         t0 = time.perf_counter()
         if m <= DENSE_EIG_MAX:      # a few rows: the whole matrix is one block of m products
             sym = sw[:, None] * op.apply(sw[:, None] * np.eye(m))
-            mu = float(np.linalg.eigvalsh(0.5 * (sym + sym.T)).min())
+            mu = _range_min(np.linalg.eigvalsh(0.5 * (sym + sym.T)))
             how = f"dense eigvalsh (m <= {DENSE_EIG_MAX})"
         else:
             A = LinearOperator((m, m), matvec=lambda v: sw * op.apply(sw * np.ravel(v)), dtype=float)
