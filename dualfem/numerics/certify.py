@@ -270,20 +270,67 @@ def guess_active_set(D: np.ndarray, mu: np.ndarray, gap: np.ndarray, diagonal: n
     return (np.asarray(mu, float) - c * gap) > 0
 
 
+def parallel_rows(B) -> np.ndarray | None:
+    """Labels of the rows of B that are one constraint: ``labels[j] = labels[k]`` when row j is a positive
+    multiple of row k (duplicated rows, to 1e-12 of the row's size); None when every row is its own. Two
+    random projections of the normalised rows find the candidates (sorted), which are then compared."""
+    import scipy.sparse as sp
+
+    B = sp.csr_matrix(B)
+    m = B.shape[0]
+    if m < 2:
+        return None
+    norms = np.sqrt(np.asarray(B.multiply(B).sum(axis=1)).ravel())
+    scale = np.where(norms > 0, norms, 1.0)
+    h = (B @ np.random.default_rng(0).standard_normal((B.shape[1], 2))) / scale[:, None]
+    order = np.lexsort((h[:, 1], h[:, 0]))
+    close = np.all(np.abs(np.diff(h[order], axis=0)) <= 1e-10 * (1 + np.abs(h[order][1:])), axis=1)
+    if not close.any():
+        return None
+    labels = np.arange(m)
+    for i in np.flatnonzero(close):
+        j, k = order[i], order[i + 1]
+        d = B[j] / scale[j] - B[k] / scale[k]
+        if norms[j] > 0 and norms[k] > 0 and (d.nnz == 0 or np.abs(d.data).max() <= 1e-12):
+            labels[k] = labels[j]
+    return None if np.unique(labels).size == m else labels
+
+
+def _group_sum(labels: np.ndarray | None, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """sum_{j in group} w_j v_j for each row's group, per row (v itself without groups)."""
+    if labels is None:
+        return v
+    return np.bincount(labels, weights=w * v, minlength=labels.size)[labels]
+
+
 class _Face:
     """D_AA^-1 for one set A: a dense Cholesky factor (``rtol`` 0: exact to rounding, ``kappa`` from its
     diagonal) or the matrix-free operator's CG (``rtol`` its tolerance, ``kappa`` its Lanczos estimate)."""
 
     def __init__(self, D: np.ndarray | None, op, A: np.ndarray, rtol: float):
         self.D, self.op, self.A, self.rtol = D, op, A, 0.0
+        self.pinv = None
         if D is not None:
-            self.L = sla.cho_factor(D[np.ix_(A, A)])
-            dL = np.abs(np.diag(self.L[0]))
-            self.kappa = float((dL.max() / max(dL.min(), 1e-300)) ** 2)   # a cheap estimate of cond(D_AA)
+            DA = D[np.ix_(A, A)]
+            try:
+                self.L = sla.cho_factor(DA)
+                dL = np.abs(np.diag(self.L[0]))
+                self.kappa = float((dL.max() / max(dL.min(), 1e-300)) ** 2)   # a cheap estimate of cond(D_AA)
+            except np.linalg.LinAlgError:
+                # singular (dependent or duplicated rows): the minimum-norm solution, on D_AA's range
+                w, V = np.linalg.eigh(0.5 * (DA + DA.T))
+                keep = w > w.size * EPS * max(float(w.max(initial=0.0)), 0.0)
+                if not keep.any():
+                    raise
+                self.pinv = (V[:, keep], w[keep])
+                self.kappa = float(w[keep].max() / w[keep].min())
         else:
             self.kappa, self.cg_rtol = 1.0, rtol
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
+        if self.pinv is not None:
+            V, w = self.pinv
+            return V @ ((V.T @ rhs) / w)
         if self.D is not None:
             return sla.cho_solve(self.L, rhs)
         out = self.op.face_solve(self.A, rhs, rtol=self.cg_rtol)
@@ -406,15 +453,23 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     e_K, e_2 = ksolve.k_error() if isinstance(ksolve, KSolver) else (0.0, 0.0)
     bmax = float(np.sqrt(np.max(np.asarray(qp.B.multiply(qp.B).sum(axis=1)), initial=0.0))) if e_2 else 0.0
     step_gap = np.abs(Bdx).max(initial=0.0) + 2.0 * bmax * e_2
-    err_mu = float(np.abs(mu - mu1).max(initial=0.0)) / force_scale(qp, mu1)
-    if (A.any() and mu1[A].min() <= margin * step_mu) or ((~A).any() and gap1[~A].min() <= margin * step_gap):
+    # duplicated rows (one constraint, several rows: the split of its force is not unique) are judged as one:
+    # the force of the group (each row's multiplier times its row's size), and no gap test for a row whose
+    # constraint is active through another row of its group
+    labels = parallel_rows(qp.B) if qp.m else None
+    size = np.sqrt(np.asarray(qp.B.multiply(qp.B).sum(axis=1)).ravel()) if labels is not None else np.ones(qp.m)
+    in_A = _group_sum(labels, A.astype(float), np.ones(qp.m)) > 0
+    mu1_g = _group_sum(labels, mu1, size) / size if labels is not None else mu1
+    err_mu = float(np.abs(_group_sum(labels, mu - mu1, size) / size).max(initial=0.0)) / force_scale(qp, mu1)
+    open_ = ~in_A
+    if (A.any() and mu1_g[A].min() <= margin * step_mu) or (open_.any() and gap1[open_].min() <= margin * step_gap):
         # not verified to first order (x's error is not |dx|); the multipliers of the set are still the
         # exact ones if the exact point keeps the KKT signs beyond the rounding of the step itself
         # (far-off multipliers with a right set: a large step, signs kept), then mu* = mu1; with CG the
         # step is known to its tolerance times the condition CG saw, not to rounding
         kappa, rtol = (face.kappa, face.rtol) if face is not None else (1.0, 0.0)
         rnd = MU_ROUNDING * max(EPS, rtol) * max(kappa, 1.0)
-        if (A.any() and mu1[A].min() <= rnd * step_mu) or ((~A).any() and gap1[~A].min() <= rnd * step_gap):
+        if (A.any() and mu1_g[A].min() <= rnd * step_mu) or (open_.any() and gap1[open_].min() <= rnd * step_gap):
             return nan
         return float("nan"), err_mu
     nx = size_energy(qp, x, _Kx)
