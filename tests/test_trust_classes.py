@@ -23,7 +23,7 @@ from dualfem.core.scene import load_scene
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
 from dualfem.experiments.runner import run
-from dualfem.numerics.certify import KSolver, infeasible_bound
+from dualfem.numerics.certify import KSolver
 
 SCENES = {"f2": ("f2", {"N": 8}), "penny": ("penny", {"mesh_size": 3.0, "tip_size": 0.5}),
           "fractured": ("fractured", {"mesh_size": 0.03, "tip_size": 0.03, "cracks": 15, "crack_length": 0.08})}
@@ -96,6 +96,8 @@ def test_penalty_beyond_its_tolerance_is_not_solved():
 def test_infeasible_bound_bounds_the_error_of_penetrating_answers(scale):
     """infeasible_bound >= the true error for answers that penetrate (too little contact force: x = K^-1 (F +
     B'mu) with mu < mu*, plus noise), where the duality-gap bound does not apply (it needs a feasible x)."""
+    from dualfem.numerics.certify import infeasible_bound
+
     qp = load_scene("f2", {"N": 16}).build()
     ref = run("pdas", qp, {"refine_tol": 1e-16})
     assert ref.multipliers.max() > 0
@@ -207,3 +209,15 @@ def test_dependent_rows_are_solved_and_sharply_certified(name, tmp_path):
     assert evaluator.energy_norm(qp, sol.x - ref.x) <= 1e-12 * evaluator.energy_norm(qp, ref.x)
     cert = sol.info["certificate"]
     assert np.isfinite(cert["active_set"]) and cert["active_set"] <= 1e-12, cert
+
+
+def test_compare_grades_penalty_beyond_its_tolerance_without_trusting_the_reference():
+    """checker wrong: compare judged an inexact solver only against the reference, excused by the reference's
+    own bound (penalty 7.5e-8 > 1e-8 missed with dual_gradient as the reference). Its `solved` is now
+    certified by its own error bound first, whatever the reference."""
+    from dualfem.experiments.compare import compare_solvers
+
+    qp = load_scene("two_defects", {"delta": 1e-12, "mesh_size": 0.08}).build()
+    res = compare_solvers(qp, ["penalty", "pdas"])
+    pen = next(r for r in res["runs"] if r["solver"] == "penalty")
+    assert pen["status"] == "inaccurate" and pen["grade"] != "correct", pen
