@@ -54,7 +54,9 @@ dual; a dual mode with compliance mu (an eigenvalue of G W, G = B K^-1 B', W = d
 by 1 / (1 + r mu) per outer iteration. The interface term makes mu ~ delta for small delta, so the
 paper's fixed r = 1e7 gives r mu ~ 1e-2 at delta = 1e-9: the ~900 iterations of its Table 2.
 ``r_rule="auto"`` takes r = r_factor / mu_min, computed from the QP itself (scale-invariant: the
-same r mu in MPa/mm and Pa/m), so every mode contracts by 1 / (1 + r_factor). The solver
+same r mu in MPa/mm and Pa/m), so every mode contracts by 1 / (1 + r_factor); mu_min is the smallest
+eigenvalue on G W's range (dependent or duplicated rows of B add zero eigenvalues whose modes change no
+x: r = r_factor / 0 gave a singular Newton system). The solver
 ``uzawa_auto`` is this method with ``r_rule="auto"``; ``uzawa`` keeps the paper's r = 1e7.
 
 The paper's r is a dimensional number (stress / length): 1e7 MPa per unit length for its body of
