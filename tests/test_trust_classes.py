@@ -221,3 +221,39 @@ def test_compare_grades_penalty_beyond_its_tolerance_without_trusting_the_refere
     res = compare_solvers(qp, ["penalty", "pdas"])
     pen = next(r for r in res["runs"] if r["solver"] == "penalty")
     assert pen["status"] == "inaccurate" and pen["grade"] != "correct", pen
+
+
+# ------------------------------------------------------------------ inactive big-M bounds
+@pytest.mark.parametrize("tau, solved", [(1e-2, True), (1e-1, True), (1.0, False)])
+def test_inactive_big_m_bounds_with_interior_point_multipliers(tmp_path, tau, solved):
+    """x >= -1e4 on every unknown (|x| ~ 1), answered as an interior-point method does: multipliers
+    tau / gap on the far bounds, x consistent with them. With x and mu errors 2.9e-7 and 2.9e-6 (tau = 0.01,
+    0.1) within the tolerance 1e-5 it is `solved` (was `inaccurate`: complementarity product 4.5e-3,
+    1e4 / |x| times the row's effect); at tau = 1 (error 2.9e-5) still `inaccurate`."""
+    rng = np.random.default_rng(3)
+    n = 8
+    M = rng.standard_normal((n, n))
+    P, q = M @ M.T + n * np.eye(n), rng.standard_normal(n) * 3
+    G0 = rng.standard_normal((n // 2, n))
+    G0 -= G0.mean(axis=1, keepdims=True)            # G0 1 = 0: the shift x0 = -1e4 (1, ..., 1) exists
+    f = tmp_path / "bigm.npz"
+    np.savez(f, P=P, q=q, G=np.vstack([G0, np.eye(n)]), h=np.r_[np.zeros(n // 2), -1e4 * np.ones(n)])
+    qp = load_scene(str(f)).build()
+    ref = run("pdas", qp, {"refine_tol": 1e-16})
+    big = np.arange(qp.m) >= n // 2
+    mu = ref.multipliers.copy()
+    mu[big] = tau / (qp.B @ ref.x)[big]
+    x = ref.x + np.linalg.solve(P, qp.B.T @ (mu - ref.multipliers))
+
+    class InteriorPointLike(Solver):
+        name = "ip_like"
+        tolerance = 1e-5
+        exact = True
+
+        def solve(self):
+            return Solution(solver=self.name, status=Status.SOLVED, x=x, multipliers=mu)
+
+    sol = run(InteriorPointLike(), qp)
+    err = evaluator.compare(qp, x, mu, ref.x, ref.multipliers)["x_energy"]
+    assert (err <= 1e-5) == solved
+    assert (sol.status == Status.SOLVED) == solved, sol.message
