@@ -294,7 +294,9 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     err_mu = float(np.abs(_group_sum(labels, mu - mu1, size) / size).max(initial=0.0)) / force_scale(qp, mu1)
     open_ = ~in_A
     if D is not None and face is not None and open_.any():
-        open_ &= ~_implied_rows(D, A, open_, face)
+        near = open_ & (gap1 <= margin * step_gap)       # only rows that would fail the margin are looked at
+        if near.any():
+            open_ &= ~_implied_rows(D, A, near, face)
     extra = 0.0
     if face is not None and face.pinv is not None and not _groups_explain(labels, A, face):
         # dependent rows beyond duplicates: the forces on A are not unique and the minimum-norm step may
