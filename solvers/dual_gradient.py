@@ -34,6 +34,7 @@ import time
 import numpy as np
 import scipy.sparse.linalg as sla
 
+from dualfem.core.evaluator import load_length
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
@@ -80,6 +81,7 @@ class DualGradient(Solver):
     def setup(self, qp) -> None:
         self.qp = qp
         self._lu = sparse_factor(qp.K, from_param(self))
+        self._length = load_length(qp)        # the evaluator's length floor: a solution x* = 0 has a scale
         B = qp.B
         if qp.m == 0:
             self.L = 1.0
@@ -105,7 +107,7 @@ class DualGradient(Solver):
         Bmu = qp.B.T @ mu
         fs = max(np.abs(qp.F).max(initial=0.0), np.abs(qp.F + Bmu).max(initial=0.0),
                  np.abs(Bmu).max(initial=0.0), 1e-300)
-        ls = max(np.abs(x).max(initial=0.0), 1e-300)
+        ls = max(np.abs(x).max(initial=0.0), self._length, 1e-300)
         primal = max(0.0, -gap.min(initial=0.0)) / ls
         compl = float(np.abs(mu * gap).max(initial=0.0)) / (fs * ls)
         return primal, compl

@@ -49,6 +49,7 @@ import sys
 import time
 
 import numpy as np
+import scipy.linalg as sla
 
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
@@ -132,7 +133,7 @@ class PDASSolver(DualOperatorSolver):
         d = np.zeros_like(mu)
         d[held] = -gap[held] / dD[held]
         if free.any():
-            d[free] = op.face_solve(free, -gap[free], rtol=FACE_RTOL)
+            d[free] = self._face_solve(free, -gap[free])
         q0 = op.dual_energy(mu)
         t = 1.0
         for _ in range(int(p["max_backtracks"]) + 1):
@@ -194,14 +195,31 @@ class PDASSolver(DualOperatorSolver):
         A = (mu - c * gap) > 0
         mu_n = np.zeros(mu.size)
         if A.any():
-            mu_n[A] = self.op.face_solve(A, -self.op.b0[A], x0=mu[A], rtol=FACE_RTOL)
+            mu_n[A] = self._face_solve(A, -self.op.b0[A], x0=mu[A])
         return mu_n, A
+
+    def _face_solve(self, A: np.ndarray, rhs: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
+        """D_AA^-1 rhs; where D_AA is singular (dependent or duplicated rows of B: the multipliers are not
+        unique, which is normal) and D is dense, the minimum-norm solution (least squares, numpy's rank
+        threshold m eps): it splits a force evenly over duplicated rows. Raises what the operator raises
+        otherwise."""
+        try:
+            return self.op.face_solve(A, rhs, x0=x0, rtol=FACE_RTOL)
+        except (np.linalg.LinAlgError, ValueError):
+            D = getattr(self.op, "D", None)
+            if self.op.kind != "dense" or D is None:
+                raise
+            DA = D[np.ix_(A, A)]
+            return sla.lstsq(DA, rhs, cond=A.sum() * np.finfo(float).eps)[0]
 
     def _polish(self, mu: np.ndarray) -> np.ndarray:
         """The exact Newton point of the converged active set, kept only if consistent (forces >= 0
         on the set, gaps >= 0 off it, to rounding: :meth:`~dualfem.numerics.dual_operator.DualOperator.
         face_minimiser`); else mu clipped at 0."""
-        mu_p = self.op.face_minimiser(mu, self.params["tol"], rtol=FACE_RTOL)
+        try:
+            mu_p = self.op.face_minimiser(mu, self.params["tol"], rtol=FACE_RTOL)
+        except (np.linalg.LinAlgError, ValueError):     # singular face (dependent rows): keep the Newton point
+            mu_p = None
         return np.maximum(mu, 0.0) if mu_p is None else mu_p
 
     def solve(self) -> Solution:

@@ -65,6 +65,7 @@ import time
 import numpy as np
 import scipy.linalg as sla
 
+from dualfem.core.evaluator import load_energy, load_length
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
 from dualfem.numerics.dual_solver import OPERATORS, DualOperatorSolver
@@ -243,6 +244,13 @@ class PenaltySolver(DualOperatorSolver):
             _SparseSpace(self.op, qp, from_param(self), keep=int(self.params["keep_factors"]))
         kd = qp.K.diagonal()[np.asarray(qp.local_dofs)]
         self.rho0 = self.params["rho0_factor"] * float(np.median(kd)) / float(np.median(qp.weights))
+        # the scales of the stop tests have the evaluator's floors (the length and the energy the load sets),
+        # so that a solution x* = 0 (a crack pushed shut, nothing else loaded) has a scale of its own
+        self._length, self._energy2 = load_length(qp), load_energy(qp) ** 2
+
+    def _size(self, xI) -> float:
+        """max(|x_I|_inf, the load's length): the scale of the penetration and step tests."""
+        return max(self.space.size(xI), self._length, 1e-300)
 
     # ------------------------------------------------------------------ pieces
     def _objective(self, xI, rho):
@@ -311,11 +319,11 @@ class PenaltySolver(DualOperatorSolver):
             # matrix-free: a sparse factorization of K + rho BA' W BA)
             d = sp_.direction(grad, A, rho)
             slope = grad @ d
-            xs = max(sp_.size(xI), 1e-300)
+            xs = self._size(xI)
             # Newton decrement -grad'd = |d|_H^2: relative to x'Sx it measures the squared
             # relative energy-norm distance to the minimiser; 1e-20 -> ~1e-10 (the stiff
             # directions make |grad| itself stall far above rounding when rho is large)
-            xSx = max(float(xI @ (S @ xI)), 1e-300)
+            xSx = max(float(xI @ (S @ xI)), self._energy2, 1e-300)
             if slope >= 0 or -slope <= 1e-20 * xSx or sp_.size(d) <= 1e-13 * xs:
                 # the Newton step is at rounding level of x (or no longer a descent direction
                 # because of rounding): xI is the minimiser to working precision
@@ -358,7 +366,7 @@ class PenaltySolver(DualOperatorSolver):
         w = self.qp.weights
         xn, mu, A = self.space.polish(xI, rho)
         gap = self.space.B @ xn
-        xs = max(self.space.size(xn), 1e-300)
+        xs = self._size(xn)
         if np.any(mu[A] <= 0) or np.any(gap[~A] < -1e-12 * xs):
             return None
         pen = float((mu[A] / (rho * w[A])).max(initial=0.0))
@@ -395,7 +403,7 @@ class PenaltySolver(DualOperatorSolver):
                 pen = float(max(0.0, -(sp_.B @ xI).min(initial=0.0)))
             else:
                 xI, mu, pen = pol
-            xs = max(sp_.size(xI), 1e-300)
+            xs = self._size(xI)
             if p["verbose"]:
                 print(f"penalty: stage {stage} rho {rho:.3g} newton {steps} penetration {pen / xs:.1e}",
                       file=sys.stderr)
@@ -416,5 +424,5 @@ class PenaltySolver(DualOperatorSolver):
             info={**self.op.info(), **sp_.info(), "factorizations": sp_.factorizations,
                   "operator_factorizations": self.op.counters.factorizations,
                   "rho": rho, "rho0": self.rho0, "penetration": pen,
-                  "penetration_rel": pen / max(np.abs(x).max(initial=0.0), 1e-300)},
+                  "penetration_rel": pen / max(np.abs(x).max(initial=0.0), self._length, 1e-300)},
         )

@@ -19,7 +19,9 @@ active set A = {lambda_j > 0},
 
 with s = 1 divided by ``step_factor`` until the Armijo test
 ``M(x - s d) <= M(x) - armijo_c * s * G'd`` holds, and the inner stop
-``||x^{m+1} - x^m|| / ||x^{m+1}|| < tol_inner``.
+``||x^{m+1} - x^m|| / max(||x^{m+1}||, s_F) < tol_inner`` (s_F the size the load sets:
+:func:`dualfem.core.evaluator.load_energy` in the energy norm, ``load_length`` in the Euclidean one; the
+test stays relative to the data when x* = 0).
 
 Choices where the paper is silent or misprinted (documented here once):
 
@@ -52,7 +54,9 @@ dual; a dual mode with compliance mu (an eigenvalue of G W, G = B K^-1 B', W = d
 by 1 / (1 + r mu) per outer iteration. The interface term makes mu ~ delta for small delta, so the
 paper's fixed r = 1e7 gives r mu ~ 1e-2 at delta = 1e-9: the ~900 iterations of its Table 2.
 ``r_rule="auto"`` takes r = r_factor / mu_min, computed from the QP itself (scale-invariant: the
-same r mu in MPa/mm and Pa/m), so every mode contracts by 1 / (1 + r_factor). The solver
+same r mu in MPa/mm and Pa/m), so every mode contracts by 1 / (1 + r_factor); mu_min is the smallest
+eigenvalue on G W's range (dependent or duplicated rows of B add zero eigenvalues whose modes change no
+x: r = r_factor / 0 gave a singular Newton system). The solver
 ``uzawa_auto`` is this method with ``r_rule="auto"``; ``uzawa`` keeps the paper's r = 1e7.
 
 The paper's r is a dimensional number (stress / length): 1e7 MPa per unit length for its body of
@@ -117,6 +121,7 @@ import scipy.linalg as la
 import scipy.sparse as sp
 
 from dualfem.core.errors import InputError
+from dualfem.core.evaluator import load_energy, load_length
 from dualfem.core.parts import UnitsPart
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
@@ -124,6 +129,8 @@ from dualfem.numerics.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics.factor import from_param
 from dualfem.numerics.linalg import LocalReduction, sparse_factor
 from dualfem.numerics.newton_matrix import NewtonMatrix
+
+EPS = float(np.finfo(float).eps)
 
 #: the matrix-free path computes mu_min densely (one block of m products) up to this many rows
 DENSE_EIG_MAX = 32
@@ -190,7 +197,7 @@ class _ReducedSpace:
         GW = self.dual_compliance(w)
         sw = np.sqrt(w)
         sym = (GW / w[None, :]) * sw[:, None] * sw[None, :]   # W^1/2 G W^1/2
-        return float(np.linalg.eigvalsh(0.5 * (sym + sym.T)).min()), {"mu_min_method": "dense eigvalsh"}
+        return _range_min(np.linalg.eigvalsh(0.5 * (sym + sym.T))), {"mu_min_method": "dense eigvalsh"}
 
     def qgrad(self, z):
         return self.Q @ z - self.q
@@ -223,6 +230,15 @@ class _ReducedSpace:
 
     def full(self, z):
         return self.red.full(z)
+
+
+def _range_min(ev: np.ndarray) -> float:
+    """The smallest eigenvalue of the dual compliance on its range: dependent or duplicated rows of B
+    (multipliers not unique) give eigenvalues 0 to rounding (below m eps max, numpy's rank threshold),
+    whose directions change no x; the dual is strongly concave on the rest, and r is chosen from that."""
+    top = float(ev.max(initial=0.0))
+    kept = ev[ev > ev.size * EPS * top]
+    return float(kept.min()) if kept.size else float(ev.min(initial=0.0))
 
 
 class _FullSpace:
@@ -313,7 +329,7 @@ class _SparseSpace:
         t0 = time.perf_counter()
         if m <= DENSE_EIG_MAX:      # a few rows: the whole matrix is one block of m products
             sym = sw[:, None] * op.apply(sw[:, None] * np.eye(m))
-            mu = float(np.linalg.eigvalsh(0.5 * (sym + sym.T)).min())
+            mu = _range_min(np.linalg.eigvalsh(0.5 * (sym + sym.T)))
             how = f"dense eigvalsh (m <= {DENSE_EIG_MAX})"
         else:
             A = LinearOperator((m, m), matvec=lambda v: sw * op.apply(sw * np.ravel(v)), dtype=float)
@@ -395,6 +411,9 @@ class Uzawa(DualOperatorSolver):
         p = self.params
         self.qp, self.op, self.reduction = qp, None, None
         self._mu, self._mu_info = None, {}
+        # the inner test's size has the evaluator's floor (the energy / length the load sets), so that a
+        # solution x* = 0 (a crack pushed shut, nothing else loaded) still has a scale: relative to the data
+        self._floor2 = (load_energy(qp) if p["inner_norm"] == "energy" else load_length(qp)) ** 2
         if p["linalg"] == "reduced":
             super().setup(qp)            # self.op (dense or matrix_free), self.reduction (dense only)
             if self.op.kind == "dense":
@@ -539,7 +558,7 @@ class Uzawa(DualOperatorSolver):
             steps.append(s)
             nz2 = sp_.norm2(z)
             ratio = s * np.sqrt(max(dQd, 0.0) if p["inner_norm"] == "energy" else float(d @ d)) \
-                / np.sqrt(max(nz2, 1e-300))
+                / np.sqrt(max(nz2, self._floor2, 1e-300))
             ratios.append(float(ratio))
             if ratio < p["tol_inner"]:
                 return z, steps, True, ""

@@ -4,7 +4,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from _backend import DEFAULT
 from _lcp import enumerate_lcp
 
 from dualfem.core import evaluator
@@ -78,8 +77,9 @@ def test_refinement_keeps_small_delta_accurate():
     qp = load_scene("f1", {"N": 32, "delta": 1e-9}).build()
     raw = run("pdas", qp, {"refine": 0})
     ref = run("pdas", qp, {"refine_tol": 1e-16})
-    if DEFAULT == "pardiso":
-        assert ref.info["refinement_steps"] >= 1
+    # a step is kept only if it lowers the residual: under SuperLU the unrefined answer is already at the
+    # rounding floor here (KKT error 2.8e-14), under PARDISO it is not
+    assert ref.info["refinement_steps"] >= 1 or evaluator.kkt_error(raw.residuals) <= 1e-13
     assert evaluator.kkt_error(ref.residuals) <= evaluator.kkt_error(raw.residuals)
     assert evaluator.kkt_error(ref.residuals) < 1e-11
 

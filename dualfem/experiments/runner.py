@@ -8,10 +8,16 @@ its message, and the residuals always come from :mod:`dualfem.core.evaluator`.
 the evaluator's scale-free KKT residuals, recomputed from (x, mu) and the QP (the stationarity
 residual beyond its measured rounding floor, :data:`dualfem.core.evaluator.ROUNDING_C`; for a shifted
 QP in the QP's own and in the user's unknowns, :mod:`dualfem.core.evaluator`), are within the
-tolerance the solver instance declares, and, for exact solvers, the a-posteriori energy-norm
-error certificate (:func:`dualfem.numerics.certify.certified_error`) is too where it applies, and
-so is the certified error of the multipliers (against the exact multipliers of the verified active
-set: the contact forces are certified, not only x).
+tolerance the solver instance declares, and the a-posteriori energy-norm error certificate
+(:func:`dualfem.numerics.certify.certified_error`) is too where it applies, and so is the certified
+error of the multipliers (against the exact multipliers of the verified active set: the contact forces
+are certified, not only x). Residuals bound the error only through the conditioning of K: a soft mode
+(an eigenvector of K's smallest eigenvalue) added to x* changes the residuals little and x much, so
+the error itself is bounded, for exact and inexact solvers alike (an inexact solver's ``tolerance`` is
+the promised energy-norm error of x against the QP's solution x*, its modelling error included). An
+inexact solver's answer is usually infeasible (a penalty solution penetrates): its error is bounded by
+:func:`dualfem.numerics.certify.infeasible_bound` or the exact step onto its verified active set; a
+``solved`` claim of an inexact solver for which no error bound applies is not certified.
 Otherwise the status becomes ``inaccurate`` with a message naming the residual and by how much;
 the plugin's own claim stays in ``Solution.info["claimed_status"]``.
 """
@@ -406,11 +412,13 @@ def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: An
     if sol.status != Status.SOLVED or res is None or not res.get("finite", False) or sol.x is None \
             or sol.multipliers is None:
         return sol
+    if not all(np.isfinite(res[k]) for k in evaluator.RESIDUALS):
+        return sol                        # not finite: never 'solved' (:func:`_certified` says so)
     worst = max(evaluator.RESIDUALS, key=lambda k: res[k])
     why = None
     if res[worst] > tol:
         why = f"evaluator residual {worst} = {res[worst]:.1e} exceeds the declared tolerance {tol:g}"
-    elif exact:
+    else:
         from dualfem.numerics.certify import KSolver, certified_error, multiplier_floor
 
         try:
@@ -431,6 +439,9 @@ def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: An
         if np.isfinite(cert) and cert > tol:
             why = (f"certified energy-norm error bound {cert:.1e} exceeds the declared tolerance {tol:g} "
                    f"(residuals are within it)")
+        elif not exact and not np.isfinite(cert):
+            why = ("no error bound applies to this answer of an inexact solver (residuals alone do not bound "
+                   "the error of x)")
         elif np.isfinite(cmu) and cmu > tol and not multipliers:
             sol.message = (f"{sol.message}; " if sol.message else "") + \
                 f"certified multiplier error {cmu:.1e} exceeds {tol:g} (not graded: x only)"
@@ -489,8 +500,8 @@ def summary(qp: QP, sol: Solution) -> dict:
         cert = sol.info.get("certificate")
         if cert:
             out["certificate"] = {k: v for k, v in cert.items()
-                                  if k in ("value", "bound", "active_set", "multipliers", "multipliers_floor",
-                                           "path")}
+                                  if k in ("value", "bound", "active_set", "infeasible", "multipliers",
+                                           "multipliers_floor", "path")}
     else:
         out.update({"energy": None, "max_jump": None, "n_contact": None, "residuals": None})
     return out
