@@ -151,7 +151,7 @@ def twice(tmp_path_factory):
     qp = load_scene("f2", {"N": 8}).build()
     B = qp.B.toarray()
     f = tmp_path_factory.mktemp("twice") / "twice.npz"
-    np.savez(f, P=qp.K.toarray(), q=-qp.F, G=np.vstack([B, B]), h=np.zeros(2 * qp.m))
+    np.savez(f, P=qp.K.toarray(), q=-qp.F, G=-np.vstack([B, B]), h=np.zeros(2 * qp.m))  # qpsolvers' G x <= h
     return qp, load_scene(str(f)).build()
 
 
@@ -202,7 +202,7 @@ def test_dependent_rows_are_solved_and_sharply_certified(name, tmp_path):
     assert a.size >= 3 and qp.m >= 7
     extra = np.array([B[a[0]] + B[a[1]], 2 * B[a[1]] + B[a[2]], B[5] + B[6]])
     f = tmp_path / "dependent.npz"
-    np.savez(f, P=qp.K.toarray(), q=-qp.F, G=np.vstack([B, extra]), h=np.zeros(qp.m + 3))
+    np.savez(f, P=qp.K.toarray(), q=-qp.F, G=-np.vstack([B, extra]), h=np.zeros(qp.m + 3))  # qpsolvers' G x <= h
     q2 = load_scene(str(f)).build()
     sol = run(name, q2)
     assert sol.status == Status.SOLVED, (name, sol.message)
@@ -237,7 +237,7 @@ def test_inactive_big_m_bounds_with_interior_point_multipliers(tmp_path, tau, so
     G0 = rng.standard_normal((n // 2, n))
     G0 -= G0.mean(axis=1, keepdims=True)            # G0 1 = 0: the shift x0 = -1e4 (1, ..., 1) exists
     f = tmp_path / "bigm.npz"
-    np.savez(f, P=P, q=q, G=np.vstack([G0, np.eye(n)]), h=np.r_[np.zeros(n // 2), -1e4 * np.ones(n)])
+    np.savez(f, P=P, q=q, G=-np.vstack([G0, np.eye(n)]), h=np.r_[np.zeros(n // 2), 1e4 * np.ones(n)])
     qp = load_scene(str(f)).build()
     ref = run("pdas", qp, {"refine_tol": 1e-16})
     big = np.arange(qp.m) >= n // 2
