@@ -133,7 +133,7 @@ def test_more_than_ten_solvers_are_faceted_by_family(tmp_path, monkeypatch):
     figs = _capture(monkeypatch)
     runs = _runs(REGISTERED_25)
     wp, sc = P.plots(runs, [], tmp_path)
-    assert wp == ["wp_f2_N16.png"] and sc == []
+    assert [f.name for f in wp] == ["wp_f2_N16.png"] and sc == []
     (name, fig), = figs
     fams = S.group_by_family(REGISTERED_25)
     assert len(fams) == 4
@@ -215,3 +215,38 @@ def test_report_reads_the_curves_of_the_rows_it_keeps(tmp_path):
     sources = [{"dir": tmp_path}, {"dir": tmp_path / "other"}]
     (c,) = load_curves(runs, sources)
     assert c.run_id == "kept" and list(c.time_s) == [0.1, 0.2] and np.allclose(c.error, [1e-2, 5e-3])
+
+
+def _gmsh_runs(path: str = "benchmarks/scenes/plate.toml") -> list[dict]:
+    """Rows of a scene file given by mesh_size (no N column at all), at two sizes, with their floors."""
+    rows = []
+    for h, n in ((0.04, 1800), (0.02, 6200)):
+        for r in _runs(["pdas", "osqp"]):
+            r = {k: v for k, v in r.items() if k != "scene_N"}
+            r.update(scene=path, scene_key=f"{r['scene_key']}-{h}", scene_mesh_size=h, n_unknowns=n,
+                     run_id=f"{r['run_id']}-{h}", scene_tip_size=0.01)
+            rows.append(r)
+    return rows
+
+
+def test_a_scene_without_N_gets_its_figures(tmp_path, monkeypatch):
+    figs = _capture(monkeypatch)
+    floors = [{"kind": "floor", "status": "solved", "n_unknowns": n, "total_s": t, "solver": "floor_splu"}
+              for n, t in ((1800, 0.004), (6200, 0.02))]
+    wp, sc = P.plots(_gmsh_runs(), floors, tmp_path)
+    assert [f.name for f in wp] == ["wp_plate_mesh_size0.04.png", "wp_plate_mesh_size0.02.png"]
+    assert [f.name for f in sc] == ["scaling_plate.png"]
+    titles = {name: fig._suptitle.get_text() for name, fig in figs}
+    assert titles["wp_plate_mesh_size0.02.png"] == "work-precision: plate, mesh_size = 0.02 (6,200 unknowns)"
+    # the floor of the figure is the floor of its size (dashed vertical line at 0.02 s)
+    fig = dict(figs)["wp_plate_mesh_size0.02.png"]
+    xs = {ln.get_xdata()[0] for ln in fig.axes[0].get_lines() if ln.get_linestyle() == "--"}
+    assert xs == {0.02}
+
+
+def test_scene_identity_names_only_what_varies():
+    from dualfem.reports._bench_util import group_scenes
+
+    runs = _gmsh_runs() + _runs(["pdas"]) + [dict(r, scene="curved") for r in _runs(["pdas"])]
+    labels = [s.label for s in group_scenes(runs)]
+    assert labels == ["curved, N = 16", "f2, N = 16", "plate, mesh_size = 0.04", "plate, mesh_size = 0.02"]

@@ -73,7 +73,9 @@ def _tier_section(runs: list[dict], tier: str, tol: float, shift: float, deltas:
     if not stats:
         return []
     L = [f"### tier {tier} (tol {tol:g})", "",
-         f"All deltas. Shifted geometric mean of time over the {ncommon} scenes every solver of this tier ran.", "",
+         "All deltas. " + (f"Shifted geometric mean of time over the {ncommon} scenes every solver of this tier ran."
+                           if ncommon else "No scene was run by every solver of this tier: no shifted geometric "
+                           "mean of time (n/a); compare the per-delta table or the figures."), "",
          "| rank | solver | runs | success rate | solved claims | certified correct | correct rate | claims agree "
          "| wrong claims | shifted GM of time (rel.) | plain GM of time (rel.) |",
          "|---|---|---|---|---|---|---|---|---|---|---|"]
