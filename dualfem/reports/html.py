@@ -117,12 +117,15 @@ def check_out_dir(out: str | Path, force: bool = False) -> Path:
 
 
 def build_dashboard(results: list[str | Path], out: str | Path, *, force: bool = False, shift: float = 10.0,
-                    ours: list[str] | None = None, err_target: float = 1e-8, command: str = "") -> Path:
+                    ours: list[str] | None = None, err_target: float = 1e-8, command: str = "",
+                    show_targets: bool = False) -> Path:
     """Write ``out/index.html`` from the results folders ``results`` (later ones replace the rows of earlier
     ones that measure the same thing); returns its path. Everything is checked (DIR, plotly, the results)
-    before anything is written; ``shift`` (s), ``ours`` and ``err_target`` as for ``dualfem report bench``."""
+    before anything is written; ``shift`` (s), ``ours``, ``err_target`` and ``show_targets`` as for
+    ``dualfem report bench``."""
     index = check_out_dir(out, force)
     bundle = plotly_js()
-    data = payload(list(results), shift=shift, ours=ours, err_target=err_target, command=command)
+    data = payload(list(results), shift=shift, ours=ours, err_target=err_target, command=command,
+                   show_targets=show_targets)
     atomic_write_text(index, render(data, bundle))
     return index
