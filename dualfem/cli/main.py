@@ -294,7 +294,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="dualfem", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (help_, configure, _) in _COMMANDS.items():
-        configure(sub.add_parser(name, help=help_, description=help_))
+        sp = sub.add_parser(name, help=help_, description=help_)
+        configure(sp)
+        try:        # every command: the third-party libraries' own output (dualfem.core.quiet)
+            sp.add_argument("--verbose", action="store_true",
+                            help="let the solvers' libraries print their own banners and logs on stderr "
+                                 "(dropped by default)")
+        except argparse.ArgumentError:      # the command has its own --verbose
+            pass
     return parser
 
 
@@ -327,6 +334,10 @@ def main(argv: list[str] | None = None) -> int:
               f"object of --json", file=sys.stderr)
         return EXIT_NO_STDOUT
     run = _COMMANDS[args.command][2]
+    if getattr(args, "verbose", False) is True:
+        from dualfem.core.quiet import set_verbose
+
+        set_verbose(True)
     try:
         rc = run(args)
         sys.stdout.flush()       # a full disk behind `> file` shows here, not at interpreter exit
