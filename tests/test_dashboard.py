@@ -498,3 +498,12 @@ def test_a_scene_without_N_is_faceted_by_its_identity(tmp_path):
         assert "N in" not in summary and "inclined_biaxial, mesh_size = 0.02" in summary
         assert re.search(r'<section id="targets-section"[^>]*hidden', res.dom)
         assert "floor N=" not in res.dom and ">floor<" in res.dom.replace("</tspan>", "<")
+
+
+def test_a_stress_row_is_named_by_its_scene_not_its_load():
+    from dualfem.reports._dash_data import _stress_row
+
+    r = _stress_row({"kind": "stress", "scene": {"load": "f2", "N": 16, "delta": 1e-5}, "scene_name": "curved",
+                     "axis": "delta", "coords": {"delta": 1e-5}, "solver": "pdas"})
+    assert r["scene"] == "curved" and r["scene_N"] == 16
+    assert _stress_row({"scene": {"load": "f2"}, "axis": "N", "coords": {}, "solver": "pdas"})["scene"] == "f2"

@@ -25,7 +25,8 @@ What the payload holds (every number as measured; NaN and infinities become ``nu
   unknowns (``scene``: index into ``scenes``).
 
 Stress rows (``dualfem stress``) have no tier: they are put in the tier ``declared`` (each solver's own
-declared tolerance, graded as recorded), their scene is the scene's load (or name), and their scene
+declared tolerance, graded as recorded), their scene is the scene's name (``scene_name``: ``curved``,
+not its problem or load; older rows: the scene's load), and their scene
 key the stress axis and its coordinates.
 """
 from __future__ import annotations
@@ -83,7 +84,7 @@ def _stress_row(r: dict) -> dict:
     sc = r.get("scene") if isinstance(r.get("scene"), dict) else {}
     coords = r.get("coords") if isinstance(r.get("coords"), dict) else {}
     r = dict(r)
-    r.update(scene=str(sc.get("scene") or sc.get("load") or "?"), scene_N=_f(sc.get("N")),
+    r.update(scene=str(r.get("scene_name") or sc.get("scene") or sc.get("load") or "?"), scene_N=_f(sc.get("N")),
              scene_delta=_f(sc.get("delta")), tier=STRESS_TIER, variant=str(r.get("solver")),
              solver=str(r.get("solver")),
              scene_key=f"{r.get('axis')}:{json.dumps(coords, sort_keys=True, default=str)}",
