@@ -224,7 +224,7 @@ def _gmsh_runs(path: str = "benchmarks/scenes/plate.toml") -> list[dict]:
         for r in _runs(["pdas", "osqp"]):
             r = {k: v for k, v in r.items() if k != "scene_N"}
             r.update(scene=path, scene_key=f"{r['scene_key']}-{h}", scene_mesh_size=h, n_unknowns=n,
-                     run_id=f"{r['run_id']}-{h}", scene_tip_size=0.01)
+                     run_id=f"{r['run_id']}-{h}", scene_tip_size=0.01, ref_solver="pdas")
             rows.append(r)
     return rows
 
@@ -242,6 +242,12 @@ def test_a_scene_without_N_gets_its_figures(tmp_path, monkeypatch):
     fig = dict(figs)["wp_plate_mesh_size0.02.png"]
     xs = {ln.get_xdata()[0] for ln in fig.axes[0].get_lines() if ln.get_linestyle() == "--"}
     assert xs == {0.02}
+    # the reference solver (pdas) is no competitor: no point of it, a dash-dotted line at its median time
+    pdas_t = sorted(r["total_s"] for r in _gmsh_runs() if r["solver"] == "pdas" and r["scene_mesh_size"] == 0.02
+                    and r["scene_delta"] == 0.1)
+    assert {ln.get_xdata()[0] for ln in fig.axes[0].get_lines() if ln.get_linestyle() == "-."} == {pdas_t[1]}
+    labels = [t.get_text() for leg in fig.legends for t in leg.get_texts()]
+    assert "osqp" in labels and "pdas" not in labels and "reference (pdas): its own runs' time" in labels
 
 
 def test_scene_identity_names_only_what_varies():

@@ -30,6 +30,8 @@ RC = {"font.size": 9, "axes.titlesize": 9.5, "axes.labelsize": 9, "legend.fontsi
       "xtick.labelsize": 8, "ytick.labelsize": 8, "legend.title_fontsize": 8.5}
 #: grey of the floor and tolerance guide lines (not a series colour)
 GUIDE = "0.45"
+#: colour of the reference solver's time line (not a series colour)
+REF_LINE = "0.15"
 #: errors below this are drawn at it
 ERR_FLOOR = 1e-16
 PANEL_W, PANEL_H = 3.3, 2.6
@@ -87,8 +89,22 @@ def solver_curves(curves: list[Curve], runs: list[dict], kind: str = "reference"
     return out
 
 
+def selfref(r: dict) -> bool:
+    """Whether a run is by its scene's reference solver: its error against that reference is 0 by
+    construction, so it is drawn as a line at its time, not as a competitor's point."""
+    return bool(r.get("ref_solver")) and str(r.get("ref_solver")) == str(r.get("solver"))
+
+
+def _ref_time(pts: list[dict]) -> tuple[float, str] | None:
+    """(median time [s], solver) of the reference solver's own runs among ``pts``, or None."""
+    ts = sorted(_f(r.get("total_s")) for r in pts if selfref(r) and math.isfinite(_f(r.get("total_s"))))
+    if not ts:
+        return None
+    return ts[len(ts) // 2], ", ".join(sorted({str(r["solver"]) for r in pts if selfref(r)}))
+
+
 def _finite_points(pts: list[dict], var: str) -> list[dict]:
-    vr = [r for r in pts if r["variant"] == var and math.isfinite(_f(r.get("err_x_energy")))
+    vr = [r for r in pts if r["variant"] == var and not selfref(r) and math.isfinite(_f(r.get("err_x_energy")))
           and math.isfinite(_f(r.get("total_s")))]
     vr.sort(key=lambda r: -_f(r.get("tol")) if math.isfinite(_f(r.get("tol"))) else 0)
     return vr
@@ -108,11 +124,12 @@ def _draw_curve(ax, sc: SolverCurve, st: Style) -> None:
 
 def _wp_panel(ax, pts: list[dict], members: list[str], st: dict[str, Style], floor_s: float | None,
               curves: dict[tuple[str, str], SolverCurve], tols: dict[str, float]) -> None:
-    """One work-precision panel: the members' points, curves (or tier lines) and the guide lines."""
-    keys = {str(r.get("scene_key")) for r in pts}
+    """One work-precision panel: the members' points, curves (or tier lines) and the guide lines (the
+    floor; the reference solver's own runs, :func:`selfref`, as a line at their median time)."""
     for var in members:
         s = st[var]
         vr = _finite_points(pts, var)
+        keys = {str(r.get("scene_key")) for r in pts if r["variant"] == var and not selfref(r)}
         sc = next((curves[(var, k)] for k in sorted(keys) if (var, k) in curves), None)
         if sc is not None:
             _draw_curve(ax, sc, s)
@@ -126,6 +143,9 @@ def _wp_panel(ax, pts: list[dict], members: list[str], st: dict[str, Style], flo
                     mfc=s.color if solved else "none", zorder=4)
     if floor_s is not None and math.isfinite(floor_s):
         ax.axvline(floor_s, color=GUIDE, ls="--", lw=0.9, zorder=1)
+    ref = _ref_time(pts)
+    if ref is not None:
+        ax.axvline(ref[0], color=REF_LINE, ls="-.", lw=1.1, zorder=1)
     for tol in tols.values():
         ax.axhline(tol, color=GUIDE, ls=":", lw=0.9, zorder=1)
 
@@ -139,12 +159,14 @@ def _legend_handles(members: list[str], st: dict[str, Style], curved: set[str], 
     return h + extra
 
 
-def _guides(floor: bool, tols: dict[str, float]) -> list:
+def _guides(floor: bool, tols: dict[str, float], ref: str = "") -> list:
     from matplotlib.lines import Line2D
 
     out = [Line2D([], [], color=GUIDE, ls="none", marker="o", mfc="none", ms=5.5, label="hollow: not solved")]
     if floor:
         out.append(Line2D([], [], color=GUIDE, ls="--", lw=0.9, label="floor: factor + solve K"))
+    if ref:
+        out.append(Line2D([], [], color=REF_LINE, ls="-.", lw=1.1, label=f"reference ({ref}): its own runs' time"))
     if tols:
         out.append(Line2D([], [], color=GUIDE, ls=":", lw=0.9,
                           label="tier tol: " + ", ".join(f"{k} {v:g}" for k, v in sorted(tols.items(),
@@ -209,9 +231,10 @@ def _finish(fig, axes, rows, st, curved, guides, ylabel: str, title: str, figdir
 def _present(sel: list[dict], curves: dict[tuple[str, str], SolverCurve]) -> list[str]:
     """The variants with something to draw in ``sel``: a finite point or a curve of one of its scenes."""
     keys = {str(r.get("scene_key")) for r in sel}
-    out = {r["variant"] for r in sel
-           if math.isfinite(_f(r.get("err_x_energy"))) and math.isfinite(_f(r.get("total_s")))}
-    return sorted(out | {v for (v, k) in curves if k in keys and any(r["variant"] == v for r in sel)})
+    out = {r["variant"] for r in sel if not selfref(r)
+           and math.isfinite(_f(r.get("err_x_energy"))) and math.isfinite(_f(r.get("total_s")))}
+    return sorted(out | {v for (v, k) in curves if k in keys and any(r["variant"] == v and not selfref(r)
+                                                                      for r in sel)})
 
 
 def wp_figure(sel: list[dict], deltas: list[float], floor_s: float | None, curves, title: str,
@@ -232,7 +255,8 @@ def wp_figure(sel: list[dict], deltas: list[float], floor_s: float | None, curve
             axes[0][j].set_title(f"delta = {d:g}")
             axes[-1][j].set_xlabel("time (setup + solve) [s]")
         curved = {v for (v, k) in curves if v in members and k in {str(r.get("scene_key")) for r in sel}}
-        return _finish(fig, axes, rows, st, curved, _guides(floor_s is not None, tols),
+        ref = _ref_time(sel)
+        return _finish(fig, axes, rows, st, curved, _guides(floor_s is not None, tols, ref[1] if ref else ""),
                        "rel. energy-norm error of x", f"work-precision: {title}", figdir, name)
 
 

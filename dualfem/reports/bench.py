@@ -259,7 +259,8 @@ def _figures(wp: list[Figure], sc: list[Figure], figrel, ok_solvers: list[str], 
          "panels per solver family (dual, interior point, first-order, active set), shared axes."
          + _curves_text(curves)
          + (f" The references were computed by {', '.join(ok_solvers)}: that solver's "
-            "own runs agree with them by construction (error near 0), their accuracy is the KKT error in the "
+            "own runs agree with them by construction (error near 0), so they are no point of the figure but a "
+            "dash-dotted vertical line at their median time; their accuracy is the KKT error in the "
             "tier tables." if ok_solvers else ""), ""]
     if not wp:
         L += ["No run has a finite time and error: no work-precision figure.", ""]
