@@ -507,3 +507,12 @@ def test_a_stress_row_is_named_by_its_scene_not_its_load():
                      "axis": "delta", "coords": {"delta": 1e-5}, "solver": "pdas"})
     assert r["scene"] == "curved" and r["scene_N"] == 16
     assert _stress_row({"scene": {"load": "f2"}, "axis": "N", "coords": {}, "solver": "pdas"})["scene"] == "f2"
+
+
+def test_a_run_with_two_repeats_gives_one_curve_not_a_saw_tooth():
+    from dualfem.reports._dash_data import _curves
+
+    recs = [{"run_id": "r", "time_s": t, "error": e, "iteration": i, "error_kind": "reference", "repeat": rep}
+            for rep, t0 in ((2, 0.0), (1, 0.05)) for i, (t, e) in enumerate([(t0 + 0.1, 1.0), (t0 + 0.2, 1e-9)])]
+    c = _curves({"r": recs})["r"]
+    assert c["t"] == [0.15, 0.25] and c["e"] == [1.0, 1e-9]      # repeat 1 only, errors decreasing

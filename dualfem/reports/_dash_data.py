@@ -13,7 +13,8 @@ What the payload holds (every number as measured; NaN and infinities become ``nu
   time = setup + solve [s] (``total_s``), relative energy-norm error against the certified reference
   (``err_x_energy``), the evaluator's KKT error, run id, label, results index, a short message;
 * ``curves``: per run id, the samples of its convergence curve (time [s], error, iteration) from the
-  folder's ``curves.csv`` (:mod:`dualfem.experiments.curves`), only for runs whose row is kept;
+  folder's ``curves.csv`` (:mod:`dualfem.experiments.curves`), only for runs whose row is kept (of a run
+  timed in several repeats, its first repeat's curve);
 * ``rank``: the ranking tables of ``dualfem report bench`` (:func:`dualfem.reports._bench_rank.rank_table`:
   success rate, correct rate, shifted geometric mean of time) per tier, for every scene / delta
   selection (all, or one value of each) the runs cover, keyed ``"tier|scene|delta"`` (-1 = all);
@@ -208,9 +209,13 @@ def _runs_columns(runs: list[dict], sidx: dict, dims: dict[str, dict]) -> dict[s
 
 
 def _curves(curves: dict[str, list[dict]]) -> dict[str, dict]:
-    """Per run id: time [s], error and iteration of each sample in time order, and the error kind."""
+    """Per run id: time [s], error and iteration of each sample in time order, and the error kind; of a
+    run timed in several repeats (one curve each), the curve of its first recorded repeat (mixing
+    them would interleave two descents into one saw-tooth)."""
     out = {}
     for rid, recs in curves.items():
+        first = min(int(c.get("repeat") or 1) for c in recs)
+        recs = [c for c in recs if int(c.get("repeat") or 1) == first]
         recs = sorted(recs, key=lambda c: (_f(c["time_s"]), c["iteration"]))
         out[rid] = {"t": [_num(c["time_s"], 6) for c in recs], "e": [_num(c["error"], 5) for c in recs],
                     "it": [c["iteration"] for c in recs], "kind": recs[0]["error_kind"]}

@@ -158,9 +158,12 @@
       const si = R.solver[ks[0]], s = D.solvers[si], ax = panelOf(ks[0]);
       solversDrawn.add(si);
       const xa = ax === 1 ? "x" : "x" + ax, ya = ax === 1 ? "y" : "y" + ax;
-      const inPanel = new Set(ks);
-      const curves = runs.filter((k) => inPanel.has(k) && D.curves[R.id[k]] && D.curves[R.id[k]].kind === kind)
-        .map((k) => D.curves[R.id[k]]);
+      // the median of the curves of the solver's tightest tier that has any (as the static figures): tiers
+      // stop at different errors, and a median across them would saw-tooth
+      const withCurve = ks.filter((k) => D.curves[R.id[k]] && D.curves[R.id[k]].kind === kind);
+      const tolOf = (k) => { const t = D.tiers[R.tier[k]].tol; return t === null ? Infinity : t; };
+      const tight = Math.min(...withCurve.map(tolOf));
+      const curves = withCurve.filter((k) => tolOf(k) === tight).map((k) => D.curves[R.id[k]]);
       if (curves.length) {
         const b = medianBand(curves);
         if (b) {
@@ -259,7 +262,7 @@
     }
     const w = wpTraces(sel, runs, panelOf);
     const curvesNote = Object.keys(D.curves).length ?
-      `Lines: at each time, the median over the selected runs started by then of each solver's convergence ` +
+      `Lines: at each time, the median over the selected runs of each solver's tightest tier (per panel) started by then of their convergence ` +
       `curve (interpolated in log time and log error between samples; a finished run keeps its last error), ` +
       `bands: the ${100 * QLO}-${100 * QHI} % quantiles of log error (${w.nCurves} curves; as the static ` +
       `figures of 'dualfem report bench'); markers: the runs' final answers.` :
