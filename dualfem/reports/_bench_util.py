@@ -40,7 +40,7 @@ SIZE_NAMES = frozenset({"N", "mesh_size"})
 
 def scene_name(r: dict) -> str:
     """The scene's name as the user gave it: a preset or library name (``f2``, ``curved``), or a scene
-    file's stem (``benchmarks/scenes/plate.toml`` -> ``plate``)."""
+    file's stem (``benchmarks/scenes/inclined_biaxial.toml`` -> ``inclined_biaxial``)."""
     s = str(r.get("scene") or r.get("scene_name") or "?")
     return Path(s).stem if s.endswith((".toml", ".npz", ".mat")) or "/" in s else s
 
