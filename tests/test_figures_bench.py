@@ -256,3 +256,10 @@ def test_scene_identity_names_only_what_varies():
     runs = _gmsh_runs() + _runs(["pdas"]) + [dict(r, scene="curved") for r in _runs(["pdas"])]
     labels = [s.label for s in group_scenes(runs)]
     assert labels == ["curved, N = 16", "f2, N = 16", "plate, mesh_size = 0.04", "plate, mesh_size = 0.02"]
+
+
+def test_targets_on_scenes_without_N_say_they_cannot_be_checked():
+    from dualfem.reports._bench_targets import targets
+
+    lines = targets(_gmsh_runs(), [], ["pdas"], 1e-8, 1.5, 10.0)
+    assert len(lines) == 1 and "No scene of these results is given by N" in lines[0] and "{}" not in lines[0]
