@@ -222,3 +222,13 @@ def test_table_is_compact_and_summarises_skipped_solvers():
     assert text.count("qp_missing") == 14 and "not run (14): qp_missing0," in text   # one (wrapped) line
     assert re.search(r"^plugin_solver_16 +solved +correct +12 +1\.750 ", text, re.M)
     assert table(result).startswith("thin_defect[f2]: 1810 unknowns")
+
+
+def test_solve_summary_names_the_scene_as_given():
+    from dualfem.cli.main import human_summary
+
+    rec = {"problem": "thin_defect[f2]", "ndof": 1810, "n_defect_nodes": 22, "solver": "pdas", "status": "solved",
+           "message": "", "iterations": {}, "time_s": {"setup": 0.1, "solve": 0.2}}
+    assert human_summary(rec, scene="curved").startswith("curved: 1810 unknowns")
+    assert human_summary(rec, scene="benchmarks/scenes/inclined_biaxial.toml").startswith("inclined_biaxial: ")
+    assert human_summary(rec).startswith("thin_defect[f2]: ")

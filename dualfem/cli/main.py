@@ -250,7 +250,7 @@ def cmd_solve(args) -> int:
     if args.json:
         print(dumps(rec))
     else:
-        print(human_summary(rec))
+        print(human_summary(rec, scene=args.scene))
     return 0 if sol.status == Status.SOLVED else 1
 
 
@@ -273,9 +273,13 @@ def peak_rss_mb() -> float:
     return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
 
 
-def human_summary(rec: dict) -> str:
-    """A few lines for a person."""
-    lines = [f"{rec['problem']}: {rec['ndof']} unknowns, {rec['n_defect_nodes']} defect nodes",
+def human_summary(rec: dict, scene: str | None = None) -> str:
+    """A few lines for a person; ``scene``: the scene as the user named it (a scene file by its stem),
+    shown instead of the QP's internal name (``curved``, not ``thin_defect[f2]``)."""
+    from pathlib import Path
+
+    name = (Path(scene).stem if scene.endswith((".toml", ".npz", ".mat")) else scene) if scene else rec["problem"]
+    lines = [f"{name}: {rec['ndof']} unknowns, {rec['n_defect_nodes']} defect nodes",
              f"solver {rec['solver']}: {rec['status']}  {rec['message']}",
              f"iterations {rec['iterations']}  time setup {rec['time_s']['setup']:.3g} s, "
              f"solve {rec['time_s']['solve']:.3g} s"]
