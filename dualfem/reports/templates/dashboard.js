@@ -439,6 +439,14 @@
     return busy;
   }
   header();
+  // faceted by scene and delta; with more panels than MAX_PANELS, open on the first scene (its deltas)
+  const MAX_PANELS = 24;
+  const nPanels = new Set((R.scene || []).map((sc, k) => `${sc}|${R.delta[k]}`)).size;
+  if (nPanels > MAX_PANELS && D.scenes.length > 1) {
+    byId("f-scene").value = "0";
+    byId("dash-summary").textContent += ` The work-precision view opens on the first scene (${nPanels} scene and ` +
+      "delta panels in all): choose a scene, or 'all', in the side panel.";
+  }
   syncFamilies();
   update().then(() => {
     const status = byId("dash-status");
