@@ -520,9 +520,10 @@ def test_a_run_with_two_repeats_gives_one_curve_not_a_saw_tooth():
 
 @needs_chromium
 def test_many_panels_open_on_the_first_scene(tmp_path):
-    """More than 24 scene x delta panels (the default sweep: 51): the page opens on the first scene's deltas."""
+    """More than 24 scene x delta panels (the default sweep: 51, no curves): the page opens on the first
+    scene's deltas."""
     res = check_page(build_dashboard([ROOT / "benchmarks" / "results" / "default"], tmp_path / "d"),
                      tmp_path / "chromium")
     assert res.problems == [], res.problems
-    assert "opens on the first scene (51 scene and delta panels in all)" in res.dom
+    assert "opens on the scene curved (51 scene and delta panels in all)" in res.dom
     assert "curved, delta = 1e-05" in res.dom and "f1, N = 32, delta" not in res.dom

@@ -439,13 +439,17 @@
     return busy;
   }
   header();
-  // faceted by scene and delta; with more panels than MAX_PANELS, open on the first scene (its deltas)
+  // faceted by scene and delta; with more panels than MAX_PANELS, open on one scene (its deltas): the one
+  // with the most runs that recorded a convergence curve, else the first
   const MAX_PANELS = 24;
   const nPanels = new Set((R.scene || []).map((sc, k) => `${sc}|${R.delta[k]}`)).size;
   if (nPanels > MAX_PANELS && D.scenes.length > 1) {
-    byId("f-scene").value = "0";
-    byId("dash-summary").textContent += ` The work-precision view opens on the first scene (${nPanels} scene and ` +
-      "delta panels in all): choose a scene, or 'all', in the side panel.";
+    const withCurves = D.scenes.map(() => 0);
+    (R.scene || []).forEach((sc, k) => { if (D.curves[R.id[k]]) withCurves[sc] += 1; });
+    const open = withCurves.indexOf(Math.max(...withCurves));
+    byId("f-scene").value = String(open);
+    byId("dash-summary").textContent += ` The work-precision view opens on the scene ${D.scenes[open]} ` +
+      `(${nPanels} scene and delta panels in all): choose a scene, or 'all', in the side panel.`;
   }
   syncFamilies();
   update().then(() => {
