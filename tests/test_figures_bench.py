@@ -263,3 +263,24 @@ def test_targets_on_scenes_without_N_say_they_cannot_be_checked():
 
     lines = targets(_gmsh_runs(), [], ["pdas"], 1e-8, 1.5, 10.0)
     assert len(lines) == 1 and "No scene of these results is given by N" in lines[0] and "{}" not in lines[0]
+
+
+def test_fractured_figure_tags_points_with_crack_counts(tmp_path, monkeypatch):
+    """benchmarks/fractured_report.py: every point of the work-precision figure says its crack count."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("fractured_report", Path(__file__).resolve().parents[1]
+                                                  / "benchmarks" / "fractured_report.py")
+    fr = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(fr)
+    assert [fr._short(x) for x in ("50 cracks", "2000 cracks", "one crack, N = 2048", "other")] == \
+        ["50", "2000", "1", "other"]
+    labels = ["50 cracks", "one crack, N = 2048"]
+    floors = {lab: {"floor": 1.0} for lab in labels}
+    table = {(lab, "pdas"): {"result": {"time_s": {"setup": 1.0, "solve": 1.0}, "certificate": {"value": 1e-12}}}
+             for lab in labels}
+    saved = []
+    monkeypatch.setattr("matplotlib.figure.Figure.savefig", lambda fig, path, **kw: saved.append(fig))
+    fr._figure(labels, floors, table, tmp_path / "wp.png")
+    texts = sorted(t.get_text() for t in saved[0].axes[0].texts)
+    assert texts == ["1", "50"]
