@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 #: Okabe-Ito: distinguishable with every common colour-vision deficiency
@@ -124,7 +125,16 @@ def render(runs: list[dict], meta: dict, report: Path) -> None:
     (report / "fractured.md").write_text("\n".join(md) + "\n")
 
 
+def _short(label: str) -> str:
+    """The crack count of a scene label, for the point's tag: ``"200 cracks"`` -> ``"200"``,
+    ``"one crack, N = 2048"`` -> ``"1"``; any other label as it is."""
+    m = re.match(r"\s*(\d+|one)\s+cracks?\b", label)
+    return ("1" if m.group(1) == "one" else m.group(1)) if m else label
+
+
 def _figure(labels, floors, table, path: Path) -> None:
+    """One point per (scene, solver), tagged with the scene's crack count; each solver's points of the
+    many-crack scenes joined in the order of the scenes (thin line)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -132,7 +142,7 @@ def _figure(labels, floors, table, path: Path) -> None:
 
     path.parent.mkdir(parents=True, exist_ok=True)
     solvers = sorted({e for (_, e) in table})
-    fig, ax = plt.subplots(figsize=(8, 5))
+    fig, ax = plt.subplots(figsize=(8.5, 5.5))
     for i, s in enumerate(solvers):
         xs, ys, names = [], [], []
         for lab in labels:
@@ -148,14 +158,22 @@ def _figure(labels, floors, table, path: Path) -> None:
             ys.append(max(cert, 1e-16))
             names.append(lab)
         if xs:
-            ax.plot(xs, ys, MARKERS[i % len(MARKERS)], color=PALETTE[i % len(PALETTE)], label=s, ms=7)
+            color = PALETTE[i % len(PALETTE)]
+            many = [k for k, lab in enumerate(names) if re.match(r"\s*\d+\s+cracks\b", lab)]
+            ax.plot([xs[k] for k in many], [ys[k] for k in many], "-", color=color, lw=0.7, alpha=0.5)
+            ax.plot(xs, ys, MARKERS[i % len(MARKERS)], color=color, label=s, ms=7)
+            for x, y, lab in zip(xs, ys, names):
+                ax.annotate(_short(lab), (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7,
+                            color=color)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("setup + solve time / floor (PARDISO factor + solve of K)")
     ax.set_ylabel("certified relative energy-norm error")
-    ax.set_title("fractured bodies: one point per (scene, solver)")
+    ax.set_title("fractured bodies: one point per (scene, solver); the number at a point is the scene's crack "
+                 "count\n(1 = one crack, N = 2048); a solver's points of the fractured scenes joined in crack order",
+                 fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False, title="solver")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)

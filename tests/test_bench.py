@@ -162,6 +162,9 @@ def test_report(small_sweep, tmp_path):
 
     _, out, _ = small_sweep
     md = build_report(out / "results.csv", tmp_path / "benchmark.md", tmp_path / "bench", ours=["osqp"])
+    assert "## Performance targets" not in md.read_text()       # dualfem's own checklist only when asked
+    md = build_report(out / "results.csv", tmp_path / "benchmark.md", tmp_path / "bench", ours=["osqp"],
+                      show_targets=True)
     text = md.read_text()
     for section in ("## Machine and versions", "## Per tolerance tier", "### tier high", "## Performance targets",
                     "## Work-precision", "## Scaling", "shifted GM", "dualfem bench"):

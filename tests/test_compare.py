@@ -230,3 +230,38 @@ def test_a_bench_spec_may_not_name_an_undeclared_reference(monkeypatch):
     for name in ("zz_exact_plugin", "mprgp"):
         with pytest.raises(InputError, match=rf"reference.solvers names '{name}', which does not declare reference"):
             parse_spec({**base, "reference": {"solvers": [name, "pdas"]}})
+
+
+def test_table_is_compact_and_summarises_skipped_solvers():
+    """At most 100 columns; skipped solvers in one line, not one row each; the scene as the user named it."""
+    from dualfem.experiments.compare import TABLE_WIDTH, table
+
+    def run(name, status="solved", grade="correct", msg=""):
+        return {"solver": name, "status": status, "grade": grade, "iterations": {"outer": 12, "inner": 40},
+                "time_s": {"setup": 0.5, "solve": 1.25}, "energy": -5.3e-4, "kkt_error": 1e-12,
+                "error_bound": 2e-12, "tolerance": 1e-8, "message": msg,
+                "diff": None if status == "skipped" else {"x_energy": 1e-12, "multipliers": 3e-11,
+                                                          "contact_mismatch": 0}}
+
+    runs = [run("plugin_solver_16"), run("osqp", "inaccurate", "failed", "osqp: not certified " + "x" * 200)]
+    runs += [run(f"qp_missing{i}", "skipped", "skipped", f"needs module {i}") for i in range(14)]
+    result = {"problem": "thin_defect[f2]", "ndof": 1810, "n_defect_nodes": 22, "runs": runs, "silent_wrong": [],
+              "reference": {"solver": "pdas", "why": "exact " * 40, "kkt_error": 1e-14, "cross_check": None}}
+    text = table(result, scene="benchmarks/scenes/plate.toml")
+    lines = text.splitlines()
+    assert max(map(len, lines)) <= TABLE_WIDTH == 100
+    assert lines[0] == "plate: 1810 unknowns, 22 defect nodes" and "thin_defect" not in text
+    assert not any(ln.startswith("qp_missing") for ln in lines)
+    assert text.count("qp_missing") == 14 and "not run (14): qp_missing0," in text   # one (wrapped) line
+    assert re.search(r"^plugin_solver_16 +solved +correct +12 +1\.750 ", text, re.M)
+    assert table(result).startswith("thin_defect[f2]: 1810 unknowns")
+
+
+def test_solve_summary_names_the_scene_as_given():
+    from dualfem.cli.main import human_summary
+
+    rec = {"problem": "thin_defect[f2]", "ndof": 1810, "n_defect_nodes": 22, "solver": "pdas", "status": "solved",
+           "message": "", "iterations": {}, "time_s": {"setup": 0.1, "solve": 0.2}}
+    assert human_summary(rec, scene="curved").startswith("curved: 1810 unknowns")
+    assert human_summary(rec, scene="benchmarks/scenes/inclined_biaxial.toml").startswith("inclined_biaxial: ")
+    assert human_summary(rec).startswith("thin_defect[f2]: ")

@@ -32,6 +32,7 @@ from dualfem.experiments.store import read_results
 pytest.importorskip("plotly", reason="dualfem report html needs plotly: pip install 'dualfem[html]'")
 
 from dualfem.reports._bench_rank import rank_table  # noqa: E402
+from dualfem.reports._bench_util import group_scenes  # noqa: E402
 from dualfem.reports.html import build_dashboard  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -134,13 +135,15 @@ def test_page_embeds_every_solver_and_the_bench_numbers(page, tiny):
     # colours: Okabe-Ito, no two solvers share colour and marker
     pairs = [(s["color"], s["symbol"]) for s in data["solvers"]]
     assert len(set(pairs)) == len(pairs)
-    # the ranking table for tier high, f1 only, is the one 'dualfem report bench' computes
+    # the ranking table for tier high, the first scene identity of f1, is the one 'dualfem report bench' computes
     ti = [t["name"] for t in data["tiers"]].index("high")
-    si = data["scenes"].index("f1")
-    got = data["rank"][f"{ti}|{si}|-1|-1"]
-    runs = [r for r in read_results(BREADTH) if r["kind"] == "run" and r["scene"] == "f1"]
+    si = data["scene_names"].index("f1")
+    got = data["rank"][f"{ti}|{si}|-1"]
+    runs = [r for r in read_results(BREADTH) if r["kind"] == "run" and r["scene"] == "f1" and r["status"] != "skipped"]
     for r in runs:
         r["tier"], r["variant"] = str(r.get("tier") or ""), str(r.get("variant") or r["solver"])
+    runs = [r for sid, g in group_scenes(runs).items() if sid.label == data["scenes"][si] for r in g]
+    assert runs and data["scenes"][si].startswith("f1, N = ")
     want, ncommon = rank_table(runs, "high", 1e-9, 10.0)
     cols = data["rank_columns"]
     assert got["n"] == ncommon
@@ -188,7 +191,7 @@ def test_stress_results(tmp_path):
     solvers = {json.loads(line)["solver"] for line in (folder / "runs.jsonl").read_text().splitlines() if line}
     assert {s["name"] for s in data["solvers"]} == solvers
     assert [t["name"] for t in data["tiers"]] == [STRESS_TIER] and data["targets"] == []
-    assert f"0|-1|-1|{len(data['deltas']) - 1}" in data["rank"]
+    assert f"0|-1|{len(data['deltas']) - 1}" in data["rank"]
 
 
 def test_bad_inputs_are_refused_before_anything_is_written(tmp_path, tiny):
@@ -426,10 +429,13 @@ def test_dashboard_renders_in_chromium(page, tmp_path):
     assert res.dom.count("js-plotly-plot") >= 2
     # the side panel lists every solver of the input, one checkbox each
     data = embedded(page)
-    # a median curve for every solver with curves (the tiny bench's uzawa and pdas; osqp has no iterates)
+    # a median curve for every solver with curves (the tiny bench's uzawa and pdas; osqp has no iterates),
+    # but the reference solver's own runs (pdas: error 0 by construction) are a line, not a competitor
     solver_of = dict(zip(data["runs"]["id"], data["runs"]["solver"]))
-    with_curves = {solver_of[i] for i, c in data["curves"].items() if c["kind"] == "reference"}
-    assert {data["solvers"][i]["name"] for i in with_curves} == {"uzawa", "pdas"}
+    selfref = dict(zip(data["runs"]["id"], data["runs"]["selfref"]))
+    with_curves = {solver_of[i] for i, c in data["curves"].items() if c["kind"] == "reference" and not selfref[i]}
+    assert {data["solvers"][i]["name"] for i in with_curves} == {"uzawa"}
+    assert {solver_of[i] for i, c in data["curves"].items() if c["kind"] == "reference"} > with_curves
     assert re.search(rf'<div id="dash-status"[^>]*data-median-curves="{len(with_curves)}"', res.dom), \
         re.search(r'<div id="dash-status"[^>]*>', res.dom)
     assert len(re.findall(r'<input type="checkbox" data-solver=', res.dom)) == len(data["solvers"])
@@ -465,3 +471,59 @@ def test_checker_fails_on_a_blank_page(tmp_path):
     res = check_page(blank, tmp_path / "chromium", size="400,300")
     assert [p for p in res.problems if p.startswith("blank screenshot")], res.problems
     assert not [p for p in res.problems if "JavaScript" in p or "rendered" in p]
+
+
+GMSH = ROOT / "benchmarks" / "results" / "gmsh_scene"
+
+
+def test_a_scene_without_N_is_faceted_by_its_identity(tmp_path):
+    """A gmsh scene given by mesh_size: scene identities name mesh_size, each has its floor; the targets
+    checklist only when asked."""
+    from dualfem.reports._dash_data import payload
+
+    data = payload([GMSH])
+    assert data["scenes"] == ["inclined_biaxial, mesh_size = 0.04", "inclined_biaxial, mesh_size = 0.02"]
+    assert "Ns" not in data and sorted(f["scene"] for f in data["floors"]) == [0, 1]
+    assert data["targets"] == [] and data["show_targets"] is False
+    assert payload([GMSH], show_targets=True)["show_targets"] is True
+    # the reference solver's own runs are flagged (drawn as a line in the energy-norm view)
+    sel = [s for s, solver in zip(data["runs"]["selfref"], data["runs"]["solver"])
+           if data["solvers"][solver]["name"] == "pdas"]
+    assert sel and all(sel) and not any(s for s, solver in zip(data["runs"]["selfref"], data["runs"]["solver"])
+                                        if data["solvers"][solver]["name"] != "pdas")
+    if chromium() is not None:
+        res = check_page(build_dashboard([GMSH], tmp_path / "d"), tmp_path / "chromium")
+        assert res.problems == [], res.problems
+        summary = re.search(r'<p id="dash-summary">(.*?)</p>', res.dom, re.S).group(1)
+        assert "N in" not in summary and "inclined_biaxial, mesh_size = 0.02" in summary
+        assert re.search(r'<section id="targets-section"[^>]*hidden', res.dom)
+        assert "floor N=" not in res.dom and ">floor<" in res.dom.replace("</tspan>", "<")
+
+
+def test_a_stress_row_is_named_by_its_scene_not_its_load():
+    from dualfem.reports._dash_data import _stress_row
+
+    r = _stress_row({"kind": "stress", "scene": {"load": "f2", "N": 16, "delta": 1e-5}, "scene_name": "curved",
+                     "axis": "delta", "coords": {"delta": 1e-5}, "solver": "pdas"})
+    assert r["scene"] == "curved" and r["scene_N"] == 16
+    assert _stress_row({"scene": {"load": "f2"}, "axis": "N", "coords": {}, "solver": "pdas"})["scene"] == "f2"
+
+
+def test_a_run_with_two_repeats_gives_one_curve_not_a_saw_tooth():
+    from dualfem.reports._dash_data import _curves
+
+    recs = [{"run_id": "r", "time_s": t, "error": e, "iteration": i, "error_kind": "reference", "repeat": rep}
+            for rep, t0 in ((2, 0.0), (1, 0.05)) for i, (t, e) in enumerate([(t0 + 0.1, 1.0), (t0 + 0.2, 1e-9)])]
+    c = _curves({"r": recs})["r"]
+    assert c["t"] == [0.15, 0.25] and c["e"] == [1.0, 1e-9]      # repeat 1 only, errors decreasing
+
+
+@needs_chromium
+def test_many_panels_open_on_the_first_scene(tmp_path):
+    """More than 24 scene x delta panels (the default sweep: 51, no curves): the page opens on the first
+    scene's deltas."""
+    res = check_page(build_dashboard([ROOT / "benchmarks" / "results" / "default"], tmp_path / "d"),
+                     tmp_path / "chromium")
+    assert res.problems == [], res.problems
+    assert "opens on the scene curved (51 scene and delta panels in all)" in res.dom
+    assert "curved, delta = 1e-05" in res.dom and "f1, N = 32, delta" not in res.dom

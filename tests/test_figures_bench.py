@@ -133,7 +133,7 @@ def test_more_than_ten_solvers_are_faceted_by_family(tmp_path, monkeypatch):
     figs = _capture(monkeypatch)
     runs = _runs(REGISTERED_25)
     wp, sc = P.plots(runs, [], tmp_path)
-    assert wp == ["wp_f2_N16.png"] and sc == []
+    assert [f.name for f in wp] == ["wp_f2_N16.png"] and sc == []
     (name, fig), = figs
     fams = S.group_by_family(REGISTERED_25)
     assert len(fams) == 4
@@ -215,3 +215,72 @@ def test_report_reads_the_curves_of_the_rows_it_keeps(tmp_path):
     sources = [{"dir": tmp_path}, {"dir": tmp_path / "other"}]
     (c,) = load_curves(runs, sources)
     assert c.run_id == "kept" and list(c.time_s) == [0.1, 0.2] and np.allclose(c.error, [1e-2, 5e-3])
+
+
+def _gmsh_runs(path: str = "benchmarks/scenes/plate.toml") -> list[dict]:
+    """Rows of a scene file given by mesh_size (no N column at all), at two sizes, with their floors."""
+    rows = []
+    for h, n in ((0.04, 1800), (0.02, 6200)):
+        for r in _runs(["pdas", "osqp"]):
+            r = {k: v for k, v in r.items() if k != "scene_N"}
+            r.update(scene=path, scene_key=f"{r['scene_key']}-{h}", scene_mesh_size=h, n_unknowns=n,
+                     run_id=f"{r['run_id']}-{h}", scene_tip_size=0.01, ref_solver="pdas")
+            rows.append(r)
+    return rows
+
+
+def test_a_scene_without_N_gets_its_figures(tmp_path, monkeypatch):
+    figs = _capture(monkeypatch)
+    floors = [{"kind": "floor", "status": "solved", "n_unknowns": n, "total_s": t, "solver": "floor_splu"}
+              for n, t in ((1800, 0.004), (6200, 0.02))]
+    wp, sc = P.plots(_gmsh_runs(), floors, tmp_path)
+    assert [f.name for f in wp] == ["wp_plate_mesh_size0.04.png", "wp_plate_mesh_size0.02.png"]
+    assert [f.name for f in sc] == ["scaling_plate.png"]
+    titles = {name: fig._suptitle.get_text() for name, fig in figs}
+    assert titles["wp_plate_mesh_size0.02.png"] == "work-precision: plate, mesh_size = 0.02 (6,200 unknowns)"
+    # the floor of the figure is the floor of its size (dashed vertical line at 0.02 s)
+    fig = dict(figs)["wp_plate_mesh_size0.02.png"]
+    xs = {ln.get_xdata()[0] for ln in fig.axes[0].get_lines() if ln.get_linestyle() == "--"}
+    assert xs == {0.02}
+    # the reference solver (pdas) is no competitor: no point of it, a dash-dotted line at its median time
+    pdas_t = sorted(r["total_s"] for r in _gmsh_runs() if r["solver"] == "pdas" and r["scene_mesh_size"] == 0.02
+                    and r["scene_delta"] == 0.1)
+    assert {ln.get_xdata()[0] for ln in fig.axes[0].get_lines() if ln.get_linestyle() == "-."} == {pdas_t[1]}
+    labels = [t.get_text() for leg in fig.legends for t in leg.get_texts()]
+    assert "osqp" in labels and "pdas" not in labels and "reference (pdas): its own runs' time" in labels
+
+
+def test_scene_identity_names_only_what_varies():
+    from dualfem.reports._bench_util import group_scenes
+
+    runs = _gmsh_runs() + _runs(["pdas"]) + [dict(r, scene="curved") for r in _runs(["pdas"])]
+    labels = [s.label for s in group_scenes(runs)]
+    assert labels == ["curved, N = 16", "f2, N = 16", "plate, mesh_size = 0.04", "plate, mesh_size = 0.02"]
+
+
+def test_targets_on_scenes_without_N_say_they_cannot_be_checked():
+    from dualfem.reports._bench_targets import targets
+
+    lines = targets(_gmsh_runs(), [], ["pdas"], 1e-8, 1.5, 10.0)
+    assert len(lines) == 1 and "No scene of these results is given by N" in lines[0] and "{}" not in lines[0]
+
+
+def test_fractured_figure_tags_points_with_crack_counts(tmp_path, monkeypatch):
+    """benchmarks/fractured_report.py: every point of the work-precision figure says its crack count."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("fractured_report", Path(__file__).resolve().parents[1]
+                                                  / "benchmarks" / "fractured_report.py")
+    fr = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(fr)
+    assert [fr._short(x) for x in ("50 cracks", "2000 cracks", "one crack, N = 2048", "other")] == \
+        ["50", "2000", "1", "other"]
+    labels = ["50 cracks", "one crack, N = 2048"]
+    floors = {lab: {"floor": 1.0} for lab in labels}
+    table = {(lab, "pdas"): {"result": {"time_s": {"setup": 1.0, "solve": 1.0}, "certificate": {"value": 1e-12}}}
+             for lab in labels}
+    saved = []
+    monkeypatch.setattr("matplotlib.figure.Figure.savefig", lambda fig, path, **kw: saved.append(fig))
+    fr._figure(labels, floors, table, tmp_path / "wp.png")
+    texts = sorted(t.get_text() for t in saved[0].axes[0].texts)
+    assert texts == ["1", "50"]

@@ -56,7 +56,12 @@ def test_vtu_holds_tetrahedra_and_both_defect_faces(penny, tmp_path):
     assert blocks["tetra"].shape == (qp.geometry.cells.shape[1], 4) and blocks["triangle"].shape == (2 * nf, 3)
     opening = m.point_data["opening"]
     assert np.allclose(opening[qp.maps["defect_upper"]], opening[qp.maps["defect_lower"]])
-    assert np.nanmin(opening) > 0 and np.isnan(opening).sum() == m.points.shape[0] - 2 * qp.m
+    on = m.point_data["defect_id"] >= 0
+    assert opening[on].min() > 0 and on.sum() == 2 * qp.m
+    # no NaN in any point field: 0 away from the defects (and the pressure 0 at the front)
+    for k, v in m.point_data.items():
+        assert np.all(np.isfinite(v)), k
+    assert np.all(opening[~on] == 0) and np.all(m.point_data["pressure"][~on] == 0)
     face = m.cell_data["face"]
     assert set(np.unique(face[1])) == {-1, 1} and np.all(face[0] == 0)
     # the "+" triangles use the "+" copies: none of their nodes is a "-" copy
@@ -81,3 +86,29 @@ def test_stress_grid_on_a_3d_scene_has_no_2d_keys():
     tasks = build_grid(["pdas"], quick=True, axes=("nu",), scene_name="penny")
     assert tasks and all("plane" not in t.scene for t in tasks)
     assert load("penny", {"nu": tasks[0].scene["nu"]}).params["nu"] == tasks[0].scene["nu"]
+
+
+def test_maps_at_rounding_level_say_so_and_the_cut_names_its_plane(penny):
+    from types import SimpleNamespace
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from dualfem.post.figures3d import plot_cut, plot_defect_maps
+
+    qp, sol = penny
+    # a pressure of 1e-20 (rounding next to stresses of order 1) is no field: the panel says so, no colour bar
+    tiny = SimpleNamespace(x=sol.x, multipliers=np.full(qp.m, 1e-20), status=sol.status)
+    fig = plot_defect_maps(qp, tiny)
+    titles = [ax.get_title() for ax in fig.axes if ax.get_title()]
+    assert titles == ["defect 0: opening", "defect 0: slip", "defect 0: pressure (no contact pressure)"]
+    assert len(fig.axes) == 5                     # three maps, two colour bars (opening, slip)
+    assert any("rounding" in t.get_text() for ax in fig.axes for t in ax.texts)
+    assert all(ax.get_xlabel().startswith("along ") for ax in fig.axes if ax.get_title())
+    plt.close(fig)
+    ax = plot_cut(qp, sol)
+    assert "plane through (" in ax.get_title() and "normal " in ax.get_title()
+    assert ax.get_xlabel().startswith("along ") and ax.get_ylabel().startswith("along ")
+    plt.close(ax.figure)

@@ -55,12 +55,18 @@ def _check(mesh, qp, sol):
     press = qp.pressure(sol.multipliers)
     assert np.isclose(pr[0], press[0]) and np.isclose(pr[m], press[-1])  # tip edges: interior value
     assert np.allclose(pr[1:m], 0.5 * (press[:-1] + press[1:]))
-    # nodal defect fields: both copies carry the value, NaN elsewhere
+    # nodal defect fields: both copies carry the value, 0 elsewhere and at the tips; no point field holds NaN
     pj = mesh.point_data["jump_normal"]
     assert np.allclose(pj[qp.maps["defect_upper"]], qp.B @ sol.x)
     assert np.allclose(pj[qp.maps["defect_lower"]], qp.B @ sol.x)
-    assert np.isnan(pj).sum() == nn - 2 * m - 2
-    assert np.nanmax(mesh.point_data["pressure"]) > 0  # f2 has a contact zone
+    for k, v in mesh.point_data.items():
+        assert np.all(np.isfinite(v)), k
+    away = mesh.point_data["defect_id"] < 0
+    assert away.sum() == nn - 2 * m - 2
+    for k in ("jump_normal", "jump_tangent", "pressure"):
+        assert np.all(mesh.point_data[k][away] == 0), k
+    pp = mesh.point_data["pressure"]
+    assert np.allclose(pp[qp.maps["defect_upper"]], press) and pp.max() > 0  # f2 has a contact zone
 
 
 def test_vtu_roundtrip(case, tmp_path):
@@ -166,4 +172,6 @@ def test_two_defect_gmsh_scene(two_defects, tmp_path, kind):
     pj = mesh.point_data["jump_normal"]
     np.testing.assert_allclose(pj[mp["defect_upper"]], qp.B @ sol.x, rtol=0, atol=1e-14 * np.abs(sol.x).max())
     np.testing.assert_allclose(pj[mp["defect_lower"]], qp.B @ sol.x, rtol=0, atol=1e-14 * np.abs(sol.x).max())
-    assert np.all(pj[tips] == 0) and np.isnan(pj).sum() == nn - 2 * qp.m - 4
+    assert np.all(pj[tips] == 0) and np.all(pj[pid < 0] == 0) and (pid < 0).sum() == nn - 2 * qp.m - 4
+    assert all(np.all(np.isfinite(v)) for v in mesh.point_data.values())
+    assert np.all(mesh.point_data["pressure"][tips] == 0)

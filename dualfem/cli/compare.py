@@ -101,5 +101,5 @@ def cmd_compare(args) -> int:
     if args.json:
         print(dumps(result))
     else:
-        print(table(result))
+        print(table(result, scene=args.scene))
     return 1 if result["silent_wrong"] else 0

@@ -292,7 +292,7 @@ def cmd_solve(args) -> int:
     if args.json:
         print(dumps(rec))
     else:
-        print(human_summary(rec))
+        print(human_summary(rec, scene=args.scene))
     return 0 if sol.status == Status.SOLVED else 1
 
 
@@ -341,9 +341,13 @@ def peak_rss_mb() -> float:
     return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
 
 
-def human_summary(rec: dict) -> str:
-    """A few lines for a person."""
-    lines = [f"{rec['problem']}: {rec['ndof']} unknowns, {rec['n_defect_nodes']} defect nodes",
+def human_summary(rec: dict, scene: str | None = None) -> str:
+    """A few lines for a person; ``scene``: the scene as the user named it (a scene file by its stem),
+    shown instead of the QP's internal name (``curved``, not ``thin_defect[f2]``)."""
+    from pathlib import Path
+
+    name = (Path(scene).stem if scene.endswith((".toml", ".npz", ".mat")) else scene) if scene else rec["problem"]
+    lines = [f"{name}: {rec['ndof']} unknowns, {rec['n_defect_nodes']} defect nodes",
              f"solver {rec['solver']}: {rec['status']}  {rec['message']}",
              f"iterations {rec['iterations']}  time setup {rec['time_s']['setup']:.3g} s, "
              f"solve {rec['time_s']['solve']:.3g} s"]
@@ -365,7 +369,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"dualfem {version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (help_, configure, _) in _COMMANDS.items():
-        configure(sub.add_parser(name, help=help_, description=_DESCRIPTIONS.get(name, help_)))
+        sp = sub.add_parser(name, help=help_, description=_DESCRIPTIONS.get(name, help_))
+        configure(sp)
+        try:        # every command: the third-party libraries' own output (dualfem.core.quiet)
+            sp.add_argument("--verbose", action="store_true",
+                            help="let the solvers' libraries print their own banners and logs on stderr "
+                                 "(dropped by default)")
+        except argparse.ArgumentError:      # the command has its own --verbose
+            pass
     return parser
 
 
@@ -415,6 +426,10 @@ def main(argv: list[str] | None = None) -> int:
               f"object of --json", file=sys.stderr)
         return EXIT_NO_STDOUT
     run = _COMMANDS[args.command][2]
+    if getattr(args, "verbose", False) is True:
+        from dualfem.core.quiet import set_verbose
+
+        set_verbose(True)
     try:
         rc = run(args)
         sys.stdout.flush()       # a full disk behind `> file` shows here, not at interpreter exit

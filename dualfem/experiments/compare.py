@@ -240,56 +240,87 @@ def grade_record(rec: dict, ref: dict | None) -> str:
 
 
 # ------------------------------------------------------------------------ printing
-def table(result: dict) -> str:
-    """The comparison as a fixed-width table for a person."""
-    lines = [f"{result['problem']}: {result['ndof']} unknowns, {result['n_defect_nodes']} defect nodes"]
+#: the widest line of :func:`table` (characters), the legend and messages wrapped to it
+TABLE_WIDTH = 100
+
+
+def _scene_title(result: dict, scene: str | None) -> str:
+    """The table's first line: the scene as the user named it (else the QP's name) and its size."""
+    from pathlib import Path
+
+    name = result["problem"]
+    if scene:
+        name = Path(scene).stem if scene.endswith((".toml", ".npz", ".mat")) else scene
+    return f"{name}: {result['ndof']} unknowns, {result['n_defect_nodes']} defect nodes"
+
+
+def _iters(it: dict) -> str:
+    """The iteration count of a run: its first counter (the outer one), '-' when none."""
+    for v in it.values():
+        return str(v)
+    return "-"
+
+
+def table(result: dict, scene: str | None = None) -> str:
+    """The comparison as a fixed-width table for a person, at most :data:`TABLE_WIDTH` characters wide
+    while solver names have at most 16 (every number is in ``--json``): one row per solver that ran; the
+    skipped ones (not installed, not applicable) summarised in one line. ``scene``: the scene as the
+    user named it (a preset, a library name or a scene file), shown instead of the QP's internal name."""
+    import textwrap
+
+    wrap = textwrap.TextWrapper(width=TABLE_WIDTH, subsequent_indent="    ", break_on_hyphens=False)
+    lines = [_scene_title(result, scene)]
     ref = result["reference"]
     if ref:
-        lines.append(f"reference: {ref['solver']} -- {ref['why']}; KKT error {ref['kkt_error']:.1e}")
+        lines += wrap.wrap(f"reference: {ref['solver']} -- {ref['why']}; KKT error {ref['kkt_error']:.1e}")
         cc = ref.get("cross_check")
         if cc:
             lines.append(f"cross-check: {cc['solver']} differs by {cc['x_energy']:.1e} (energy norm), "
                          f"allowed {cc['allowed']:.1e}: {'agrees' if cc['agrees'] else 'DISAGREES'}")
             if cc.get("identical_to_reference"):
-                lines.append("  (bit-for-bit identical to the reference, not counted as a cross-check: "
-                             + ", ".join(cc["identical_to_reference"]) + ")")
+                lines += wrap.wrap("  (bit-for-bit identical to the reference, not counted as a cross-check: "
+                                   + ", ".join(cc["identical_to_reference"]) + ")")
         else:
             lines.append("cross-check: no second exact solver claimed success")
     else:
         declared = ", ".join(n for n, _ in reference_solvers()) or "none registered"
         lines.append(f"reference: none (no solver declaring reference claimed success with finite residuals; "
                      f"reference solvers: {declared})")
-    w = max([10] + [len(r["solver"]) for r in result["runs"]])
-    hdr = (f"{'solver':{w}s} {'status':15s} {'grade':12s} {'iterations':22s} {'setup_s':>8s} {'solve_s':>8s} "
-           f"{'energy':>17s} {'kkt':>8s} {'bound':>8s} {'tol':>7s} {'dx_K':>8s} {'dmu':>8s} {'contact':>7s}")
+    ran = [r for r in result["runs"] if r["status"] != "skipped"]
+    skipped = [r for r in result["runs"] if r["status"] == "skipped"]
+    w = max([6] + [len(r["solver"]) for r in ran])
+    hdr = (f"{'solver':{w}s} {'status':10s} {'grade':12s} {'iters':>5s} {'time_s':>7s} {'kkt':>7s} {'bound':>7s} "
+           f"{'tol':>5s} {'dx_K':>7s} {'dmu':>7s} {'contact':>7s}")
     lines += [hdr, "-" * len(hdr)]
-    for r in result["runs"]:
-        it = ",".join(f"{k}={v}" for k, v in r["iterations"].items()) or "-"
+    for r in ran:
         d = r["diff"] or {}
-        en = f"{r['energy']:17.10e}" if r["energy"] is not None else f"{'-':>17s}"
         cm = "-" if not d else ("same" if d["contact_mismatch"] == 0 else f"{d['contact_mismatch']} off")
-        lines.append(f"{r['solver']:{w}s} {r['status']:15s} {r['grade']:12s} {it[:22]:22s} "
-                     f"{r['time_s'].get('setup', 0):8.3f} {r['time_s'].get('solve', 0):8.3f} {en} "
-                     f"{_num8(r['kkt_error'])} {_num8(r['error_bound'])} {r['tolerance']:7.0e} "
-                     f"{_num8(d.get('x_energy'))} {_num8(d.get('multipliers'))} {cm:>7s}")
-    for r in result["runs"]:
+        t = r["time_s"].get("setup", 0) + r["time_s"].get("solve", 0)
+        lines.append(f"{r['solver']:{w}s} {r['status']:10s} {r['grade']:12s} {_iters(r['iterations']):>5s} "
+                     f"{t:7.3f} {_num7(r['kkt_error'])} {_num7(r['error_bound'])} {r['tolerance']:5.0e} "
+                     f"{_num7(d.get('x_energy'))} {_num7(d.get('multipliers'))} {cm:>7s}")
+    for r in ran:
         if (r["status"] != "solved" or r["grade"] in WRONG) and r["message"]:
-            msg = r["message"]
-            lines.append(f"  {msg}" if msg.startswith(r["solver"]) else f"  {r['solver']}: {msg}")
-    lines.append("dx_K: relative energy-norm difference to the reference; dmu: multipliers, relative to "
-                 "max(|mu_ref|, |F|); bound: certified relative energy-norm error bound (- where x is infeasible); "
-                 "tol: the certified tolerance (--tol, else the solver's declared one); contact: contact set vs the "
-                 "reference; grade: "
-                 "dualfem.core.grade (correct, failed, flagged, silent_wrong, unverified, skipped)")
+            msg = r["message"] if r["message"].startswith(r["solver"]) else f"{r['solver']}: {r['message']}"
+            lines += wrap.wrap("  " + msg)
+    if skipped:
+        lines += wrap.wrap(f"not run ({len(skipped)}): " + ", ".join(r["solver"] for r in skipped)
+                           + " (not installed or not applicable; `dualfem list` says what each needs)")
+    lines += wrap.wrap("time_s: setup + solve; iters: the solver's outer iterations; dx_K: relative energy-norm "
+                       "difference to the reference; dmu: multipliers, relative to max(|mu_ref|, |F|); bound: "
+                       "certified relative energy-norm error bound (- where x is infeasible); tol: the certified "
+                       "tolerance (--tol, else the solver's declared one); contact: contact set vs the reference; "
+                       "grade: dualfem.core.grade; "
+                       "energies, every iteration counter and the skipped solvers' reasons: --json")
     if result["silent_wrong"]:
         lines.append("SILENT WRONG ANSWER: " + ", ".join(result["silent_wrong"]) +
                      " claim(s) success but are wrong beyond their declared tolerance")
     return "\n".join(lines)
 
 
-def _num8(v) -> str:
-    """A number in the table's 8-character scientific format, '-' when missing."""
-    return f"{v:8.1e}" if isinstance(v, (int, float)) and math.isfinite(v) else f"{'-':>8s}"
+def _num7(v) -> str:
+    """A number in the table's 7-character scientific format, '-' when missing."""
+    return f"{v:7.1e}" if isinstance(v, (int, float)) and math.isfinite(v) else f"{'-':>7s}"
 
 
 def stderr_progress() -> Callable[[str], None]:

@@ -158,7 +158,8 @@ def _attempt(solver: Solver, view: QP, qp: QP, tick: Callable[[str, float], None
     att = _Attempt()
     spent = (lambda: monitor.overhead) if monitor is not None else (lambda: 0.0)
     name = _name(solver)
-    with plugin_output():
+    # a built-in wrapper's library banners (HiGHS, OSQP) are dropped unless --verbose; a plugin's output is kept
+    with plugin_output(drop_c_output=name in builtin_names("solver")):
         t0 = t1 = time.perf_counter()
         try:
             solver.check_params()      # again: a plugin may override __init__ or change params after it

@@ -18,6 +18,44 @@ from dualfem.post.style import FIELD_CMAP
 
 #: defects drawn at most (one row of panels each)
 MAX_DEFECT_ROWS = 4
+#: a map whose largest |value| is at most this times its scale (opening, slip: the largest nodal
+#: displacement; pressure: the largest von Mises stress) is rounding, not a field: drawn as "closed",
+#: "no slip" or "no contact pressure"
+ROUNDING = 1e-9
+#: what a map at rounding level says, per quantity
+ZERO_SAYS = {"opening": "closed", "slip": "no slip", "pressure": "no contact pressure"}
+
+
+def axis_name(v) -> str:
+    """A unit direction as text: ``x``, ``-z`` for a coordinate axis, else ``(0.707, 0.707, 0)``."""
+    v = np.asarray(v, float)
+    k = int(np.argmax(np.abs(v)))
+    if abs(abs(v[k]) - 1.0) < 1e-9:
+        return ("-" if v[k] < 0 else "") + "xyz"[k]
+    return "(" + ", ".join(f"{c:.3g}" for c in np.where(np.abs(v) < 1e-12, 0.0, v)) + ")"
+
+
+def _scales(qp, sol, d: dict, qs: list[str]) -> dict[str, float]:
+    """The scale each quantity is compared with (:data:`ROUNDING`)."""
+    from dualfem.post.fields import nodal_displacement
+
+    out = {}
+    if "opening" in qs or "slip" in qs:
+        u = float(np.abs(nodal_displacement(qp, sol.x)).max(initial=0.0))
+        out.update(opening=u, slip=u)
+    if "pressure" in qs:
+        out["pressure"] = float(np.nanmax(stresses3d(qp, sol.x)["von_mises"], initial=0.0))
+    return out
+
+
+def _zero_panel(ax, tri, q: str, vmax: float) -> None:
+    """A map at rounding level: the defect's outline in grey and what it means (no colour scale)."""
+    from matplotlib.colors import ListedColormap
+
+    ax.tripcolor(tri, np.zeros(tri.x.size), shading="flat", cmap=ListedColormap(["0.88"]))
+    why = f"max |{q}| = {vmax:.1e}: rounding" if vmax > 0 else f"{q} 0 everywhere"
+    ax.text(0.5, 0.5, f"{ZERO_SAYS.get(q, 'zero')}\n({why})", transform=ax.transAxes,
+            ha="center", va="center", fontsize=8.5, bbox={"facecolor": "white", "alpha": 0.85, "lw": 0})
 
 
 def plane_frame(points: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -67,7 +105,10 @@ def _triangulation(xy: np.ndarray, triangles):
 
 
 def plot_defect_maps(qp, sol, *, fig=None, quantities=("opening", "slip", "pressure")):
-    """One row per defect (at most :data:`MAX_DEFECT_ROWS`), one panel per quantity; returns the figure."""
+    """One row per defect (at most :data:`MAX_DEFECT_ROWS`), one panel per quantity; returns the figure.
+    A quantity at rounding level (:data:`ROUNDING`) is drawn as a grey surface that says so ("closed",
+    "no slip", "no contact pressure"), without a colour scale. Axes: the defect's in-plane directions
+    (:func:`plane_frame`), lengths of the scene from the defect's centre."""
     import matplotlib.pyplot as plt
 
     if sol.x is None:
@@ -75,6 +116,7 @@ def plot_defect_maps(qp, sol, *, fig=None, quantities=("opening", "slip", "press
     d = defect_fields3d(qp, sol.x, sol.multipliers)
     ids = np.unique(d["defect_id"])[:MAX_DEFECT_ROWS]
     qs = [q for q in quantities if q in d]
+    scale = _scales(qp, sol, d, qs)
     fig = fig or plt.figure(figsize=(3.6 * len(qs), 3.1 * len(ids)), layout="constrained")
     axes = np.atleast_2d(fig.subplots(len(ids), len(qs), squeeze=False))
     for r, k in enumerate(ids):
@@ -87,18 +129,26 @@ def plot_defect_maps(qp, sol, *, fig=None, quantities=("opening", "slip", "press
             ax = axes[r, col]
             # the front is sealed: opening and slip 0 there; the pressure is drawn as 0 where undefined
             v = np.where(vrows >= 0, np.nan_to_num(d[q][np.maximum(vrows, 0)], nan=0.0), 0.0)
-            im = ax.tripcolor(tri, v, shading="gouraud", cmap=FIELD_CMAP)
+            vmax = float(np.abs(v).max(initial=0.0))
+            closed = vmax <= ROUNDING * scale.get(q, 0.0) or vmax == 0.0
+            if closed:
+                _zero_panel(ax, tri, q, vmax)
+            else:
+                im = ax.tripcolor(tri, v, shading="gouraud", cmap=FIELD_CMAP)
+                fig.colorbar(im, ax=ax, shrink=0.8).ax.tick_params(labelsize=7)
             ax.set_aspect("equal")
-            ax.set_title(f"defect {k}: {q}", fontsize=9)
+            ax.set_title(f"defect {k}: {q}" + (f" ({ZERO_SAYS.get(q, 'zero')})" if closed else ""), fontsize=9)
+            ax.set_xlabel(f"along {axis_name(e1)}", fontsize=8)
+            ax.set_ylabel(f"along {axis_name(e2)}", fontsize=8)
             ax.tick_params(labelsize=7)
-            fig.colorbar(im, ax=ax, shrink=0.8).ax.tick_params(labelsize=7)
     return fig
 
 
 def plot_cut(qp, sol, *, origin=None, normal=None, ax=None, scale: float = 0.0):
     """The section of the body by a plane (default: through the first defect's centre, containing its
     normal), coloured by the von Mises stress per tetrahedron; the defect nodes near the plane are marked.
-    ``scale`` > 0 draws the section at displaced positions (u times scale). Returns the axes."""
+    ``scale`` > 0 draws the section at displaced positions (u times scale). The title names the plane
+    (its origin and normal), the axes its in-plane directions. Returns the axes."""
     import matplotlib.pyplot as plt
     from matplotlib.collections import PolyCollection
 
@@ -133,6 +183,9 @@ def plot_cut(qp, sol, *, origin=None, normal=None, ax=None, scale: float = 0.0):
     pts = d["points"][near]
     ax.plot((pts - origin) @ a1, (pts - origin) @ a2, "w.", ms=2, label="defect nodes")
     ax.figure.colorbar(pc, ax=ax, shrink=0.8, label="von Mises stress (units of E)")
-    ax.set_title("cut through the body across defect 0 (its normal up)" if scale == 0 else
-                 f"cut through the body, displacements x {scale:g}", fontsize=9)
+    where = f"plane through ({', '.join(f'{v:.3g}' for v in origin)}), normal {axis_name(nv)}"
+    ax.set_title(("cut across defect 0 (its normal up)" if scale == 0 else
+                  f"cut, displacements x {scale:g}") + f"\n{where}", fontsize=9)
+    ax.set_xlabel(f"along {axis_name(a1)} from the plane's origin (length units of the scene)", fontsize=8)
+    ax.set_ylabel(f"along {axis_name(a2)}", fontsize=8)
     return ax

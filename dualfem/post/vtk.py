@@ -5,8 +5,10 @@ One unstructured grid holds
 * the points: every mesh node, doubled defect nodes included (so the crack opens when the
   mesh is warped), with z = 0;
 * point data ``displacement`` (3 components, z = 0: use *Warp By Vector*), and the nodal
-  defect fields ``jump_normal``, ``jump_tangent``, ``pressure`` (NaN away from the defect; at a
-  defect node both copies carry the same value; the tips carry jump 0 and no pressure);
+  defect fields ``jump_normal``, ``jump_tangent``, ``pressure`` (``pressure`` only when the
+  solution has multipliers): 0 away from the defects (``defect_id`` -1 tells those nodes apart), at a
+  defect node both copies carry the same value, the tips carry jump 0 and pressure 0 (no constraint
+  acts there: the model's closed-form value); no point field holds NaN;
 * point data ``defect_id`` (the defect a node lies on, counted from 0 in the order of the
   scene's ``[[defects]]``; -1 elsewhere) and ``normal`` (3 components: the defect's unit normal
   nu at its nodes, pointing to the "+" face, the tips taking their neighbour's; 0 elsewhere:
@@ -106,10 +108,9 @@ def to_meshio(qp, sol=None, *, post: Post | None = None):
         nodal = {"jump_normal": d["jump_normal"], "jump_tangent": d["jump_tangent"],
                  "pressure": d.get("pressure", np.full(d["s"].size, np.nan))}
         for k, v in nodal.items():
-            arr = np.full(npts, np.nan)
-            arr[d["lower"]] = v
-            arr[d["upper"]] = v
-            point_data[k] = arr
+            if k == "pressure" and "pressure" not in d:
+                continue
+            point_data[k] = _point_field(npts, d["lower"], d["upper"], np.where(d["interior"], v, 0.0))
         point_data["defect_id"] = np.full(npts, -1, dtype=np.int32)
         point_data["normal"] = np.zeros((npts, 3))
         for ids in (d["lower"], d["upper"]):
@@ -142,6 +143,14 @@ def _defect_edges(d: dict, nodal: dict) -> tuple[np.ndarray, dict, np.ndarray, n
                 vals[k].append(finite_mean(np.stack([v[idx][:-1], v[idx][1:]])))
     return (np.vstack(edges).astype(np.int64), {k: np.concatenate(v) for k, v in vals.items()},
             np.concatenate(ids), np.concatenate(face))
+
+
+def _point_field(npts: int, lower: np.ndarray, upper: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """A defect field as point data: ``v`` on both copies of each defect node, 0 at every other node."""
+    arr = np.zeros(npts)
+    arr[lower] = v
+    arr[upper] = v
+    return arr
 
 
 def finite_mean(a: np.ndarray) -> np.ndarray:

@@ -1,8 +1,9 @@
 """ParaView output of a 3D solution (VTU/XDMF via meshio): the tetrahedra and the defect surfaces.
 
 One unstructured grid holds the points (every node, both copies of a defect node), point data
-``displacement`` (3 components: *Warp By Vector*), ``opening``, ``slip``, ``pressure`` (NaN away from
-the defects; both copies of a defect node carry its value), ``defect_id`` (-1 elsewhere) and
+``displacement`` (3 components: *Warp By Vector*), ``opening``, ``slip``, ``pressure`` (``pressure`` only
+with multipliers; 0 away from the defects and at front nodes, which carry no constraint; both copies of
+a defect node carry its value; no point field holds NaN), ``defect_id`` (-1 elsewhere) and
 ``normal`` (the unit normal pointing to the "+" face at defect nodes, 0 elsewhere); cell blocks: the
 tetrahedra, then, when the QP has its defect surface triangles (``maps['defect_faces']``, (3, n_faces)
 node ids of the "-" face, the front nodes single), the triangles of every "+" face followed by those
@@ -27,7 +28,7 @@ def to_meshio3d(qp, sol):
     g = qp.geometry
     npts = g.nodes.shape[1]
     from dualfem.post.fields import nodal_displacement
-    from dualfem.post.vtk import finite_mean
+    from dualfem.post.vtk import _point_field, finite_mean
 
     u = nodal_displacement(qp, sol.x)
     st = stresses3d(qp, sol.x)
@@ -38,12 +39,15 @@ def to_meshio3d(qp, sol):
     face = [np.zeros(ntet, dtype=np.int32)]
     if "defect_upper" in qp.maps:
         d = defect_fields3d(qp, sol.x, sol.multipliers)
+        has_p = "pressure" in d
         d.setdefault("pressure", np.full(qp.m, np.nan))
         for k in NODAL:
-            arr = np.full(npts, np.nan)
-            arr[d["lower"]] = d[k]
-            arr[d["upper"]] = d[k]
-            point_data[k] = arr
+            if k == "pressure" and not has_p:
+                continue
+            v = np.asarray(d[k], float)
+            if k == "pressure":         # front nodes (weight 0): no constraint acts, the pressure is 0
+                v = np.where(np.asarray(qp.weights, float) > 0, v, 0.0)
+            point_data[k] = _point_field(npts, d["lower"], d["upper"], v)
         point_data["defect_id"] = np.full(npts, -1, dtype=np.int32)
         point_data["normal"] = np.zeros((npts, 3))
         for ids in (d["lower"], d["upper"]):

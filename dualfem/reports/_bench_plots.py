@@ -1,4 +1,4 @@
-"""The figures of ``dualfem report bench``: work-precision per (scene, N) and scaling per scene.
+"""The figures of ``dualfem report bench``: work-precision per scene identity and scaling per scene.
 
 Work-precision: relative energy-norm error of x against time (setup + solve, seconds), log-log, one
 column of panels per delta. Every run is a point (hollow when its status is not ``solved``). A solver
@@ -23,13 +23,15 @@ from pathlib import Path
 from dualfem.core.io import atomic_savefig
 from dualfem.post.style import MAX_SERIES, Style, group_by_family, styles
 from dualfem.reports._bench_curves import Curve, MedianCurve, median_curve
-from dualfem.reports._bench_util import _f
+from dualfem.reports._bench_util import SceneId, _f, group_scenes, unknowns
 
 #: font sizes of every bench figure (points)
 RC = {"font.size": 9, "axes.titlesize": 9.5, "axes.labelsize": 9, "legend.fontsize": 8,
       "xtick.labelsize": 8, "ytick.labelsize": 8, "legend.title_fontsize": 8.5}
 #: grey of the floor and tolerance guide lines (not a series colour)
 GUIDE = "0.45"
+#: colour of the reference solver's time line (not a series colour)
+REF_LINE = "0.15"
 #: errors below this are drawn at it
 ERR_FLOOR = 1e-16
 PANEL_W, PANEL_H = 3.3, 2.6
@@ -87,8 +89,22 @@ def solver_curves(curves: list[Curve], runs: list[dict], kind: str = "reference"
     return out
 
 
+def selfref(r: dict) -> bool:
+    """Whether a run is by its scene's reference solver: its error against that reference is 0 by
+    construction, so it is drawn as a line at its time, not as a competitor's point."""
+    return bool(r.get("ref_solver")) and str(r.get("ref_solver")) == str(r.get("solver"))
+
+
+def _ref_time(pts: list[dict]) -> tuple[float, str] | None:
+    """(median time [s], solver) of the reference solver's own runs among ``pts``, or None."""
+    ts = sorted(_f(r.get("total_s")) for r in pts if selfref(r) and math.isfinite(_f(r.get("total_s"))))
+    if not ts:
+        return None
+    return ts[len(ts) // 2], ", ".join(sorted({str(r["solver"]) for r in pts if selfref(r)}))
+
+
 def _finite_points(pts: list[dict], var: str) -> list[dict]:
-    vr = [r for r in pts if r["variant"] == var and math.isfinite(_f(r.get("err_x_energy")))
+    vr = [r for r in pts if r["variant"] == var and not selfref(r) and math.isfinite(_f(r.get("err_x_energy")))
           and math.isfinite(_f(r.get("total_s")))]
     vr.sort(key=lambda r: -_f(r.get("tol")) if math.isfinite(_f(r.get("tol"))) else 0)
     return vr
@@ -108,11 +124,12 @@ def _draw_curve(ax, sc: SolverCurve, st: Style) -> None:
 
 def _wp_panel(ax, pts: list[dict], members: list[str], st: dict[str, Style], floor_s: float | None,
               curves: dict[tuple[str, str], SolverCurve], tols: dict[str, float]) -> None:
-    """One work-precision panel: the members' points, curves (or tier lines) and the guide lines."""
-    keys = {str(r.get("scene_key")) for r in pts}
+    """One work-precision panel: the members' points, curves (or tier lines) and the guide lines (the
+    floor; the reference solver's own runs, :func:`selfref`, as a line at their median time)."""
     for var in members:
         s = st[var]
         vr = _finite_points(pts, var)
+        keys = {str(r.get("scene_key")) for r in pts if r["variant"] == var and not selfref(r)}
         sc = next((curves[(var, k)] for k in sorted(keys) if (var, k) in curves), None)
         if sc is not None:
             _draw_curve(ax, sc, s)
@@ -126,6 +143,9 @@ def _wp_panel(ax, pts: list[dict], members: list[str], st: dict[str, Style], flo
                     mfc=s.color if solved else "none", zorder=4)
     if floor_s is not None and math.isfinite(floor_s):
         ax.axvline(floor_s, color=GUIDE, ls="--", lw=0.9, zorder=1)
+    ref = _ref_time(pts)
+    if ref is not None:
+        ax.axvline(ref[0], color=REF_LINE, ls="-.", lw=1.1, zorder=1)
     for tol in tols.values():
         ax.axhline(tol, color=GUIDE, ls=":", lw=0.9, zorder=1)
 
@@ -139,12 +159,14 @@ def _legend_handles(members: list[str], st: dict[str, Style], curved: set[str], 
     return h + extra
 
 
-def _guides(floor: bool, tols: dict[str, float]) -> list:
+def _guides(floor: bool, tols: dict[str, float], ref: str = "") -> list:
     from matplotlib.lines import Line2D
 
     out = [Line2D([], [], color=GUIDE, ls="none", marker="o", mfc="none", ms=5.5, label="hollow: not solved")]
     if floor:
         out.append(Line2D([], [], color=GUIDE, ls="--", lw=0.9, label="floor: factor + solve K"))
+    if ref:
+        out.append(Line2D([], [], color=REF_LINE, ls="-.", lw=1.1, label=f"reference ({ref}): its own runs' time"))
     if tols:
         out.append(Line2D([], [], color=GUIDE, ls=":", lw=0.9,
                           label="tier tol: " + ", ".join(f"{k} {v:g}" for k, v in sorted(tols.items(),
@@ -209,14 +231,15 @@ def _finish(fig, axes, rows, st, curved, guides, ylabel: str, title: str, figdir
 def _present(sel: list[dict], curves: dict[tuple[str, str], SolverCurve]) -> list[str]:
     """The variants with something to draw in ``sel``: a finite point or a curve of one of its scenes."""
     keys = {str(r.get("scene_key")) for r in sel}
-    out = {r["variant"] for r in sel
-           if math.isfinite(_f(r.get("err_x_energy"))) and math.isfinite(_f(r.get("total_s")))}
-    return sorted(out | {v for (v, k) in curves if k in keys and any(r["variant"] == v for r in sel)})
+    out = {r["variant"] for r in sel if not selfref(r)
+           and math.isfinite(_f(r.get("err_x_energy"))) and math.isfinite(_f(r.get("total_s")))}
+    return sorted(out | {v for (v, k) in curves if k in keys and any(r["variant"] == v and not selfref(r)
+                                                                      for r in sel)})
 
 
-def wp_figure(sel: list[dict], deltas: list[float], floor_s: float | None, curves, load: str, N: float,
+def wp_figure(sel: list[dict], deltas: list[float], floor_s: float | None, curves, title: str,
               figdir: Path, name: str) -> str:
-    """One work-precision figure (scene ``load``, size N): facets x deltas; returns the file name."""
+    """One work-precision figure (``title``: the scene and its size): facets x deltas; returns the file name."""
     import matplotlib
 
     members = _present(sel, curves)
@@ -232,8 +255,9 @@ def wp_figure(sel: list[dict], deltas: list[float], floor_s: float | None, curve
             axes[0][j].set_title(f"delta = {d:g}")
             axes[-1][j].set_xlabel("time (setup + solve) [s]")
         curved = {v for (v, k) in curves if v in members and k in {str(r.get("scene_key")) for r in sel}}
-        return _finish(fig, axes, rows, st, curved, _guides(floor_s is not None, tols),
-                       "rel. energy-norm error of x", f"work-precision: {load}, N = {N:g}", figdir, name)
+        ref = _ref_time(sel)
+        return _finish(fig, axes, rows, st, curved, _guides(floor_s is not None, tols, ref[1] if ref else ""),
+                       "rel. energy-norm error of x", f"work-precision: {title}", figdir, name)
 
 
 def _scaling_panel(ax, sel: list[dict], members: list[str], st: dict[str, Style], floor_t: dict, d: float) -> None:
@@ -287,35 +311,55 @@ def scaling_figure(sel: list[dict], deltas: list[float], floor_t: dict, load: st
                        f"scaling: {load}", figdir, name, minor_labels=False)
 
 
+@dataclass(frozen=True)
+class Figure:
+    """One drawn figure: its file name (in the figure folder), what it shows and its median unknowns."""
+
+    name: str
+    scene: SceneId
+    n_unknowns: float
+
+
+def _floors(floors: list[dict]) -> dict[float, tuple[float, float, str]]:
+    """Unknowns -> (unknowns, time [s], backend) of every usable floor row (a floor is K's size)."""
+    return {_f(f.get("n_unknowns")): (_f(f.get("n_unknowns")), _f(f.get("total_s")), str(f.get("solver")))
+            for f in floors if f.get("status") in ("solved", "inaccurate") and math.isfinite(_f(f.get("n_unknowns")))}
+
+
 def plots(runs: list[dict], floors: list[dict], figdir: Path,
-          curves: list[Curve] | None = None) -> tuple[list[str], list[str]]:
-    """Draw every figure into ``figdir``; returns (work-precision files, scaling files). ``curves``:
-    the sweep's convergence curves (those of error kind ``reference`` are drawn)."""
+          curves: list[Curve] | None = None) -> tuple[list[Figure], list[Figure]]:
+    """Draw every figure into ``figdir``; returns (work-precision figures, scaling figures).
+
+    One work-precision figure per scene identity (:func:`dualfem.reports._bench_util.group_scenes`: the
+    scene's name and the values of its grid keys that vary, e.g. ``N`` or ``mesh_size``), one panel
+    column per delta; one scaling figure per scene name that was run at two sizes or more. The floor of
+    a figure is the floor row of the same number of unknowns. ``curves``: the sweep's convergence
+    curves (those of error kind ``reference`` are drawn)."""
     import matplotlib
 
     matplotlib.use("Agg")
     figdir.mkdir(parents=True, exist_ok=True)
-    floor_t = {_f(f.get("scene_N")): (_f(f["n_unknowns"]), _f(f["total_s"]), f["solver"])
-               for f in floors if f["status"] in ("solved", "inaccurate")}
-    loads = sorted({str(r["scene"]) for r in runs})
-    Ns = sorted({_f(r.get("scene_N")) for r in runs if math.isfinite(_f(r.get("scene_N")))})
+    floor_t = _floors(floors)
     deltas = sorted({_f(r.get("scene_delta")) for r in runs if math.isfinite(_f(r.get("scene_delta")))},
                     reverse=True)
     has = [r for r in runs if r["status"] != "skipped"]
     med = solver_curves(curves or [], has)
     wp_files, sc_files = [], []
-    for load in loads:     # work-precision: one figure per (scene, N), one panel column per delta
-        for N in Ns:
-            sel = [r for r in has if r["scene"] == load and _f(r.get("scene_N")) == N]
-            if not sel:
-                continue
-            ds = [d for d in deltas if any(_f(r.get("scene_delta")) == d for r in sel)] or [float("nan")]
-            fl = floor_t[N][1] if N in floor_t else None
-            wp_files.append(wp_figure(sel, ds, fl, med, load, N, figdir, f"wp_{load}_N{int(N)}.png"))
-    for load in loads:     # scaling: one figure per scene, one panel column per delta
-        sel = [r for r in has if r["scene"] == load]
+    by_scene: dict[str, list[dict]] = {}
+    for sid, sel in group_scenes(has).items():     # work-precision: one panel column per delta
+        ds = [d for d in deltas if any(_f(r.get("scene_delta")) == d for r in sel)] or [float("nan")]
+        n = unknowns(sel)
+        fl = floor_t[n][1] if n in floor_t else None
+        title = sid.label + (f" ({n:,.0f} unknowns)" if math.isfinite(n) else "")
+        wp_files.append(Figure(wp_figure(sel, ds, fl, med, title, figdir, f"wp_{sid.slug}.png"), sid, n))
+        by_scene.setdefault(sid.scene, []).extend(sel)
+    for name, sel in by_scene.items():     # scaling: one figure per scene name, one panel column per delta
+        ns = {_f(r.get("n_unknowns")) for r in sel if math.isfinite(_f(r.get("n_unknowns")))}
         ds = [d for d in deltas if any(_f(r.get("scene_delta")) == d for r in sel)]
-        if not ds or len(Ns) < 2:
+        if not ds or len(ns) < 2:
             continue
-        sc_files.append(scaling_figure(sel, ds, floor_t, load, figdir, f"scaling_{load}.png"))
+        fl = {k: v for k, v in floor_t.items() if k in ns}
+        sid = SceneId(name)
+        sc_files.append(Figure(scaling_figure(sel, ds, fl, name, figdir, f"scaling_{sid.slug}.png"), sid,
+                               max(ns)))
     return wp_files, sc_files

@@ -82,8 +82,9 @@ def _tier_section(runs: list[dict], tier: str, tol: float, shift: float, deltas:
         return []
     L = [f"### tier {tier} (tol {tol:g})", "",
          "All deltas. Time: shifted geometric mean over each solver's successful runs (how many in brackets); "
-         f"the last column is qpbenchmark's convention over the {ncommon} scenes every solver of this tier ran, "
-         "a run that is not a success counted at its time limit.", "",
+         + (f"the last column is qpbenchmark's convention over the {ncommon} scenes every solver of this tier ran, "
+            "a run that is not a success counted at its time limit." if ncommon else
+            "no scene was run by every solver of this tier: the qpbenchmark-convention column is n/a."), "",
          "| rank | solver | runs | success rate | solved claims | certified correct | correct rate | claims agree "
          "| wrong claims | shifted GM of time of successes (rel.) | plain GM (rel.) "
          "| qpbenchmark convention: failures at the time limit (rel.) |",

@@ -203,6 +203,9 @@ def targets(runs, floors, ours: list[str], err_target: float, floor_target: floa
     present = sorted({r["solver"] for r in runs if r["solver"] in ours and r["status"] != "skipped"})
     if not present:
         return [f"No run of {', '.join(ours)} in these results: the targets cannot be checked."]
+    if not Ns:
+        return ["No scene of these results is given by N (the targets are defined on the paper's scenes at "
+                "their largest N): the targets cannot be checked."]
     lines = [f"Checked at N in {{{', '.join(f'{n:g}' for n in Ns)}}} (the largest sizes of this sweep), "
              f"for {', '.join(present)}. A run counts when its status is solved and its relative "
              f"energy-norm error against the reference is <= {err_target:g}; its time is setup + solve; end to "

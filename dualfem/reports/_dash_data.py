@@ -3,23 +3,31 @@ into one JSON-able payload that the page's script filters (:mod:`dualfem.reports
 
 What the payload holds (every number as measured; NaN and infinities become ``null``):
 
+* ``scenes``: the scene identities (:class:`dualfem.reports._bench_util.SceneId`: the scene's name and
+  the values of its grid keys that vary, e.g. ``f2, N = 64`` or ``plate, mesh_size = 0.02``), as labels,
+  with ``scene_names`` (the scene name of each) and ``scene_unknowns`` (median unknowns of each);
 * ``runs``: one entry per run row that was not skipped (bench rows of kind ``run``, stress rows of kind
-  ``stress``), in columns: solver variant, scene name, N, delta, tier, status, claimed status, grade,
+  ``stress``), in columns: solver variant, scene identity (index into ``scenes``), delta, tier, status,
+  claimed status, grade, whether the solver is the reference solver of its scene (``selfref``: its
+  energy-norm error is 0 by construction),
   time = setup + solve [s] (``total_s``), relative energy-norm error against the certified reference
   (``err_x_energy``), the evaluator's KKT error, run id, label, results index, a short message;
 * ``curves``: per run id, the samples of its convergence curve (time [s], error, iteration) from the
-  folder's ``curves.csv`` (:mod:`dualfem.experiments.curves`), only for runs whose row is kept;
+  folder's ``curves.csv`` (:mod:`dualfem.experiments.curves`), only for runs whose row is kept (of a run
+  timed in several repeats, its first repeat's curve);
 * ``rank``: the ranking tables of ``dualfem report bench`` (:func:`dualfem.reports._bench_rank.rank_table`:
-  success rate, correct rate, shifted geometric mean of time) per tier, for every scene / N / delta
-  selection (all, or one value of each) the runs cover;
+  success rate, correct rate, shifted geometric mean of time) per tier, for every scene / delta
+  selection (all, or one value of each) the runs cover, keyed ``"tier|scene|delta"`` (-1 = all);
 * ``targets``: the performance-target checks of ``dualfem report bench``
-  (:func:`dualfem.reports._bench_targets.target_checks`);
+  (:func:`dualfem.reports._bench_targets.target_checks`), only when ``show_targets`` (else []);
 * ``solvers``: every solver variant of the input (also those only skipped) with its family and
   plotly style (:meth:`dualfem.post.style.Style.plotly`: Okabe-Ito colours, one marker set per family);
-* ``floors``: the floor (one factorization + one solve of K) per N.
+* ``floors``: the floor (one factorization + one solve of K) per scene identity of the same number of
+  unknowns (``scene``: index into ``scenes``).
 
 Stress rows (``dualfem stress``) have no tier: they are put in the tier ``declared`` (each solver's own
-declared tolerance, graded as recorded), their scene is the scene's load (or name), and their scene
+declared tolerance, graded as recorded), their scene is the scene's name (``scene_name``: ``curved``,
+not its problem or load; older rows: the scene's load), and their scene
 key the stress axis and its coordinates.
 """
 from __future__ import annotations
@@ -39,7 +47,7 @@ from dualfem.experiments.stress import load_results
 from dualfem.post.style import FAMILIES, MAX_SERIES, family, styles
 from dualfem.reports._bench_rank import deltas_of, rank_table, tiers_of
 from dualfem.reports._bench_targets import target_checks
-from dualfem.reports._bench_util import OURS, _f
+from dualfem.reports._bench_util import OURS, _f, group_scenes, unknowns
 from dualfem.reports._correct_rate import DEFINITION, SUCCESS
 from dualfem.reports.bench import _slot
 
@@ -77,7 +85,7 @@ def _stress_row(r: dict) -> dict:
     sc = r.get("scene") if isinstance(r.get("scene"), dict) else {}
     coords = r.get("coords") if isinstance(r.get("coords"), dict) else {}
     r = dict(r)
-    r.update(scene=str(sc.get("scene") or sc.get("load") or "?"), scene_N=_f(sc.get("N")),
+    r.update(scene=str(r.get("scene_name") or sc.get("scene") or sc.get("load") or "?"), scene_N=_f(sc.get("N")),
              scene_delta=_f(sc.get("delta")), tier=STRESS_TIER, variant=str(r.get("solver")),
              solver=str(r.get("solver")),
              scene_key=f"{r.get('axis')}:{json.dumps(coords, sort_keys=True, default=str)}",
@@ -183,8 +191,8 @@ def _runs_columns(runs: list[dict], sidx: dict, dims: dict[str, dict]) -> dict[s
         if r.get("status") == "skipped":
             continue
         cols["solver"].append(sidx[r["variant"]])
-        cols["scene"].append(dims["scene"][str(r.get("scene"))])
-        cols["N"].append(_num(r.get("scene_N")))
+        cols["scene"].append(dims["scene"][id(r)])
+        cols["selfref"].append(int(bool(r.get("ref_solver")) and str(r.get("ref_solver")) == r["solver"]))
         cols["delta"].append(_num(r.get("scene_delta")))
         cols["tier"].append(dims["tier"][r["tier"]])
         cols["status"].append(dims["status"][str(r.get("status"))])
@@ -201,33 +209,32 @@ def _runs_columns(runs: list[dict], sidx: dict, dims: dict[str, dict]) -> dict[s
 
 
 def _curves(curves: dict[str, list[dict]]) -> dict[str, dict]:
-    """Per run id: time [s], error and iteration of each sample in time order, and the error kind."""
+    """Per run id: time [s], error and iteration of each sample in time order, and the error kind; of a
+    run timed in several repeats (one curve each), the curve of its first recorded repeat (mixing
+    them would interleave two descents into one saw-tooth)."""
     out = {}
     for rid, recs in curves.items():
+        first = min(int(c.get("repeat") or 1) for c in recs)
+        recs = [c for c in recs if int(c.get("repeat") or 1) == first]
         recs = sorted(recs, key=lambda c: (_f(c["time_s"]), c["iteration"]))
         out[rid] = {"t": [_num(c["time_s"], 6) for c in recs], "e": [_num(c["error"], 5) for c in recs],
                     "it": [c["iteration"] for c in recs], "kind": recs[0]["error_kind"]}
     return out
 
 
-def _rank(runs: list[dict], tiers: list[tuple[str, float | None]], scenes: list[str], Ns: list[float],
+def _rank(live: list[dict], tiers: list[tuple[str, float | None]], groups: list[list[dict]],
           deltas: list[float], shift: float, sidx: dict) -> dict[str, dict]:
-    """The ranking tables keyed ``"tier|scene|N|delta"`` (indices into the payload's lists, -1 = all)."""
-    live = [r for r in runs if r.get("status") != "skipped"]
+    """The ranking tables keyed ``"tier|scene|delta"`` (indices into the payload's lists, -1 = all);
+    ``groups``: the runs of each scene identity."""
     out = {}
-    for si, scene in [(-1, None)] + list(enumerate(scenes)):
-        for ni, N in [(-1, None)] + list(enumerate(Ns)):
-            sub = [r for r in live if (scene is None or str(r.get("scene")) == scene)
-                   and (N is None or _f(r.get("scene_N")) == N)]
-            if not sub:
-                continue
-            for ti, (tier, tol) in enumerate(tiers):
-                for di, delta in [(-1, None)] + list(enumerate(deltas)):
-                    # tol None (stress): each run graded as recorded, at its solver's declared tolerance
-                    stats, ncommon = rank_table(sub, tier, tol, shift, delta)  # type: ignore[arg-type]
-                    if stats:
-                        out[f"{ti}|{si}|{ni}|{di}"] = {"n": ncommon, "rows": [
-                            [sidx[s["variant"]]] + [_num(s[k], 4) for k in RANK_COLUMNS[1:]] for s in stats]}
+    for si, sub in [(-1, live)] + list(enumerate(groups)):
+        for ti, (tier, tol) in enumerate(tiers):
+            for di, delta in [(-1, None)] + list(enumerate(deltas)):
+                # tol None (stress): each run graded as recorded, at its solver's declared tolerance
+                stats, ncommon = rank_table(sub, tier, tol, shift, delta)  # type: ignore[arg-type]
+                if stats:
+                    out[f"{ti}|{si}|{di}"] = {"n": ncommon, "rows": [
+                        [sidx[s["variant"]]] + [_num(s[k], 4) for k in RANK_COLUMNS[1:]] for s in stats]}
     return out
 
 
@@ -240,10 +247,21 @@ def _targets(runs: list[dict], floors: list[dict], ours: list[str], err_target: 
     return [{k: (_num(v) if isinstance(v, float) else v) for k, v in asdict(c).items()} for c in checks]
 
 
+def _floors(floors: list[dict], sizes: list[float]) -> list[dict]:
+    """The usable floors, one entry per scene identity of the same number of unknowns."""
+    out = []
+    for f in floors:
+        if f.get("status") in ("solved", "inaccurate"):
+            out += [{"scene": i, "time": _num(f.get("total_s")), "backend": str(f.get("solver")),
+                     "source": f["_source"]} for i, n in enumerate(sizes) if n == _f(f.get("n_unknowns"))]
+    return out
+
+
 def payload(results: list[str | Path], *, shift: float = 10.0, ours: list[str] | None = None,
             err_target: float = 1e-8, floor_target: float = 1.5, speed_target: float = 10.0,
-            command: str = "") -> dict:
-    """The dashboard's data (module docstring) of one or several results folders."""
+            command: str = "", show_targets: bool = False) -> dict:
+    """The dashboard's data (module docstring) of one or several results folders; ``show_targets``:
+    include dualfem's own performance-target checks (off: ``targets`` is [])."""
     runs, floors, curves, sources = load(results)
     ours = list(OURS) if ours is None else list(ours)
     solvers = _solvers(runs)
@@ -254,28 +272,30 @@ def payload(results: list[str | Path], *, shift: float = 10.0, ours: list[str] |
         tiers.append((STRESS_TIER, None))
     if not tiers and live:          # only tolerance-free runs: one table of them, graded as recorded
         tiers.append(("any", None))
-    scenes = sorted({str(r.get("scene")) for r in live})
-    Ns = sorted({_f(r.get("scene_N")) for r in live if math.isfinite(_f(r.get("scene_N")))})
+    groups = group_scenes(live)
+    sizes = [unknowns(g) for g in groups.values()]
     deltas = deltas_of(live)
     tier_names = [t for t, _ in tiers] + sorted({r["tier"] for r in live} - {t for t, _ in tiers})
     statuses = sorted({str(r.get("status")) for r in live})
-    dims = {"scene": _index(scenes)[1], "tier": _index(tier_names)[1], "status": _index(statuses)[1]}
+    dims = {"scene": {id(r): i for i, g in enumerate(groups.values()) for r in g}, "tier": _index(tier_names)[1],
+            "status": _index(statuses)[1]}
     return {
         "title": "dualfem benchmark dashboard", "command": command,
         "sources": [asdict(s) for s in sources],
         "solvers": solvers, "families": [f for f in FAMILIES if any(s["family"] == f for s in solvers)],
         "max_series": MAX_SERIES,
-        "scenes": scenes, "Ns": [_num(n) for n in Ns], "deltas": [_num(d) for d in deltas], "statuses": statuses,
+        "scenes": [s.label for s in groups], "scene_names": [s.scene for s in groups],
+        "scene_unknowns": [_num(n) for n in sizes], "deltas": [_num(d) for d in deltas], "statuses": statuses,
         "tiers": [{"name": t, "tol": _num(tol) if tol is not None else None} for t, tol in tiers]
         + [{"name": t, "tol": None} for t in tier_names[len(tiers):]],
         "ranked_tiers": len(tiers),
         "runs": _runs_columns(runs, sidx, dims),
         "curves": _curves(curves),
-        "floors": [{"N": _num(f.get("scene_N")), "time": _num(f.get("total_s")), "backend": str(f.get("solver")),
-                    "source": f["_source"]} for f in floors if f.get("status") in ("solved", "inaccurate")],
+        "floors": _floors(floors, sizes),
         "rank_columns": list(RANK_COLUMNS),
-        "rank": _rank(runs, tiers, scenes, Ns, deltas, shift, sidx),
-        "targets": _targets(runs, floors, ours, err_target, floor_target, speed_target),
+        "rank": _rank(live, tiers, list(groups.values()), deltas, shift, sidx),
+        "show_targets": show_targets,
+        "targets": _targets(runs, floors, ours, err_target, floor_target, speed_target) if show_targets else [],
         "target_settings": {"ours": ours, "error": err_target, "floor": floor_target, "speed": speed_target},
         "shift": shift,
         "definitions": {"correct": DEFINITION, "success": SUCCESS},

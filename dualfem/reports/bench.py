@@ -23,10 +23,10 @@ from dualfem.core.errors import InputError
 from dualfem.core.io import atomic_write_text
 from dualfem.experiments.store import read_results
 from dualfem.reports._bench_curves import Curve, curves_from_table
-from dualfem.reports._bench_plots import plots
+from dualfem.reports._bench_plots import Figure, plots
 from dualfem.reports._bench_rank import rank_table, ranking
 from dualfem.reports._bench_targets import targets
-from dualfem.reports._bench_util import _f, _fmt
+from dualfem.reports._bench_util import _f, _fmt, group_scenes
 
 
 def tier_table(runs: list[dict], tier: str, tol: float, shift: float) -> tuple[list[dict], int]:
@@ -101,10 +101,9 @@ def _header(results: list, sources: list[dict], rows: list[dict], command: str) 
     for i, src in enumerate(sources):
         meta = src["meta"]
         tag = f"[{i + 1}] " if len(sources) > 1 else ""
-        sizes = sorted({_f(r.get("scene_N")) for r in rows if r["_source"] == i and r["kind"] == "run"
-                        and math.isfinite(_f(r.get("scene_N")))})
-        kept = (f" {src['kept']} of its {src['n_rows']} rows are in this report (N = "
-                f"{', '.join(f'{n:g}' for n in sizes)})." if len(sources) > 1 else "")
+        ids = group_scenes([r for r in rows if r["_source"] == i and r["kind"] == "run"])
+        kept = (f" {src['kept']} of its {src['n_rows']} rows are in this report ("
+                f"{'; '.join(s.label for s in ids) or 'no runs'})." if len(sources) > 1 else "")
         if meta.get("command"):
             L.append(f"- {tag}`{src['results']}` was produced by `{meta['command']}` (spec `{meta.get('spec')}`, "
                      f"jobs {meta.get('jobs')}, dask {meta.get('dask') or 'no'}; started {meta.get('started_utc')}, "
@@ -248,33 +247,39 @@ def _curves_text(curves: list[Curve]) -> str:
     return txt
 
 
-def _figures(wp: list[str], sc: list[str], figrel, ok_solvers: list[str], curves: list[Curve]) -> list[str]:
-    """Work-precision (largest N per scene inline, the others linked) and scaling figures."""
+def _figures(wp: list[Figure], sc: list[Figure], figrel, ok_solvers: list[str], curves: list[Curve]) -> list[str]:
+    """Work-precision (the largest size of each scene inline, the others linked) and scaling figures."""
     L = ["## Work-precision", "",
-         "Relative energy-norm error of x against time (setup + solve, seconds), log-log; markers: the runs "
+         "Relative energy-norm error of x against time (setup + solve, seconds), log-log; one figure per scene "
+         "and size (the scene's name and the values of its grid keys that vary, e.g. `N` or `mesh_size`), one "
+         "column of panels per delta; markers: the runs "
          "(one per tolerance tier; hollow: status not solved); dotted horizontal lines: the tiers' tolerances; "
          "dashed vertical line: the floor. Errors below 1e-16 are drawn at 1e-16. Each solver keeps one "
          "colour-blind-safe colour + marker (`dualfem.post.style`); with more than 10 solvers, one row of "
          "panels per solver family (dual, interior point, first-order, active set), shared axes."
          + _curves_text(curves)
          + (f" The references were computed by {', '.join(ok_solvers)}: that solver's "
-            "own runs agree with them by construction (error near 0), their accuracy is the KKT error in the "
+            "own runs agree with them by construction (error near 0), so they are no point of the figure but a "
+            "dash-dotted vertical line at their median time; their accuracy is the KKT error in the "
             "tier tables." if ok_solvers else ""), ""]
-    largest = {}
-    for name in wp:
-        load, n = name[3:-4].rsplit("_N", 1)
-        if int(n) >= largest.get(load, (0, ""))[0]:
-            largest[load] = (int(n), name)
-    for load, (n, name) in sorted(largest.items()):
-        L += [f"![work-precision {load} N={n}]({figrel}/{name})", ""]
-    others = [n for n in wp if n not in {v[1] for v in largest.values()}]
+    if not wp:
+        L += ["No run has a finite time and error: no work-precision figure.", ""]
+    largest: dict[str, Figure] = {}
+    for f in wp:
+        if f.scene.scene not in largest or not f.n_unknowns <= largest[f.scene.scene].n_unknowns:
+            largest[f.scene.scene] = f
+    for _, f in sorted(largest.items()):
+        L += [f"![work-precision {f.scene.label}]({figrel}/{f.name})", ""]
+    others = [f for f in wp if f not in largest.values()]
     if others:
-        L += ["Other sizes: " + ", ".join(f"[{n[3:-4]}]({figrel}/{n})" for n in others), ""]
+        L += ["Other sizes: " + ", ".join(f"[{f.scene.label}]({figrel}/{f.name})" for f in others), ""]
     L += ["## Scaling", "",
           "Time of the tightest solved tier against the number of unknowns; dashed: the floor (one "
           "factorization + one solve of K), dotted: 1.5 x the floor. Same styles and facets as above.", ""]
-    for name in sc:
-        L += [f"![scaling {name[8:-4]}]({figrel}/{name})", ""]
+    if not sc:
+        L += ["No scene was run at two sizes or more: no scaling figure.", ""]
+    for f in sc:
+        L += [f"![scaling {f.scene.label}]({figrel}/{f.name})", ""]
     return L
 
 
@@ -303,8 +308,10 @@ def _statuses(runs: list[dict]) -> list[str]:
 
 def build_report(results: str | Path | list[str | Path], md: str | Path, figdir: str | Path, *,
                  ours: list[str], shift: float = 10.0, err_target: float = 1e-8, floor_target: float = 1.5,
-                 speed_target: float = 10.0, command: str = "") -> Path:
-    """Write the markdown report and its figures from one or several results; returns the markdown path."""
+                 speed_target: float = 10.0, command: str = "", show_targets: bool = False) -> Path:
+    """Write the markdown report and its figures from one or several results; returns the markdown path.
+    ``show_targets``: add the section ``Performance targets`` (``ours`` against the floor and the
+    competitors: dualfem's own checklist, not part of a user's comparison)."""
 
     results = [results] if isinstance(results, (str, Path)) else list(results)
     if not results:
@@ -321,9 +328,11 @@ def build_report(results: str | Path | list[str | Path], md: str | Path, figdir:
     except ValueError:
         figrel = figdir.resolve()
     L = _header(results, sources, rows, command) + _machine(rows, sources) + _method(runs, shift, sources)
-    L += _references(refs, sources) + ranking(runs, shift) + ["## Performance targets", ""]
-    L += targets(runs, floors, ours, err_target, floor_target, speed_target, tag_sources=len(sources) > 1)
-    L.append("")
+    L += _references(refs, sources) + ranking(runs, shift)
+    if show_targets:
+        L += ["## Performance targets", ""]
+        L += targets(runs, floors, ours, err_target, floor_target, speed_target, tag_sources=len(sources) > 1)
+        L.append("")
     L += _figures(wp, sc, figrel, sorted({r["solver"] for r in refs if r["status"] == "solved"}), curves)
     L += _statuses(runs)
     atomic_write_text(md, "\n".join(L) + "\n")

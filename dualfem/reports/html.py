@@ -1,16 +1,20 @@
 """``dualfem report html RESULTS... --out DIR``: a self-contained interactive dashboard, ``DIR/index.html``.
 
 One HTML file that opens without a network: plotly.js (the ``plotly`` Python package's copy,
-``pip install 'dualfem[html]'``) and the data are embedded inline. It shows, for the scene, N, delta,
-tier and solvers selected in its side panel (plain JavaScript filtering the embedded JSON):
+``pip install 'dualfem[html]'``) and the data are embedded inline. It shows, for the scene (its identity:
+name and the grid keys that vary, :class:`dualfem.reports._bench_util.SceneId`), delta, tier and solvers
+selected in its side panel (plain JavaScript filtering the embedded JSON):
 
 * the work-precision plot: time (setup + solve, s) against the relative energy-norm error against the
   certified reference (or the evaluator's KKT error), one point per run, hollow when not solved; with
   convergence curves in the results (bench spec ``curves = true``, ``curves.csv``) the median curve
-  per solver with its interquartile band; the floor as a dashed line; one panel per solver family
-  above :data:`dualfem.post.style.MAX_SERIES` solvers; colours and markers of :mod:`dualfem.post.style`;
-* success and correct rates per solver and tier, the ranking tables and the performance targets of
-  ``dualfem report bench`` (the same functions compute them: :mod:`dualfem.reports._dash_data`).
+  per solver (of its tightest tier) with its interquartile band; the floor as a dashed line and the
+  reference solver's own runs (error 0 against themselves) as a dotted line, not as points; by default
+  one panel per scene and delta (more than 24: the page opens on one scene), or one panel per solver
+  family; colours and markers of :mod:`dualfem.post.style`;
+* success and correct rates per solver and tier, the ranking tables and, with ``show_targets``, the
+  performance targets of ``dualfem report bench`` (the same functions compute them:
+  :mod:`dualfem.reports._dash_data`).
 
 The page marks itself for tests: ``data-dash-rendered="ok"`` on ``<html>`` once every plot is drawn;
 any JavaScript error or unhandled rejection is written into ``<pre id="dash-errors">`` (and
@@ -117,12 +121,15 @@ def check_out_dir(out: str | Path, force: bool = False) -> Path:
 
 
 def build_dashboard(results: list[str | Path], out: str | Path, *, force: bool = False, shift: float = 10.0,
-                    ours: list[str] | None = None, err_target: float = 1e-8, command: str = "") -> Path:
+                    ours: list[str] | None = None, err_target: float = 1e-8, command: str = "",
+                    show_targets: bool = False) -> Path:
     """Write ``out/index.html`` from the results folders ``results`` (later ones replace the rows of earlier
     ones that measure the same thing); returns its path. Everything is checked (DIR, plotly, the results)
-    before anything is written; ``shift`` (s), ``ours`` and ``err_target`` as for ``dualfem report bench``."""
+    before anything is written; ``shift`` (s), ``ours``, ``err_target`` and ``show_targets`` as for
+    ``dualfem report bench``."""
     index = check_out_dir(out, force)
     bundle = plotly_js()
-    data = payload(list(results), shift=shift, ours=ours, err_target=err_target, command=command)
+    data = payload(list(results), shift=shift, ours=ours, err_target=err_target, command=command,
+                   show_targets=show_targets)
     atomic_write_text(index, render(data, bundle))
     return index

@@ -38,18 +38,24 @@ def progress(msg: str) -> None:
 
 
 def add_target_args(p) -> None:
-    """``--ours``, ``--shift``, ``--error``: the performance-target options of ``report bench`` and ``report html``."""
+    """``--ours``, ``--shift``, ``--error``, ``--targets``: the performance-target options of ``report bench``
+    and ``report html``."""
     from dualfem.reports._bench_util import OURS
 
     p.add_argument("--ours", default=",".join(OURS), help="comma-separated solvers checked against the targets")
     p.add_argument("--shift", type=float, default=10.0, help="shift of the geometric mean in seconds (10)")
     p.add_argument("--error", type=float, default=1e-8, help="equal-error level of the targets (1e-8)")
+    p.add_argument("--targets", action="store_true",
+                   help="add dualfem's own performance-target checklist (--ours against the floor and the "
+                        "competitors); off by default: it is the project's benchmark, not the user's")
 
 
 def target_args(a) -> dict:
-    """The checked target options as keyword arguments: ``ours`` (list), ``shift``, ``err_target``."""
+    """The checked target options as keyword arguments: ``ours`` (list), ``shift``, ``err_target``,
+    ``show_targets`` (whether the target checklist is shown)."""
     if not (a.shift >= 0 and math.isfinite(a.shift)):
         raise InputError(f"--shift must be a finite number >= 0, got {a.shift}")
     if not (a.error > 0 and math.isfinite(a.error)):
         raise InputError(f"--error must be a finite number > 0, got {a.error}")
-    return {"ours": [s for s in a.ours.split(",") if s], "shift": a.shift, "err_target": a.error}
+    return {"ours": [s for s in a.ours.split(",") if s], "shift": a.shift, "err_target": a.error,
+            "show_targets": bool(a.targets)}

@@ -35,5 +35,6 @@ def run(argv: list[str]) -> int:
     cmd = "dualfem report bench " + " ".join(shlex.quote(x) for x in argv)
     figdir = a.figdir or str(Path(a.md).parent / "bench")
     md = build_report(a.results, a.md, figdir, command=cmd, **targets)
-    print(f"wrote {md} and figures in {figdir}", file=sys.stderr)
+    n = len(list(Path(figdir).glob("*.png")))
+    print(f"wrote {md} and {n} figure{'s' if n != 1 else ''} in {figdir}", file=sys.stderr)
     return 0

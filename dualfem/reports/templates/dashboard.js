@@ -26,7 +26,6 @@
     values.forEach((v, i) => sel.appendChild(el("option", { value: String(i) }, labels ? labels[i] : String(v))));
   }
   options(byId("f-scene"), D.scenes);
-  options(byId("f-N"), D.Ns, D.Ns.map(gg));
   options(byId("f-delta"), D.deltas, D.deltas.map(gg));
   options(byId("f-tier"), D.tiers.map((t) => t.name),
           D.tiers.map((t) => t.tol === null ? t.name : `${t.name} (tol ${gg(t.tol)})`));
@@ -102,11 +101,11 @@
     D.solvers.forEach((s, i) => { checks[i].checked = b.dataset.pick === "all" || (b.dataset.pick === "ran" && s.ran); });
     syncFamilies(); update();
   }));
-  for (const id of ["f-scene", "f-N", "f-delta", "f-tier", "f-error", "f-panels"]) byId(id).addEventListener("change", update);
+  for (const id of ["f-scene", "f-delta", "f-tier", "f-error", "f-panels"]) byId(id).addEventListener("change", update);
 
   function selection() {
     const v = (id) => Number(byId(id).value);
-    return { scene: v("f-scene"), N: v("f-N"), delta: v("f-delta"), tier: v("f-tier"),
+    return { scene: v("f-scene"), delta: v("f-delta"), tier: v("f-tier"),
              error: byId("f-error").value, panels: byId("f-panels").value,
              solvers: new Set(checks.map((c, i) => c.checked ? i : -1).filter((i) => i >= 0)) };
   }
@@ -115,7 +114,6 @@
     for (let k = 0; k < NRUNS; k++) {
       if (!sel.solvers.has(R.solver[k])) continue;
       if (sel.scene >= 0 && R.scene[k] !== sel.scene) continue;
-      if (sel.N >= 0 && R.N[k] !== D.Ns[sel.N]) continue;
       if (sel.delta >= 0 && R.delta[k] !== D.deltas[sel.delta]) continue;
       if (sel.tier >= 0 && R.tier[k] !== sel.tier) continue;
       out.push(k);
@@ -137,28 +135,40 @@
       (R.message[k] ? `<br>${esc(R.message[k].slice(0, 100))}` : "");
   }
   function wpTraces(sel, runs, panelOf) {
+    // one series per (solver, panel); in the energy-norm view the reference solver's own runs (error 0 by
+    // construction) are no competitor: they are drawn as a line (wpLayout), not as points
     const traces = [];
     const bySolver = new Map();
+    let nSelfRef = 0;
     for (const k of runs) {
       const y = sel.error === "err" ? R.err[k] : R.kkt[k];
       if (R.time[k] === null || y === null || !(R.time[k] > 0)) continue;
-      if (!bySolver.has(R.solver[k])) bySolver.set(R.solver[k], []);
-      bySolver.get(R.solver[k]).push(k);
+      if (sel.error === "err" && R.selfref[k]) { nSelfRef += 1; continue; }
+      const key = `${R.solver[k]}|${panelOf(k)}`;
+      if (!bySolver.has(key)) bySolver.set(key, []);
+      bySolver.get(key).push(k);
     }
     const nMarkers = [...bySolver.values()].reduce((a, ks) => a + ks.length, 0);
-    const oneScene = sel.scene >= 0 && sel.N >= 0 && sel.delta >= 0 && sel.tier < 0;
+    const faceted = sel.panels === "scene-delta";
+    const oneScene = (faceted || (sel.scene >= 0 && sel.delta >= 0)) && sel.tier < 0;
     const kind = sel.error === "err" ? "reference" : "kkt";
-    let nCurves = 0, nPoints = 0, nMedians = 0;
-    for (const [si, ks] of bySolver) {
-      const s = D.solvers[si], ax = panelOf(s.family);
+    let nCurves = 0, nPoints = 0;
+    const solversDrawn = new Set(), medians = new Set();
+    for (const [key, ks] of bySolver) {
+      const si = R.solver[ks[0]], s = D.solvers[si], ax = panelOf(ks[0]);
+      solversDrawn.add(si);
       const xa = ax === 1 ? "x" : "x" + ax, ya = ax === 1 ? "y" : "y" + ax;
-      const curves = runs.filter((k) => R.solver[k] === si && D.curves[R.id[k]] && D.curves[R.id[k]].kind === kind)
-        .map((k) => D.curves[R.id[k]]);
+      // the median of the curves of the solver's tightest tier that has any (as the static figures): tiers
+      // stop at different errors, and a median across them would saw-tooth
+      const withCurve = ks.filter((k) => D.curves[R.id[k]] && D.curves[R.id[k]].kind === kind);
+      const tolOf = (k) => { const t = D.tiers[R.tier[k]].tol; return t === null ? Infinity : t; };
+      const tight = Math.min(...withCurve.map(tolOf));
+      const curves = withCurve.filter((k) => tolOf(k) === tight).map((k) => D.curves[R.id[k]]);
       if (curves.length) {
         const b = medianBand(curves);
         if (b) {
           nCurves += curves.length;
-          nMedians += 1;
+          medians.add(si);
           const common = { x: b.t, xaxis: xa, yaxis: ya, hoverinfo: "skip", showlegend: false, legendgroup: s.name };
           traces.push(Object.assign({ y: b.lo, mode: "lines", line: { width: 0, color: s.color } }, common));
           traces.push(Object.assign({ y: b.hi, mode: "lines", line: { width: 0, color: s.color }, fill: "tonexty",
@@ -181,17 +191,17 @@
         text: ks.map(hover), hovertemplate: "%{text}<extra></extra>",
       });
     }
-    return { traces, nCurves, nPoints, nMedians, nSolvers: bySolver.size };
+    return { traces, nCurves, nPoints, nMedians: medians.size, nSolvers: solversDrawn.size, nSelfRef };
   }
-  function wpLayout(sel, panels, runs) {
+  function wpLayout(sel, panels, runs, ncols) {
     const ytitle = sel.error === "err" ? "relative energy-norm error vs certified reference" : "KKT error (evaluator)";
-    const n = panels.length, cols = n > 1 ? 2 : 1, rows = Math.ceil(n / cols);
+    const n = panels.length, cols = n > 1 ? (ncols || 2) : 1, rows = Math.ceil(n / cols);
     const layout = { height: n > 1 ? 330 * rows + 60 : 560, margin: { l: 70, r: 20, t: 40, b: 60 },
                      hovermode: "closest", showlegend: false, annotations: [], shapes: [],
                      plot_bgcolor: "#fff", paper_bgcolor: "#fff" };
     if (n > 1) layout.grid = { rows, columns: cols, pattern: "independent", xgap: 0.08, ygap: 0.14 };
-    const Ns = new Set(runs.map((k) => R.N[k]));
-    panels.forEach((fam, i) => {
+    panels.forEach((panel, i) => {
+      const fam = panel.title;
       const ax = i + 1, sx = ax === 1 ? "" : String(ax);
       const bottom = Math.floor(i / cols) === rows - 1 || i + cols >= n;
       layout["xaxis" + sx] = { type: "log", title: { text: bottom ? "time = setup + solve [s]" : "" }, gridcolor: "#e5e5e5",
@@ -200,26 +210,59 @@
                               exponentformat: "power", matches: ax === 1 ? undefined : "y" };
       if (n > 1) layout.annotations.push({ text: `<b>${esc(fam)}</b>`, xref: `x${sx} domain`, yref: `y${sx} domain`,
                                            x: 0.5, y: 1.02, xanchor: "center", yanchor: "bottom", showarrow: false });
-      for (const f of D.floors) {
-        if (!Ns.has(f.N) || f.time === null) continue;
-        layout.shapes.push({ type: "line", xref: "x" + sx, yref: `y${sx} domain`, x0: f.time, x1: f.time, y0: 0, y1: 1,
-                             line: { color: "#666", width: 1, dash: "dash" } });
-        layout.annotations.push({ text: `floor N=${gg(f.N)}`, xref: "x" + sx, yref: `y${sx} domain`, x: Math.log10(f.time),
-                                  y: 0.02, textangle: -90, xanchor: "right", yanchor: "bottom", showarrow: false,
+      const mine = runs.filter((k) => panel.has(k));
+      const scenes = new Set(mine.map((k) => R.scene[k]));
+      const vline = (x, text, dash, y) => {
+        layout.shapes.push({ type: "line", xref: "x" + sx, yref: `y${sx} domain`, x0: x, x1: x, y0: 0, y1: 1,
+                             line: { color: "#666", width: 1, dash } });
+        layout.annotations.push({ text, xref: "x" + sx, yref: `y${sx} domain`, x: Math.log10(x), y,
+                                  textangle: -90, xanchor: "right", yanchor: "bottom", showarrow: false,
                                   font: { size: 10, color: "#666" } });
+      };
+      for (const f of D.floors) {       // the floor of each scene of the panel: one factorization + one solve of K
+        if (!scenes.has(f.scene) || f.time === null) continue;
+        vline(f.time, scenes.size > 1 ? `floor ${esc(D.scenes[f.scene])}` : "floor", "dash", 0.02);
+      }
+      if (sel.error === "err") {        // the reference solver's own runs: a line at their median time
+        const own = mine.filter((k) => R.selfref[k] && R.time[k] > 0).map((k) => R.time[k]).sort((a, b) => a - b);
+        if (own.length) {
+          const names = [...new Set(mine.filter((k) => R.selfref[k]).map((k) => D.solvers[R.solver[k]].name))];
+          vline(own[Math.floor(own.length / 2)], `reference (${esc(names.join(", "))})`, "dot", 0.35);
+        }
       }
     });
     return layout;
   }
+  function facetPanels(sel, runs) {
+    // one panel per (scene, delta) of the selected runs, scenes as rows, deltas as columns
+    const scenes = [...new Set(runs.map((k) => R.scene[k]))].sort((a, b) => a - b);
+    const deltas = [...new Set(runs.map((k) => R.delta[k]))].sort((a, b) => (b === null) - (a === null) || b - a);
+    const panels = [], where = new Map();
+    for (const sc of scenes) for (const d of deltas) {
+      const ks = runs.filter((k) => R.scene[k] === sc && R.delta[k] === d);
+      if (!ks.length) continue;
+      const set = new Set(ks);
+      panels.push({ title: `${D.scenes[sc]}, delta = ${d === null ? "n/a" : gg(d)}`, has: (k) => set.has(k) });
+      for (const k of ks) where.set(k, panels.length);
+    }
+    return { panels, panelOf: (k) => where.get(k) || 1, ncols: Math.min(Math.max(deltas.length, 1), 3) };
+  }
   function drawWp(sel, runs) {
-    const present = D.families.filter((f) => runs.some((k) => D.solvers[R.solver[k]].family === f));
-    const nSel = new Set(runs.map((k) => R.solver[k])).size;
-    const split = sel.panels === "family" || (sel.panels === "auto" && nSel > D.max_series);
-    const panels = split && present.length > 1 ? present : ["all"];
-    const panelOf = (fam) => panels.length > 1 ? panels.indexOf(fam) + 1 : 1;
+    let panels, panelOf, ncols;
+    if (sel.panels === "scene-delta") {
+      ({ panels, panelOf, ncols } = facetPanels(sel, runs));
+      if (!panels.length) panels = [{ title: "all", has: () => true }];
+    } else {
+      const present = D.families.filter((f) => runs.some((k) => D.solvers[R.solver[k]].family === f));
+      const nSel = new Set(runs.map((k) => R.solver[k])).size;
+      const split = sel.panels === "family" || (sel.panels === "auto" && nSel > D.max_series);
+      const fams = split && present.length > 1 ? present : ["all"];
+      panels = fams.map((f) => ({ title: f, has: (k) => f === "all" || D.solvers[R.solver[k]].family === f }));
+      panelOf = (k) => fams.length > 1 ? fams.indexOf(D.solvers[R.solver[k]].family) + 1 : 1;
+    }
     const w = wpTraces(sel, runs, panelOf);
     const curvesNote = Object.keys(D.curves).length ?
-      `Lines: at each time, the median over the selected runs started by then of each solver's convergence ` +
+      `Lines: at each time, the median over the selected runs of each solver's tightest tier (per panel) started by then of their convergence ` +
       `curve (interpolated in log time and log error between samples; a finished run keeps its last error), ` +
       `bands: the ${100 * QLO}-${100 * QHI} % quantiles of log error (${w.nCurves} curves; as the static ` +
       `figures of 'dualfem report bench'); markers: the runs' final answers.` :
@@ -229,13 +272,16 @@
       `error are left out). ${curvesNote} ` +
       "Hollow markers: status not solved (the solver's claim demoted, or a failure with an iterate). " +
       `Errors below ${FLOOR_ERR} are drawn at ${FLOOR_ERR}. Dashed: the floor (one factorization + one solve of K). ` +
+      (w.nSelfRef ? `Dotted: the reference solver's own runs (${w.nSelfRef}; their error against their own ` +
+        "reference is 0 by construction, so they are a line at their median time, not a competitor; the KKT view " +
+        "draws them as points). " : "") +
       "Hover a point for its run; the side panel selects solvers, by family.";
-    return Plotly.react("wp-plot", w.traces, wpLayout(sel, panels, runs), { displaylogo: false, responsive: true });
+    return Plotly.react("wp-plot", w.traces, wpLayout(sel, panels, runs, ncols), { displaylogo: false, responsive: true });
   }
 
   /* ---------- ranking and rates ---------- */
   const RC = Object.fromEntries(D.rank_columns.map((c, i) => [c, i]));
-  function rankKey(ti, sel) { return `${ti}|${sel.scene}|${sel.N}|${sel.delta}`; }
+  function rankKey(ti, sel) { return `${ti}|${sel.scene}|${sel.delta}`; }
   function rankedTiers(sel) {
     const out = [];
     for (let ti = 0; ti < D.ranked_tiers; ti++) if (sel.tier < 0 || sel.tier === ti) out.push(ti);
@@ -307,14 +353,16 @@
     }
     byId("rank-note").textContent = `As in 'dualfem report bench': ranked by success rate, then the shifted ` +
       `geometric mean of time (shift ${D.shift} s; a run that is not a success counts at its time limit), then the ` +
-      "correct rate; for the scene, N and delta selected (all tiers or the one selected).";
+      "correct rate; for the scene and delta selected (all tiers or the one selected).";
   }
   function drawTargets(sel) {
     const box = byId("targets");
     box.replaceChildren();
     const T = D.target_settings;
-    const rows = D.targets.filter((c) => (sel.scene < 0 || c.scene === D.scenes[sel.scene]) &&
-      (sel.N < 0 || c.N === D.Ns[sel.N]) && (sel.delta < 0 || c.delta === D.deltas[sel.delta]) &&
+    byId("targets-section").hidden = !D.show_targets;
+    if (!D.show_targets) return;
+    const rows = D.targets.filter((c) => (sel.scene < 0 || c.scene === D.scene_names[sel.scene]) &&
+      (sel.delta < 0 || c.delta === D.deltas[sel.delta]) &&
       solverIndex.has(c.solver) && sel.solvers.has(solverIndex.get(c.solver)));
     byId("targets-note").textContent = D.targets.length ?
       `Our solvers (${T.ours.join(", ")}) at the two largest sizes: a run counts when solved with relative ` +
@@ -362,7 +410,7 @@
   function header() {
     const nsrc = D.sources.length;
     byId("dash-summary").textContent = `${NRUNS} runs of ${D.solvers.length} solver variants (${D.families.length} ` +
-      `families) on ${D.scenes.length} scene(s), N in {${D.Ns.map(gg).join(", ")}}, ${D.deltas.length} delta(s), tiers ` +
+      `families) on ${D.scenes.length} scene(s) (${D.scenes.join("; ")}), ${D.deltas.length} delta(s), tiers ` +
       `${D.tiers.map((t) => t.name).join(", ")}; from ${nsrc} results folder${nsrc > 1 ? "s" : ""}` +
       (D.command ? `; generated by ${D.command}` : "") + ".";
     const ul = document.querySelector("#dash-sources ul");
@@ -391,6 +439,18 @@
     return busy;
   }
   header();
+  // faceted by scene and delta; with more panels than MAX_PANELS, open on one scene (its deltas): the one
+  // with the most runs that recorded a convergence curve, else the first
+  const MAX_PANELS = 24;
+  const nPanels = new Set((R.scene || []).map((sc, k) => `${sc}|${R.delta[k]}`)).size;
+  if (nPanels > MAX_PANELS && D.scenes.length > 1) {
+    const withCurves = D.scenes.map(() => 0);
+    (R.scene || []).forEach((sc, k) => { if (D.curves[R.id[k]]) withCurves[sc] += 1; });
+    const open = withCurves.indexOf(Math.max(...withCurves));
+    byId("f-scene").value = String(open);
+    byId("dash-summary").textContent += ` The work-precision view opens on the scene ${D.scenes[open]} ` +
+      `(${nPanels} scene and delta panels in all): choose a scene, or 'all', in the side panel.`;
+  }
   syncFamilies();
   update().then(() => {
     const status = byId("dash-status");
