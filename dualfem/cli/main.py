@@ -12,7 +12,7 @@ from collections.abc import Callable
 from typing import Any
 
 from dualfem.cli.stages import Stages
-from dualfem.core.errors import InputError, MissingDependency
+from dualfem.core.errors import InputError, MissingDependency, describe_exception
 
 #: the paper's method with r taken from the QP: scale-free (uzawa's r = 1e7 is in MPa per unit length)
 DEFAULT_SOLVER = "uzawa_auto"
@@ -143,7 +143,7 @@ def _plugin_info(describe: Callable[[Any], dict], cls: Any) -> dict:
     except BaseException as exc:  # noqa: BLE001 - a third-party plugin's bug
         if type(exc) is KeyboardInterrupt:
             raise
-        why = f"plugin error: {type(exc).__name__}: {exc}"
+        why = f"plugin error: {describe_exception(exc)}"
         return {"installed": False, "missing": why, "description": str(getattr(cls, "description", "")),
                 "parameters": {}}
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from dualfem.cli.main import add_factor_arg, apply_factor, command
 from dualfem.core.errors import InputError
+from dualfem.core.io import check_folder_files
 
 
 def _cfg(p):
@@ -71,6 +72,7 @@ def cmd_stress(args) -> int:
     out = Path(args.out) if args.out else default_out("stress", "quick" if args.quick else "full")
     if out.exists() and not out.is_dir():
         raise InputError(f"--out must be a directory, {str(out)!r} is a file")
+    check_folder_files(out, "--out")
     held = stress.holds_results(out)
     if held and not (args.resume or args.force or args.dry_run):
         raise InputError(f"--out {str(out)!r} already holds results ({held}): pass --resume to continue it "

@@ -20,7 +20,14 @@ from typing import Any
 import numpy as np
 
 from dualfem.core.errors import InputError, OutputError
-from dualfem.core.io import atomic_write, atomic_write_text, move_aside
+from dualfem.core.io import (
+    RESULTS_ENTRIES,
+    atomic_write,
+    atomic_write_text,
+    check_folder_files,
+    check_input_path,
+    move_aside,
+)
 from dualfem.experiments.row import COLUMNS, Row
 
 #: statuses of a run that are final (a resumed sweep does not redo them, ``--retry-failed`` redoes
@@ -47,7 +54,9 @@ class ResultStore:
         self._lock = None
 
     def open(self) -> ResultStore:
-        """Create the folder, take its lock, clear interrupted temporary files, read every row."""
+        """Create the folder, take its lock, clear interrupted temporary files, read every row. A folder
+        holding a FIFO or a device (:func:`~dualfem.core.io.check_folder_files`) is refused first."""
+        check_folder_files(self.out, "--out")
         self.rows_dir.mkdir(parents=True, exist_ok=True)
         self.refs_dir.mkdir(parents=True, exist_ok=True)
         self._take_lock()
@@ -345,12 +354,29 @@ def _csv_path(path: str | Path) -> Path:
     return path / "results.csv" if path.is_dir() else path
 
 
+#: the columns of a bench results.csv that ``dualfem report bench`` cannot do without (every bench writes them)
+REPORT_COLUMNS = ("scene", "scene_key", "label", "n_unknowns", "total_s")
+
+
+def check_report_input(path: str | Path) -> None:
+    """Refuse, in one InputError, results that ``dualfem report bench`` cannot read: a folder holding a FIFO
+    or a device, a file that is not a bench results.csv, or one without a column of :data:`REPORT_COLUMNS`
+    (a hand-made minimal CSV)."""
+    p = Path(path)
+    check_folder_files(p if p.is_dir() else p.parent, "RESULTS", only=None if p.is_dir() else RESULTS_ENTRIES)
+    csv_path = check_input_path(_csv_path(p), "results file")
+    with open(csv_path, encoding="utf-8", errors="replace", newline="") as fh:
+        header = next(csv.reader(fh), [])
+    missing = [c for c in REPORT_COLUMNS if c not in header]
+    if missing and {"run_id", "kind", "status"} <= set(header):     # else the loader says what it is not
+        raise InputError(f"{str(csv_path)!r} lacks the column(s) {', '.join(missing)} that every 'dualfem bench' "
+                         f"results.csv has: it cannot be reported (write it with dualfem bench)")
+
+
 def read_results_checked(path: str | Path) -> tuple[list[dict], list[tuple[int, str]]]:
     """(rows, bad) of a results.csv: the readable rows, and (line number, raw text) of every unreadable
     record (a cut last line, a wrong number of fields, no run id, undecodable bytes, NUL bytes)."""
-    path = _csv_path(path)
-    if not path.is_file():
-        raise InputError(f"results file {str(path)!r} does not exist")
+    path = check_input_path(_csv_path(path), "results file")
     try:
         data = path.read_bytes()
     except OSError as exc:

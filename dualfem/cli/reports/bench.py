@@ -31,6 +31,10 @@ def run(argv: list[str]) -> int:
         a = p.parse_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0)
+    from dualfem.experiments.store import check_report_input
+
+    for item in a.results:
+        check_report_input(item)       # one line for what the report cannot read (experiments/store.py)
     targets = target_args(a)
     cmd = "dualfem report bench " + " ".join(shlex.quote(x) for x in argv)
     figdir = a.figdir or str(Path(a.md).parent / "bench")

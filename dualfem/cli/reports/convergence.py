@@ -19,11 +19,19 @@ from dualfem.core.scene import DEFAULT_SCENE
 from dualfem.experiments.convergence import DEFAULT_DELTAS, DEFAULT_NS, DEFAULT_REF
 
 
-def _read_json(path: str) -> dict:
+def _read_json(path: str, flag: str) -> dict:
+    """A stored study (``convergence.json``), checked by :func:`dualfem.reports.convergence.check_study`
+    before anything is drawn; a FIFO or a device is refused before it is opened."""
+    from dualfem.core.io import check_input_path
+    from dualfem.reports.convergence import check_study
+
+    check_input_path(path, flag)
     try:
-        return json.loads(Path(path).read_text(encoding="utf-8"))
+        res = json.loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
-        raise InputError(f"cannot read {path!r}: {exc}") from None
+        raise InputError(f"{flag} {path!r}: cannot read it: {exc}") from None
+    check_study(res, f"{flag} {path!r}")
+    return res
 
 
 @register_report("convergence", f"mesh-convergence study of {DEFAULT_SCENE} against a fine reference (slow: ~8 min "
@@ -50,10 +58,10 @@ def run(argv: list[str]) -> int:
                          "for one delta")
     argv = strip_dashes(argv)
     args = ap.parse_args(argv)
-    supplements = [_read_json(f) for f in args.supplement]
+    supplements = [_read_json(f, "--supplement") for f in args.supplement]
     out = Path(args.out)
     if args.from_json:
-        res = _read_json(args.from_json)
+        res = _read_json(args.from_json, "--from-json")
         res["supplements"] = supplements or res.get("supplements", [])
         atomic_write_text(out / "convergence.json", dumps(res) + "\n")
         md = render(res, out, res.get("command", "dualfem report convergence"))
