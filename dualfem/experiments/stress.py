@@ -443,8 +443,11 @@ def load_results(path: str | Path) -> tuple[dict, list[Row]]:
     if metap.is_file():
         try:
             meta = json.loads(metap.read_text(encoding="utf-8"))
-        except json.JSONDecodeError:
+        except (json.JSONDecodeError, UnicodeDecodeError):
             raise InputError(f"{str(metap)!r} is not valid JSON") from None
+        if not isinstance(meta, dict):
+            raise InputError(f"{str(metap)!r} is not a stress grid's meta.json (a JSON object), got "
+                             f"{type(meta).__name__}: move it away, the rows are kept in results.csv")
     return meta, rows
 
 
