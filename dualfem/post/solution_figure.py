@@ -34,6 +34,9 @@ def solution_figure(qp, sol):
     if g.dim == 3:
         from dualfem.post.figures3d import plot_cut, plot_defect_maps
 
+        if qp.m == 0:
+            raise InputError("--figure draws the defects' opening and contact maps and a cut across the first "
+                             "defect; this 3D scene has none (defects = []): write the fields with --vtk or --xdmf")
         fig = plot_defect_maps(qp, sol)
         cut = plt.figure(figsize=(5, 4.4), layout="constrained")
         plot_cut(qp, sol, ax=cut.add_subplot())
