@@ -110,7 +110,27 @@ class ThreeD(Problem):
         "remote_stress": "",
     }
     presets = {"three_d": {}}
-    update_keys = ("delta", "load", "load_scale")
+    #: keys a sweep changes without re-meshing (Workspace.update, with_params): the loads change F only, the
+    #: supports (``boundary``'s fixed sides) the elastic stiffness too (:meth:`with_params`)
+    update_keys = ("delta", "load", "load_scale", "boundary", "body_force", "remote_stress")
+
+    def _support_key(self) -> tuple | None:
+        """What the fixed unknowns depend on beyond the mesh: None (the legacy bottom clamp) or the supports."""
+        return None if self._loads is None else \
+            tuple(sorted((s.side, s.support) for s in self._loads.sides if s.support != "free"))
+
+    def with_params(self, **changes) -> ThreeD:
+        """This scene with ``changes``. Only :attr:`update_keys` changed: the mesh and the cut are reused, and
+        with the same supports also the delta-free stiffness (only F and the delta term change); other
+        supports re-assemble the stiffness on the same mesh. Any other key starts afresh."""
+        new = type(self)(**{**self.params, **changes})
+        if set(changes) <= set(self.update_keys):
+            if new._support_key() == self._support_key():
+                new.shared = self.shared
+            else:
+                new.shared.data.update({k: self.shared.data[k] for k in ("cut", "sides") if k in self.shared.data})
+                new.shared.assemblies = self.shared.assemblies      # counted on: the next build assembles once more
+        return new
 
     # ------------------------------------------------------------ validation
     def validate(self) -> None:
