@@ -288,10 +288,19 @@ def human_summary(rec: dict) -> str:
 
 
 # --------------------------------------------------------------------------- main
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with the project's one-line errors: ``dualfem CMD: error: ...`` naming the option (and where
+    the options are listed), exit 2, instead of the whole usage. Sub-parsers inherit it."""
+
+    def error(self, message: str):  # type: ignore[override]
+        print(f"{self.prog}: error: {message} (see '{self.prog} --help')", file=sys.stderr)
+        raise SystemExit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser with every registered sub-command."""
     _import_commands()
-    parser = argparse.ArgumentParser(prog="dualfem", description=__doc__.splitlines()[0])
+    parser = OneLineParser(prog="dualfem", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (help_, configure, _) in _COMMANDS.items():
         configure(sub.add_parser(name, help=help_, description=help_))

@@ -156,7 +156,7 @@ def atomic_write(path: str | Path, write: Callable[[str], None]) -> Path:
         if os.path.exists(tmp):
             os.unlink(tmp)
         if isinstance(exc, OSError):    # disk full, file size limit, permission: one clear line
-            raise OutputError(f"cannot write {str(path)!r}: {exc.strerror or exc} (nothing was written)") from exc
+            raise OutputError(f"cannot write {str(path)!r}: {exc.strerror or exc} (nothing was written to it)") from exc
         raise
     return path
 

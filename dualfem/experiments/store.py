@@ -6,6 +6,7 @@ atomically), ``refs/<scene_key>.npz`` (certified reference solutions); with ``cu
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -140,6 +141,32 @@ class ResultStore:
         raise InputError(f"--out {str(self.out)!r} holds the results of another spec "
                          f"({_spec_name(old) or 'unnamed'!r}, not {name!r}); choose another --out, "
                          f"or pass --force to add this spec's rows to it")
+
+    def on_disk(self) -> str:
+        """What the folder holds now, for a message after a failed write: "rows/ (3 runs), refs/ (1), ...";
+        "nothing" when it holds none of these."""
+        parts = []
+        for d, word in ((self.rows_dir, "runs"), (self.refs_dir, "references")):
+            n = sum(1 for _ in d.glob("[!.]*")) if d.is_dir() else 0
+            if n:
+                parts.append(f"{d.name}/ ({n} {word})")
+        parts += [n for n in ("spec.toml", "sweep.json", "meta.json", "results.csv", "curves.csv")
+                  if (self.out / n).is_file()]
+        return ", ".join(parts) or "nothing"
+
+    @contextlib.contextmanager
+    def accounted(self):
+        """Re-raise a failed write (:class:`OutputError`: disk full, file size limit, a read-only file) with
+        what the folder already holds (:meth:`on_disk`), which is kept: "nothing was written" only when true."""
+        try:
+            yield self
+        except OutputError as exc:
+            raise self.accounted_error(exc) from exc
+
+    def accounted_error(self, exc: OutputError) -> OutputError:
+        """``exc`` with what the folder already holds (see :meth:`accounted`)."""
+        return OutputError(f"{exc}; already in {str(self.out)!r} and kept: {self.on_disk()} (rerun with "
+                           f"--resume once it can be written: finished runs are not redone)")
 
     def done(self, run_id: str) -> bool:
         r = self.rows.get(run_id)

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from dualfem.core.errors import InputError
+from dualfem.core.errors import InputError, OutputError
 from dualfem.core.scene import DEFAULT_SCENE
 from dualfem.experiments.row import Row
 from dualfem.experiments.stress_grid import (  # noqa: F401  (re-exported: the grid's public names)
@@ -345,6 +345,8 @@ def run_grid(tasks: list[Task], out: str | Path, *, jobs: int = 1, resume: bool 
         ordered = [Row.from_dict(store.rows[t.id]) for t in tasks if t.id in store.rows]
         _write_meta(out, {**(meta or {}), "complete": len(ordered) == len(tasks), "n_tasks": len(tasks)})
         return ordered
+    except OutputError as exc:          # a failed write names what the folder already holds
+        raise store.accounted_error(exc) from exc
     finally:
         store.close()
 

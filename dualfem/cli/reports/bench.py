@@ -4,11 +4,11 @@ Reads the results and writes the report with :func:`dualfem.reports.bench.build_
 """
 from __future__ import annotations
 
-import argparse
 import shlex
 import sys
 from pathlib import Path
 
+from dualfem.cli.main import OneLineParser
 from dualfem.cli.report import register_report
 from dualfem.cli.reports._args import add_target_args, target_args
 
@@ -17,7 +17,7 @@ from dualfem.cli.reports._args import add_target_args, target_args
 def run(argv: list[str]) -> int:
     from dualfem.reports.bench import build_report
 
-    p = argparse.ArgumentParser(prog="dualfem report bench",
+    p = OneLineParser(prog="dualfem report bench",
                                 description="reports/benchmark.md + PNGs from a dualfem bench results.csv")
     p.add_argument("results", metavar="RESULTS", nargs="+",
                    help="results.csv or a sweep's output directory; several are merged, a later one replacing "

@@ -6,12 +6,12 @@ stored earlier instead (no solves).
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
 from pathlib import Path
 
+from dualfem.cli.main import OneLineParser
 from dualfem.cli.report import register_report
 from dualfem.cli.reports._args import floats, ints, strip_dashes
 from dualfem.core.errors import InputError
@@ -40,7 +40,7 @@ def run(argv: list[str]) -> int:
     from dualfem.core.io import atomic_write_text, dumps
     from dualfem.reports.convergence import render
 
-    ap = argparse.ArgumentParser(prog="dualfem report convergence",
+    ap = OneLineParser(prog="dualfem report convergence",
                                  description="render the mesh-convergence study (reports/convergence.md)")
     ap.add_argument("--deltas", default=",".join(f"{d:g}" for d in DEFAULT_DELTAS), help="comma-separated deltas")
     ap.add_argument("--N", dest="Ns", default=",".join(map(str, DEFAULT_NS)), help="comma-separated coarse N")

@@ -6,11 +6,11 @@ the ``--out`` path with ``.json``), then renders with :func:`dualfem.reports.pap
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
+from dualfem.cli.main import OneLineParser
 from dualfem.cli.report import register_report
 from dualfem.core.errors import InputError
 
@@ -30,7 +30,7 @@ def report_paper(argv: list[str]) -> int:
     from dualfem.core.io import atomic_write_text
     from dualfem.reports.paper import render
 
-    ap = argparse.ArgumentParser(prog="dualfem report paper")
+    ap = OneLineParser(prog="dualfem report paper")
     ap.add_argument("--N", default="16,32,64,128,256", help="comma-separated mesh sizes")
     ap.add_argument("--inner-N", default=None, help="mesh sizes of the inner stop test study (default: N <= 128)")
     ap.add_argument("--out", default="dualfem-results/reports/paper_tables.md",
