@@ -282,3 +282,14 @@ def test_the_stability_report_names_the_grid_scene():
     assert base_scene({"scene": "two_defects", "base": {"mesh": "gmsh", "mesh_size": 0.04, "delta": 1e-5}}) == \
         "`two_defects` (gmsh, mesh_size = 0.04, delta = 1e-05)"
     assert "paper's f2" in base_scene({"scene": "f2 (paper)", "quick": True})
+
+
+# ----------------------------------------------------------------------------- the committed report
+def test_corpus_records_name_no_path_of_this_machine():
+    from dualfem.experiments.robustness import load_cases, run_case
+
+    case = next(c for c in load_cases(CORPUS) if c["name"] == "TOML boolean for a number (delta = true)")
+    rec = run_case(case, CORPUS.resolve(), main)
+    assert rec["outcome"] == "refused" and "{corpus}/scenes/bool_delta.toml" in rec["why"], rec["why"]
+    text = json.dumps(rec)
+    assert str(CORPUS.resolve()) not in text and "/tmp/dualfem-bad-" not in text

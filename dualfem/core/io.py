@@ -118,6 +118,9 @@ def check_folder_files(folder: str | Path, what: str, depth: int = 2, only: Iter
                 mode = os.stat(e.path).st_mode
             except OSError:
                 continue                # a dangling link: nothing to block on
+            if stat.S_ISDIR(mode) and level == 0 and e.name in RESULTS_ENTRIES and "." in e.name:
+                raise InputError(f"{what} {str(folder)!r} holds a folder named {e.name!r} where its file belongs: "
+                                 "move it away first (nothing could be written there)")
             if stat.S_ISDIR(mode):
                 if level + 1 < depth:
                     todo.append((Path(e.path), level + 1))
