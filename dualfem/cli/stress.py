@@ -51,7 +51,9 @@ def _cfg(p):
                         "this grid's rows to it (nothing is dropped)")
     p.add_argument("--retry-failed", action="store_true",
                    help="with --resume: also redo finished runs whose status is not solved/inaccurate")
-    p.add_argument("--dry-run", action="store_true", help="print the number of runs per axis and exit")
+    p.add_argument("--dry-run", action="store_true",
+                   help="print the number of runs per axis and the time estimate (one timed run of the base "
+                        "scene, as every grid prints before it starts), then exit")
 
 
 @command("stress", "run the numerical-stability grid (delta, r, units, load, nu, N) over every solver")(_cfg)
