@@ -14,7 +14,7 @@ from pathlib import Path
 
 from dualfem.cli.main import add_factor_arg, apply_factor, command
 from dualfem.core.errors import InputError, describe_exception
-from dualfem.core.io import check_folder_files
+from dualfem.core.io import RESULTS_ENTRIES, check_folder_files
 
 
 def _cfg(p):
@@ -74,7 +74,7 @@ def cmd_stress(args) -> int:
     out = Path(args.out) if args.out else default_out("stress", "quick" if args.quick else "full")
     if out.exists() and not out.is_dir():
         raise InputError(f"--out must be a directory, {str(out)!r} is a file")
-    check_folder_files(out, "--out")
+    check_folder_files(out, "--out", only=RESULTS_ENTRIES)
     held = stress.holds_results(out)
     if held and not (args.resume or args.force or args.dry_run):
         raise InputError(f"--out {str(out)!r} already holds results ({held}): pass --resume to continue it "

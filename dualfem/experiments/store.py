@@ -57,7 +57,7 @@ class ResultStore:
     def open(self) -> ResultStore:
         """Create the folder, take its lock, clear interrupted temporary files, read every row. A folder
         holding a FIFO or a device (:func:`~dualfem.core.io.check_folder_files`) is refused first."""
-        check_folder_files(self.out, "--out")
+        check_folder_files(self.out, "--out", only=RESULTS_ENTRIES)
         self.rows_dir.mkdir(parents=True, exist_ok=True)
         self.refs_dir.mkdir(parents=True, exist_ok=True)
         self._take_lock()
