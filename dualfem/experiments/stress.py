@@ -426,9 +426,11 @@ def row_from_record(rec: dict) -> Row:
 def load_results(path: str | Path) -> tuple[dict, list[Row]]:
     """(meta, rows) from a stress results folder: its ``results.csv`` (the one store), or, for a folder
     written before the one engine, its ``runs.jsonl`` (also a path to either file); InputError if unusable."""
+    from dualfem.core.io import RESULTS_ENTRIES, check_folder_files
     from dualfem.experiments.store import read_results
 
     p = Path(path)
+    check_folder_files(p if p.is_dir() else p.parent, "RESULTS", only=RESULTS_ENTRIES)     # no FIFO opened
     csv_path = p / "results.csv" if p.is_dir() else (p if p.suffix == ".csv" else None)
     runs = p / "runs.jsonl" if p.is_dir() else (p if p.suffix != ".csv" else None)
     folder = p if p.is_dir() else p.parent
