@@ -211,6 +211,19 @@ def test_no_defects_in_2d_is_an_uncracked_body(tmp_path, capsys):
     assert (tmp_path / "u.vtu").is_file()
 
 
+def test_every_installed_solver_answers_or_skips_a_qp_without_constraints():
+    """m = 0: solved, or skipped with the reason (SCS needs a constraint); never an error."""
+    from dualfem.core.registry import solvers
+    from dualfem.core.scene import load_scene
+    from dualfem.experiments.runner import run
+
+    qp = load_scene("f2", {"N": 4, "defects": []}).build()
+    for name, cls in sorted(solvers().items()):
+        if cls.missing() is None and name not in ("cvxpy",):      # cvxpy: its import alone takes seconds
+            sol = run(name, qp)
+            assert str(sol.status) in ("solved", "skipped"), (name, sol.status, sol.message)
+
+
 def test_no_defects_in_3d_is_an_uncracked_box(tmp_path, capsys):
     from dualfem.core.scene import load_scene
     from dualfem.experiments.runner import run
