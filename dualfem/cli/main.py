@@ -221,6 +221,10 @@ def cmd_solve(args) -> int:
 
     qp = build_qp(problem)           # contained: a problem plugin's prints, exceptions, a non-QP
     t2 = time.perf_counter()
+    if args.figure:
+        from dualfem.post.solution_figure import check_figure_qp
+
+        check_figure_qp(qp)          # before the solve and before --vtk is written
     stages("assembly (mesh, matrices)", t2 - t1)
     hint = missing_fast_backend_hint(qp.n)
     if hint and not args.quiet:
