@@ -72,6 +72,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
 from dualfem.core.errors import InputError, check_positive
+from dualfem.core.io import check_input_path
 from dualfem.core.parts import ShiftPart
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
@@ -82,8 +83,7 @@ STORAGE = ("full", "upper", "lower")
 
 
 def _read(path: Path) -> dict:
-    if not path.is_file():
-        raise InputError(f"QP file {str(path)!r} does not exist")
+    check_input_path(path, "QP file")      # a FIFO or a device: refused before anything opens it
     if path.suffix not in (".npz", ".mat"):
         raise InputError(f"parameter 'path' must name a .npz or .mat file, got {str(path)!r}")
     try:

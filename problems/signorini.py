@@ -50,6 +50,10 @@ from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
 from dualfem.core.registry import register_problem
 
+#: the most grid squares a scene may have (N = 4096 on a square body; the N range's top): checked in validate,
+#: before anything is allocated, since height / width multiplies the rows of the grid
+MAX_CELLS = 4096 ** 2
+
 
 def gap_function(expr: str):
     """The initial gap ``g(x)`` from a numpy expression in ``x`` (or a Python function).
@@ -92,6 +96,11 @@ class Signorini(Problem):
         p["width"] = check_positive("width", p["width"])
         p["height"] = check_positive("height", p["height"])
         p["indent"] = check_positive("indent", p["indent"], allow_zero=True)
+        nx, ny = self.grid()
+        if nx * ny > MAX_CELLS:      # before anything is allocated: height / width multiplies the rows
+            raise InputError(f"the grid N x round(N height / width) = {nx} x {ny:,} (N = {nx}, height / width = "
+                             f"{p['height'] / p['width']:g}) has more than {MAX_CELLS:,} squares (N = 4096 on a square "
+                             f"body): lower N or height / width")
         if p["plane"] not in PLANES:
             raise InputError(f"plane must be one of {', '.join(PLANES)}, got {p['plane']!r}")
         self._gap = gap_function(p["obstacle"])
@@ -106,12 +115,24 @@ class Signorini(Problem):
             raise InputError(f"obstacle {p['obstacle']!r} gives a negative initial gap (the foundation would "
                              f"already penetrate the body); the gap g(x) must be >= 0 on [0, {p['width']:g}]")
 
+    def grid(self) -> tuple[int, int]:
+        """(squares along x, squares along y) of the mesh: ``(N, max(1, round(N height / width)))``."""
+        p = self.params
+        ratio = float(p["height"]) / float(p["width"])
+        rows = p["N"] * ratio
+        return p["N"], max(1, int(round(rows))) if np.isfinite(rows) and rows < 2.0 ** 62 else 2 ** 62
+
+    def size_estimate(self) -> tuple[int, str]:
+        """Unknowns before assembly: 2 per grid node (an upper bound: the Dirichlet nodes are counted)."""
+        nx, ny = self.grid()
+        return 2 * (nx + 1) * (ny + 1), f"N={nx} (grid {nx} x {ny})"
+
     def mesh(self):
         """The scikit-fem mesh of the rectangle."""
         from skfem import MeshTri
 
         p = self.params
-        ny = max(1, int(round(p["N"] * p["height"] / p["width"])))
+        _, ny = self.grid()
         return MeshTri.init_tensor(np.linspace(0, p["width"], p["N"] + 1), np.linspace(0, p["height"], ny + 1))
 
     def build(self) -> QP:

@@ -243,7 +243,9 @@ class PenaltySolver(DualOperatorSolver):
         self.space = _DenseSpace(self.op, qp) if self.op.kind == "dense" else \
             _SparseSpace(self.op, qp, from_param(self), keep=int(self.params["keep_factors"]))
         kd = qp.K.diagonal()[np.asarray(qp.local_dofs)]
-        self.rho0 = self.params["rho0_factor"] * float(np.median(kd)) / float(np.median(qp.weights))
+        # no constraint (m = 0, an uncracked body): no penalty term, rho only labels the messages
+        self.rho0 = self.params["rho0_factor"] * float(np.median(kd)) / float(np.median(qp.weights)) \
+            if qp.m and kd.size else 1.0
         # the scales of the stop tests have the evaluator's floors (the length and the energy the load sets),
         # so that a solution x* = 0 (a crack pushed shut, nothing else loaded) has a scale of its own
         self._length, self._energy2 = load_length(qp), load_energy(qp) ** 2

@@ -60,6 +60,8 @@ from dualfem.numerics.scaling import scale
 #: default size above which dense backends are skipped (a dense n x n Hessian: 8 n^2 bytes and
 #: O(n^3) factorizations; at n = 3000 that is 72 MB and seconds per factorization)
 DENSE_MAX_N = 3000
+#: backends that refuse a QP without constraints (SCS: "m must be a positive integer"): skipped with the reason
+NEEDS_A_CONSTRAINT = ("scs",)
 
 
 def _tols(*names: str) -> Callable[[float], dict]:
@@ -236,11 +238,16 @@ class QpsolversSolver(Solver):
         P = (0.5 * (s.P + s.P.T)).tocsc()     # exactly symmetric (some backends test it)
         if self.info().dense:
             P, G = P.toarray(), G.toarray()
-        self._problem = qpsolvers.Problem(P, s.q, G, np.zeros(qp.m))
+        # no constraint (m = 0, an uncracked body): quadprog takes no G at all (it fails on a 0-row G)
+        self._problem = qpsolvers.Problem(P, s.q) if qp.m == 0 and self.backend == "quadprog" else \
+            qpsolvers.Problem(P, s.q, G, np.zeros(qp.m))
 
     def solve(self) -> Solution:
         import qpsolvers
 
+        if self.qp.m == 0 and self.backend in NEEDS_A_CONSTRAINT:
+            return Solution(solver=self.name, status=Status.SKIPPED,
+                            message=f"{self.backend} needs at least one constraint; this QP has none (m = 0)")
 
         with warnings.catch_warnings(), c_stdout_to_stderr():
             warnings.simplefilter("ignore")

@@ -22,7 +22,7 @@ from dualfem.cli.options import (
     spelled,
 )
 from dualfem.cli.stages import Stages
-from dualfem.core.errors import InputError, MissingDependency
+from dualfem.core.errors import InputError, MissingDependency, describe_exception
 
 #: the paper's method with r taken from the QP: scale-free (uzawa's r = 1e7 is in MPa per unit length)
 DEFAULT_SOLVER = "uzawa_auto"
@@ -168,7 +168,7 @@ def _plugin_info(describe: Callable[[Any], dict], cls: Any) -> dict:
     except BaseException as exc:  # noqa: BLE001 - a third-party plugin's bug
         if type(exc) is KeyboardInterrupt:
             raise
-        why = f"plugin error: {type(exc).__name__}: {exc}"
+        why = f"plugin error: {describe_exception(exc)}"
         return {"installed": False, "missing": why, "description": str(getattr(cls, "description", "")),
                 "parameters": {}}
 
@@ -260,6 +260,10 @@ def cmd_solve(args) -> int:
 
     qp = build_qp(problem)           # contained: a problem plugin's prints, exceptions, a non-QP
     t2 = time.perf_counter()
+    if args.figure:
+        from dualfem.post.solution_figure import check_figure_qp
+
+        check_figure_qp(qp)          # before the solve and before --vtk is written
     stages("assembly (mesh, matrices)", t2 - t1)
     hint = missing_fast_backend_hint(qp.n)
     if hint and not args.quiet:

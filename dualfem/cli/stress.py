@@ -13,7 +13,8 @@ import time
 from pathlib import Path
 
 from dualfem.cli.main import add_factor_arg, apply_factor, command
-from dualfem.core.errors import InputError
+from dualfem.core.errors import InputError, describe_exception
+from dualfem.core.io import RESULTS_ENTRIES, check_folder_files
 
 
 def _cfg(p):
@@ -50,7 +51,9 @@ def _cfg(p):
                         "this grid's rows to it (nothing is dropped)")
     p.add_argument("--retry-failed", action="store_true",
                    help="with --resume: also redo finished runs whose status is not solved/inaccurate")
-    p.add_argument("--dry-run", action="store_true", help="print the number of runs per axis and exit")
+    p.add_argument("--dry-run", action="store_true",
+                   help="print the number of runs per axis and the time estimate (one timed run of the base "
+                        "scene, as every grid prints before it starts), then exit")
 
 
 @command("stress", "run the numerical-stability grid (delta, r, units, load, nu, N) over every solver")(_cfg)
@@ -73,6 +76,7 @@ def cmd_stress(args) -> int:
     out = Path(args.out) if args.out else default_out("stress", grid)     # one folder per grid and scene
     if out.exists() and not out.is_dir():
         raise InputError(f"--out must be a directory, {str(out)!r} is a file")
+    check_folder_files(out, "--out", only=RESULTS_ENTRIES)
     held = stress.holds_results(out)
     if held and not (args.resume or args.force or args.dry_run):
         raise InputError(f"--out {str(out)!r} already holds results ({held}): pass --resume to continue it "
@@ -85,6 +89,7 @@ def cmd_stress(args) -> int:
         for ax, n in Counter(t.axis for t in tasks).items():
             print(f"{ax:6s} {n} runs")
         print(f"total  {len(tasks)} runs, solvers: {', '.join(names)}")
+        print(f"time   {_estimate(tasks, jobs)[1]}")
         return 0
     refs = reference.candidates()
     meta = _meta(args, reg, names, axes, tasks, [r[0] for r in refs])
@@ -102,6 +107,7 @@ def cmd_stress(args) -> int:
 
     print(f"dualfem stress: {len(tasks)} runs ({', '.join(names)}), reference "
           f"{refs[0][0] if refs else 'NONE'} -> {out}", file=sys.stderr)
+    _say_estimate(tasks, jobs, out if args.resume else None)
     recs = stress.run_grid(tasks, out, jobs=jobs, resume=args.resume, force=args.force,
                            retry_failed=args.retry_failed, progress=progress, meta={**meta},
                            command=meta.get("command") or "")
@@ -118,6 +124,34 @@ def cmd_stress(args) -> int:
     print("outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(c.items())), file=sys.stderr)
     print(f"results in {out}/results.csv; report: dualfem report stability {out}", file=sys.stderr)
     return 0
+
+
+def _estimate(tasks: list, jobs: int) -> tuple[dict | None, str]:
+    """The grid's time estimate (:mod:`dualfem.experiments.stress_estimate`) and its line; (None, why)
+    when the probe run of the base scene fails (the grid then records that failure run by run)."""
+    from dualfem.experiments.stress_estimate import describe, estimate
+
+    try:
+        est = estimate(tasks, jobs)
+    except Exception as exc:  # noqa: BLE001 - a plugin's or a scene's failure, whatever it raises
+        return None, f"no estimate: one run of the base scene failed ({describe_exception(exc)})"
+    return est, describe(est)
+
+
+def _say_estimate(tasks: list, jobs: int, resumed: Path | None) -> None:
+    """Before the first run: the estimate on stderr (of the runs a resume has left), and a warning
+    line when it exceeds :data:`~dualfem.experiments.stress_estimate.WARN_S`."""
+    from dualfem.experiments.stress_estimate import WARN_S, duration
+
+    if resumed is not None:
+        done = {p.name[:-5] for p in (resumed / "rows").glob("[!.]*.json")}
+        tasks = [t for t in tasks if t.id not in done]
+    est, line = _estimate(tasks, jobs)
+    print(f"dualfem stress: {line}", file=sys.stderr, flush=True)
+    if est is not None and est["seconds"] > WARN_S:
+        print(f"dualfem stress: warning: this grid takes about {duration(est['seconds'])}; narrow it with --solvers, "
+              f"--axes or --max-n (--dry-run lists the runs per axis); Ctrl-C stops it, --resume continues it",
+              file=sys.stderr, flush=True)
 
 
 def _choice(flag: str, value: str | None, allowed: list[str], what: str, word: str) -> list[str]:

@@ -25,6 +25,24 @@ class MissingDependency(ImportError):
     """An optional dependency is missing; the message says what to install."""
 
 
+def describe_exception(exc: BaseException) -> str:
+    """``"TypeName: message"`` of an exception (``"TypeName"`` alone when the message is empty), never
+    raising: a plugin's exception whose ``__str__`` (or whose class's ``__name__``) itself raises is named
+    with what can be read, so that reporting a plugin's failure cannot end in a traceback."""
+    try:
+        name = str(type(exc).__name__)
+    except Exception:  # noqa: BLE001 - a hostile metaclass
+        name = "exception"
+    try:
+        msg = str(exc)
+    except Exception as inner:  # noqa: BLE001 - a hostile __str__
+        try:
+            msg = f"<its message cannot be shown: str() raised {type(inner).__name__}>"
+        except Exception:  # noqa: BLE001
+            msg = "<its message cannot be shown>"
+    return f"{name}: {msg}" if msg else name
+
+
 #: pip distributions whose import name differs from the distribution name
 DISTRIBUTIONS = {"skfem": "scikit-fem", "sksparse": "scikit-sparse", "yaml": "pyyaml", "sklearn": "scikit-learn"}
 

@@ -58,6 +58,77 @@ def check_output_path(path: str | Path, flag: str) -> Path:
     return path
 
 
+def _kind(mode: int) -> str:
+    import stat
+
+    for test, name in ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a directory")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def check_input_path(path: str | Path, what: str, folder: bool = False) -> Path:
+    """``path`` if it names an existing regular file (``folder``: a directory); else an InputError naming
+    ``what`` (e.g. "scene file"). Checked with ``stat``, never by opening: a FIFO, a device or a socket is
+    refused before anything reads it (opening a FIFO blocks until a writer comes, reading a device may
+    never end)."""
+    import stat
+
+    path = Path(path)
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise InputError(f"{what} {str(path)!r} does not exist") from None
+    except OSError as exc:
+        raise InputError(f"{what} {str(path)!r}: cannot read it: {exc.strerror or exc}") from None
+    if (stat.S_ISDIR(mode) if folder else stat.S_ISREG(mode)):
+        return path
+    want = "a folder" if folder else "a regular file"
+    raise InputError(f"{what} {str(path)!r} is {_kind(mode)}, not {want}: it is refused before reading")
+
+
+#: what a results folder (of bench or stress) may hold that a command reads without being asked
+RESULTS_ENTRIES = ("results.csv", "curves.csv", "sweep.json", "spec.toml", "runs.jsonl", "meta.json", "rows",
+                   "refs", "curves", "records")
+
+
+def check_folder_files(folder: str | Path, what: str, depth: int = 2, only: Iterable[str] | None = None) -> None:
+    """Refuse (InputError naming ``what`` and the entry) a results folder holding a FIFO, a device or a
+    socket in it or in its subfolders down to ``depth`` levels (rows/, refs/, curves/): commands read
+    those files without asking, and opening a FIFO blocks. ``only``: the top-level names looked at (e.g.
+    :data:`RESULTS_ENTRIES` when the folder is the user's own, holding a results.csv given by name).
+    Checked with ``stat`` only; a folder that does not exist passes (it is created later)."""
+    import stat
+
+    keep = None if only is None else set(only)
+    todo = [(Path(folder), 0)]
+    while todo:
+        d, level = todo.pop()
+        try:
+            entries = list(os.scandir(d))
+        except (FileNotFoundError, NotADirectoryError):
+            continue
+        except OSError as exc:
+            raise InputError(f"{what} {str(d)!r}: cannot list it: {exc.strerror or exc}") from None
+        for e in entries:
+            if level == 0 and keep is not None and e.name not in keep:
+                continue
+            try:
+                mode = os.stat(e.path).st_mode
+            except OSError:
+                continue                # a dangling link: nothing to block on
+            if stat.S_ISDIR(mode) and level == 0 and e.name in RESULTS_ENTRIES and "." in e.name:
+                raise InputError(f"{what} {str(folder)!r} holds a folder named {e.name!r} where its file belongs: "
+                                 "move it away first (nothing could be written there)")
+            if stat.S_ISDIR(mode):
+                if level + 1 < depth:
+                    todo.append((Path(e.path), level + 1))
+            elif not stat.S_ISREG(mode):
+                raise InputError(f"{what} {str(folder)!r} holds {str(e.path)!r}, {_kind(mode)}, not a regular "
+                                 "file: move it away first (it is refused before anything reads it)")
+
+
 def refuse_overwrite(paths: Iterable[str | Path], force: bool, flag: str = "--force") -> None:
     """Before any work: InputError naming the first of ``paths`` that exists, unless ``force``
     (results of another run, or committed ones, are replaced only when asked explicitly)."""
@@ -88,7 +159,7 @@ def atomic_write(path: str | Path, write: Callable[[str], None]) -> Path:
         if os.path.exists(tmp):
             os.unlink(tmp)
         if isinstance(exc, OSError):    # disk full, file size limit, permission: one clear line
-            raise OutputError(f"cannot write {str(path)!r}: {exc.strerror or exc} (nothing was written)") from exc
+            raise OutputError(f"cannot write {str(path)!r}: {exc.strerror or exc} (nothing was written to it)") from exc
         raise
     return path
 

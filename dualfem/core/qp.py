@@ -265,9 +265,9 @@ class QP:
     @classmethod
     def load(cls, path: str | Path) -> QP:
         """Read a QP written by :meth:`save` (``.npz`` or ``.mat``) and validate it."""
-        path = Path(path)
-        if not path.exists():
-            raise InputError(f"QP file {str(path)!r} does not exist")
+        from dualfem.core.io import check_input_path
+
+        path = check_input_path(Path(path), "QP file")
         if path.suffix not in (".npz", ".mat"):
             raise InputError(f"QP file must end in .npz or .mat, got {path.name!r}")
         where = f"QP file {str(path)!r}"

@@ -39,6 +39,9 @@ def declared_arrays(path: Path) -> dict[str, tuple[tuple[int, ...], str]]:
     """Name -> (declared shape, kind) of every array of a .npz or .mat file, read from the headers
     alone (nothing decompressed): kind is the numpy dtype kind ("f", "i", "c", ...; "sparse" for a
     MATLAB sparse matrix, "?" when the header does not say)."""
+    from dualfem.core.io import check_input_path
+
+    check_input_path(path, "QP file")     # a FIFO or a device: refused before anything opens it
     out: dict[str, tuple[tuple[int, ...], str]] = {}
     if path.suffix == ".npz":
         import zipfile

@@ -137,10 +137,10 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
     elif Path(spec).suffix in (".npz", ".mat"):
         # a QP file (qpsolvers' P, q, G, h: G x <= h, or dualfem's K, F, B: an export): problems/generic_qp.py
         pname, params = "qp_file", {"path": spec}
-    elif spec.endswith(".toml") or Path(spec).is_file():
-        path = Path(spec)
-        if not path.is_file():
-            raise InputError(f"scene file {spec!r} does not exist")
+    elif spec.endswith(".toml") or Path(spec).exists():
+        from dualfem.core.io import check_input_path
+
+        path = check_input_path(spec, "scene file")
         try:
             data = tomllib.loads(path.read_text(encoding="utf-8"))
         except tomllib.TOMLDecodeError as exc:

@@ -470,8 +470,9 @@ def run_sweep(spec: Spec | str | Path, out: str | Path, *, jobs: int = 1, dask: 
         check_dask(dask, connect_timeout)
     store = open_store(out, spec.name, spec.text or json.dumps(_canon(spec.__dict__)), force=force)
     try:
-        return _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, stream, retry_failed,
-                      connect_timeout)
+        with store.accounted():         # a failed write names what the folder already holds
+            return _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, stream, retry_failed,
+                          connect_timeout)
     finally:
         store.close()
 

@@ -29,6 +29,8 @@ import time
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from dualfem.core.errors import describe_exception
+
 #: task kind -> "module:function" of the handler ``(task, tick) -> (row dict, payload)``
 HANDLERS = {
     "run": "dualfem.experiments.bench:execute",
@@ -182,7 +184,7 @@ def _child_main() -> None:  # pragma: no cover - runs in the child process
         try:
             row, payload = _handler(task["kind"])(task, lambda phase, budget: _send(out, ("phase", phase, budget)))
         except BaseException as exc:  # noqa: BLE001 - every failure becomes an error row
-            row, payload = error_row(task, f"{type(exc).__name__}: {exc}"), None
+            row, payload = error_row(task, describe_exception(exc)), None
         row["peak_rss_mb"] = round(max(watch.peak, rss_mb()), 1)
         _send(out, ("done", row, payload))
         if not task.get("keep_cache"):
@@ -336,7 +338,7 @@ def run_guarded(task: dict) -> tuple[dict, Any]:
     try:
         return w.run(task)
     except Exception as exc:  # noqa: BLE001 - never lose a task
-        return error_row(task, f"{type(exc).__name__}: {exc}"), None
+        return error_row(task, describe_exception(exc)), None
 
 
 def _close_local_worker() -> None:

@@ -94,12 +94,54 @@ def _unrelated_h5(d: Path) -> None:
     (d / "out.h5").write_bytes(b"someone's HDF5 data")
 
 
+def _fifos(d: Path) -> None:
+    """Named pipes where a QP file, a scene file, a JSON file and a results folder's files are expected
+    (opening one blocks until a writer comes: they must be refused by ``stat`` alone)."""
+    for name in ("p.npz", "s.toml", "c.json"):
+        os.mkfifo(d / name)
+    (d / "res" / "rows").mkdir(parents=True)
+    os.mkfifo(d / "res" / "results.csv")
+    (d / "rows_fifo" / "rows").mkdir(parents=True)
+    os.mkfifo(d / "rows_fifo" / "rows" / "abc.json")
+
+
+def _minimal_results(d: Path) -> None:
+    (d / "res").mkdir()
+    (d / "res" / "results.csv").write_text("run_id,kind,status\nabc,run,solved\n")
+
+
+def _convergence_jsons(d: Path) -> None:
+    (d / "empty.json").write_text("{}\n")
+    (d / "list.json").write_text("[]\n")
+    (d / "no_levels.json").write_text(json.dumps({"scene": "f2", "solver": "pdas", "ref_N": 8, "Ns": [2],
+                                                  "deltas": {"0.1": {"levels": [], "reference": {}}}, "time_s": 1}))
+
+
+def _stress_meta_list(d: Path) -> None:
+    """A stress folder whose meta.json is valid JSON but not an object (a hand edit, a foreign tool)."""
+    (d / "grid").mkdir()
+    (d / "grid" / "results.csv").write_text("run_id,kind,status,axis\nabc,stress,solved,N\n")
+    (d / "grid" / "meta.json").write_text("[1, 2]\n")
+
+
+def _folder_as_results_csv(d: Path) -> None:
+    (d / "res" / "results.csv").mkdir(parents=True)
+
+
+def _uncracked_scenes(d: Path) -> None:
+    (d / "plate.toml").write_text("# no defect at all\nN = 8\ndefects = []\n")
+    (d / "box.toml").write_text("# no defect at all, 3D\ndim = 3\nN = 3\ndefects = []\n")
+
+
 
 
 MAKERS: dict[str, Callable[[Path], None]] = {
     "float_indices": _float_indices, "huge_shape": _huge_shape, "shifted_qp": _shifted_qp,
     "bad_nu_export": _bad_nu_export, "foreign_results": _foreign_results, "old_grid": _old_grid,
     "foreign_csv": _foreign_csv, "a_directory": _a_directory, "a_file": _a_file, "unrelated_h5": _unrelated_h5,
+    "fifos": _fifos, "minimal_results": _minimal_results, "convergence_jsons": _convergence_jsons,
+    "stress_meta_list": _stress_meta_list, "folder_as_results_csv": _folder_as_results_csv,
+    "uncracked_scenes": _uncracked_scenes,
 }
 
 
@@ -206,7 +248,23 @@ def run_case(case: dict, corpus: Path, main: Main) -> dict:
         rec = {"class": case["class"], "name": case["name"], "argv": argv, "exit": rc, "seconds":
                round(time.perf_counter() - t0, 2), "stderr": err.strip()[-400:], "open": case.get("open", "")}
         rec["outcome"], rec["why"] = _classify(case, rc, out, err, tb, before, after)
-        return rec
+        return _anonymous(rec, d, corpus)
+
+
+def _anonymous(rec: dict, scratch: Path, corpus: Path) -> dict:
+    """The record with the paths of this machine (the scratch folder, the corpus) written as ``{dir}`` and
+    ``{corpus}``, as in the case's argv: a committed report names no folder of its author's machine."""
+    subs = sorted({(str(p), tag) for base, tag in ((scratch, "{dir}"), (corpus, "{corpus}"))
+                   for p in (base, base.resolve())}, key=lambda s: -len(s[0]))
+
+    def clean(v):
+        if isinstance(v, str):
+            for path, tag in subs:
+                v = v.replace(path, tag)
+            return v
+        return [clean(x) for x in v] if isinstance(v, list) else v
+
+    return {k: clean(v) for k, v in rec.items()}
 
 
 def _classify(case: dict, rc, out: str, err: str, tb: str, before: dict, after: dict) -> tuple[str, str]:
@@ -223,7 +281,7 @@ def _classify(case: dict, rc, out: str, err: str, tb: str, before: dict, after: 
             return ("silent_wrong" if rc == 0 else "wrong_refusal"), f"exit {rc}, expected a refusal (exit 2)"
         if set(after) - set(before):
             return "wrote_on_refusal", f"wrote {', '.join(sorted(set(after) - set(before)))}"
-        if len(lines) != 1 or not re.match(r"dualfem \S+: error: ", lines[0]):
+        if len(lines) != 1 or not re.match(r"dualfem (report )?\S+: error: ", lines[0]):
             return "wrong_refusal", f"stderr is not one error line: {lines[:3]}"
         missing = [n for n in case.get("needles", []) if not re.search(n, lines[0], flags=re.I)]
         if missing:
@@ -237,7 +295,7 @@ def _classify(case: dict, rc, out: str, err: str, tb: str, before: dict, after: 
 
 
 def _check_answer(case: dict, out: str) -> tuple[str, str]:
-    if not any(k in case for k in ("json_status", "json_energy", "finite_residuals")):
+    if not any(k in case for k in ("json_status", "json_energy", "finite_residuals", "json_defect_nodes")):
         return "answered", "no traceback, exit 0/1"
     try:
         rec = json.loads(out)
@@ -245,6 +303,8 @@ def _check_answer(case: dict, out: str) -> tuple[str, str]:
         return "silent_wrong", "stdout is not one JSON object"
     if "json_status" in case and rec.get("status") not in case["json_status"]:
         return "silent_wrong", f"status {rec.get('status')}, expected one of {case['json_status']}"
+    if "json_defect_nodes" in case and rec.get("n_defect_nodes") != case["json_defect_nodes"]:
+        return "silent_wrong", f"{rec.get('n_defect_nodes')} defect nodes, the scene has {case['json_defect_nodes']}"
     want = case.get("json_energy")
     got = rec.get("energy")
     if want is not None and not (got is not None and abs(got - want) <= 1e-8 * max(1, abs(want))):

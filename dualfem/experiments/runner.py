@@ -35,7 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from dualfem.core import evaluator
-from dualfem.core.errors import InputError
+from dualfem.core.errors import InputError, describe_exception
 from dualfem.core.qp import QP, Maps
 from dualfem.core.quiet import plugin_output
 from dualfem.core.registry import builtin_names, get_solver
@@ -65,7 +65,7 @@ def make_solver(name: str, params: dict[str, Any] | None = None) -> Solver:
             if type(exc) is KeyboardInterrupt:     # a real Ctrl-C (exactly this class) still stops
                 raise
             raise InputError(f"solver plugin {name!r} ({cls.__module__}.{cls.__qualname__}) could not be created: "
-                             f"{type(exc).__name__}: {exc}") from None
+                             f"{describe_exception(exc)}") from None
 
 
 def missing_reason(solver: Solver) -> str | None:
@@ -77,7 +77,7 @@ def missing_reason(solver: Solver) -> str | None:
         except BaseException as exc:  # noqa: BLE001 - a plugin's bug
             if type(exc) is KeyboardInterrupt:
                 raise
-            return f"solver plugin {_name(solver)!r}: missing() raised {type(exc).__name__}: {exc}"
+            return f"solver plugin {_name(solver)!r}: missing() raised {describe_exception(exc)}"
     return None if reason is None else str(reason)
 
 
@@ -186,7 +186,7 @@ def _attempt(solver: Solver, view: QP, qp: QP, tick: Callable[[str, float], None
         except BaseException as exc:   # noqa: BLE001 - the solver broke (even SystemExit): say so, never hide it
             if type(exc) is KeyboardInterrupt:     # a real Ctrl-C (exactly this class) still stops the program
                 raise
-            att.why = f"{type(exc).__name__}: {exc}"
+            att.why = describe_exception(exc)
             if att.setup_s or t1 != t0:
                 att.solve_s = time.perf_counter() - t1 - spent()
         if att.why is None:

@@ -171,9 +171,9 @@ def load_spec(path: str | Path, selection: Selection | None = None) -> Spec:
 
     ``selection``: the command line's ``-s``/``-d``/``-r`` (:mod:`dualfem.experiments.spec_select`),
     applied to the parsed file before validation; the spec's ``text`` is then the effective spec."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"spec file {str(path)!r} does not exist")
+    from dualfem.core.io import check_input_path
+
+    path = check_input_path(path, "spec file")
     size = path.stat().st_size
     if size > MAX_SPEC_BYTES:
         raise InputError(f"spec {str(path)!r} is {size:,} bytes; the limit is {MAX_SPEC_BYTES:,} (a sweep spec "

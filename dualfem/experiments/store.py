@@ -6,6 +6,7 @@ atomically), ``refs/<scene_key>.npz`` (certified reference solutions); with ``cu
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -20,7 +21,14 @@ from typing import Any
 import numpy as np
 
 from dualfem.core.errors import InputError, OutputError
-from dualfem.core.io import atomic_write, atomic_write_text, move_aside
+from dualfem.core.io import (
+    RESULTS_ENTRIES,
+    atomic_write,
+    atomic_write_text,
+    check_folder_files,
+    check_input_path,
+    move_aside,
+)
 from dualfem.experiments.row import COLUMNS, Row
 
 #: statuses of a run that are final (a resumed sweep does not redo them, ``--retry-failed`` redoes
@@ -47,7 +55,9 @@ class ResultStore:
         self._lock = None
 
     def open(self) -> ResultStore:
-        """Create the folder, take its lock, clear interrupted temporary files, read every row."""
+        """Create the folder, take its lock, clear interrupted temporary files, read every row. A folder
+        holding a FIFO or a device (:func:`~dualfem.core.io.check_folder_files`) is refused first."""
+        check_folder_files(self.out, "--out", only=RESULTS_ENTRIES)
         self.rows_dir.mkdir(parents=True, exist_ok=True)
         self.refs_dir.mkdir(parents=True, exist_ok=True)
         self._take_lock()
@@ -131,6 +141,32 @@ class ResultStore:
         raise InputError(f"--out {str(self.out)!r} holds the results of another spec "
                          f"({_spec_name(old) or 'unnamed'!r}, not {name!r}); choose another --out, "
                          f"or pass --force to add this spec's rows to it")
+
+    def on_disk(self) -> str:
+        """What the folder holds now, for a message after a failed write: "rows/ (3 runs), refs/ (1), ...";
+        "nothing" when it holds none of these."""
+        parts = []
+        for d, word in ((self.rows_dir, "runs"), (self.refs_dir, "references")):
+            n = sum(1 for _ in d.glob("[!.]*")) if d.is_dir() else 0
+            if n:
+                parts.append(f"{d.name}/ ({n} {word})")
+        parts += [n for n in ("spec.toml", "sweep.json", "meta.json", "results.csv", "curves.csv")
+                  if (self.out / n).is_file()]
+        return ", ".join(parts) or "nothing"
+
+    @contextlib.contextmanager
+    def accounted(self):
+        """Re-raise a failed write (:class:`OutputError`: disk full, file size limit, a read-only file) with
+        what the folder already holds (:meth:`on_disk`), which is kept: "nothing was written" only when true."""
+        try:
+            yield self
+        except OutputError as exc:
+            raise self.accounted_error(exc) from exc
+
+    def accounted_error(self, exc: OutputError) -> OutputError:
+        """``exc`` with what the folder already holds (see :meth:`accounted`)."""
+        return OutputError(f"{exc}; already in {str(self.out)!r} and kept: {self.on_disk()} (rerun with "
+                           f"--resume once it can be written: finished runs are not redone)")
 
     def done(self, run_id: str) -> bool:
         r = self.rows.get(run_id)
@@ -345,12 +381,29 @@ def _csv_path(path: str | Path) -> Path:
     return path / "results.csv" if path.is_dir() else path
 
 
+#: the columns of a bench results.csv that ``dualfem report bench`` cannot do without (every bench writes them)
+REPORT_COLUMNS = ("scene", "scene_key", "label", "n_unknowns", "total_s")
+
+
+def check_report_input(path: str | Path) -> None:
+    """Refuse, in one InputError, results that ``dualfem report bench`` cannot read: a folder holding a FIFO
+    or a device, a file that is not a bench results.csv, or one without a column of :data:`REPORT_COLUMNS`
+    (a hand-made minimal CSV)."""
+    p = Path(path)
+    check_folder_files(p if p.is_dir() else p.parent, "RESULTS", only=None if p.is_dir() else RESULTS_ENTRIES)
+    csv_path = check_input_path(_csv_path(p), "results file")
+    with open(csv_path, encoding="utf-8", errors="replace", newline="") as fh:
+        header = next(csv.reader(fh), [])
+    missing = [c for c in REPORT_COLUMNS if c not in header]
+    if missing and {"run_id", "kind", "status"} <= set(header):     # else the loader says what it is not
+        raise InputError(f"{str(csv_path)!r} lacks the column(s) {', '.join(missing)} that every 'dualfem bench' "
+                         f"results.csv has: it cannot be reported (write it with dualfem bench)")
+
+
 def read_results_checked(path: str | Path) -> tuple[list[dict], list[tuple[int, str]]]:
     """(rows, bad) of a results.csv: the readable rows, and (line number, raw text) of every unreadable
     record (a cut last line, a wrong number of fields, no run id, undecodable bytes, NUL bytes)."""
-    path = _csv_path(path)
-    if not path.is_file():
-        raise InputError(f"results file {str(path)!r} does not exist")
+    path = check_input_path(_csv_path(path), "results file")
     try:
         data = path.read_bytes()
     except OSError as exc:

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from dualfem.core.errors import InputError
+from dualfem.core.errors import InputError, OutputError
 from dualfem.core.scene import DEFAULT_SCENE
 from dualfem.experiments.row import Row
 from dualfem.experiments.stress_grid import (  # noqa: F401  (re-exported: the grid's public names)
@@ -345,6 +345,8 @@ def run_grid(tasks: list[Task], out: str | Path, *, jobs: int = 1, resume: bool 
         ordered = [Row.from_dict(store.rows[t.id]) for t in tasks if t.id in store.rows]
         _write_meta(out, {**(meta or {}), "complete": len(ordered) == len(tasks), "n_tasks": len(tasks)})
         return ordered
+    except OutputError as exc:          # a failed write names what the folder already holds
+        raise store.accounted_error(exc) from exc
     finally:
         store.close()
 
@@ -424,9 +426,11 @@ def row_from_record(rec: dict) -> Row:
 def load_results(path: str | Path) -> tuple[dict, list[Row]]:
     """(meta, rows) from a stress results folder: its ``results.csv`` (the one store), or, for a folder
     written before the one engine, its ``runs.jsonl`` (also a path to either file); InputError if unusable."""
+    from dualfem.core.io import RESULTS_ENTRIES, check_folder_files
     from dualfem.experiments.store import read_results
 
     p = Path(path)
+    check_folder_files(p if p.is_dir() else p.parent, "RESULTS", only=RESULTS_ENTRIES)     # no FIFO opened
     csv_path = p / "results.csv" if p.is_dir() else (p if p.suffix == ".csv" else None)
     runs = p / "runs.jsonl" if p.is_dir() else (p if p.suffix != ".csv" else None)
     folder = p if p.is_dir() else p.parent
@@ -443,8 +447,11 @@ def load_results(path: str | Path) -> tuple[dict, list[Row]]:
     if metap.is_file():
         try:
             meta = json.loads(metap.read_text(encoding="utf-8"))
-        except json.JSONDecodeError:
+        except (json.JSONDecodeError, UnicodeDecodeError):
             raise InputError(f"{str(metap)!r} is not valid JSON") from None
+        if not isinstance(meta, dict):
+            raise InputError(f"{str(metap)!r} is not a stress grid's meta.json (a JSON object), got "
+                             f"{type(meta).__name__}: move it away, the rows are kept in results.csv")
     return meta, rows
 
 

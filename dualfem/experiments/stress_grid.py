@@ -224,8 +224,8 @@ def scene_base(spec: str) -> dict:
         raise InputError(f"--scene {spec!r}: a load given as a Python function cannot be converted to other units")
     if "defect" in p:
         p["defect"] = np.asarray(p["defect"], dtype=float).tolist()
-    if prob.name == "thin_defect":
-        p["defects"] = [dict(t) for t in p.get("defects") or []]
+    if prob.name == "thin_defect" and p.get("defects") is not None:      # None: the single segment ``defect``
+        p["defects"] = [dict(t) for t in p["defects"]]
     return jsonable(p)
 
 

@@ -17,8 +17,10 @@ Who owns what is reused (nothing is kept by a module):
 
 Lifecycle: :meth:`Workspace.setup` assembles and factorizes (called by the first use if not
 before); :meth:`Workspace.update` makes the QP for new values of the keys the problem declares in
-``update_keys`` (thin_defect: ``delta``, ``load``, ``load_scale``), reusing both; any other key
-(``N``, ``E``, a defect, ...) changes the mesh or K_fixed and is refused (make a new Workspace);
+``update_keys`` (thin_defect and three_d: ``delta``, ``load``, ``load_scale``, ``boundary``, ``body_force``,
+``remote_stress``), reusing both (new supports in ``boundary`` re-assemble K_fixed on the same mesh: one more
+assembly and factorization); any other key (``N``, ``E``, a defect, ...) changes the mesh and is refused
+(make a new Workspace);
 :meth:`Workspace.solve` runs a solver on the current QP (:func:`dualfem.experiments.runner.run`:
 timed, residuals, certified); :meth:`Workspace.clear` drops the factorizations, so the next solve
 pays for one again (cold timings; the assembly is kept). Counters: ``assemblies``,

@@ -190,6 +190,9 @@ def defect_fields(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> d
         parts["id"].append(np.full(row.size, k, dtype=np.int64))
         parts["nrm"].append(nrm_j[near])
         parts["tau"].append(tau_j[near])
+    if not parts["s"]:          # no defect (defects = []): every field empty
+        parts = {k: [np.zeros(0, float if k == "s" else np.int64)] for k in ("s", "upper", "lower", "row", "id")} | \
+            {k: [np.zeros((0, 2))] for k in ("nrm", "tau")}
     s, upper, lower, row, did = (np.concatenate(parts[k]) for k in ("s", "upper", "lower", "row", "id"))
     nrm_n, tau_n = np.vstack(parts["nrm"]), np.vstack(parts["tau"])
     interior = row >= 0

@@ -19,6 +19,15 @@ def check_figure_path(path: str) -> Path:
     return check_output_path(p, "--figure")
 
 
+def check_figure_qp(qp) -> None:
+    """Refuse (InputError), before anything is solved or written, a QP the figure cannot draw: a 3D scene
+    without defects (``defects = []``), whose figure would be the defects' maps and a cut across one."""
+    g = getattr(qp, "geometry", None)
+    if g is not None and g.dim == 3 and qp.m == 0:
+        raise InputError("--figure draws the defects' opening and contact maps and a cut across the first "
+                         "defect; this 3D scene has none (defects = []): write the fields with --vtk or --xdmf")
+
+
 def solution_figure(qp, sol):
     """The matplotlib figure described in the module docstring."""
     import matplotlib
@@ -34,6 +43,7 @@ def solution_figure(qp, sol):
     if g.dim == 3:
         from dualfem.post.figures3d import plot_cut, plot_defect_maps
 
+        check_figure_qp(qp)
         fig = plot_defect_maps(qp, sol)
         cut = plt.figure(figsize=(5, 4.4), layout="constrained")
         plot_cut(qp, sol, ax=cut.add_subplot())

@@ -103,7 +103,7 @@ def to_meshio(qp, sol=None, *, post: Post | None = None):
     cell_data = {k: [np.asarray(st[k], dtype=float)] for k in ("von_mises", "s11", "s22", "s12", "s33")}
     face = [np.zeros(ntri, dtype=np.int32)]
     defect_keys = ("jump_normal", "jump_tangent", "pressure")
-    if "defect_upper" in qp.maps:
+    if "defect_upper" in qp.maps and qp.m:       # (defects = []: an uncracked body, no defect cells)
         d = p.defect
         nodal = {"jump_normal": d["jump_normal"], "jump_tangent": d["jump_tangent"],
                  "pressure": d.get("pressure", np.full(d["s"].size, np.nan))}

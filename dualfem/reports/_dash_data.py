@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from dualfem.core.errors import InputError
+from dualfem.core.io import RESULTS_ENTRIES, check_folder_files
 from dualfem.experiments.curves import read_curves
 from dualfem.experiments.row import Row
 from dualfem.experiments.store import read_results
@@ -100,6 +101,8 @@ def _read_one(item: str | Path) -> tuple[list[dict], Source, Path]:
         raise InputError(f"RESULTS {str(p)!r} does not exist (give a 'dualfem bench' or 'dualfem stress' "
                          "results folder)")
     folder = p if p.is_dir() else p.parent
+    # a FIFO or a device in it: refused before anything reads it
+    check_folder_files(folder, "RESULTS", only=None if p.is_dir() else RESULTS_ENTRIES)
     if p.suffix == ".csv" or (p.is_dir() and (p / "results.csv").is_file()):
         raw = read_results(p)
         rows = [_stress_row(Row.from_dict(r).to_dict()) if r.get("kind") == "stress" else r for r in raw]

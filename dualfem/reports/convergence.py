@@ -13,8 +13,58 @@ from pathlib import Path
 
 import numpy as np
 
+from dualfem.core.errors import InputError
 from dualfem.core.io import atomic_savefig, atomic_write_text
 from dualfem.experiments.convergence import fit_rate, triple_rates
+
+# ----------------------------------------------------------------------------- stored numbers
+_NUM = (int, float)
+#: what :func:`render` reads from a stored study: key -> type (a tuple: one of), ``"num?"`` a number or null
+_LEVEL = {k: "num?" for k in ("h", "energy", "contact_length", "total_force", "energy_norm", "K_norm", "L2",
+                              "rate_energy_norm", "rate_K_norm", "rate_L2", "diff_energy", "rate_diff_energy",
+                              "diff_contact_length", "rate_diff_contact_length", "diff_total_force",
+                              "rate_diff_total_force")} | {"N": int, "ndof": int}
+_REFERENCE = {"energy": _NUM, "contact_length": _NUM, "total_force": _NUM, "n_contact": int, "max_jump": _NUM,
+              "ndof": int, "time_build_s": _NUM, "time_s": dict, "residuals": dict}
+_STUDY = {"scene": str, "solver": str, "ref_N": int, "Ns": list, "deltas": dict, "time_s": _NUM}
+
+
+def _require(d, schema: dict, where: str, src: str) -> None:
+    if not isinstance(d, dict):
+        raise InputError(f"{src}: {where or 'the file'} must be a JSON object, got {type(d).__name__}")
+    for k, t in schema.items():
+        v = d.get(k)
+        ok = (v is None or (isinstance(v, _NUM) and not isinstance(v, bool))) if t == "num?" else \
+            isinstance(v, t) and not isinstance(v, bool)
+        if not ok:
+            names = "/".join(x.__name__ for x in (t if isinstance(t, tuple) else (t,))) if t != "num?" else ""
+            want = names or "a number or null"
+            raise InputError(f"{src} is not a convergence.json written by 'dualfem report convergence': "
+                             f"{where}{k!r} must be {want}, got {'nothing' if k not in d else type(v).__name__}")
+
+
+def check_study(res, src: str, nested: str = "") -> None:
+    """Refuse (InputError naming ``src`` and the key) a stored study that :func:`render` cannot draw: every
+    key it reads present with its type, at least one delta, every delta with at least one level; the same
+    for each entry of ``supplements``."""
+    _require(res, _STUDY, nested, src)
+    if not res["deltas"] or not all(isinstance(n, int) and n > 0 for n in res["Ns"]):
+        raise InputError(f"{src}: {nested}'deltas' must name at least one delta and 'Ns' hold positive integers")
+    if not isinstance(res["ref_N"], int) or res["ref_N"] <= 0:
+        raise InputError(f"{src}: {nested}'ref_N' must be a positive integer, got {res['ref_N']!r}")
+    for dl, d in res["deltas"].items():
+        at = f"{nested}deltas[{dl!r}]"
+        _require(d, {"reference": dict, "levels": list}, at + ".", src)
+        _require(d["reference"], _REFERENCE, at + ".reference.", src)
+        if not d["levels"]:
+            raise InputError(f"{src}: {at}.levels is empty")
+        for i, lv in enumerate(d["levels"]):
+            _require(lv, _LEVEL, f"{at}.levels[{i}].", src)
+    sups = res.get("supplements", [])
+    if not isinstance(sups, list):
+        raise InputError(f"{src}: {nested}'supplements' must be a list")
+    for i, sup in enumerate(sups):
+        check_study(sup, src, f"{nested}supplements[{i}].")
 
 
 # ----------------------------------------------------------------------------- output

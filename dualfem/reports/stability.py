@@ -29,7 +29,7 @@ AXIS_TITLE = {
     "delta": "fracture parameter delta (default solver parameters)",
     "r": "Uzawa augmentation parameter r x delta",
     "units": "units (same physics, entries scaled by up to 1e6)",
-    "load": "load magnitude (x the paper's f2)",
+    "load": "load magnitude (x the base scene's load)",
     "nu": "Poisson ratio nu (plane strain)",
     "N": "mesh size N (unknowns ~ 2 N^2)",
 }
@@ -412,14 +412,26 @@ def _other_axes(recs: list, fig_dir: Path) -> list[str]:
     return L
 
 
+def base_scene(meta: dict) -> str:
+    """The grid's base scene as its meta.json records it (``scene``: the --scene given, absent or
+    "f2 (paper)" for the default; ``base``: its parameters): the name, and its mesh and delta."""
+    name = meta.get("scene")
+    if not name or name == "f2 (paper)":
+        return (f"the paper's f2 (E = 69000, nu = 0.3, plane strain, delta = 1e-5) at N = "
+                f"{16 if meta.get('quick') else 32}")
+    base = meta.get("base") if isinstance(meta.get("base"), dict) else {}
+    mesh = (f"gmsh, mesh_size = {base['mesh_size']:g}" if base.get("mesh") == "gmsh" and base.get("mesh_size")
+            else f"N = {base['N']}" if base.get("N") else "its own mesh")
+    keys = ", ".join(f"{k} = {base[k]:g}" for k in ("E", "nu", "delta") if isinstance(base.get(k), (int, float)))
+    return f"`{name}` ({mesh}{', ' + keys if keys else ''})"
+
+
 def render(meta: dict, recs: list, md_path: Path) -> str:
     """Write the figures next to ``md_path`` (folder ``stability/``) and return the Markdown text."""
     fig_dir = md_path.parent / "stability"
     L = _head(meta, recs) + _summary(recs) + correct_rate_section(recs)
     fig_dir.mkdir(parents=True, exist_ok=True)
-    L += ["## The grid", "",
-          f"Base scene: the paper's f2 (E = 69000, nu = 0.3, plane strain, delta = 1e-5) at N = "
-          f"{16 if meta.get('quick') else 32}; each axis varies one thing. Per-run solver time limit "
-          f"{meta.get('time_limit')} s.", ""]
+    L += ["## The grid", "", f"Base scene: {base_scene(meta)}; each axis varies one thing. Per-run solver time "
+          f"limit {meta.get('time_limit')} s.", ""]
     L += _delta_axis(recs, fig_dir) + _r_axis(recs, fig_dir) + _other_axes(recs, fig_dir)
     return "\n".join(L) + "\n"

@@ -31,7 +31,7 @@ the reference frame and rotated; the supported and loaded sides are those of the
 a roller on a rotated body is refused),
 and ``defects`` (TOML ``[[defects]]`` tables: ``points`` = [[x, y], ...] in the reference frame,
 ``curve`` = "polyline" | "spline", optional ``delta`` and ``face_pressure``). Without ``defects`` the single segment
-``defect = [[x1, y1], [x2, y2]]`` is used.
+``defect = [[x1, y1], [x2, y2]]`` is used; ``defects = []`` is an uncracked body (a QP without constraints).
 
 P1 elements; nodes strictly inside a defect are doubled (tips not); the interface integral uses
 the trapezoid rule. Units are whatever the inputs use (paper: MPa and a unit length). The QP and
@@ -98,7 +98,7 @@ class ThinDefect(Problem):
         "mesh_size": 0.0,
         "tip_size": 0.0,
         "rotate_deg": 0.0,
-        "defects": (),
+        "defects": None,
         "boundary": (),
         "body_force": None,
         "remote_stress": None,
@@ -115,8 +115,7 @@ class ThinDefect(Problem):
         p["defect"] = parse_defect(p["defect"])
         default_defect = np.asarray(self.defaults["defect"], dtype=float)
         tables = p["defects"]
-        if not (isinstance(tables, (list, tuple)) and len(tables) == 0) \
-                and not np.array_equal(p["defect"], default_defect):
+        if tables is not None and not np.array_equal(p["defect"], default_defect):
             raise InputError("give either defect = [[x1, y1], [x2, y2]] or [[defects]] tables, not both")
         self._defects = parse_defects(p["defects"], p["defect"], p["delta"], p["width"], p["height"], p["mesh"])
         self._check_defects_and_load()

@@ -60,6 +60,11 @@ def cut(points: np.ndarray, triangles: np.ndarray, defects: list[np.ndarray], me
     ``mesh_label`` names the mesh in error messages (e.g. ``"N=4"``).
     """
     nn = points.shape[1]
+    if not defects:             # an uncracked body (defects = []): nothing doubled, no contact pairs
+        none = np.zeros(0, np.int64)
+        return Cut(points=points, triangles=np.sort(triangles, axis=0), lower=none, upper=none, defect_id=none,
+                   normals=np.zeros((2, 0)), tangents=np.zeros((2, 0)), weights=np.zeros(0), s=np.zeros(0),
+                   tips=none, length=np.zeros(0))
     seen = np.zeros(nn, dtype=np.int64) - 1
     lower, ids, nrm, tng, w, s, prev, nxt, tips, length = ([] for _ in range(10))
     for k, nodes in enumerate(defects):

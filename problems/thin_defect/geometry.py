@@ -85,7 +85,8 @@ def _check_inside(key: str, pts: np.ndarray, width: float, height: float) -> Non
 
 def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height: float,
                   mesh: str) -> list[dict]:
-    """The defects as dicts {points (k, 2), curve, delta, face_pressure}; ``defect`` when ``tables`` is empty.
+    """The defects as dicts {points (k, 2), curve, delta, face_pressure}: ``defect`` when ``tables`` is None
+    (not given), none at all when it is empty (``defects = []``: an uncracked body, a QP without constraints).
 
     Checks: each table has ``points`` (>= 2 distinct consecutive points strictly inside the body),
     ``curve`` in CURVES (``"spline"`` needs ``mesh = "gmsh"``), ``delta`` > 0, optional ``face_pressure``
@@ -93,7 +94,9 @@ def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height
     None when not given); unknown keys refused.
     Whether defects touch or cross is checked by the mesher (gmsh) or on the grid (structured).
     """
-    if tables is None or (isinstance(tables, (list, tuple)) and len(tables) == 0):
+    if isinstance(tables, (list, tuple)) and len(tables) == 0:
+        return []
+    if tables is None:
         _check_inside("defect", defect, width, height)
         return [{"points": defect, "curve": "polyline", "delta": delta, "face_pressure": None}]
     if not isinstance(tables, (list, tuple)) or not all(isinstance(t, dict) for t in tables):

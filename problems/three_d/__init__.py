@@ -7,8 +7,8 @@ mesh_size; ``surface_size`` on the defect surfaces, 0 = no refinement there) wit
 surface embedded (:mod:`.mesh`). Defects: ``[[defects]]`` tables with ``shape`` = ``disk``,
 ``ellipse``, ``polygon`` or ``cap`` and an optional per-defect ``delta`` (keys and normals:
 :mod:`.geometry`); without tables the disk of radius 0.25 x min(width, depth) at the centre,
-normal +z. Nodes strictly inside a defect are doubled, its front is not
-(:mod:`.cut`). Energy, one term per defect d:
+normal +z; ``defects = []``: no defect at all, an uncracked box (a QP without constraints).
+Nodes strictly inside a defect are doubled, its front is not (:mod:`.cut`). Energy, one term per defect d:
 
     Pi(v) = 1/2 a(v, v) - (f, v) + sum_d 1/(2 delta_d) int_gamma_d |[v]|^2,   [v_nu] >= 0 on every gamma_d,
 
@@ -104,13 +104,33 @@ class ThreeD(Problem):
         "surface_size": 0.0,
         "rotate_deg": 0.0,
         "rotate_axis": (0.0, 0.0, 1.0),
-        "defects": (),
+        "defects": None,
         "boundary": (),
         "body_force": "",
         "remote_stress": "",
     }
     presets = {"three_d": {}}
-    update_keys = ("delta", "load", "load_scale")
+    #: keys a sweep changes without re-meshing (Workspace.update, with_params): the loads change F only, the
+    #: supports (``boundary``'s fixed sides) the elastic stiffness too (:meth:`with_params`)
+    update_keys = ("delta", "load", "load_scale", "boundary", "body_force", "remote_stress")
+
+    def _support_key(self) -> tuple | None:
+        """What the fixed unknowns depend on beyond the mesh: None (the legacy bottom clamp) or the supports."""
+        return None if self._loads is None else \
+            tuple(sorted((s.side, s.support) for s in self._loads.sides if s.support != "free"))
+
+    def with_params(self, **changes) -> ThreeD:
+        """This scene with ``changes``. Only :attr:`update_keys` changed: the mesh and the cut are reused, and
+        with the same supports also the delta-free stiffness (only F and the delta term change); other
+        supports re-assemble the stiffness on the same mesh. Any other key starts afresh."""
+        new = type(self)(**{**self.params, **changes})
+        if set(changes) <= set(self.update_keys):
+            if new._support_key() == self._support_key():
+                new.shared = self.shared
+            else:
+                new.shared.data.update({k: self.shared.data[k] for k in ("cut", "sides") if k in self.shared.data})
+                new.shared.assemblies = self.shared.assemblies      # counted on: the next build assembles once more
+        return new
 
     # ------------------------------------------------------------ validation
     def validate(self) -> None:
@@ -146,10 +166,11 @@ class ThreeD(Problem):
                 tables = json.loads(tables)
             except ValueError:
                 raise InputError(f"defects must be a list of tables (from --set: JSON), got {tables!r}") from None
-        if isinstance(tables, (list, tuple)) and len(tables) == 0:
+        if tables is None:          # not given: the default disk; an empty list is an uncracked body
             tables = [{"shape": "disk", "center": [w / 2 for w in box], "normal": [0.0, 0.0, 1.0],
                        "radius": 0.25 * min(box[0], box[1])}]
-        self._surfaces: list[Surface] = parse_defects(tables, p["delta"], box)
+        self._surfaces: list[Surface] = parse_defects(tables, p["delta"], box) \
+            if not (isinstance(tables, (list, tuple)) and len(tables) == 0) else []
         check_size(box, h, self.tip_size, sum(s.front_length() for s in self._surfaces), self._size_label(),
                    self.surface_size, sum(s.area() for s in self._surfaces))
         check_apart(self._surfaces, min(self.tip_size or h, self.surface_size or h))

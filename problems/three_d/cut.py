@@ -97,6 +97,11 @@ def _surface_nodes(points: np.ndarray, faces: np.ndarray, surf: Surface, k: int)
 def cut(points: np.ndarray, tets: np.ndarray, faces: list[np.ndarray], surfaces: list[Surface]) -> Cut3:
     """Double the interior nodes of every defect (see the module docstring)."""
     nn = points.shape[1]
+    if not surfaces:            # an uncracked body: nothing doubled, no contact pairs
+        none = np.zeros(0, np.int64)
+        return Cut3(points=points, tets=tets.astype(np.int64, copy=True), lower=none, upper=none, defect_id=none,
+                    normals=np.zeros((3, 0)), weights=np.zeros(0), front=none, front_id=none, area=np.zeros(0),
+                    faces=np.zeros((3, 0), np.int64))
     parts = [_surface_nodes(points, f, s, k) for k, (f, s) in enumerate(zip(faces, surfaces))]
     lower = np.concatenate([p[0] for p in parts])
     ids = np.concatenate([np.full(p[0].size, k) for k, p in enumerate(parts)])

@@ -166,7 +166,8 @@ def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | N
         occ = gmsh.model.occ
         vol = occ.addBox(0.0, 0.0, 0.0, *[float(b) for b in box])
         tags = [_surface(gmsh, s) for s in surfaces]
-        _, omap = occ.fragment([(3, vol)], [(2, t) for t in tags])
+        # no defect (an uncracked body): nothing to embed, the box is meshed as it is
+        _, omap = occ.fragment([(3, vol)], [(2, t) for t in tags]) if tags else (None, [[(3, vol)]])
         occ.synchronize()
         pieces = [[t for d, t in m if d == 2] for m in omap[1:]]
         if any(len(p) != 1 for p in pieces) or len(omap[0]) != 1:

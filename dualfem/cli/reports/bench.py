@@ -4,11 +4,11 @@ Reads the results and writes the report with :func:`dualfem.reports.bench.build_
 """
 from __future__ import annotations
 
-import argparse
 import shlex
 import sys
 from pathlib import Path
 
+from dualfem.cli.options import OneLineParser
 from dualfem.cli.report import register_report
 from dualfem.cli.reports._args import add_target_args, target_args
 
@@ -17,7 +17,7 @@ from dualfem.cli.reports._args import add_target_args, target_args
 def run(argv: list[str]) -> int:
     from dualfem.reports.bench import build_report
 
-    p = argparse.ArgumentParser(prog="dualfem report bench",
+    p = OneLineParser(prog="dualfem report bench",
                                 description="reports/benchmark.md + PNGs from a dualfem bench results.csv")
     p.add_argument("results", metavar="RESULTS", nargs="+",
                    help="results.csv or a sweep's output directory; several are merged, a later one replacing "
@@ -31,6 +31,10 @@ def run(argv: list[str]) -> int:
         a = p.parse_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0)
+    from dualfem.experiments.store import check_report_input
+
+    for item in a.results:
+        check_report_input(item)       # one line for what the report cannot read (experiments/store.py)
     targets = target_args(a)
     cmd = "dualfem report bench " + " ".join(shlex.quote(x) for x in argv)
     figdir = a.figdir or str(Path(a.md).parent / "bench")

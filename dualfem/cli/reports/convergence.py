@@ -6,12 +6,12 @@ stored earlier instead (no solves).
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
 from pathlib import Path
 
+from dualfem.cli.options import OneLineParser
 from dualfem.cli.report import register_report
 from dualfem.cli.reports._args import floats, ints, strip_dashes
 from dualfem.core.errors import InputError
@@ -19,11 +19,19 @@ from dualfem.core.scene import DEFAULT_SCENE
 from dualfem.experiments.convergence import DEFAULT_DELTAS, DEFAULT_NS, DEFAULT_REF
 
 
-def _read_json(path: str) -> dict:
+def _read_json(path: str, flag: str) -> dict:
+    """A stored study (``convergence.json``), checked by :func:`dualfem.reports.convergence.check_study`
+    before anything is drawn; a FIFO or a device is refused before it is opened."""
+    from dualfem.core.io import check_input_path
+    from dualfem.reports.convergence import check_study
+
+    check_input_path(path, flag)
     try:
-        return json.loads(Path(path).read_text(encoding="utf-8"))
+        res = json.loads(Path(path).read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
-        raise InputError(f"cannot read {path!r}: {exc}") from None
+        raise InputError(f"{flag} {path!r}: cannot read it: {exc}") from None
+    check_study(res, f"{flag} {path!r}")
+    return res
 
 
 @register_report("convergence", f"mesh-convergence study of {DEFAULT_SCENE} against a fine reference (slow: ~8 min "
@@ -32,7 +40,7 @@ def run(argv: list[str]) -> int:
     from dualfem.core.io import atomic_write_text, dumps
     from dualfem.reports.convergence import render
 
-    ap = argparse.ArgumentParser(prog="dualfem report convergence",
+    ap = OneLineParser(prog="dualfem report convergence",
                                  description="render the mesh-convergence study (reports/convergence.md)")
     ap.add_argument("--deltas", default=",".join(f"{d:g}" for d in DEFAULT_DELTAS), help="comma-separated deltas")
     ap.add_argument("--N", dest="Ns", default=",".join(map(str, DEFAULT_NS)), help="comma-separated coarse N")
@@ -50,10 +58,10 @@ def run(argv: list[str]) -> int:
                          "for one delta")
     argv = strip_dashes(argv)
     args = ap.parse_args(argv)
-    supplements = [_read_json(f) for f in args.supplement]
+    supplements = [_read_json(f, "--supplement") for f in args.supplement]
     out = Path(args.out)
     if args.from_json:
-        res = _read_json(args.from_json)
+        res = _read_json(args.from_json, "--from-json")
         res["supplements"] = supplements or res.get("supplements", [])
         atomic_write_text(out / "convergence.json", dumps(res) + "\n")
         md = render(res, out, res.get("command", "dualfem report convergence"))

@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+from dualfem.cli.options import OneLineParser
 from dualfem.cli.report import register_report
 from dualfem.cli.reports._args import strip_dashes
 from dualfem.core.errors import InputError
@@ -31,7 +32,7 @@ def generate(outdir: Path, N: int = 64, solver: str | None = None, scale: float 
 @register_report("figures", "the paper's figures (deformed bodies, jumps, faces, pressure, Uzawa histories) "
                             "and the scene library's deformed bodies with every defect")
 def run(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="dualfem report figures", description=__doc__.splitlines()[0])
+    ap = OneLineParser(prog="dualfem report figures", description=__doc__.splitlines()[0])
     ap.add_argument("--N", type=int, default=64, help="mesh size N (default 64)")
     ap.add_argument("--solver", default=None,
                     help="solver for the pictures (default: the reference policy's first, Solver.reference)")

@@ -5,10 +5,10 @@ Reads bench (or stress) results folders and writes the page with
 """
 from __future__ import annotations
 
-import argparse
 import shlex
 import sys
 
+from dualfem.cli.options import OneLineParser
 from dualfem.cli.report import register_report
 from dualfem.cli.reports._args import add_target_args, strip_dashes, target_args
 
@@ -18,7 +18,7 @@ from dualfem.cli.reports._args import add_target_args, strip_dashes, target_args
 def run(argv: list[str]) -> int:
     from dualfem.reports.html import build_dashboard
 
-    p = argparse.ArgumentParser(prog="dualfem report html",
+    p = OneLineParser(prog="dualfem report html",
                                 description="a self-contained interactive dashboard (DIR/index.html) from "
                                             "'dualfem bench' (or 'dualfem stress') results folders")
     p.add_argument("results", metavar="RESULTS", nargs="+",

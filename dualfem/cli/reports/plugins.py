@@ -5,11 +5,11 @@ Runs :func:`dualfem.experiments.plugins.collect`, then draws and writes with
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
+from dualfem.cli.options import OneLineParser
 from dualfem.cli.report import register_report
 from dualfem.core.errors import InputError, check_int
 from dualfem.core.scene import DEFAULT_SCENE
@@ -25,7 +25,7 @@ def generate(out: Path, N: int = 32, dpi: int = 110, sizes=(16, 32, 64, 128)) ->
 
 @register_report("plugins", "Signorini problem plugin and template solver: every solver, physics checks, figure")
 def run(argv: list[str]) -> int:
-    ap = argparse.ArgumentParser(prog="dualfem report plugins", description=__doc__.splitlines()[0])
+    ap = OneLineParser(prog="dualfem report plugins", description=__doc__.splitlines()[0])
     ap.add_argument("--N", type=int, default=32, help="mesh size of the Signorini scene (default 32)")
     ap.add_argument("--dpi", type=int, default=110)
     ap.add_argument("--sizes", default="16,32,64,128", metavar="N,N,...",

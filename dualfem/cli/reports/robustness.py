@@ -6,11 +6,11 @@ checkout) through this command line's own entry point, then writes ``DIR/robustn
 """
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
 
+from dualfem.cli.options import OneLineParser
 from dualfem.cli.report import register_report
 from dualfem.core.errors import InputError
 
@@ -26,7 +26,7 @@ def report_robustness(argv: list[str]) -> int:
     from dualfem.experiments.robustness import run_corpus
     from dualfem.reports.robustness import render
 
-    ap = argparse.ArgumentParser(prog="dualfem report robustness")
+    ap = OneLineParser(prog="dualfem report robustness")
     ap.add_argument("--out", required=True, metavar="DIR",
                     help="folder for robustness.md (reports/ for the committed one)")
     ap.add_argument("--corpus", default=str(CORPUS), metavar="DIR", help="the corpus folder (default tests/bad_inputs)")

@@ -5,9 +5,9 @@ its figures with :func:`dualfem.reports.stability.render` (figures in ``<its fol
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
+from dualfem.cli.options import OneLineParser
 from dualfem.cli.report import register_report
 from dualfem.core.errors import InputError
 
@@ -18,7 +18,7 @@ def run(argv: list[str]) -> int:
     from dualfem.experiments.stress import load_results
     from dualfem.reports.stability import render
 
-    ap = argparse.ArgumentParser(prog="dualfem report stability",
+    ap = OneLineParser(prog="dualfem report stability",
                                  description="write reports/stability.md from a dualfem stress results directory")
     ap.add_argument("results", metavar="RESULTS", help="directory written by dualfem stress (runs.jsonl, meta.json)")
     ap.add_argument("output", nargs="?", default=None, metavar="OUTPUT.md",
