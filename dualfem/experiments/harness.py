@@ -109,15 +109,27 @@ def watch_parent(parent: int, interval: float = 0.1) -> None:
     alive 5 s after ``kill -9`` or SIGTERM of the sweep). A daemon thread polls ``os.getppid()``
     (which changes when the parent process dies, whatever killed it), kills this worker's guarded
     children and exits; the children die with it in any case (their own PDEATHSIG and watch).
-    Started once per process (later calls with the same parent are no-ops).
+    Started once per process (later calls with the same parent are no-ops), at the worker's start
+    (the executor's initializer, so that an idle worker or one still importing dies too) and again
+    with every task. A worker whose ``parent`` is already gone exits at once (it never starts the
+    task it was handed); one that is not a child of a live ``parent`` (another executor's topology)
+    watches ``parent``'s pid instead of its own parent pid.
     """
     global _WATCHING
-    if _WATCHING == parent or os.getppid() != parent:     # watching already, or not a child of ``parent``
+    if _WATCHING == parent:
         return
+    if os.getppid() == parent:
+        def alive() -> bool:
+            return os.getppid() == parent
+    elif _pid_alive(parent):
+        def alive() -> bool:
+            return _pid_alive(parent)
+    else:                             # the sweep died before this worker got here
+        os._exit(3)
     _WATCHING = parent
 
     def loop() -> None:
-        while os.getppid() == parent:
+        while alive():
             time.sleep(interval)
         for proc in list(_CHILDREN):
             try:
@@ -127,6 +139,21 @@ def watch_parent(parent: int, interval: float = 0.1) -> None:
         os._exit(3)
 
     threading.Thread(target=loop, name="dualfem-watch-parent", daemon=True).start()
+
+
+def _pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (and is not a zombie: a killed parent not yet reaped)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
 
 
 def run_in_worker(task: dict, parent: int) -> tuple[dict, Any]:
@@ -400,8 +427,9 @@ def execute_all(tasks: list[dict], jobs: int = 1, dask: str | None = None,
         except ImportError:
             from dualfem.core.errors import MissingDependency
             raise MissingDependency("--jobs needs joblib: pip install 'dualfem[parallel]'") from None
-        par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
-        me = os.getpid()          # each loky worker exits as soon as this process is gone
+        me = os.getpid()          # each loky worker exits as soon as this process is gone, from its start
+        par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered", initializer=watch_parent,
+                       initargs=(me,))
         yield from par(delayed(run_in_worker)(t, me) for t in tasks)
     else:
         try:
