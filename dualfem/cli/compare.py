@@ -9,10 +9,10 @@ one JSON object on stdout; one progress line per finished solver goes to stderr.
 """
 from __future__ import annotations
 
+import sys
+
 from dualfem.cli.main import add_factor_arg, add_scene_args, apply_factor, command, dumps, scene_from_args
 from dualfem.core.errors import InputError
-from dualfem.core.quiet import c_stdout_to_stderr
-from dualfem.core.scene import build_qp
 
 
 def _cfg(p):
@@ -45,7 +45,8 @@ def parse_solver_params(items: list[str], names: list[str]) -> dict[str, dict[st
 def cmd_compare(args) -> int:
     apply_factor(args)
     from dualfem.core.registry import get_solver
-    from dualfem.experiments.compare import compare_solvers, default_solvers, stderr_progress, table
+    from dualfem.experiments.compare import default_solvers, stderr_progress, table
+    from dualfem.experiments.launch import compare_guarded
 
     if args.solvers is not None:
         names = [s.strip() for s in args.solvers.split(",") if s.strip()]
@@ -58,10 +59,11 @@ def cmd_compare(args) -> int:
     else:
         names = default_solvers()
     params = parse_solver_params(args.param, names)
-    problem = scene_from_args(args)
-    with c_stdout_to_stderr():
-        qp = build_qp(problem)
-        result = compare_solvers(qp, names, params, progress=stderr_progress())
+    scene_from_args(args)            # bad scene parameters: one line, before any worker starts
+    result, why = compare_guarded(args, names, params, progress=stderr_progress())   # under the watchdog
+    if result is None:
+        print(f"dualfem compare: {why}", file=sys.stderr)
+        return 1
     if args.json:
         print(dumps(result))
     else:

@@ -79,11 +79,16 @@ def default_solvers() -> list[str]:
 
 
 def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, dict] | None = None,
-                    progress: Callable[[str], None] | None = None) -> Comparison:
+                    progress: Callable[[str], None] | None = None, *,
+                    done: dict[str, tuple[Row, Solution]] | None = None,
+                    before_run: Callable[[str, Any], None] | None = None,
+                    after_run: Callable[[str, Row, Solution], None] | None = None) -> Comparison:
     """Run ``names`` on ``qp``; return the comparison (see module docstring).
 
     ``params`` maps a solver name to its parameters. ``progress`` receives one line per finished
-    solver.
+    solver. ``done``: (row, solution) of solvers already run (e.g. by an earlier worker process of
+    :mod:`dualfem.experiments.launch`, or killed there at their time limit): they are not run again.
+    ``before_run(name, solver)`` and ``after_run(name, row, solution)`` are called around each run.
     """
     from dualfem.experiments.runner import make_solver
 
@@ -96,11 +101,19 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     rows: list[Row] = []
     sols: dict[str, Solution] = {}
     for nm, inst in insts.items():
+        if done and nm in done:
+            row, sols[nm] = done[nm]
+            rows.append(row)
+            continue
+        if before_run is not None:
+            before_run(nm, inst)
         t0 = time.perf_counter()
         row, sols[nm] = _run_one(qp, nm, inst, ksolve)
         if sols[nm].info.get("qp_changed"):     # the runner's fingerprint: every later run would be void
             raise InputError(f"{sols[nm].message}; the comparison is stopped")
         rows.append(row)
+        if after_run is not None:
+            after_run(nm, row, sols[nm])
         if progress:
             progress(f"{nm}: {row.status} in {time.perf_counter() - t0:.2f} s")
     out = Comparison({"problem": qp.name, "ndof": qp.n, "n_defect_nodes": qp.m,

@@ -1,0 +1,179 @@
+"""``dualfem solve`` and ``dualfem compare`` under the watchdog (:mod:`dualfem.experiments.watchdog`).
+
+The QP is built in the worker process (a problem plugin's build is plugin code too, and nothing
+large crosses the pipe), then solved and certified there. Every phase (``build``, ``setup and
+solve``, ``certification``, ``output``; compare: ``build``, one phase per solver, ``reference and
+grades``) gets the budget ``time_limit * 1.5 + 10`` s (:func:`dualfem.experiments.watchdog.budget`)
+of the solver's own ``time_limit`` parameter (its default unless ``-p time_limit=...`` sets it;
+600 s for a solver without one); the shared phases of compare take the largest of the compared
+solvers' limits. A phase that runs past its budget ends the worker:
+
+* ``solve``: the record has ``status`` ``time_limit`` (``crashed`` if the worker died) and a
+  ``message`` naming the phase and its budget (exit status 1);
+* ``compare``: the killed solver's run is a ``time_limit`` (or ``crashed``) row, graded ``failed``
+  like any honest non-success; a new worker builds the QP again and goes on with the next solver (the runs made
+  so far are kept). A killed build or grading phase ends the command with one line (exit status 1).
+"""
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+from dualfem.experiments.watchdog import Guard, Outcome, budget, guarded_call, limit_text, time_limit_of
+
+
+# ------------------------------------------------------------------------------ solve
+def solve_guarded(args: Any, solver: Any, stages: Callable[[str, float], None]) -> tuple[dict, bool]:
+    """(JSON record, solved?) of ``dualfem solve`` with the validated ``args`` and ``solver``."""
+    limit = time_limit_of(solver)
+    out = guarded_call(_solve_work, args, solver, limit, stages, phase="build", seconds=budget(limit))
+    if out.status == "done":
+        return out.value
+    return _killed_record(args, solver, out, limit), False
+
+
+def _solve_work(guard: Guard, args: Any, solver: Any, limit: float,
+                stages: Callable[[str, float], None]) -> tuple[dict, bool]:  # pragma: no cover - in the worker
+    from dualfem.cli.main import peak_rss_mb, scene_from_args
+    from dualfem.core.scene import build_qp
+    from dualfem.core.solution import Status
+    from dualfem.experiments.runner import run, summary
+    from dualfem.numerics.factor import missing_fast_backend_hint
+
+    t0 = time.perf_counter()
+    problem = scene_from_args(args)
+    t1 = time.perf_counter()
+    qp = build_qp(problem)           # contained: a problem plugin's prints, exceptions, a non-QP
+    t2 = time.perf_counter()
+    guard.send({"problem": qp.name, "ndof": qp.n, "n_defect_nodes": qp.m})
+    stages("assembly (mesh, matrices)", t2 - t1)
+    hint = missing_fast_backend_hint(qp.n)
+    if hint and not args.quiet:
+        print(f"dualfem solve: note: {hint}", file=sys.stderr)
+
+    def tick(stage: str, seconds: float) -> None:
+        stages(stage, seconds)
+        if stage.startswith("solve"):
+            guard.phase("certification", budget(limit))
+
+    guard.phase("setup and solve", budget(limit))
+    sol = run(solver, qp, progress=tick)
+    guard.phase("output", budget(limit))
+    rec = summary(qp, sol)
+    rec["time_s"] = {**rec["time_s"], "assembly": t2 - t1, "total": time.perf_counter() - t0}
+    rec["peak_rss_mb"] = peak_rss_mb()
+    _outputs(args, problem, qp, sol, rec)
+    return rec, sol.status == Status.SOLVED
+
+
+def _outputs(args: Any, problem: Any, qp: Any, sol: Any, rec: dict) -> None:  # pragma: no cover - in the worker
+    """The ``_post`` hook, ``--vtk``/``--xdmf`` and ``--figure`` of ``dualfem solve``."""
+    post = getattr(args, "_post", None)
+    if post:
+        post(problem, qp, sol, rec)
+    if args.vtk or args.xdmf:
+        from dualfem.post.vtk import write_outputs
+
+        if sol.x is None:
+            print(f"dualfem solve: no solution ({sol.status}): --vtk/--xdmf not written", file=sys.stderr)
+        else:
+            for path in write_outputs(qp, sol, vtk=args.vtk, xdmf=args.xdmf):
+                print(f"wrote {path}", file=sys.stderr)
+    if args.figure and sol.x is not None:
+        from dualfem.post.solution_figure import write_solution_figure
+
+        for path in write_solution_figure(args.figure, qp, sol):
+            print(f"wrote {path}", file=sys.stderr)
+
+
+def _killed_record(args: Any, solver: Any, out: Outcome, limit: float) -> dict:
+    """The record of a solve whose worker was killed by the watchdog (or died)."""
+    from dualfem.experiments.runner import _name, _params, jsonable_params
+
+    meta = out.parts[0] if out.parts else {}
+    msg = limit_text(out.phase, out.budget, limit) if out.status == "time_limit" else out.message
+    return {"solver": _name(solver), "status": out.status, "claimed_status": None, "message": msg,
+            "problem": meta.get("problem", str(args.scene)), "ndof": meta.get("ndof"),
+            "n_defect_nodes": meta.get("n_defect_nodes"), "iterations": {}, "time_s": {"total": out.elapsed},
+            "params": jsonable_params(_params(solver)), "counters": {}, "energy": None, "max_jump": None,
+            "n_contact": None, "residuals": None, "killed_in_phase": out.phase}
+
+
+# ---------------------------------------------------------------------------- compare
+def compare_guarded(args: Any, names: list[str], params: dict[str, dict],
+                    progress: Callable[[str], None] | None = None) -> tuple[dict | None, str | None]:
+    """(the comparison of :func:`dualfem.experiments.compare.compare_solvers`, None), or (None, why)
+    when a shared phase (build, reference and grades) was killed; a killed solver is a row."""
+    from dualfem.experiments.runner import make_solver
+
+    limits = {nm: time_limit_of(make_solver(nm, params.get(nm))) for nm in names}
+    shared = budget(max(limits.values(), default=600.0))
+    done: dict[str, tuple[Any, Any]] = {}
+    meta: dict[str, Any] = {}
+
+    def keep(part: Any) -> None:
+        if part[0] == "meta":
+            meta.update(part[1])
+        else:
+            done[part[1]] = (part[2], part[3])
+
+    while True:
+        out = guarded_call(_compare_work, args, names, params, dict(done), limits, shared, phase="build",
+                           seconds=shared, on_part=keep)
+        if out.status == "done":
+            return out.value, None
+        nm = out.phase.removeprefix("run ") if out.phase.startswith("run ") else None
+        if nm not in limits or nm in done:
+            why = limit_text(out.phase, out.budget, max(limits.values())) if out.status == "time_limit" \
+                else out.message
+            return None, why
+        done[nm] = _killed_run(nm, out, limits[nm], meta, params.get(nm))
+        if progress:
+            progress(f"{nm}: {out.status} after {out.elapsed:.2f} s (killed in phase '{out.phase}')")
+
+
+def _compare_work(guard: Guard, args: Any, names: list[str], params: dict, done: dict, limits: dict,
+                  shared: float) -> Any:  # pragma: no cover - in the worker
+    from dualfem.cli.main import scene_from_args
+    from dualfem.core.quiet import c_stdout_to_stderr
+    from dualfem.core.scene import build_qp
+    from dualfem.experiments.compare import compare_solvers, stderr_progress
+
+    with c_stdout_to_stderr():
+        qp = build_qp(scene_from_args(args))
+        guard.send(("meta", {"scene": qp.name, "n_unknowns": qp.n, "n_constraints": qp.m}))
+        return compare_solvers(
+            qp, names, params, progress=stderr_progress(), done=done,
+            before_run=lambda nm, inst: guard.phase(f"run {nm}", budget(limits[nm])),
+            after_run=lambda nm, row, sol: (guard.send(("run", nm, row, _sendable(sol))),
+                                            guard.phase("reference and grades", shared)))
+
+
+def _sendable(sol: Any) -> Any:
+    """The solution with only plain values in ``info`` (what crosses the pipe)."""
+    import copy
+
+    out = copy.copy(sol)
+    out.info = {k: v for k, v in sol.info.items() if isinstance(v, (str, int, float, bool, dict, list, type(None)))}
+    return out
+
+
+def _killed_run(nm: str, out: Outcome, limit: float, meta: dict, params: dict | None) -> tuple[Any, Any]:
+    """(row, solution) of a compare run whose worker was killed at its budget (or died)."""
+    from dualfem.core.registry import get_solver
+    from dualfem.core.solution import Solution, Status
+    from dualfem.experiments.row import Row
+
+    cls = get_solver(nm)
+    msg = limit_text(out.phase, out.budget, limit) if out.status == "time_limit" else out.message
+    status = Status.TIME_LIMIT if out.status == "time_limit" else Status.ERROR
+    row = Row(kind="compare", run_id=f"compare:{nm}", scene=meta.get("scene"), n_unknowns=meta.get("n_unknowns"),
+              n_constraints=meta.get("n_constraints"), solver=nm, variant=nm, solver_params=dict(params or {}),
+              tol=float(cls.tolerance), status=out.status, claimed_status=None, message=msg, iterations={},
+              total_s=None, exact=bool(cls.exact), third_party=bool(cls.requires))
+    row.set_residuals(None, row.tol)
+    row.update(energy=None, time_s={"killed_after": out.elapsed}, error_bound=None, certificate=None, diff=None,
+               n_contact=None)
+    return row, Solution(solver=nm, status=status, message=msg)
