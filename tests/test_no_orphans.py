@@ -102,3 +102,58 @@ def test_no_process_outlives_a_killed_parallel_sweep(tmp_path, sig, moment):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+SPIN_SRC = '''
+import sys, time
+from dualfem.core.registry import register_solver
+from dualfem.core.solver import Solver
+
+
+@register_solver
+class Spin(Solver):
+    name = "hostile_spin"
+
+    def solve(self):
+        print("ready", file=sys.stderr, flush=True)
+        while True:
+            time.sleep(0.01)
+'''
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
+def test_the_watchdogs_worker_dies_with_a_killed_solve(tmp_path, sig):
+    """``dualfem solve`` runs the plugin in a worker process (issue 37, item 4): killing the command
+    while its plugin runs leaves no worker behind (PR_SET_PDEATHSIG and a watch of the parent's pid)."""
+    src, site = tmp_path / "src", tmp_path / "site" / "hostile_spin-0.1.dist-info"
+    src.mkdir()
+    site.mkdir(parents=True)
+    (src / "hostile_spin.py").write_text(SPIN_SRC)
+    (site / "METADATA").write_text("Metadata-Version: 2.1\nName: hostile-spin\nVersion: 0.1\n")
+    (site / "entry_points.txt").write_text("[dualfem.solvers]\nhostile_spin = hostile_spin\n")
+    env = dict(os.environ, MPLBACKEND="Agg")
+    env["PYTHONPATH"] = os.pathsep.join([str(site.parent), str(src), env.get("PYTHONPATH", "")])
+    cmd = [sys.executable, "-m", "dualfem", "solve", "f1", "--set", "N=8", "--solver", "hostile_spin"]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        for line in proc.stderr:
+            if "ready" in line:
+                break
+        assert len(session_processes(proc.pid)) == 2, session_processes(proc.pid)   # the command and its worker
+        os.kill(proc.pid, sig)
+        proc.wait(timeout=30)
+        gone = time.monotonic() + 5.0
+        while session_processes(proc.pid) and time.monotonic() < gone:
+            time.sleep(0.1)
+        left = session_processes(proc.pid)
+        assert left == [], f"{len(left)} process(es) alive 5 s after {sig.name} of solve: {left}"
+    finally:
+        for pid, _ in session_processes(proc.pid):
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
