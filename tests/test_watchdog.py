@@ -162,3 +162,10 @@ def test_a_worker_that_dies_is_crashed_not_a_hang():
 
     out = watchdog.guarded_call(die, phase="dying", seconds=30)
     assert out.status == "crashed" and "dying" in out.message and out.elapsed < 10
+
+
+def test_compare_table_shows_no_time_for_a_killed_run(register, capsys):
+    register(Runaway)
+    assert main(["compare", "f1", *SMALL, "--solvers", "hostile_runaway,pdas"]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("hostile_runaway "))
+    assert "time_limit" in line and "0.000" not in line and line.split()[4:6] == ["-", "-"], line

@@ -265,7 +265,7 @@ def table(result: dict) -> str:
         en = f"{r['energy']:17.10e}" if r["energy"] is not None else f"{'-':>17s}"
         cm = "-" if not d else ("same" if d["contact_mismatch"] == 0 else f"{d['contact_mismatch']} off")
         lines.append(f"{r['solver']:{w}s} {r['status']:15s} {r['grade']:12s} {it[:22]:22s} "
-                     f"{r['time_s'].get('setup', 0):8.3f} {r['time_s'].get('solve', 0):8.3f} {en} "
+                     f"{_sec8(r['time_s'].get('setup'))} {_sec8(r['time_s'].get('solve'))} {en} "
                      f"{_num8(r['kkt_error'])} {_num8(r['error_bound'])} {r['tolerance']:7.0e} "
                      f"{_num8(d.get('x_energy'))} {_num8(d.get('multipliers'))} {cm:>7s}")
     for r in result["runs"]:
@@ -285,6 +285,11 @@ def table(result: dict) -> str:
 def _num8(v) -> str:
     """A number in the table's 8-character scientific format, '-' when missing."""
     return f"{v:8.1e}" if isinstance(v, (int, float)) and math.isfinite(v) else f"{'-':>8s}"
+
+
+def _sec8(v) -> str:
+    """Seconds in the table's 8-character format, '-' when there are none (a run killed by the watchdog)."""
+    return f"{v:8.3f}" if isinstance(v, (int, float)) and math.isfinite(v) else f"{'-':>8s}"
 
 
 def stderr_progress() -> Callable[[str], None]:
