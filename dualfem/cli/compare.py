@@ -44,9 +44,9 @@ def parse_solver_params(items: list[str], names: list[str]) -> dict[str, dict[st
 @command("compare", "run several solvers on one scene and cross-check them against a certified reference")(_cfg)
 def cmd_compare(args) -> int:
     apply_factor(args)
+    from dualfem.cli.launch import compare_guarded
     from dualfem.core.registry import get_solver
     from dualfem.experiments.compare import default_solvers, stderr_progress, table
-    from dualfem.experiments.launch import compare_guarded
 
     if args.solvers is not None:
         names = [s.strip() for s in args.solvers.split(",") if s.strip()]

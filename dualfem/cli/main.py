@@ -211,7 +211,7 @@ def cmd_solve(args) -> int:
     factor = apply_factor(args)
     threads = set_threads(check_threads(args.threads))
     stages = Stages("solve", quiet=args.quiet)
-    from dualfem.experiments.launch import solve_guarded
+    from dualfem.cli.launch import solve_guarded
 
     rec, solved = solve_guarded(args, solver, stages)      # build, solve, outputs: under the watchdog
     rec["factor"] = factor

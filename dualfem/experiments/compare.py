@@ -87,7 +87,7 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
 
     ``params`` maps a solver name to its parameters. ``progress`` receives one line per finished
     solver. ``done``: (row, solution) of solvers already run (e.g. by an earlier worker process of
-    :mod:`dualfem.experiments.launch`, or killed there at their time limit): they are not run again.
+    :mod:`dualfem.cli.launch`, or killed there at their time limit): they are not run again.
     ``before_run(name, solver)`` and ``after_run(name, row, solution)`` are called around each run.
     """
     from dualfem.experiments.runner import make_solver
