@@ -141,14 +141,18 @@ def _compare_work(guard: Guard, args: Any, names: list[str], params: dict, done:
     from dualfem.core.scene import build_qp
     from dualfem.experiments.compare import compare_solvers, stderr_progress
 
+    def before(nm: str, inst: Any) -> None:
+        guard.phase(f"run {nm}", budget(limits[nm]))
+
+    def after(nm: str, row: Any, sol: Any) -> None:
+        guard.send(("run", nm, row, _sendable(sol)))
+        guard.phase("reference and grades", shared)
+
     with c_stdout_to_stderr():
         qp = build_qp(scene_from_args(args))
         guard.send(("meta", {"scene": qp.name, "n_unknowns": qp.n, "n_constraints": qp.m}))
-        return compare_solvers(
-            qp, names, params, progress=stderr_progress(), done=done,
-            before_run=lambda nm, inst: guard.phase(f"run {nm}", budget(limits[nm])),
-            after_run=lambda nm, row, sol: (guard.send(("run", nm, row, _sendable(sol))),
-                                            guard.phase("reference and grades", shared)))
+        return compare_solvers(qp, names, params, progress=stderr_progress(), done=done, before_run=before,
+                               after_run=after)
 
 
 def _sendable(sol: Any) -> Any:

@@ -270,7 +270,7 @@ def current_content(scenes: list, rows: dict[str, dict], warn: Callable[[str], N
             current.setdefault(sc.scene, set()).add(sc.key)
 
     def keep(r: dict) -> bool:
-        keys = current.get(r.get("scene"))
+        keys = current.get(str(r.get("scene")))
         return keys is None or r.get("scene_key") in keys
 
     old = [r for r in rows.values() if not keep(r)]

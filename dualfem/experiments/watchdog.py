@@ -104,6 +104,8 @@ class _Forward(io.TextIOBase):
     """``sys.stdout``/``sys.stderr`` of the worker: text goes to the parent's stream of the same name;
     ``fileno`` is the original descriptor (fd-level redirections of C output keep working)."""
 
+    encoding = "utf-8"
+
     def __init__(self, guard: Guard, name: str, original: Any) -> None:
         super().__init__()
         self._guard, self._name, self._original = guard, name, original
@@ -120,10 +122,6 @@ class _Forward(io.TextIOBase):
         if self._original is None:
             raise io.UnsupportedOperation("no descriptor")
         return self._original.fileno()
-
-    @property
-    def encoding(self) -> str:
-        return "utf-8"
 
 
 def _context() -> Any:
