@@ -169,3 +169,19 @@ def test_compare_table_shows_no_time_for_a_killed_run(register, capsys):
     assert main(["compare", "f1", *SMALL, "--solvers", "hostile_runaway,pdas"]) == 0
     line = next(ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("hostile_runaway "))
     assert "time_limit" in line and "0.000" not in line and line.split()[4:6] == ["-", "-"], line
+
+
+def test_a_short_time_limit_never_kills_dualfems_own_certification(monkeypatch, capsys):
+    """The solver returned in time: its certification (dualfem's code) is not bound by the solver's limit."""
+    from dualfem.experiments import runner
+
+    slow = runner.attach_residuals
+
+    def attach(qp, sol):
+        time.sleep(1.5)                           # past budget(0.4) = 1.1 s with the test's grace
+        return slow(qp, sol)
+
+    monkeypatch.setattr(runner, "attach_residuals", attach)
+    rc = main(["solve", "f1", *SMALL, "--solver", "pdas", "-p", "time_limit=0.4", "--json"])
+    rec = json.loads(capsys.readouterr().out)
+    assert rc == 0 and rec["status"] == "solved", rec

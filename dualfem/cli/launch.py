@@ -1,12 +1,14 @@
 """``dualfem solve`` and ``dualfem compare`` under the watchdog (:mod:`dualfem.experiments.watchdog`).
 
 The QP is built in the worker process (a problem plugin's build is plugin code too, and nothing
-large crosses the pipe), then solved and certified there. Every phase (``build``, ``setup and
-solve``, ``certification``, ``output``; compare: ``build``, one phase per solver, ``reference and
-grades``) gets the budget ``time_limit * 1.5 + 10`` s (:func:`dualfem.experiments.watchdog.budget`)
-of the solver's own ``time_limit`` parameter (its default unless ``-p time_limit=...`` sets it;
-600 s for a solver without one); the shared phases of compare take the largest of the compared
-solvers' limits. A phase that runs past its budget ends the worker:
+large crosses the pipe), then solved and certified there. The phases that run plugin code
+(``build`` and ``setup and solve`` of solve; ``run NAME`` of compare) get the budget
+``time_limit * 1.5 + 10`` s (:func:`dualfem.experiments.watchdog.budget`) of the solver's own
+``time_limit`` parameter (its default unless ``-p time_limit=...`` sets it; 600 s for a solver
+without one); the phases of dualfem's own code after a solver returned (``certification``,
+``output``; ``certify NAME``, ``reference and grades``) get :func:`own_budget`, at least that of
+600 s (a short solver time limit never throws away an answer returned in time); compare's ``build``
+takes the largest of the compared solvers' limits. A phase that runs past its budget ends the worker:
 
 * ``solve``: the record has ``status`` ``time_limit`` (``crashed`` if the worker died) and a
   ``message`` naming the phase and its budget (exit status 1);
@@ -21,7 +23,22 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from dualfem.experiments.watchdog import Guard, Outcome, budget, guarded_call, limit_text, time_limit_of
+from dualfem.experiments.watchdog import (
+    DEFAULT_TIME_LIMIT,
+    Guard,
+    Outcome,
+    budget,
+    guarded_call,
+    limit_text,
+    time_limit_of,
+)
+
+
+def own_budget(limit: float) -> float:
+    """Budget of a phase of dualfem's own code (certification, output, grading): that of ``limit`` but at
+    least that of DEFAULT_TIME_LIMIT, so that a short solver time limit never throws away an answer the
+    solver returned in time."""
+    return budget(max(limit, DEFAULT_TIME_LIMIT))
 
 
 # ------------------------------------------------------------------------------ solve
@@ -56,11 +73,11 @@ def _solve_work(guard: Guard, args: Any, solver: Any, limit: float,
     def tick(stage: str, seconds: float) -> None:
         stages(stage, seconds)
         if stage.startswith("solve"):
-            guard.phase("certification", budget(limit))
+            guard.phase("certification", own_budget(limit))
 
     guard.phase("setup and solve", budget(limit))
     sol = run(solver, qp, progress=tick)
-    guard.phase("output", budget(limit))
+    guard.phase("output", own_budget(limit))
     rec = summary(qp, sol)
     rec["time_s"] = {**rec["time_s"], "assembly": t2 - t1, "total": time.perf_counter() - t0}
     rec["peak_rss_mb"] = peak_rss_mb()
@@ -109,7 +126,8 @@ def compare_guarded(args: Any, names: list[str], params: dict[str, dict],
     from dualfem.experiments.runner import make_solver
 
     limits = {nm: time_limit_of(make_solver(nm, params.get(nm))) for nm in names}
-    shared = budget(max(limits.values(), default=600.0))
+    longest = max(limits.values(), default=DEFAULT_TIME_LIMIT)
+    shared = own_budget(longest)
     done: dict[str, tuple[Any, Any]] = {}
     meta: dict[str, Any] = {}
 
@@ -121,13 +139,12 @@ def compare_guarded(args: Any, names: list[str], params: dict[str, dict],
 
     while True:
         out = guarded_call(_compare_work, args, names, params, dict(done), limits, shared, phase="build",
-                           seconds=shared, on_part=keep)
+                           seconds=budget(longest), on_part=keep)
         if out.status == "done":
             return out.value, None
-        nm = out.phase.removeprefix("run ") if out.phase.startswith("run ") else None
+        nm = out.phase.split(" ", 1)[1] if out.phase.startswith(("run ", "certify ")) else None
         if nm not in limits or nm in done:
-            why = limit_text(out.phase, out.budget, max(limits.values())) if out.status == "time_limit" \
-                else out.message
+            why = limit_text(out.phase, out.budget, longest) if out.status == "time_limit" else out.message
             return None, why
         done[nm] = _killed_run(nm, out, limits[nm], meta, params.get(nm))
         if progress:
@@ -143,6 +160,13 @@ def _compare_work(guard: Guard, args: Any, names: list[str], params: dict, done:
 
     def before(nm: str, inst: Any) -> None:
         guard.phase(f"run {nm}", budget(limits[nm]))
+        current[0] = nm
+
+    def tick(stage: str, seconds: float) -> None:
+        if stage.startswith("solve"):             # the plugin returned: dualfem's own certification
+            guard.phase(f"certify {current[0]}", own_budget(limits[current[0]]))
+
+    current = [""]
 
     def after(nm: str, row: Any, sol: Any) -> None:
         guard.send(("run", nm, row, _sendable(sol)))
@@ -152,7 +176,7 @@ def _compare_work(guard: Guard, args: Any, names: list[str], params: dict, done:
         qp = build_qp(scene_from_args(args))
         guard.send(("meta", {"scene": qp.name, "n_unknowns": qp.n, "n_constraints": qp.m}))
         return compare_solvers(qp, names, params, progress=stderr_progress(), done=done, before_run=before,
-                               after_run=after)
+                               after_run=after, stages=tick)
 
 
 def _sendable(sol: Any) -> Any:

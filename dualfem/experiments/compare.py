@@ -82,13 +82,15 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
                     progress: Callable[[str], None] | None = None, *,
                     done: dict[str, tuple[Row, Solution]] | None = None,
                     before_run: Callable[[str, Any], None] | None = None,
-                    after_run: Callable[[str, Row, Solution], None] | None = None) -> Comparison:
+                    after_run: Callable[[str, Row, Solution], None] | None = None,
+                    stages: Callable[[str, float], None] | None = None) -> Comparison:
     """Run ``names`` on ``qp``; return the comparison (see module docstring).
 
     ``params`` maps a solver name to its parameters. ``progress`` receives one line per finished
     solver. ``done``: (row, solution) of solvers already run (e.g. by an earlier worker process of
     :mod:`dualfem.cli.launch`, or killed there at their time limit): they are not run again.
-    ``before_run(name, solver)`` and ``after_run(name, row, solution)`` are called around each run.
+    ``before_run(name, solver)`` and ``after_run(name, row, solution)`` are called around each run,
+    ``stages(stage, seconds)`` as each stage of a run (setup, solve, certification) finishes.
     """
     from dualfem.experiments.runner import make_solver
 
@@ -108,7 +110,7 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
         if before_run is not None:
             before_run(nm, inst)
         t0 = time.perf_counter()
-        row, sols[nm] = _run_one(qp, nm, inst, ksolve)
+        row, sols[nm] = _run_one(qp, nm, inst, ksolve, stages)
         if sols[nm].info.get("qp_changed"):     # the runner's fingerprint: every later run would be void
             raise InputError(f"{sols[nm].message}; the comparison is stopped")
         rows.append(row)
@@ -129,11 +131,12 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     return out
 
 
-def _run_one(qp: QP, nm: str, inst, ksolve) -> tuple[Row, Solution]:
+def _run_one(qp: QP, nm: str, inst, ksolve, stages: Callable[[str, float], None] | None = None
+             ) -> tuple[Row, Solution]:
     """Solve with one solver; its row (not yet graded, no difference to a reference) and its solution."""
     from dualfem.experiments.runner import run
 
-    sol = run(inst, qp)           # hands the plugin a read-only view and checks qp's fingerprint afterwards
+    sol = run(inst, qp, progress=stages)   # hands the plugin a read-only view, checks qp's fingerprint afterwards
     finite = sol.residuals is not None and sol.residuals.get("finite", False)
     declared = sol.info.get("declared") or {}     # what the runner read and checked, not what the plugin says now
     tol = float(declared.get("tolerance", get_solver(nm).tolerance))
