@@ -26,6 +26,7 @@ parent's pid, for SIGKILL of the parent) and is killed in a ``finally`` (Ctrl-C,
 """
 from __future__ import annotations
 
+import gc
 import io
 import math
 import multiprocessing
@@ -195,7 +196,11 @@ def guarded_call(fn: Callable, *args: Any, phase: str, seconds: float,
     t0 = time.monotonic()
     out = Outcome(status="running", phase=phase, budget=float(seconds))
     try:
-        proc.start()
+        gc.freeze()                   # the worker's collections do not touch (and copy) the parent's objects
+        try:
+            proc.start()
+        finally:
+            gc.unfreeze()
         if hasattr(os, "setpgid"):
             try:
                 os.setpgid(proc.pid, proc.pid)        # at once, so that a kill cannot miss the group
