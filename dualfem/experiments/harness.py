@@ -3,7 +3,9 @@
 A task is a dict with a ``kind``. It runs in a long-lived child Python process
 (:class:`GuardedWorker`) that the parent kills when a phase exceeds its wall-clock budget (the
 child announces each phase and its budget), or that dies on its own (segmentation fault, out of
-memory): the parent then makes an error row, never loses the task and never hangs. Children
+memory): the parent then makes an error row, never loses the task and never hangs (the protocol,
+the budgets and the process hygiene of :mod:`dualfem.experiments.watchdog`, whose forked workers
+guard ``solve`` and ``compare``; here long-lived children serve many tasks). Children
 volunteer to the kernel's OOM killer, die with their parent (no orphans after ``kill -9`` or
 SIGTERM of a sweep: PDEATHSIG and a watch of the parent's pid in every child, and in every loky
 worker a watch of the sweep process, :func:`watch_parent`) and report their peak resident memory
@@ -28,6 +30,8 @@ import threading
 import time
 from collections.abc import Callable, Iterable
 from typing import Any
+
+from dualfem.experiments.watchdog import die_with_parent, pid_alive, volunteer_for_oom_killer
 
 #: task kind -> "module:function" of the handler ``(task, tick) -> (row dict, payload)``
 HANDLERS = {
@@ -61,31 +65,6 @@ def _recv_blocking(fh) -> Any:
 
 
 # ---------------------------------------------------------------- process hygiene
-def volunteer_for_oom_killer() -> None:
-    """Make this process the kernel's first choice when memory runs out (Linux; no-op elsewhere).
-
-    A run that exhausts a shared machine's memory should lose its own worker, which the sweep
-    records as a failed run, not the sweep's parent process or someone else's job.
-    """
-    try:
-        with open("/proc/self/oom_score_adj", "w") as fh:
-            fh.write("1000")
-    except OSError:
-        pass
-
-
-def die_with_parent() -> None:
-    """Ask the kernel to kill this process when its parent dies (Linux prctl PR_SET_PDEATHSIG)."""
-    try:
-        import ctypes
-        import signal
-
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, signal.SIGKILL)      # PR_SET_PDEATHSIG = 1
-    except (OSError, AttributeError):
-        pass
-
-
 def rss_mb(pid: int | str = "self") -> float:
     """Resident memory of a process in MB (Linux /proc; 0 elsewhere or if it is gone)."""
     try:
@@ -121,9 +100,9 @@ def watch_parent(parent: int, interval: float = 0.1) -> None:
     if os.getppid() == parent:
         def alive() -> bool:
             return os.getppid() == parent
-    elif _pid_alive(parent):
+    elif pid_alive(parent):
         def alive() -> bool:
-            return _pid_alive(parent)
+            return pid_alive(parent)
     else:                             # the sweep died before this worker got here
         os._exit(3)
     _WATCHING = parent
@@ -139,21 +118,6 @@ def watch_parent(parent: int, interval: float = 0.1) -> None:
         os._exit(3)
 
     threading.Thread(target=loop, name="dualfem-watch-parent", daemon=True).start()
-
-
-def _pid_alive(pid: int) -> bool:
-    """Whether process ``pid`` exists (and is not a zombie: a killed parent not yet reaped)."""
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    try:
-        with open(f"/proc/{pid}/stat") as fh:
-            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except (OSError, IndexError):
-        return True
 
 
 def run_in_worker(task: dict, parent: int) -> tuple[dict, Any]:

@@ -125,14 +125,52 @@ class _Forward(io.TextIOBase):
         return self._original.fileno()
 
 
+# ---------------------------------------------------------------- process hygiene (harness workers too)
+def volunteer_for_oom_killer() -> None:
+    """Make this process the kernel's first choice when memory runs out (Linux; no-op elsewhere).
+
+    A run that exhausts a shared machine's memory should lose its own worker, which the sweep
+    records as a failed run, not the sweep's parent process or someone else's job.
+    """
+    try:
+        with open("/proc/self/oom_score_adj", "w") as fh:
+            fh.write("1000")
+    except OSError:
+        pass
+
+
+def die_with_parent() -> None:
+    """Ask the kernel to kill this process when its parent dies (Linux prctl PR_SET_PDEATHSIG)."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL)      # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):
+        pass
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (and is not a zombie: a killed parent not yet reaped)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
+
+
 def _context() -> Any:
     methods = multiprocessing.get_all_start_methods()
     return multiprocessing.get_context("fork" if "fork" in methods else "spawn")
 
 
 def _child(conn: Any, fn: Callable, args: tuple, parent: int) -> None:  # pragma: no cover - in the worker
-    from dualfem.experiments.harness import die_with_parent
-
     if hasattr(os, "setpgid"):
         try:
             os.setpgid(0, 0)          # its own group: killed with everything it starts
