@@ -185,3 +185,18 @@ def test_a_short_time_limit_never_kills_dualfems_own_certification(monkeypatch, 
     rc = main(["solve", "f1", *SMALL, "--solver", "pdas", "-p", "time_limit=0.4", "--json"])
     rec = json.loads(capsys.readouterr().out)
     assert rc == 0 and rec["status"] == "solved", rec
+
+
+class _Unreadable(Exception):
+    """Pickles, but cannot be unpickled (its constructor needs two arguments)."""
+
+    def __init__(self, a, b):
+        super().__init__(f"{a} {b}")
+
+
+def test_an_answer_the_parent_cannot_read_is_crashed_not_a_traceback():
+    def raise_unreadable(guard):
+        raise _Unreadable(1, 2)
+
+    out = watchdog.guarded_call(raise_unreadable, phase="answer", seconds=30)
+    assert out.status == "crashed" and "could not be read" in out.message and "answer" in out.message

@@ -262,6 +262,11 @@ def guarded_call(fn: Callable, *args: Any, phase: str, seconds: float,
                 out.status = "crashed"
                 out.message = f"worker process died in phase '{out.phase}' (exit code {code}{why})"
                 break
+            except Exception as exc:  # noqa: BLE001 - e.g. an exception class the parent cannot unpickle
+                out.status = "crashed"
+                out.message = (f"the worker's answer in phase '{out.phase}' could not be read: "
+                               f"{type(exc).__name__}: {exc}")
+                break
             if msg[0] == "phase":
                 out.phase, out.budget = msg[1], msg[2]
                 deadline = time.monotonic() + out.budget
