@@ -191,6 +191,12 @@ def _child(conn: Any, fn: Callable, args: tuple, parent: int) -> None:  # pragma
     try:
         msg: tuple = ("done", fn(guard, *args))
     except BaseException as exc:  # noqa: BLE001 - the parent re-raises it
+        import traceback
+
+        try:                          # the worker's traceback travels with it (shown if nothing catches it)
+            exc.add_note("raised in the watchdog's worker process:\n" + "".join(traceback.format_tb(exc.__traceback__)))
+        except Exception:  # noqa: BLE001
+            pass
         msg = ("raised", exc)
     try:
         guard._put(msg)
