@@ -200,3 +200,23 @@ def test_an_answer_the_parent_cannot_read_is_crashed_not_a_traceback():
 
     out = watchdog.guarded_call(raise_unreadable, phase="answer", seconds=30)
     assert out.status == "crashed" and "could not be read" in out.message and "answer" in out.message
+
+
+class Dies(Runaway):
+    """Its process dies (as in a segmentation fault) when it runs in a worker process."""
+
+    name = "hostile_dies"
+    parent = os.getpid()
+
+    def solve(self):
+        if os.getpid() != self.parent:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return super().solve()
+
+
+def test_compare_records_a_dead_worker_as_crashed_and_goes_on(register, capsys):
+    register(Dies)
+    rc = main(["compare", "f1", *SMALL, "--solvers", "hostile_dies,pdas", "--json"])
+    runs = {r["solver"]: r for r in json.loads(capsys.readouterr().out)["runs"]}
+    assert rc == 0 and runs["hostile_dies"]["status"] == "crashed" and runs["hostile_dies"]["grade"] == "crashed"
+    assert "run hostile_dies" in runs["hostile_dies"]["message"] and runs["pdas"]["grade"] == "correct", runs
