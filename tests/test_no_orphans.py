@@ -157,3 +157,77 @@ def test_the_watchdogs_worker_dies_with_a_killed_solve(tmp_path, sig):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+SPAWNER_SRC = '''
+import os, subprocess, sys, time
+from dualfem.core.registry import register_solver
+from dualfem.core.solver import Solver
+
+
+@register_solver
+class Spawner(Solver):
+    name = "hostile_spawner"
+    defaults = {"tol": 1e-8, "time_limit": 1.0}
+
+    def solve(self):
+        child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
+        with open(os.environ["SPAWNER_PIDFILE"], "w") as fh:
+            fh.write(str(child.pid))
+        while True:
+            time.sleep(0.05)
+'''
+
+SPAWNER_SPEC = """
+name = "spawner"
+repeats = 1
+warmup = false
+time_limit = 1
+guard_slack = 0.5
+[tiers]
+low = 1e-3
+[floor]
+enabled = false
+[[scenes]]
+scene = ["f1"]
+N = [8]
+[[solvers]]
+name = "hostile_spawner"
+"""
+
+
+def test_a_killed_bench_run_takes_the_processes_its_plugin_started_with_it(tmp_path):
+    """bench's guard kills the guarded child's whole process group (issue 37, item 7): a plugin's own
+    subprocess dies with the run killed at its time limit (before: it was left running)."""
+    src, site = tmp_path / "src", tmp_path / "site" / "hostile_spawner-0.1.dist-info"
+    src.mkdir()
+    site.mkdir(parents=True)
+    (src / "hostile_spawner.py").write_text(SPAWNER_SRC)
+    (site / "METADATA").write_text("Metadata-Version: 2.1\nName: hostile-spawner\nVersion: 0.1\n")
+    (site / "entry_points.txt").write_text("[dualfem.solvers]\nhostile_spawner = hostile_spawner\n")
+    (tmp_path / "spec.toml").write_text(SPAWNER_SPEC)
+    pidfile = tmp_path / "pid"
+    env = dict(os.environ, MPLBACKEND="Agg", SPAWNER_PIDFILE=str(pidfile))
+    env["PYTHONPATH"] = os.pathsep.join([str(site.parent), str(src), env.get("PYTHONPATH", "")])
+    r = subprocess.run([sys.executable, "-m", "dualfem", "bench", str(tmp_path / "spec.toml"), "--out",
+                        str(tmp_path / "out"), "--no-progress-bar"], env=env, capture_output=True, text=True,
+                       timeout=120, start_new_session=True)
+    assert "time_limit" in r.stderr, r.stderr
+    pid = int(pidfile.read_text())
+    try:
+        gone = time.monotonic() + 5.0
+        while _alive(pid) and time.monotonic() < gone:
+            time.sleep(0.1)
+        assert not _alive(pid), "the plugin's subprocess outlived its run killed by bench's guard"
+    finally:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass

@@ -23,6 +23,7 @@ import importlib
 import os
 import pickle
 import select
+import signal
 import struct
 import subprocess
 import sys
@@ -111,13 +112,23 @@ def watch_parent(parent: int, interval: float = 0.1) -> None:
         while alive():
             time.sleep(interval)
         for proc in list(_CHILDREN):
-            try:
-                proc.kill()
-            except OSError:
-                pass
+            kill_group(proc)
         os._exit(3)
 
     threading.Thread(target=loop, name="dualfem-watch-parent", daemon=True).start()
+
+
+def kill_group(proc: subprocess.Popen) -> None:
+    """SIGKILL a guarded child's process group (the child leads it) and the child itself."""
+    if hasattr(os, "killpg"):
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except OSError:
+            pass
+    try:
+        proc.kill()
+    except OSError:
+        pass
 
 
 def run_in_worker(task: dict, parent: int) -> tuple[dict, Any]:
@@ -217,8 +228,9 @@ class GuardedWorker:
         env = dict(os.environ)
         env.setdefault("MPLBACKEND", "Agg")
         env["DUALFEM_HARNESS_PARENT"] = str(os.getpid())     # the child exits when this process is gone
+        group = {"process_group": 0} if hasattr(os, "killpg") else {}    # its own group: killed with its children
         self.proc = subprocess.Popen([sys.executable, "-m", "dualfem.experiments.harness", "--child"],
-                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=0)
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=0, **group)
         _CHILDREN.add(self.proc)
         self.buf = b""
 
@@ -230,15 +242,17 @@ class GuardedWorker:
                 self.proc.stdin.close()
                 self.proc.wait(timeout=5)
             except Exception:  # noqa: BLE001
-                self.proc.kill()
-                self.proc.wait()
+                pass
+            kill_group(self.proc)        # and whatever its tasks started and left running
+            self.proc.wait()
             self.proc = None
 
     def kill(self) -> None:
-        """Kill the child now (its task is lost; the caller makes the error row)."""
+        """Kill the child and every process it started (its group) now (its task is lost; the caller
+        makes the error row)."""
         if self.proc is not None:
             _CHILDREN.discard(self.proc)
-            self.proc.kill()
+            kill_group(self.proc)
             self.proc.wait()
             self.proc = None
 
@@ -330,10 +344,12 @@ def run_guarded(task: dict) -> tuple[dict, Any]:
         return error_row(task, f"{type(exc).__name__}: {exc}"), None
 
 
-def _close_local_worker() -> None:
+def _close_local_worker(now: bool = False) -> None:
+    """Close this thread's guarded child (``now``: kill it and its group, e.g. after Ctrl-C of the sweep:
+    a child in its own process group does not see the terminal's SIGINT)."""
     w = getattr(_LOCAL, "worker", None)
     if w is not None:
-        w.close()
+        w.kill() if now else w.close()
         _LOCAL.worker = None
 
 
@@ -399,6 +415,9 @@ def execute_all(tasks: list[dict], jobs: int = 1, dask: str | None = None,
         try:
             for t in tasks:
                 yield run_guarded(t)
+        except BaseException:
+            _close_local_worker(now=True)
+            raise
         finally:
             _close_local_worker()
 
