@@ -1,9 +1,12 @@
 """No orphans: after ``kill -9`` or SIGTERM of a ``--jobs 2`` sweep, no process of it is alive 5 s later.
 
-A real ``dualfem bench SPEC --jobs 2`` is started in its own session; once its loky workers and
-their guarded children run, the sweep process alone is killed and the session's live processes
-(loky workers, guarded harness children, resource trackers) are counted 5 s later. Before the
-fix (issue 26, item 6) 6 processes were left, for minutes.
+A real ``dualfem bench SPEC --jobs 2`` is started in its own session; the sweep process alone is
+killed, either once its loky workers and their guarded children run (``running``) or as soon as its
+loky workers exist, before they have a task (``starting``: a worker still importing, or handed a task
+after its sweep died), and the session's live processes (loky workers, guarded harness children,
+loky's and multiprocessing's resource trackers) are counted 5 s later. Before the fix of issue 26,
+item 6, 6 processes were left for minutes (``running``); before that of issue 37, item 7, 4 to 8
+(``starting``: the workers watched their sweep only from their first task on).
 """
 from __future__ import annotations
 
@@ -56,8 +59,15 @@ def session_processes(sid: int) -> list[tuple[int, str]]:
     return out
 
 
+def _ready(moment: str, procs: list[tuple[int, str]]) -> bool:
+    if moment == "starting":
+        return sum("popen_loky_posix" in c for _, c in procs) == 2
+    return sum("harness --child" in c for _, c in procs) == 2
+
+
+@pytest.mark.parametrize("moment", ["running", "starting"])
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
-def test_no_process_outlives_a_killed_parallel_sweep(tmp_path, sig):
+def test_no_process_outlives_a_killed_parallel_sweep(tmp_path, sig, moment):
     spec = tmp_path / "spec.toml"
     spec.write_text(SPEC, encoding="utf-8")
     out = tmp_path / "out"
@@ -67,13 +77,14 @@ def test_no_process_outlives_a_killed_parallel_sweep(tmp_path, sig):
     try:
         deadline = time.monotonic() + 180
         while time.monotonic() < deadline and proc.poll() is None:
-            if sum("harness --child" in c for _, c in session_processes(proc.pid)) == 2:
-                time.sleep(1.0)                              # both workers are inside a task
+            if _ready(moment, session_processes(proc.pid)):
+                time.sleep(1.0 if moment == "running" else 0.3)   # inside a task / still starting
                 break
-            time.sleep(0.1)
+            time.sleep(0.05)
         assert proc.poll() is None, "the sweep finished before it could be killed"
         running = session_processes(proc.pid)
-        assert sum("harness --child" in c for _, c in running) == 2, running   # two guarded children
+        if moment == "running":
+            assert sum("harness --child" in c for _, c in running) == 2, running   # two guarded children
         assert sum("loky" in c.lower() for _, c in running) >= 2, running         # under two loky workers
         os.kill(proc.pid, sig)                               # the sweep alone, not its group
         proc.wait(timeout=30)
@@ -91,3 +102,132 @@ def test_no_process_outlives_a_killed_parallel_sweep(tmp_path, sig):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+SPIN_SRC = '''
+import sys, time
+from dualfem.core.registry import register_solver
+from dualfem.core.solver import Solver
+
+
+@register_solver
+class Spin(Solver):
+    name = "hostile_spin"
+
+    def solve(self):
+        print("ready", file=sys.stderr, flush=True)
+        while True:
+            time.sleep(0.01)
+'''
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
+def test_the_watchdogs_worker_dies_with_a_killed_solve(tmp_path, sig):
+    """``dualfem solve`` runs the plugin in a worker process (issue 37, item 4): killing the command
+    while its plugin runs leaves no worker behind (PR_SET_PDEATHSIG and a watch of the parent's pid)."""
+    src, site = tmp_path / "src", tmp_path / "site" / "hostile_spin-0.1.dist-info"
+    src.mkdir()
+    site.mkdir(parents=True)
+    (src / "hostile_spin.py").write_text(SPIN_SRC)
+    (site / "METADATA").write_text("Metadata-Version: 2.1\nName: hostile-spin\nVersion: 0.1\n")
+    (site / "entry_points.txt").write_text("[dualfem.solvers]\nhostile_spin = hostile_spin\n")
+    env = dict(os.environ, MPLBACKEND="Agg")
+    env["PYTHONPATH"] = os.pathsep.join([str(site.parent), str(src), env.get("PYTHONPATH", "")])
+    cmd = [sys.executable, "-m", "dualfem", "solve", "f1", "--set", "N=8", "--solver", "hostile_spin"]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        for line in proc.stderr:
+            if "ready" in line:
+                break
+        assert len(session_processes(proc.pid)) == 2, session_processes(proc.pid)   # the command and its worker
+        os.kill(proc.pid, sig)
+        proc.wait(timeout=30)
+        gone = time.monotonic() + 5.0
+        while session_processes(proc.pid) and time.monotonic() < gone:
+            time.sleep(0.1)
+        left = session_processes(proc.pid)
+        assert left == [], f"{len(left)} process(es) alive 5 s after {sig.name} of solve: {left}"
+    finally:
+        for pid, _ in session_processes(proc.pid):
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+SPAWNER_SRC = '''
+import os, subprocess, sys, time
+from dualfem.core.registry import register_solver
+from dualfem.core.solver import Solver
+
+
+@register_solver
+class Spawner(Solver):
+    name = "hostile_spawner"
+    defaults = {"tol": 1e-8, "time_limit": 1.0}
+
+    def solve(self):
+        child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
+        with open(os.environ["SPAWNER_PIDFILE"], "w") as fh:
+            fh.write(str(child.pid))
+        while True:
+            time.sleep(0.05)
+'''
+
+SPAWNER_SPEC = """
+name = "spawner"
+repeats = 1
+warmup = false
+time_limit = 1
+guard_slack = 0.5
+[tiers]
+low = 1e-3
+[floor]
+enabled = false
+[[scenes]]
+scene = ["f1"]
+N = [8]
+[[solvers]]
+name = "hostile_spawner"
+"""
+
+
+def test_a_killed_bench_run_takes_the_processes_its_plugin_started_with_it(tmp_path):
+    """bench's guard kills the guarded child's whole process group (issue 37, item 7): a plugin's own
+    subprocess dies with the run killed at its time limit (before: it was left running)."""
+    src, site = tmp_path / "src", tmp_path / "site" / "hostile_spawner-0.1.dist-info"
+    src.mkdir()
+    site.mkdir(parents=True)
+    (src / "hostile_spawner.py").write_text(SPAWNER_SRC)
+    (site / "METADATA").write_text("Metadata-Version: 2.1\nName: hostile-spawner\nVersion: 0.1\n")
+    (site / "entry_points.txt").write_text("[dualfem.solvers]\nhostile_spawner = hostile_spawner\n")
+    (tmp_path / "spec.toml").write_text(SPAWNER_SPEC)
+    pidfile = tmp_path / "pid"
+    env = dict(os.environ, MPLBACKEND="Agg", SPAWNER_PIDFILE=str(pidfile))
+    env["PYTHONPATH"] = os.pathsep.join([str(site.parent), str(src), env.get("PYTHONPATH", "")])
+    r = subprocess.run([sys.executable, "-m", "dualfem", "bench", str(tmp_path / "spec.toml"), "--out",
+                        str(tmp_path / "out"), "--no-progress-bar"], env=env, capture_output=True, text=True,
+                       timeout=120, start_new_session=True)
+    assert "time_limit" in r.stderr, r.stderr
+    pid = int(pidfile.read_text())
+    try:
+        gone = time.monotonic() + 5.0
+        while _alive(pid) and time.monotonic() < gone:
+            time.sleep(0.1)
+        assert not _alive(pid), "the plugin's subprocess outlived its run killed by bench's guard"
+    finally:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass

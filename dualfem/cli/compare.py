@@ -12,13 +12,12 @@ one JSON object on stdout; one progress line per finished solver goes to stderr.
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Any
 
 from dualfem.cli.main import add_factor_arg, add_scene_args, add_tol_arg, apply_factor, command, dumps, scene_from_args
 from dualfem.cli.options import add_solver_option, deprecated, parse_solvers, spelled
 from dualfem.core.errors import InputError
-from dualfem.core.quiet import c_stdout_to_stderr
-from dualfem.core.scene import build_qp
 
 
 def _cfg(p):
@@ -86,7 +85,8 @@ def compare_choice(args: argparse.Namespace) -> tuple[list[str], dict[str, dict[
 @command("compare", "run several solvers on one scene and cross-check them against a certified reference")(_cfg)
 def cmd_compare(args) -> int:
     apply_factor(args)
-    from dualfem.experiments.compare import compare_solvers, stderr_progress, table
+    from dualfem.cli.launch import compare_guarded
+    from dualfem.experiments.compare import stderr_progress, table
     from dualfem.experiments.runner import make_solver
     from dualfem.experiments.tolerance import check_tol
 
@@ -94,10 +94,11 @@ def cmd_compare(args) -> int:
     names, params = compare_choice(args)
     for nm, prm in params.items():
         make_solver(nm, prm)        # a bad parameter is refused before the (slow) assembly
-    problem = scene_from_args(args)
-    with c_stdout_to_stderr():
-        qp = build_qp(problem)
-        result = compare_solvers(qp, names, params, progress=stderr_progress(), tol=tol)
+    scene_from_args(args)            # bad scene parameters: one line, before any worker starts
+    result, why = compare_guarded(args, names, params, progress=stderr_progress(), tol=tol)   # under the watchdog
+    if result is None:
+        print(f"dualfem compare: {why}", file=sys.stderr)
+        return 1
     if args.json:
         print(dumps(result))
     else:

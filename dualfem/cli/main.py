@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -227,9 +226,8 @@ def _cfg_solve(p):
 @command("solve", "solve one scene with one solver")(_cfg_solve)
 def cmd_solve(args) -> int:
     from dualfem.core.registry import get_solver
-    from dualfem.core.solution import Status
-    from dualfem.experiments.runner import make_solver, missing_reason, run, summary
-    from dualfem.experiments.tolerance import check_tol, explain, with_tolerance
+    from dualfem.experiments.runner import make_solver, missing_reason
+    from dualfem.experiments.tolerance import check_tol, with_tolerance
 
     tol = check_tol(args.tol)
     name, given = solve_choice(args)
@@ -247,57 +245,21 @@ def cmd_solve(args) -> int:
         from dualfem.post.solution_figure import check_figure_path
 
         check_figure_path(args.figure)
-    from dualfem.numerics.factor import missing_fast_backend_hint
     from dualfem.numerics.threads import set_threads
 
     factor = apply_factor(args)
     threads = set_threads(check_threads(args.threads))
     stages = Stages("solve", quiet=args.quiet)
-    t0 = time.perf_counter()
-    problem = scene_from_args(args)
-    t1 = time.perf_counter()
-    from dualfem.core.scene import build_qp
+    from dualfem.cli.launch import solve_guarded
 
-    qp = build_qp(problem)           # contained: a problem plugin's prints, exceptions, a non-QP
-    t2 = time.perf_counter()
-    if args.figure:
-        from dualfem.post.solution_figure import check_figure_qp
-
-        check_figure_qp(qp)          # before the solve and before --vtk is written
-    stages("assembly (mesh, matrices)", t2 - t1)
-    hint = missing_fast_backend_hint(qp.n)
-    if hint and not args.quiet:
-        print(f"dualfem solve: note: {hint}", file=sys.stderr)
-    sol = run(solver, qp, progress=stages, tol=tol)
-    why = explain(sol, given, tol)
-    if why:
-        sol.message = f"{sol.message}; {why}" if sol.message else why
-    rec = summary(qp, sol)
-    rec["time_s"] = {**rec["time_s"], "assembly": t2 - t1, "total": time.perf_counter() - t0}
+    rec, solved = solve_guarded(args, solver, stages, tol, given)      # build, solve, outputs: under the watchdog
     rec["factor"] = factor
     rec["threads"] = threads
-    rec["peak_rss_mb"] = peak_rss_mb()
-    post = getattr(args, "_post", None)
-    if post:
-        post(problem, qp, sol, rec)
-    if args.vtk or args.xdmf:
-        from dualfem.post.vtk import write_outputs
-
-        if sol.x is None:
-            print(f"dualfem solve: no solution ({sol.status}): --vtk/--xdmf not written", file=sys.stderr)
-        else:
-            for path in write_outputs(qp, sol, vtk=args.vtk, xdmf=args.xdmf):
-                print(f"wrote {path}", file=sys.stderr)
-    if args.figure and sol.x is not None:
-        from dualfem.post.solution_figure import write_solution_figure
-
-        for path in write_solution_figure(args.figure, qp, sol):
-            print(f"wrote {path}", file=sys.stderr)
     if args.json:
         print(dumps(rec))
     else:
         print(human_summary(rec, scene=args.scene))
-    return 0 if sol.status == Status.SOLVED else 1
+    return 0 if solved else 1
 
 
 def solve_choice(args: argparse.Namespace) -> tuple[str, dict[str, Any]]:
@@ -353,14 +315,20 @@ def human_summary(rec: dict, scene: str | None = None) -> str:
     name = (Path(scene).stem if scene.endswith((".toml", ".npz", ".mat")) else scene) if scene else rec["problem"]
     lines = [f"{name}: {rec['ndof']} unknowns, {rec['n_defect_nodes']} defect nodes",
              f"solver {rec['solver']}: {rec['status']}  {rec['message']}",
-             f"iterations {rec['iterations']}  time setup {rec['time_s']['setup']:.3g} s, "
-             f"solve {rec['time_s']['solve']:.3g} s"]
+             f"iterations {rec['iterations']}  " + _times(rec['time_s'])]
     if rec.get("residuals"):
         r = rec["residuals"]
         lines.append(f"energy {rec['energy']:.10g}  max jump {rec['max_jump']:.4g}  "
                      f"contact nodes {rec['n_contact']}/{rec['n_defect_nodes']}")
         lines.append("residuals (evaluator): " + "  ".join(f"{k} {v:.2e}" for k, v in r.items()))
     return "\n".join(lines)
+
+
+def _times(t: dict) -> str:
+    """``time setup S s, solve S s`` (or the seconds until a killed run was stopped)."""
+    if "setup" in t and "solve" in t:
+        return f"time setup {t['setup']:.3g} s, solve {t['solve']:.3g} s"
+    return f"stopped after {t.get('total', float('nan')):.3g} s"
 
 
 # --------------------------------------------------------------------------- main

@@ -30,7 +30,7 @@ from dualfem.experiments.machine import loadavg, machine_info, utc_now
 from dualfem.experiments.progress import Progress
 from dualfem.experiments.row import Row
 from dualfem.experiments.spec import Spec, load_spec
-from dualfem.experiments.store import ResultStore, same_spec
+from dualfem.experiments.store import ResultStore, current_content, same_spec
 from dualfem.experiments.tasks import _canon, expand_scenes, expand_tasks, floor_tasks, reference_task
 
 
@@ -492,7 +492,9 @@ def _sweep(spec, scenes, tasks, store, out, jobs, dask, command, progress, strea
         # the curves are kept in step with their rows (a run redone without a curve loses its old one)
         CurveStore(store).open()
     # results.csv lists every row of the folder: this spec's, and (a folder shared with --force) those
-    # of other specs or other versions of this one; nothing finished is ever dropped from it
+    # of other specs or other versions of this one; nothing finished is ever dropped from it, except the
+    # rows of a scene file or QP file of this spec made with its former content (they stay in rows/)
+    store.keep = current_content(scenes, store.rows, store.warn)
     refs, aux, n_refs = _references_and_floors(spec, scenes, pending, store, is_done, jobs, dask, stream, progress,
                                                connect_timeout)
     statuses, ran = _runs(pending, refs, store, jobs, dask, stream, progress, spec.name, connect_timeout)

@@ -81,12 +81,20 @@ def default_solvers() -> list[str]:
 
 
 def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, dict] | None = None,
-                    progress: Callable[[str], None] | None = None, tol: float | None = None) -> Comparison:
+                    progress: Callable[[str], None] | None = None, tol: float | None = None, *,
+                    done: dict[str, tuple[Row, Solution]] | None = None,
+                    before_run: Callable[[str, Any], None] | None = None,
+                    after_run: Callable[[str, Row, Solution], None] | None = None,
+                    stages: Callable[[str, float], None] | None = None) -> Comparison:
     """Run ``names`` on ``qp``; return the comparison (see module docstring).
 
     ``params`` maps a solver name to its parameters. ``progress`` receives one line per finished
     solver. ``tol``: the certified tolerance of every run (``--tol``, :mod:`dualfem.experiments.tolerance`:
     each solver's ``tolerance_params(tol)`` under its ``params``); None: each solver's declared tolerance.
+    ``done``: (row, solution) of solvers already run (e.g. by an earlier worker process of
+    :mod:`dualfem.cli.launch`, or killed there at their time limit): they are not run again.
+    ``before_run(name, solver)`` and ``after_run(name, row, solution)`` are called around each run,
+    ``stages(stage, seconds)`` as each stage of a run (setup, solve, certification) finishes.
     """
     from dualfem.experiments.runner import make_solver
     from dualfem.experiments.tolerance import with_tolerance
@@ -100,11 +108,19 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     rows: list[Row] = []
     sols: dict[str, Solution] = {}
     for nm, inst in insts.items():
+        if done and nm in done:
+            row, sols[nm] = done[nm]
+            rows.append(row)
+            continue
+        if before_run is not None:
+            before_run(nm, inst)
         t0 = time.perf_counter()
-        row, sols[nm] = _run_one(qp, nm, inst, ksolve, tol, params.get(nm))
+        row, sols[nm] = _run_one(qp, nm, inst, ksolve, tol, params.get(nm), stages)
         if sols[nm].info.get("qp_changed"):     # the runner's fingerprint: every later run would be void
             raise InputError(f"{sols[nm].message}; the comparison is stopped")
         rows.append(row)
+        if after_run is not None:
+            after_run(nm, row, sols[nm])
         if progress:
             progress(f"{nm}: {row.status} in {time.perf_counter() - t0:.2f} s")
     out = Comparison({"problem": qp.name, "ndof": qp.n, "n_defect_nodes": qp.m,
@@ -120,13 +136,13 @@ def compare_solvers(qp: QP, names: list[str] | None = None, params: dict[str, di
     return out
 
 
-def _run_one(qp: QP, nm: str, inst, ksolve, asked: float | None = None,
-             given: dict | None = None) -> tuple[Row, Solution]:
+def _run_one(qp: QP, nm: str, inst, ksolve, asked: float | None = None, given: dict | None = None,
+             stages: Callable[[str, float], None] | None = None) -> tuple[Row, Solution]:
     """Solve with one solver; its row (not yet graded, no difference to a reference) and its solution."""
     from dualfem.experiments.runner import run
     from dualfem.experiments.tolerance import explain
 
-    sol = run(inst, qp, tol=asked)  # hands the plugin a read-only view and checks qp's fingerprint afterwards
+    sol = run(inst, qp, progress=stages, tol=asked)   # a read-only view; checks qp's fingerprint afterwards
     why = explain(sol, given, asked)
     if why:
         sol.message = f"{sol.message}; {why}" if sol.message else why
@@ -295,9 +311,11 @@ def table(result: dict, scene: str | None = None) -> str:
     for r in ran:
         d = r["diff"] or {}
         cm = "-" if not d else ("same" if d["contact_mismatch"] == 0 else f"{d['contact_mismatch']} off")
-        t = r["time_s"].get("setup", 0) + r["time_s"].get("solve", 0)
+        ts = r["time_s"]
+        t = ts["setup"] + ts["solve"] if isinstance(ts.get("setup"), (int, float)) and \
+            isinstance(ts.get("solve"), (int, float)) else None
         lines.append(f"{r['solver']:{w}s} {r['status']:10s} {r['grade']:12s} {_iters(r['iterations']):>5s} "
-                     f"{t:7.3f} {_num7(r['kkt_error'])} {_num7(r['error_bound'])} {r['tolerance']:5.0e} "
+                     f"{_sec7(t)} {_num7(r['kkt_error'])} {_num7(r['error_bound'])} {r['tolerance']:5.0e} "
                      f"{_num7(d.get('x_energy'))} {_num7(d.get('multipliers'))} {cm:>7s}")
     for r in ran:
         if (r["status"] != "solved" or r["grade"] in WRONG) and r["message"]:
@@ -321,6 +339,11 @@ def table(result: dict, scene: str | None = None) -> str:
 def _num7(v) -> str:
     """A number in the table's 7-character scientific format, '-' when missing."""
     return f"{v:7.1e}" if isinstance(v, (int, float)) and math.isfinite(v) else f"{'-':>7s}"
+
+
+def _sec7(v) -> str:
+    """Seconds in the table's 7-character format, '-' when there are none (a run killed by the watchdog)."""
+    return f"{v:7.3f}" if isinstance(v, (int, float)) and math.isfinite(v) else f"{'-':>7s}"
 
 
 def stderr_progress() -> Callable[[str], None]:

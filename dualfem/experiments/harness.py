@@ -3,7 +3,9 @@
 A task is a dict with a ``kind``. It runs in a long-lived child Python process
 (:class:`GuardedWorker`) that the parent kills when a phase exceeds its wall-clock budget (the
 child announces each phase and its budget), or that dies on its own (segmentation fault, out of
-memory): the parent then makes an error row, never loses the task and never hangs. Children
+memory): the parent then makes an error row, never loses the task and never hangs (the protocol,
+the budgets and the process hygiene of :mod:`dualfem.experiments.watchdog`, whose forked workers
+guard ``solve`` and ``compare``; here long-lived children serve many tasks). Children
 volunteer to the kernel's OOM killer, die with their parent (no orphans after ``kill -9`` or
 SIGTERM of a sweep: PDEATHSIG and a watch of the parent's pid in every child, and in every loky
 worker a watch of the sweep process, :func:`watch_parent`) and report their peak resident memory
@@ -21,6 +23,7 @@ import importlib
 import os
 import pickle
 import select
+import signal
 import struct
 import subprocess
 import sys
@@ -30,6 +33,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from dualfem.core.errors import describe_exception
+from dualfem.experiments.watchdog import die_with_parent, pid_alive, volunteer_for_oom_killer
 
 #: task kind -> "module:function" of the handler ``(task, tick) -> (row dict, payload)``
 HANDLERS = {
@@ -63,31 +67,6 @@ def _recv_blocking(fh) -> Any:
 
 
 # ---------------------------------------------------------------- process hygiene
-def volunteer_for_oom_killer() -> None:
-    """Make this process the kernel's first choice when memory runs out (Linux; no-op elsewhere).
-
-    A run that exhausts a shared machine's memory should lose its own worker, which the sweep
-    records as a failed run, not the sweep's parent process or someone else's job.
-    """
-    try:
-        with open("/proc/self/oom_score_adj", "w") as fh:
-            fh.write("1000")
-    except OSError:
-        pass
-
-
-def die_with_parent() -> None:
-    """Ask the kernel to kill this process when its parent dies (Linux prctl PR_SET_PDEATHSIG)."""
-    try:
-        import ctypes
-        import signal
-
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, signal.SIGKILL)      # PR_SET_PDEATHSIG = 1
-    except (OSError, AttributeError):
-        pass
-
-
 def rss_mb(pid: int | str = "self") -> float:
     """Resident memory of a process in MB (Linux /proc; 0 elsewhere or if it is gone)."""
     try:
@@ -111,24 +90,46 @@ def watch_parent(parent: int, interval: float = 0.1) -> None:
     alive 5 s after ``kill -9`` or SIGTERM of the sweep). A daemon thread polls ``os.getppid()``
     (which changes when the parent process dies, whatever killed it), kills this worker's guarded
     children and exits; the children die with it in any case (their own PDEATHSIG and watch).
-    Started once per process (later calls with the same parent are no-ops).
+    Started once per process (later calls with the same parent are no-ops), at the worker's start
+    (the executor's initializer, so that an idle worker or one still importing dies too) and again
+    with every task. A worker whose ``parent`` is already gone exits at once (it never starts the
+    task it was handed); one that is not a child of a live ``parent`` (another executor's topology)
+    watches ``parent``'s pid instead of its own parent pid.
     """
     global _WATCHING
-    if _WATCHING == parent or os.getppid() != parent:     # watching already, or not a child of ``parent``
+    if _WATCHING == parent:
         return
+    if os.getppid() == parent:
+        def alive() -> bool:
+            return os.getppid() == parent
+    elif pid_alive(parent):
+        def alive() -> bool:
+            return pid_alive(parent)
+    else:                             # the sweep died before this worker got here
+        os._exit(3)
     _WATCHING = parent
 
     def loop() -> None:
-        while os.getppid() == parent:
+        while alive():
             time.sleep(interval)
         for proc in list(_CHILDREN):
-            try:
-                proc.kill()
-            except OSError:
-                pass
+            kill_group(proc)
         os._exit(3)
 
     threading.Thread(target=loop, name="dualfem-watch-parent", daemon=True).start()
+
+
+def kill_group(proc: subprocess.Popen) -> None:
+    """SIGKILL a guarded child's process group (the child leads it) and the child itself."""
+    if hasattr(os, "killpg"):
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except OSError:
+            pass
+    try:
+        proc.kill()
+    except OSError:
+        pass
 
 
 def run_in_worker(task: dict, parent: int) -> tuple[dict, Any]:
@@ -228,8 +229,9 @@ class GuardedWorker:
         env = dict(os.environ)
         env.setdefault("MPLBACKEND", "Agg")
         env["DUALFEM_HARNESS_PARENT"] = str(os.getpid())     # the child exits when this process is gone
+        group = {"process_group": 0} if hasattr(os, "killpg") else {}    # its own group: killed with its children
         self.proc = subprocess.Popen([sys.executable, "-m", "dualfem.experiments.harness", "--child"],
-                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=0)
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=0, **group)
         _CHILDREN.add(self.proc)
         self.buf = b""
 
@@ -241,15 +243,17 @@ class GuardedWorker:
                 self.proc.stdin.close()
                 self.proc.wait(timeout=5)
             except Exception:  # noqa: BLE001
-                self.proc.kill()
-                self.proc.wait()
+                pass
+            kill_group(self.proc)        # and whatever its tasks started and left running
+            self.proc.wait()
             self.proc = None
 
     def kill(self) -> None:
-        """Kill the child now (its task is lost; the caller makes the error row)."""
+        """Kill the child and every process it started (its group) now (its task is lost; the caller
+        makes the error row)."""
         if self.proc is not None:
             _CHILDREN.discard(self.proc)
-            self.proc.kill()
+            kill_group(self.proc)
             self.proc.wait()
             self.proc = None
 
@@ -341,10 +345,12 @@ def run_guarded(task: dict) -> tuple[dict, Any]:
         return error_row(task, describe_exception(exc)), None
 
 
-def _close_local_worker() -> None:
+def _close_local_worker(now: bool = False) -> None:
+    """Close this thread's guarded child (``now``: kill it and its group, e.g. after Ctrl-C of the sweep:
+    a child in its own process group does not see the terminal's SIGINT)."""
     w = getattr(_LOCAL, "worker", None)
     if w is not None:
-        w.close()
+        w.kill() if now else w.close()
         _LOCAL.worker = None
 
 
@@ -402,13 +408,17 @@ def execute_all(tasks: list[dict], jobs: int = 1, dask: str | None = None,
         except ImportError:
             from dualfem.core.errors import MissingDependency
             raise MissingDependency("--jobs needs joblib: pip install 'dualfem[parallel]'") from None
-        par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
-        me = os.getpid()          # each loky worker exits as soon as this process is gone
+        me = os.getpid()          # each loky worker exits as soon as this process is gone, from its start
+        par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered", initializer=watch_parent,
+                       initargs=(me,))
         yield from par(delayed(run_in_worker)(t, me) for t in tasks)
     else:
         try:
             for t in tasks:
                 yield run_guarded(t)
+        except BaseException:
+            _close_local_worker(now=True)
+            raise
         finally:
             _close_local_worker()
 

@@ -57,6 +57,7 @@ from dualfem.core.errors import InputError
 from dualfem.core.grade import DEFAULT_GRADES, check_grades
 from dualfem.core.solver import reference_solvers
 from dualfem.experiments.spec_select import Selection, apply_selection, effective_text
+from dualfem.experiments.watchdog import GUARD_FACTOR, GUARD_SLACK
 
 SPEC_KEYS = {"name", "description", "repeats", "warmup", "time_limit", "guard_factor", "guard_slack",
              "build_limit", "cold_setup", "curves", "tiers", "grades", "reference", "floor", "scenes", "solvers"}
@@ -93,8 +94,8 @@ class Spec:
     repeats: int = 3
     warmup: bool = True
     time_limit: float = 60.0
-    guard_factor: float = 1.5
-    guard_slack: float = 10.0
+    guard_factor: float = GUARD_FACTOR      # the watchdog's grace, as for solve and compare
+    guard_slack: float = GUARD_SLACK
     build_limit: float = 900.0
     cold_setup: bool = True
     curves: bool = False

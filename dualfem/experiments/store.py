@@ -254,6 +254,70 @@ def ref_hash(ref: dict) -> str:
     return h.hexdigest()
 
 
+def file_digest(path: str | Path) -> str:
+    """SHA-256 of a file's bytes (cached per process by path, size, modification time and inode)."""
+    import hashlib
+
+    path = Path(path)
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns, st.st_ino)
+    if key not in _DIGESTS:
+        with open(path, "rb") as fh:
+            _DIGESTS[key] = hashlib.file_digest(fh, "sha256").hexdigest()
+    return _DIGESTS[key]
+
+
+_DIGESTS: dict[tuple, str] = {}
+
+
+def _is_file(v: Any) -> bool:
+    try:
+        return isinstance(v, str) and bool(v) and "\0" not in v and Path(v).is_file()
+    except (OSError, ValueError):
+        return False
+
+
+def content_ident(scene: str, params: dict) -> dict | None:
+    """What a scene's cached rows and reference are keyed by, when it reads files: the scene name and
+    every parameter value that names a file (a QP file, a scene file, anything a problem reads) replaced
+    by ``{"sha256": ...}`` of the file's content, not its name. A changed file is another scene (its
+    runs are redone; the rows of the old content stay in ``rows/``); the same content under another
+    name or path is the same scene. None when the scene reads no file (its key is its name and
+    parameters, as before)."""
+    named = [v for v in (scene, *params.values()) if _is_file(v)]
+    if not named:
+        return None
+
+    def ident(v: Any) -> Any:
+        return {"sha256": file_digest(v)} if _is_file(v) else v
+
+    return {"scene": ident(scene), "params": {k: ident(v) for k, v in params.items()}}
+
+
+def current_content(scenes: list, rows: dict[str, dict], warn: Callable[[str], None] | None = None
+                    ) -> Callable[[dict], bool]:
+    """``keep(row)`` for results.csv: False for a row of a scene of this sweep that reads files
+    (``scenes``: :class:`dualfem.experiments.tasks.SceneSpec`, same ``scene`` name) made with another
+    content of them (another ``scene_key``): the file changed since, and its rows would be read as the
+    new content's. Such rows stay in ``rows/`` (nothing is deleted); ``warn`` says how many."""
+    current: dict[str, set] = {}
+    for sc in scenes:
+        if sc.content is not None:
+            current.setdefault(sc.scene, set()).add(sc.key)
+
+    def keep(r: dict) -> bool:
+        keys = current.get(str(r.get("scene")))
+        return keys is None or r.get("scene_key") in keys
+
+    old = [r for r in rows.values() if not keep(r)]
+    if old and warn is not None:
+        names = sorted({str(r.get("scene")) for r in old})
+        warn(f"{len(old)} row(s) of {', '.join(map(repr, names[:3]))}{' ...' if len(names) > 3 else ''} were made "
+             f"with another content of the file(s) (changed since): they stay in rows/, not in results.csv, and "
+             f"the runs of the current content are made")
+    return keep
+
+
 def lock_folder(out: Path):
     """Take the exclusive lock of a results folder (released when the returned file is closed)."""
     import fcntl

@@ -1,7 +1,8 @@
 """Tasks of a sweep: every run (scene x solver variant x tier), the references and the floors.
 
 ``run_id`` is a hash of everything that defines a run, so a sweep started again skips every
-finished row.
+finished row; a scene that reads files (a QP file, a scene file) is identified by their content
+(:func:`dualfem.experiments.store.content_ident`), so a changed file is run again.
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import numpy as np
 
 from dualfem.core.grade import DEFAULT_GRADES
 from dualfem.experiments.spec import SCENE_KEYS_RESERVED, Spec, _as_list, _grid
+from dualfem.experiments.store import content_ident
 
 
 def _canon(o: Any) -> Any:
@@ -52,6 +54,7 @@ class SceneSpec:
     repeats: int
     warmup: bool
     too_big: str | None = None      # why its runs are not attempted: it would not fit in memory
+    content: dict | None = None     # scene and params with files as their content hash (store.content_ident)
 
 
     @property
@@ -74,11 +77,13 @@ def expand_scenes(spec: Spec) -> list[SceneSpec]:
             name = str(combo.pop("scene"))
             prob = load_scene(name, combo)          # InputError for a bad scene or parameter
             resolved = _canon(prob.params)
-            key = _hash({"scene": name, "params": resolved})
+            content = content_ident(name, resolved)      # a scene that reads files: keyed by their content
+            key = _hash(content if content is not None else {"scene": name, "params": resolved})
             if key not in out:
                 if have is None:
                     have = available_bytes()        # read once per sweep (it reads /proc and the cgroups)
-                out[key] = SceneSpec(name, combo, resolved, key, reps, warm, too_big=_too_big(prob, have))
+                out[key] = SceneSpec(name, combo, resolved, key, reps, warm, too_big=_too_big(prob, have),
+                                     content=content)
     return list(out.values())
 
 
@@ -187,7 +192,8 @@ def floor_tasks(spec: Spec, scenes: list[SceneSpec]) -> list[dict]:
     for sc in scenes:
         if sc.too_big:           # its runs are skipped rows: no floor either
             continue
-        group = {k: v for k, v in sc.resolved.items() if k not in spec.floor["ignore"]}
+        params = sc.content["params"] if sc.content is not None else sc.resolved     # files by content
+        group = {k: v for k, v in params.items() if k not in spec.floor["ignore"]}
         ident = {"floor": group, "repeats": spec.floor["repeats"], "cholmod": spec.floor["cholmod"],
                  "warmup": spec.floor["warmup"]}
         rid = "floor-" + _hash(ident)
