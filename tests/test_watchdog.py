@@ -220,3 +220,19 @@ def test_compare_records_a_dead_worker_as_crashed_and_goes_on(register, capsys):
     runs = {r["solver"]: r for r in json.loads(capsys.readouterr().out)["runs"]}
     assert rc == 0 and runs["hostile_dies"]["status"] == "crashed" and runs["hostile_dies"]["grade"] == "crashed"
     assert "run hostile_dies" in runs["hostile_dies"]["message"] and runs["pdas"]["grade"] == "correct", runs
+
+
+def test_a_process_that_ran_pardiso_does_not_fork_a_worker_that_hangs(tmp_path):
+    """A forked child of a process that has run MKL PARDISO hangs in its first PARDISO call (OpenMP's
+    threads and locks do not survive a fork): such a process runs the command in-process, says so."""
+    from dualfem.numerics import factor
+
+    if "pardiso" not in factor.available():
+        pytest.skip("needs MKL PARDISO (the pardiso extra)")
+    script = ("from dualfem.core.scene import load_scene\nfrom dualfem.experiments.runner import run\n"
+              "from dualfem.cli import main\nqp = load_scene('f2', {'N': 8}).build()\n"
+              "assert str(run('pdas', qp, {'factor': 'pardiso'}).status) == 'solved'\n"
+              "raise SystemExit(main(['solve', 'f2', '--set', 'N=8', '-s', 'pdas[factor=pardiso]', '--json']))\n")
+    res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "time limit is not enforced" in res.stderr

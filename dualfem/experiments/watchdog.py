@@ -101,6 +101,34 @@ class Guard:
         self._put(("part", obj))
 
 
+class _InlineGuard:
+    """The in-process stand-in of :class:`Guard` (see :func:`fork_is_unsafe`): phases are recorded in the
+    outcome, not enforced; partial results go to ``on_part`` at once."""
+
+    def __init__(self, out: Outcome, on_part: Callable[[Any], None] | None) -> None:
+        self._out, self._on_part = out, on_part
+
+    def phase(self, name: str, seconds: float) -> None:
+        self._out.phase, self._out.budget = str(name), float(seconds)
+
+    def send(self, obj: Any) -> None:
+        self._out.parts.append(obj)
+        if self._on_part is not None:
+            self._on_part(obj)
+
+
+def fork_is_unsafe() -> bool:
+    """Whether this process has already run MKL PARDISO (its OpenMP thread pool): a process forked
+    from it hangs in its first PARDISO call (the pool's threads and locks do not survive a fork).
+    A fresh ``dualfem`` command never has (it forks before building the QP); a Python session that
+    solved before calling :func:`dualfem.cli.main` may have."""
+    mod = sys.modules.get("dualfem.numerics.factor.pardiso")
+    return bool(getattr(mod, "STARTED", False))
+
+
+_WARNED_INLINE = [False]
+
+
 class _Forward(io.TextIOBase):
     """``sys.stdout``/``sys.stderr`` of the worker: text goes to the parent's stream of the same name;
     ``fileno`` is the original descriptor (fd-level redirections of C output keep working)."""
@@ -220,6 +248,24 @@ def _kill(proc: Any) -> None:
     proc.join(5.0)
 
 
+def _inline_call(fn: Callable, args: tuple, phase: str, seconds: float,
+                 on_part: Callable[[Any], None] | None) -> Outcome:
+    """``fn`` in this process, its phases recorded but not enforced (a fork would hang: see
+    :func:`fork_is_unsafe`); said once per process on stderr."""
+    if not _WARNED_INLINE[0]:
+        _WARNED_INLINE[0] = True
+        print("dualfem: note: this process has run MKL PARDISO, which a forked worker cannot use: plugin code "
+              "runs in this process and its time limit is not enforced by the watchdog", file=sys.stderr)
+    t0 = time.monotonic()
+    out = Outcome(status="running", phase=phase, budget=float(seconds))
+    try:
+        out.value = fn(_InlineGuard(out, on_part), *args)
+        out.status = "done"
+    finally:
+        out.elapsed = time.monotonic() - t0
+    return out
+
+
 def guarded_call(fn: Callable, *args: Any, phase: str, seconds: float,
                  on_part: Callable[[Any], None] | None = None) -> Outcome:
     """``fn(guard, *args)`` in a worker process; the first phase is ``phase`` with a budget of ``seconds``.
@@ -227,9 +273,12 @@ def guarded_call(fn: Callable, *args: Any, phase: str, seconds: float,
     ``fn`` announces later phases with ``guard.phase(name, seconds)`` and may send partial results
     with ``guard.send(obj)`` (passed to ``on_part`` and kept in ``Outcome.parts``). An exception
     raised by ``fn`` is raised here (its traceback stays in the worker). The worker is gone when
-    this returns or raises, whatever happened (killed at its budget, Ctrl-C of the parent).
+    this returns or raises, whatever happened (killed at its budget, Ctrl-C of the parent). In a process
+    that has already run MKL PARDISO (:func:`fork_is_unsafe`), ``fn`` runs in this process instead.
     """
     ctx = _context()
+    if ctx.get_start_method() == "fork" and fork_is_unsafe():
+        return _inline_call(fn, args, phase, seconds, on_part)
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()            # a forked worker must not inherit (and repeat) unwritten output

@@ -32,6 +32,9 @@ import scipy.sparse as sp
 from .base import Backend, Factorization, Forward, OrderHint
 
 _LIB = None
+#: whether this process has called PARDISO (its OpenMP threads then exist: a forked child would hang in
+#: its first call; read by dualfem.experiments.watchdog.fork_is_unsafe)
+STARTED = False
 _ERRORS = {-1: "input inconsistent", -2: "not enough memory", -3: "reordering problem",
            -4: "zero pivot (matrix not positive definite?)", -5: "unclassified internal error",
            -6: "reordering failed", -7: "diagonal matrix is singular", -8: "32-bit integer overflow",
@@ -106,6 +109,8 @@ class PardisoFactorization(Factorization):
         self.maxfct = self.mnum = 1
 
     def _call(self, phase: int, b: np.ndarray, x: np.ndarray, nrhs: int = 1) -> None:
+        global STARTED
+        STARTED = True
         P = ctypes.POINTER
         i32 = ctypes.c_int32
         err = i32(0)
