@@ -229,7 +229,6 @@ def _patch_for_speed(monkeypatch) -> None:
                         f"not run")
 
     monkeypatch.setattr(scene_mod, "build_qp", guarded_build)
-    monkeypatch.setattr("dualfem.cli.compare.build_qp", guarded_build)
     monkeypatch.setattr(compare_mod, "default_solvers", lambda: list(COMPARE_SOLVERS))
     monkeypatch.setattr(bench_mod, "open_store", claimed_only)
 
