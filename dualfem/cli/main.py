@@ -359,10 +359,15 @@ def version() -> str:
 
     try:
         return dist_version("dualfem")
-    except PackageNotFoundError:
-        import dualfem
+    except PackageNotFoundError:     # a source tree that was never installed: the version it declares
+        import tomllib
+        from pathlib import Path
 
-        return str(getattr(dualfem, "__version__", "unknown"))
+        try:
+            meta = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml").read_text("utf-8"))
+            return str(meta["project"]["version"])
+        except (OSError, KeyError, tomllib.TOMLDecodeError):
+            return "unknown"
 
 
 def _import_commands() -> None:
