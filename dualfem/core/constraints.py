@@ -14,7 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from dualfem.core.errors import InputError
-from dualfem.core.laws import Law
+from dualfem.core.laws import CONES, Law
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,3 +93,22 @@ def face(blocks: tuple[Constraint, ...], mu: np.ndarray, gap: np.ndarray, c: flo
     """The stacked mask of every block's active face (:meth:`dualfem.core.laws.Law.face`)."""
     parts = [b.law.face(mk, gk, c) for b, mk, gk in zip(blocks, split(blocks, mu), split(blocks, gap))]
     return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+
+def conic_rows(blocks: tuple[Constraint, ...]) -> list[tuple[str, int]]:
+    """(cone kind, rows) of every block, in block order, from each law's :meth:`dualfem.core.laws.Law.conic`:
+    what a conic backend builds (``G x`` in the cone). InputError for a law without a conic description."""
+    out = []
+    for k, b in enumerate(blocks):
+        kind = b.law.conic()
+        if kind not in CONES:
+            raise InputError(f"the {b.law.name!r} law of constraint block {k} has no conic description "
+                             f"(one of {', '.join(CONES)}), got {kind!r}")
+        out.append((kind, b.m))
+    return out
+
+
+def upper_bounds(blocks: tuple[Constraint, ...]) -> np.ndarray:
+    """Per stacked row, the upper bound of ``G x`` in a box form ``0 <= G x <= u`` (an operator-splitting
+    backend's ``l <= A x <= u``): +inf for a ``nonneg`` row, 0 for a ``zero`` row."""
+    return np.concatenate([np.full(m, np.inf if kind == "nonneg" else 0.0) for kind, m in conic_rows(blocks)])
