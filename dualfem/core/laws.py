@@ -64,6 +64,13 @@ class Law:
         ``c`` converting a gap into a force (1 / mean diagonal of the Delassus matrix)."""
         raise NotImplementedError
 
+    def face_holds(self, mu1: np.ndarray, gap1: np.ndarray, face: np.ndarray, mu_margin: float,
+                   gap_margin: float) -> bool:
+        """Whether the exact point of the face (multipliers ``mu1``, gaps ``gap1``; ``face`` the rows held as
+        equalities) keeps the law's conditions with margins (forces ``mu_margin``, lengths ``gap_margin``):
+        then it is the solution, and the certificate's step to it measures the error."""
+        raise NotImplementedError
+
     def conic(self) -> str | None:
         """The cone (one of :data:`CONES`) that ``G x`` must lie in, or None when the law is not a
         constraint ``G x in cone`` with fixed data (friction: a term of the objective); a conic backend
@@ -103,6 +110,9 @@ class Signorini(Law):
 
     def face(self, mu, gap, c):
         return (np.asarray(mu, float) - c * gap) > 0
+
+    def face_holds(self, mu1, gap1, face, mu_margin, gap_margin):
+        return bool(mu1[face].min(initial=np.inf) > mu_margin and gap1[~face].min(initial=np.inf) > gap_margin)
 
     def conic(self):
         return "nonneg"

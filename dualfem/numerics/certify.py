@@ -255,9 +255,13 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     when mu is already 0 off A).
     """
     nan = (float("nan"), float("nan"))
-    if not _finite(x, mu) or qp.blocks:     # the exact face step is the Signorini block's (D = B K^-1 B')
+    if not _finite(x, mu):
         return nan
     ksolve = ksolve or solver_for(qp)
+    if qp.blocks:                   # several laws: the face step on the stacked G (dualfem.numerics.faces)
+        from dualfem.numerics.faces import blocks_active_set_check
+
+        return blocks_active_set_check(qp, x, mu, ksolve, margin, _Kx)
     mu = np.asarray(mu, float)
     if isinstance(ksolve, KSolver) and _quad is None:
         ksolve.reset_k_error()

@@ -67,7 +67,8 @@ def test_every_solver_solves_or_is_skipped(glued, name):
         assert sol.status == Status.SOLVED, sol.message
         cmp = evaluator.compare(qp, sol.x, sol.multipliers, x_ref, mu_ref)
         assert cmp["x_energy"] < cls.tolerance and cmp["multipliers"] < 10 * cls.tolerance, cmp
-        assert np.isfinite(sol.info["certificate"]["bound"])
+        # the certificate's face step on both laws measures the true error (the bound is only sqrt-tight)
+        assert sol.info["certificate"]["active_set"] < 10 * cmp["x_energy"] + 1e-12, sol.info["certificate"]
     else:
         assert sol.status == Status.SKIPPED
         assert "does not handle the 'bilateral' law" in sol.message and name in sol.message
