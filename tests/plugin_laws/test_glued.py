@@ -74,6 +74,14 @@ def test_every_solver_solves_or_is_skipped(glued, name):
         assert "does not handle the 'bilateral' law" in sol.message and name in sol.message
 
 
+def test_an_instance_narrows_what_it_accepts(glued):
+    qp, _ = glued
+    if solvers()["cvxpy"].missing():
+        pytest.skip("cvxpy is not installed")
+    sol = run("cvxpy", qp, {"solver": "ECOS"})        # untested backend: Signorini only
+    assert sol.status == Status.SKIPPED and "does not handle the 'bilateral' law" in sol.message
+
+
 def test_fully_glued_crack_has_no_signorini_rows():
     qp = glued_qp(signorini=False)
     assert qp.m == 0 and qp.m_total == qp.blocks[0].m
