@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dualfem.core.laws import Law
+from dualfem.laws import Law
 
 
 class Bilateral(Law):

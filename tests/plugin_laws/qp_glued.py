@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 from law_bilateral import Bilateral
 
-from dualfem.core.constraints import Constraint
-from dualfem.core.qp import QP
-from dualfem.core.scene import load_scene
+from dualfem.laws import Constraint
+from dualfem.qp import QP
+from dualfem.scene import load_scene
 
 
 def glued_qp(N: int = 16, every: int = 2, signorini: bool = True) -> QP:

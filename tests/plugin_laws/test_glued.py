@@ -13,13 +13,13 @@ import scipy.sparse.linalg as sla
 from law_bilateral import Bilateral
 from qp_glued import glued_qp
 
-from dualfem.core import evaluator
-from dualfem.core.constraints import Constraint
-from dualfem.core.errors import InputError
-from dualfem.core.qp import QP
-from dualfem.core.registry import solvers
-from dualfem.core.solution import Status
-from dualfem.experiments.runner import run
+from dualfem import evaluator
+from dualfem.errors import InputError
+from dualfem.laws import Constraint
+from dualfem.qp import QP
+from dualfem.registry import solvers
+from dualfem.runner import run
+from dualfem.solution import Status
 
 
 def kkt_reference(qp: QP) -> tuple[np.ndarray, np.ndarray]:

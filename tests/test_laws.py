@@ -1,0 +1,126 @@
+"""Constraint laws and blocks in the core (dualfem.core.laws, dualfem.core.constraints): today's QPs are one
+Signorini block, the law's methods are exactly the formulas the evaluator and the certificate used, further
+blocks are validated, stacked, hashed, guarded and fingerprinted, and a solver never runs on a law it does not
+accept. The toy bilateral law through every solver: tests/plugin_laws."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from dualfem.core import constraints
+from dualfem.core.errors import InputError
+from dualfem.core.laws import SIGNORINI, Law, Signorini
+from dualfem.core.qp import QP
+from dualfem.core.solver import Solver, unhandled_law
+from dualfem.experiments.runner import fingerprint, guarded_view
+from dualfem.laws import Constraint
+
+
+class Glue(Law):
+    name = "glue"
+
+    def project(self, mu, weights=None, mus=()):
+        return mu
+
+    def primal(self, gap):
+        return float(np.abs(gap).max(initial=0.0))
+
+    def dual(self, mu, weights=None, mus=()):
+        return 0.0
+
+    def complementarity(self, mu_s, gap_s):
+        return np.zeros_like(mu_s)
+
+    def support(self, mu, gap, weights=None, mus=()):
+        return float(mu @ gap)
+
+    def face(self, mu, gap, c):
+        return np.ones(mu.shape, bool)
+
+    def conic(self):
+        return "zero"
+
+
+def _qp(blocks=()):
+    K = sp.diags([2.0, 3.0, 4.0]).tocsc()
+    return QP(K=K, F=np.array([1.0, -1.0, 2.0]), B=sp.csr_matrix([[1.0, 0, 0]]), weights=[0.5], blocks=blocks)
+
+
+def test_a_qp_is_one_signorini_block_of_its_b_and_weights():
+    qp = _qp()
+    (block,) = qp.constraints
+    assert block.G is qp.B and block.weights is qp.weights and block.law is SIGNORINI
+    assert qp.G is qp.B and qp.m_total == qp.m == 1 and qp.blocks == ()
+
+
+def test_signorini_is_exactly_the_formulas_it_replaced():
+    rng = np.random.default_rng(3)
+    mu, gap = rng.standard_normal(40), rng.standard_normal(40)
+    law = Signorini()
+    assert law.primal(gap) == max(0.0, -gap.min(initial=0.0)) and law.dual(mu) == max(0.0, -mu.min(initial=0.0))
+    assert np.array_equal(law.project(mu), np.maximum(mu, 0.0))
+    assert np.array_equal(law.complementarity(mu, gap), np.abs(mu * gap))
+    assert law.support(mu, gap) == float(mu @ gap) and law.conic() == "nonneg"
+    assert np.array_equal(law.face(mu, gap, 2.0), mu - 2.0 * gap > 0)
+    assert law.face_holds(np.array([1.0, 0.0]), np.array([0.0, 1.0]), np.array([True, False]), 0.5, 0.5)
+    assert not law.face_holds(np.array([0.4, 0.0]), np.array([0.0, 1.0]), np.array([True, False]), 0.5, 0.5)
+    assert law == SIGNORINI and law != Glue()
+
+
+def test_further_blocks_are_stacked_split_and_projected():
+    qp = _qp((Constraint.make(sp.csr_matrix([[0, 1.0, -1.0]]), None, Glue()),))
+    assert qp.m == 1 and qp.m_total == 2 and [b.law.name for b in qp.constraints] == ["signorini", "glue"]
+    assert np.array_equal(qp.G.toarray(), [[1, 0, 0], [0, 1, -1]])
+    mu = np.array([-1.0, -2.0])
+    assert np.array_equal(constraints.project(qp.constraints, mu), [0.0, -2.0])   # each law its own dual set
+    assert [list(v) for v in constraints.split(qp.constraints, mu)] == [[-1.0], [-2.0]]
+    assert constraints.conic_rows(qp.constraints) == [("nonneg", 1), ("zero", 1)]
+    assert np.array_equal(constraints.upper_bounds(qp.constraints), [np.inf, 0.0])
+    assert qp.key() != _qp().key()
+
+
+def test_a_bad_block_is_refused_with_its_law_named():
+    with pytest.raises(InputError, match="glue block's G must have 3 columns"):
+        _qp((Constraint.make(sp.csr_matrix([[0, 1.0]]), None, Glue()),))
+    with pytest.raises(InputError, match="glue block's weights must be > 0"):
+        _qp((Constraint.make(sp.csr_matrix([[0, 1.0, 0]]), [-1.0], Glue()),))
+    with pytest.raises(InputError, match="must be dualfem.core.constraints.Constraint"):
+        _qp(("not a block",))
+
+
+def test_a_law_without_a_conic_description_is_refused_by_a_conic_backend():
+    class Friction(Glue):
+        name = "friction"
+
+        def conic(self):
+            return None
+
+    with pytest.raises(InputError, match="'friction' law of constraint block 1 has no conic description"):
+        constraints.conic_rows(_qp((Constraint.make(sp.csr_matrix([[0, 1.0, 0]]), None, Friction()),)).constraints)
+
+
+def test_the_runner_guards_and_fingerprints_further_blocks():
+    qp = _qp((Constraint.make(sp.csr_matrix([[0, 1.0, -1.0]]), None, Glue()),))
+    view = guarded_view(qp)
+    with pytest.raises(ValueError, match="read-only"):
+        view.blocks[0].G.data[0] = 5.0
+    before = fingerprint(qp)
+    assert "blocks" in before and "blocks" not in fingerprint(_qp())      # today's QPs: the same record as before
+    qp.blocks[0].G.data[0] = 5.0
+    assert fingerprint(qp)["blocks"] != before["blocks"]
+
+
+def test_accepts_defaults_to_signorini_and_names_the_law():
+    class Plain(Solver):
+        name = "plain"
+
+    class Both(Solver):
+        name = "both"
+        accepts = ("signorini", "glue")
+
+    glued = _qp((Constraint.make(sp.csr_matrix([[0, 1.0, -1.0]]), None, Glue()),))
+    assert Plain.accepts == ("signorini",) and unhandled_law(Plain, _qp()) is None
+    why = unhandled_law(Plain, glued)
+    assert "does not handle the 'glue' law of constraint block 1 (it accepts: 'signorini')" in why
+    assert unhandled_law(Both, glued) is None
