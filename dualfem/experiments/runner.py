@@ -499,7 +499,7 @@ def summary(qp: QP, sol: Solution) -> dict:
             "max_jump": float(jump.max(initial=0.0)),
             "n_contact": int(evaluator.contact_set(qp, sol.x).sum()),
             "contact_rtol": evaluator.CONTACT_RTOL,
-            "total_contact_force": float(np.sum(sol.multipliers)),
+            "total_contact_force": float(np.sum(sol.multipliers[:qp.m])),     # the Signorini block's
             "residuals": evaluator.kkt_residuals(sol.residuals),
             "stationarity_raw": sol.residuals.get("stationarity_raw"),
         })
