@@ -29,11 +29,17 @@ class Glue(Law):
     def dual(self, mu, weights=None, mus=()):
         return 0.0
 
-    def complementarity(self, mu_s, gap_s):
+    def complementarity(self, mu_s, gap_s, weights=None, fs=1.0, mus=()):
         return np.zeros_like(mu_s)
 
     def support(self, mu, gap, weights=None, mus=()):
         return float(mu @ gap)
+
+    def energy(self, gap, weights=None):
+        return 0.0                      # a constraint: no term of the objective
+
+    def complementary(self, mu, gap, weights=None, mus=()):
+        return np.asarray(mu, float)    # an equality row: any force is complementary
 
     def face(self, mu, gap, c):
         return np.ones(mu.shape, bool)
@@ -124,3 +130,70 @@ def test_accepts_defaults_to_signorini_and_names_the_law():
     why = unhandled_law(Plain, glued)
     assert "does not handle the 'glue' law of constraint block 1 (it accepts: 'signorini')" in why
     assert unhandled_law(Both, glued) is None
+
+
+class Tresca(Law):
+    """Tresca friction in 2D (a box per node, |mu_j| <= g w_j), written against the Law interface only."""
+
+    name = "tresca"
+
+    def __init__(self, g: float, normal: int | None = None):
+        self.g, self.normal = g, normal
+
+    def bound(self, weights, mus):     # Coulomb (normal set): the radius is the normal multiplier times g
+        return self.g * (weights if self.normal is None else np.maximum(mus[self.normal], 0.0))
+
+    def project(self, mu, weights=None, mus=()):
+        b = self.bound(weights, mus)
+        return np.clip(mu, -b, b)
+
+    def primal(self, gap):
+        return 0.0
+
+    def dual(self, mu, weights=None, mus=()):
+        return float(np.maximum(np.abs(mu) - self.bound(weights, mus), 0.0).max(initial=0.0))
+
+    def complementarity(self, mu_s, gap_s, weights=None, fs=1.0, mus=()):
+        return np.abs(self.bound(weights, mus) / fs * np.abs(gap_s) + mu_s * gap_s)
+
+    def energy(self, gap, weights=None):
+        return float(self.g * weights @ np.abs(gap)) if self.normal is None else 0.0
+
+    def support(self, mu, gap, weights=None, mus=()):
+        return float(self.bound(weights, mus) @ np.abs(gap) + mu @ gap)
+
+    def face(self, mu, gap, c):        # stick: the trial force inside the box
+        return np.abs(mu - c * gap) < self.g * np.ones_like(mu) if self.normal is None else np.zeros(mu.shape, bool)
+
+    def complementary(self, mu, gap, weights=None, mus=()):
+        return -np.sign(gap) * self.bound(weights, mus)
+
+    def face_holds(self, mu1, gap1, face, mu_margin, gap_margin):
+        return bool(np.all(-np.sign(mu1[~face]) * gap1[~face] > gap_margin))
+
+
+def _friction_qp(law: Tresca, f: float = 3.0, p: float = 2.0) -> QP:
+    """x = (x_n, x_t), K = I, F = (-p, f): pushed into contact (mu_n = p), pulled tangentially by f."""
+    return QP(K=sp.identity(2, format="csc"), F=np.array([-p, f]), B=sp.csr_matrix([[1.0, 0.0]]), weights=[1.0],
+              blocks=(Constraint.make(sp.csr_matrix([[0.0, 1.0]]), [1.0], law),))
+
+
+@pytest.mark.parametrize("law", [Tresca(0.5), Tresca(0.5, normal=0)], ids=["tresca", "coulomb"])
+def test_friction_laws_fit_the_interface_without_a_core_change(law):
+    from dualfem.core import evaluator
+    from dualfem.numerics.certify import certified_error
+
+    qp = _friction_qp(law)          # sliding: |f| = 3 > bound (0.5 or 0.5 mu_n = 1): mu_t = -bound, x_t = f - bound
+    bound = 0.5 if law.normal is None else 1.0
+    x, mu = np.array([0.0, 3.0 - bound]), np.array([2.0, -bound])
+    assert evaluator.kkt_error(evaluator.residuals(qp, x, mu)) < 1e-15
+    frictionless = evaluator.residuals(qp, np.array([0.0, 3.0]), np.array([2.0, 0.0]))
+    assert frictionless["complementarity"] > 0.1 and frictionless["stationarity"] == 0.0
+    assert evaluator.residuals(qp, x, np.array([2.0, -2 * bound]))["dual"] > 0.1
+    if law.normal is None:
+        assert evaluator.residuals(qp, x, mu)["energy"] == pytest.approx(0.5 * x @ x - qp.F @ x + 0.5 * x[1])
+        xp = x + np.array([0.0, 1e-3])
+        cert = certified_error(qp, xp, mu)            # the face step measures the error |xp - x|_K = 1e-3
+        assert cert["active_set"] == pytest.approx(1e-3 / evaluator.size_energy(qp, xp), rel=1e-6)
+        assert cert["bound"] >= cert["active_set"]
+    assert "does not handle the 'tresca' law" in unhandled_law(Solver, qp)

@@ -162,10 +162,15 @@ def _frame(qp: QP, x, mu, Kx, F, h) -> dict:
     gap = G @ x if h is None else G @ x - h
     r = np.abs(Kx - F - Bmu)
     mus, gaps, scaled = tuple(split(blocks, mu)), split(blocks, gap), split(blocks, mu / fs)
-    parts = [b.law.complementarity(ms, gs) for b, ms, gs in zip(blocks, scaled, split(blocks, gap / ls))]
+    parts = [b.law.complementarity(ms, gs, b.weights, fs, mus)
+             for b, ms, gs in zip(blocks, scaled, split(blocks, gap / ls))]
     comp = parts[0] if len(parts) == 1 else np.concatenate(parts)
     if comp.size and comp.max() > 0:
-        comp = np.minimum(comp, np.abs(mu) * _row_max(G) / fs)
+        if qp.blocks:                    # the distance to each law's complementary multipliers (0 for Signorini)
+            nu = np.concatenate([b.law.complementary(mk, gk, b.weights, mus) for b, mk, gk in zip(blocks, mus, gaps)])
+            comp = np.minimum(comp, np.abs(mu - nu) * _row_max(G) / fs)
+        else:
+            comp = np.minimum(comp, np.abs(mu) * _row_max(G) / fs)
     return {
         "stationarity": _beyond_floor(qp, x, mu, F, r, fs) / fs,
         "stationarity_raw": float(r.max(initial=0.0) / fs),
@@ -191,6 +196,8 @@ def residuals(qp: QP, x: np.ndarray, multipliers: np.ndarray) -> dict:
     Kx = qp.K @ x                        # the one product with K (two for a shifted QP)
     out = _frame(qp, x, mu, Kx, qp.F, None)
     energy = qp.energy(x, Kx)
+    if qp.blocks:                        # a law's own objective term (friction's sum g w |gap|; 0 for constraints)
+        energy += sum(b.law.energy(g, b.weights) for b, g in zip(qp.constraints, split(qp.constraints, qp.G @ x)))
     objective = energy
     uf = user_frame(qp, x)
     if uf is not None:
@@ -198,7 +205,7 @@ def residuals(qp: QP, x: np.ndarray, multipliers: np.ndarray) -> dict:
         Ky = qp.K @ y
         user = _frame(qp, y, mu, Ky, Fu, hu)
         out = {k: max(v, user[k]) for k, v in out.items()}
-        objective = float(0.5 * y @ Ky - Fu @ y)
+        objective = float(0.5 * y @ Ky - Fu @ y) + (energy - qp.energy(x, Kx) if qp.blocks else 0.0)
     return {**out, "energy": energy, "objective": objective, "finite": True}
 
 

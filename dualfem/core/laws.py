@@ -49,9 +49,16 @@ class Law:
         """The largest violation of the dual set by ``mu`` (forces; 0 inside)."""
         raise NotImplementedError
 
-    def complementarity(self, mu_s: np.ndarray, gap_s: np.ndarray) -> np.ndarray:
+    def complementarity(self, mu_s: np.ndarray, gap_s: np.ndarray, weights: np.ndarray | None = None,
+                        fs: float = 1.0, mus: tuple = ()) -> np.ndarray:
         """Per-row complementarity violation from the scaled ``mu_s = mu / f_s`` and ``gap_s = gap / l_s``
-        (dimensionless; the evaluator takes the smaller of it and the force the row carries)."""
+        (dimensionless; the evaluator takes the smaller of it and the force the row carries). ``fs``: the force
+        scale, for a law whose dual set has a size of its own (Tresca's bound g w / f_s); ``mus`` unscaled."""
+        raise NotImplementedError
+
+    def energy(self, gap: np.ndarray, weights: np.ndarray) -> float:
+        """The law's term of the objective at ``gap`` (energy; 0 for a constraint such as Signorini, whose
+        indicator is 0 on the feasible set; ``sum_j g w_j |gap_j|`` for Tresca friction)."""
         raise NotImplementedError
 
     def support(self, mu: np.ndarray, gap: np.ndarray, weights: np.ndarray, mus: tuple = ()) -> float:
@@ -62,6 +69,13 @@ class Law:
     def face(self, mu: np.ndarray, gap: np.ndarray, c: float) -> np.ndarray:
         """Boolean mask of the rows held as equalities by the certificate's exact step (the active face),
         ``c`` converting a gap into a force (1 / mean diagonal of the Delassus matrix)."""
+        raise NotImplementedError
+
+    def complementary(self, mu: np.ndarray, gap: np.ndarray, weights: np.ndarray, mus: tuple = ()) -> np.ndarray:
+        """The multipliers (forces) that make each row complementary at its ``gap``: 0 for an open Signorini
+        row, ``-g w sign(gap)`` for a sliding Tresca row. The certificate's step holds the rows off the face
+        at them, and the evaluator's complementarity of a row is at most ``|mu - complementary| |g_j|_inf /
+        f_s`` (the stationarity residual that moving mu there would cost)."""
         raise NotImplementedError
 
     def face_holds(self, mu1: np.ndarray, gap1: np.ndarray, face: np.ndarray, mu_margin: float,
@@ -102,14 +116,20 @@ class Signorini(Law):
     def dual(self, mu, weights=None, mus=()):
         return max(0.0, -mu.min(initial=0.0))
 
-    def complementarity(self, mu_s, gap_s):
+    def complementarity(self, mu_s, gap_s, weights=None, fs=1.0, mus=()):
         return np.abs(mu_s * gap_s)
+
+    def energy(self, gap, weights=None):
+        return 0.0
 
     def support(self, mu, gap, weights=None, mus=()):
         return float(mu @ gap)
 
     def face(self, mu, gap, c):
         return (np.asarray(mu, float) - c * gap) > 0
+
+    def complementary(self, mu, gap, weights=None, mus=()):
+        return np.zeros(np.shape(mu))
 
     def face_holds(self, mu1, gap1, face, mu_margin, gap_margin):
         return bool(mu1[face].min(initial=np.inf) > mu_margin and gap1[~face].min(initial=np.inf) > gap_margin)

@@ -3,7 +3,8 @@
 The same measurement as :func:`dualfem.numerics.certify.active_set_check` (read its docstring: one exact
 Newton step onto the face the laws guess, verified when the exact point of that face keeps every law's
 conditions with margins larger than the step), on the stacked operator ``G`` of all blocks, with each
-block's law deciding its face (:meth:`dualfem.core.laws.Law.face`) and whether the exact point holds
+block's law deciding its face (:meth:`dualfem.core.laws.Law.face`), the multipliers it holds off the face
+(:meth:`dualfem.core.laws.Law.complementary`) and whether the exact point holds
 (:meth:`dualfem.core.laws.Law.face_holds`). The Delassus matrix ``D = G K^-1 G'`` is formed densely from
 ``m_total`` K-solves (exact factorizations only: with AMG K-solves no value is claimed), up to
 :data:`MAX_ROWS` rows.
@@ -40,7 +41,9 @@ def blocks_active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, margi
     dD = np.diag(D)
     c = 1.0 / dD.mean() if dD.size and dD.mean() > 0 else 1.0
     A = constraints.face(blocks, mu, gap, c)
-    mu_A = np.where(A, mu, 0.0)
+    mus, gaps = tuple(constraints.split(blocks, mu)), constraints.split(blocks, gap)
+    held = [b.law.complementary(mk, gk, b.weights, mus) for b, mk, gk in zip(blocks, mus, gaps)]
+    mu_A = np.where(A, mu, np.concatenate(held) if held else mu)
     r = (qp.K @ x if Kx is None else Kx) - qp.F - G.T @ mu_A
     z = ksolve(r)
     rKr, Gz = float(r @ z), G @ z

@@ -25,11 +25,17 @@ class Bilateral(Law):
     def dual(self, mu, weights=None, mus=()):
         return 0.0
 
-    def complementarity(self, mu_s, gap_s):
+    def complementarity(self, mu_s, gap_s, weights=None, fs=1.0, mus=()):
         return np.zeros_like(mu_s)      # an equality: its violation is the primal residual
 
     def support(self, mu, gap, weights=None, mus=()):
         return float(mu @ gap)          # 0 at a feasible gap (G x = 0)
+
+    def energy(self, gap, weights=None):
+        return 0.0                      # a constraint: no term of the objective
+
+    def complementary(self, mu, gap, weights=None, mus=()):
+        return np.asarray(mu, float)    # an equality row: any force is complementary
 
     def face(self, mu, gap, c):
         return np.ones(np.shape(mu), bool)
