@@ -21,6 +21,13 @@ keeps strict complementarity with margins larger than the step (mu_A > 10 |dmu|,
 gaps > 10 |B dx|), A is the true active set and |dx|_K / |x|_K estimates the error to first
 order. :func:`certified_error` returns both and their minimum.
 
+**Constraint laws** (:mod:`dualfem.core.laws`): the formulas above are the Signorini law's; in the code
+``mu`` is projected by each block's law (``max(mu, 0)`` for Signorini), feasibility is the law's primal
+residual and ``mu'Bx`` is the sum of the laws' support terms (``Law.support``), on the stacked ``qp.G``; the
+active set is the law's face (``Law.face``). A QP with further blocks gets the face step of
+:mod:`dualfem.numerics.faces`; the duplicated-row handling and :func:`infeasible_bound` are the Signorini
+block's (nan with further blocks).
+
 **Dependent rows** (non-unique multipliers are normal): duplicated rows (positive multiples of one
 another, :func:`parallel_rows`) are one constraint, judged by the force of the group; a row off A whose
 normal is a combination of A's (:func:`_implied_rows`) has gap 0 at the exact point by construction and
