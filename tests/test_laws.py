@@ -71,7 +71,9 @@ def test_signorini_is_exactly_the_formulas_it_replaced():
     assert np.array_equal(law.face(mu, gap, 2.0), mu - 2.0 * gap > 0)
     assert law.face_holds(np.array([1.0, 0.0]), np.array([0.0, 1.0]), np.array([True, False]), 0.5, 0.5)
     assert not law.face_holds(np.array([0.4, 0.0]), np.array([0.0, 1.0]), np.array([True, False]), 0.5, 0.5)
-    assert law == SIGNORINI and law != Glue()
+    assert law == SIGNORINI and law != Glue() and Tresca(0.5) == Tresca(0.5) != Tresca(1.0)
+    per_node = Tresca(np.array([0.5, 1.0]))
+    assert per_node == per_node and per_node != Tresca(np.array([0.5, 1.0]))
 
 
 def test_further_blocks_are_stacked_split_and_projected():

@@ -95,7 +95,11 @@ class Law:
         return f"{type(self).__name__}()"
 
     def __eq__(self, other: object) -> bool:
-        return type(other) is type(self) and vars(other) == vars(self)
+        """Equal: the same class with equal parameters (a law with array parameters: only itself)."""
+        try:
+            return type(other) is type(self) and bool(vars(other) == vars(self))
+        except ValueError:          # array-valued parameters: their comparison has no single truth value
+            return other is self
 
     def __hash__(self) -> int:
         return hash(type(self))
