@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from dualfem.core.constraints import conic_rows
 from dualfem.core.errors import InputError
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
@@ -55,6 +56,8 @@ class ClarabelSolver(Solver):
 
     name = "clarabel"
     family = "interior point"
+    #: the bilateral law (G x = 0, mu free) through Clarabel's zero cone (conic_rows); tested in tests/plugin_laws
+    accepts = ("signorini", "bilateral")
     description = "Clarabel (interior point, Rust) via its Python interface"
     requires = ("clarabel",)
     # measured: at delta = 1e-9 Clarabel stops 'Solved' with x off by ~5e-6 (energy norm) from the
@@ -111,8 +114,9 @@ class ClarabelSolver(Solver):
         for k in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
             setattr(settings, k, self.params["tol"])
         self._scaled = s = scale(qp, self.params["scale"])
-        self._solver = clarabel.DefaultSolver(sp.triu(s.P, format="csc"), s.q, (-s.A).tocsc(), np.zeros(qp.m),
-                                              [clarabel.NonnegativeConeT(qp.m)], settings)
+        cone = {"nonneg": clarabel.NonnegativeConeT, "zero": clarabel.ZeroConeT}
+        self._solver = clarabel.DefaultSolver(sp.triu(s.P, format="csc"), s.q, (-s.A).tocsc(), np.zeros(qp.m_total),
+                                              [cone[kind](m) for kind, m in conic_rows(qp.constraints)], settings)
 
     def solve(self) -> Solution:
         sol = self._solver.solve()
@@ -120,7 +124,7 @@ class ClarabelSolver(Solver):
         status = _STATUS.get(name, Status.ERROR)
         x, z = self._scaled.unscale(np.array(sol.x), np.array(sol.z))
         info = {}
-        if self.params["polish"] and status == Status.SOLVED:
+        if self.params["polish"] and status == Status.SOLVED and not self.qp.blocks:   # the polish is Signorini's
             x, z, info = polish_if_better(self.qp, x, z)
         return Solution(
             solver=self.name, status=status, x=x, multipliers=z,

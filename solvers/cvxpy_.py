@@ -32,6 +32,7 @@ import warnings
 
 import numpy as np
 
+from dualfem.core.constraints import conic_rows
 from dualfem.core.errors import InputError
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.core.registry import register_solver
@@ -88,6 +89,10 @@ class CvxpySolver(Solver):
 
     name = "cvxpy"
     family = "interior point"
+    #: the bilateral law (G x = 0, mu free) as cvxpy equality rows (conic_rows), with the default backend
+    #: CLARABEL only (tests/plugin_laws; the Signorini polish does not apply, so an instance with another
+    #: backend accepts Signorini only: :meth:`validate`)
+    accepts = ("signorini", "bilateral")
     description = "cvxpy with a chosen backend (CLARABEL, OSQP, SCS, ... as installed)"
     requires = ("cvxpy",)
     tolerance = BACKEND_TOLERANCE["CLARABEL"]
@@ -117,6 +122,7 @@ class CvxpySolver(Solver):
                                  f"backend ({', '.join(installed)}), got {backend!r}")
         # an instance promises what its backend (and the polish) can deliver
         self.tolerance = 1e-8 if self.params["polish"] else BACKEND_TOLERANCE.get(backend, _DEFAULT_TOLERANCE)
+        self.accepts = type(self).accepts if backend == "CLARABEL" else ("signorini",)
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -146,7 +152,12 @@ class CvxpySolver(Solver):
         self._scaled = s = scale(qp, self.params["scale"])
         y = cp.Variable(qp.n)
         P = sp.csc_matrix(0.5 * (s.P + s.P.T))
-        self._cons = [s.A @ y >= 0]
+        self._eq = None
+        if qp.blocks:       # further blocks: 'nonneg' rows as A y >= 0, 'zero' rows as A y == 0 (conic_rows)
+            self._eq = eq = np.concatenate([np.full(m, kind == "zero") for kind, m in conic_rows(qp.constraints)])
+            self._cons = [s.A[np.flatnonzero(~eq)] @ y >= 0, s.A[np.flatnonzero(eq)] @ y == 0]
+        else:
+            self._cons = [s.A @ y >= 0]
         self._prob = cp.Problem(cp.Minimize(0.5 * cp.quad_form(y, cp.psd_wrap(P)) + s.q @ y), self._cons)
         self._y = y
 
@@ -169,6 +180,8 @@ class CvxpySolver(Solver):
         text = str(self._prob.status)
         status = _STATUS.get(text, Status.ERROR)
         yv, nu = self._y.value, self._cons[0].dual_value
+        if self._eq is not None:
+            nu = _stacked(self._eq, self._cons)
         stats = self._prob.solver_stats
         iters = {"backend": int(stats.num_iters)} if stats is not None and stats.num_iters is not None else {}
         info = {"backend": backend, "cvxpy_status": text,
@@ -178,7 +191,7 @@ class CvxpySolver(Solver):
                             iterations=iters, message=f"cvxpy/{backend}: {text} (no solution returned)", info=info)
         x, mu = self._scaled.unscale(np.asarray(yv, float).ravel(), np.asarray(nu, float).ravel())
         msg = f"cvxpy/{backend}: {text}"
-        if self.params["polish"] and status in (Status.SOLVED, Status.INACCURATE):
+        if self.params["polish"] and status in (Status.SOLVED, Status.INACCURATE) and self._eq is None:
 
             try:
                 pol = active_set_polish(self.qp, x, mu)
@@ -196,3 +209,15 @@ class CvxpySolver(Solver):
                 msg += "; active-set polish inconsistent: unpolished backend answer kept"
         return Solution(solver=self.name, status=status, x=x, multipliers=mu, iterations=iters,
                         message=msg, info=info)
+
+
+def _stacked(eq: np.ndarray, cons: list) -> np.ndarray | None:
+    """The scaled multipliers of every row in block order from cvxpy's duals of ``A_in y >= 0`` (>= 0) and of
+    ``A_eq y == 0`` (cvxpy: P y + q = A_in' d_in - A_eq' d_eq, so nu_eq = -d_eq); None when cvxpy gave none."""
+    d_in, d_eq = cons[0].dual_value, cons[1].dual_value
+    if d_eq is None or ((~eq).any() and d_in is None):
+        return None
+    nu = np.zeros(eq.size)
+    nu[~eq] = np.asarray(d_in, float).ravel() if (~eq).any() else 0.0
+    nu[eq] = -np.asarray(d_eq, float).ravel()
+    return nu

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from dualfem.core.constraints import upper_bounds
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.core.registry import register_solver
 from dualfem.core.solution import Solution, Status
@@ -45,6 +46,8 @@ class OSQPSolver(Solver):
 
     name = "osqp"
     family = "first-order"
+    #: the bilateral law (G x = 0, mu free) as rows with l = u = 0 (upper_bounds); tested in tests/plugin_laws
+    accepts = ("signorini", "bilateral")
     description = "OSQP 1.x (ADMM) via its Python interface"
     requires = ("osqp",)
     tolerance = 1e-3
@@ -86,8 +89,8 @@ class OSQPSolver(Solver):
         settings.update(eps_abs=self.params["tol"], eps_rel=self.params["tol"], polishing=self.params["polish"])
         self._solver = osqp.OSQP()
         with c_stdout_to_stderr():
-            self._solver.setup(P=sp.triu(s.P, format="csc"), q=s.q, A=s.A.tocsc(), l=np.zeros(qp.m),
-                               u=np.full(qp.m, np.inf), **settings)
+            self._solver.setup(P=sp.triu(s.P, format="csc"), q=s.q, A=s.A.tocsc(), l=np.zeros(qp.m_total),
+                               u=upper_bounds(qp.constraints), **settings)
 
     def solve(self) -> Solution:
         with c_stdout_to_stderr():

@@ -15,6 +15,11 @@ works in MPa/mm and in Pa/m alike:
 ``complementarity`` max_j min(|mu_j (Bx)_j| / (f_s l_s), |mu_j| |b_j|_inf / f_s), b_j row j of B
 ==================  =====================================================
 
+The table states the Signorini law (``Bx >= 0``, ``mu >= 0``) of today's QPs; with several constraint blocks
+(:attr:`dualfem.core.qp.QP.constraints`) ``B`` is the stacked ``qp.G``, mu the concatenated multipliers, and
+primal, dual and the complementarity product are each block's law's own (:mod:`dualfem.core.laws`), the
+largest over the blocks.
+
 **Complementarity of an inactive row** is the smaller of the scaled product and the force the row carries
 (``|mu_j| |b_j|_inf / f_s``: setting mu_j to 0 makes that row exactly complementary and moves the
 stationarity residual by that much, in its own scale). A far inactive row (a big-M bound x >= -1e4 with
@@ -52,6 +57,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from dualfem.core.constraints import split
 from dualfem.core.qp import QP
 
 TINY = 1e-300
@@ -104,7 +110,7 @@ def user_frame(qp: QP, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     if shift is None or s is None:
         return None
     Fu = s.load if s.load is not None and s.load.shape == shift.shape else qp.F + qp.K @ shift
-    hu = s.rhs if s.rhs is not None and s.rhs.shape == (qp.m,) else qp.B @ shift
+    hu = s.rhs if s.rhs is not None and s.rhs.shape == (qp.m_total,) else qp.G @ shift
     if not np.any(Fu) and hu.max(initial=0.0) <= 0.0:
         return None           # no load, origin feasible: the user's solution is y = 0, no relative scale
     return x + shift, Fu, hu
@@ -139,27 +145,37 @@ def _beyond_floor(qp: QP, x, mu, F, r, fs) -> float:
     rows = np.flatnonzero(r > 64.0 * EPS * fs)
     if rows.size == 0:
         return float(r.max(initial=0.0))
-    s = (abs_product(qp.K, np.abs(x)) + np.abs(F) + abs_product(qp.B.T, np.abs(mu)))[rows]
+    s = (abs_product(qp.K, np.abs(x)) + np.abs(F) + abs_product(qp.G.T, np.abs(mu)))[rows]
     excess = np.maximum(r[rows] - ROUNDING_C * EPS * s, 0.0).max(initial=0.0)
     rest = np.delete(r, rows).max(initial=0.0) if rows.size < r.size else 0.0
     return float(max(excess, rest))
 
 
 def _frame(qp: QP, x, mu, Kx, F, h) -> dict:
-    """The residuals of (x, mu) for ``min 1/2 x'Kx - F'x s.t. Bx >= h`` (module docstring)."""
-    Bmu = qp.B.T @ mu
+    """The residuals of (x, mu) for ``min 1/2 x'Kx - F'x s.t. G x - h`` in each block's law (module
+    docstring): the primal, dual and complementarity terms are the laws' own
+    (:mod:`dualfem.core.laws`), the largest over the blocks."""
+    G, blocks = qp.G, qp.constraints
+    Bmu = G.T @ mu
     fs = max(np.abs(F).max(initial=0.0), np.abs(Kx).max(initial=0.0), np.abs(Bmu).max(initial=0.0), TINY)
     ls = max(float(np.abs(x).max(initial=0.0)), load_length(qp, F), TINY)
-    gap = qp.B @ x if h is None else qp.B @ x - h
+    gap = G @ x if h is None else G @ x - h
     r = np.abs(Kx - F - Bmu)
-    comp = np.abs((mu / fs) * (gap / ls))
+    mus, gaps, scaled = tuple(split(blocks, mu)), split(blocks, gap), split(blocks, mu / fs)
+    parts = [b.law.complementarity(ms, gs, b.weights, fs, mus)
+             for b, ms, gs in zip(blocks, scaled, split(blocks, gap / ls))]
+    comp = parts[0] if len(parts) == 1 else np.concatenate(parts)
     if comp.size and comp.max() > 0:
-        comp = np.minimum(comp, np.abs(mu) * _row_max(qp.B) / fs)
+        if qp.blocks:                    # the distance to each law's complementary multipliers (0 for Signorini)
+            nu = np.concatenate([b.law.complementary(mk, gk, b.weights, mus) for b, mk, gk in zip(blocks, mus, gaps)])
+            comp = np.minimum(comp, np.abs(mu - nu) * _row_max(G) / fs)
+        else:
+            comp = np.minimum(comp, np.abs(mu) * _row_max(G) / fs)
     return {
         "stationarity": _beyond_floor(qp, x, mu, F, r, fs) / fs,
         "stationarity_raw": float(r.max(initial=0.0) / fs),
-        "primal": float(max(0.0, -gap.min(initial=0.0)) / ls),
-        "dual": float(max(0.0, -mu.min(initial=0.0)) / fs),
+        "primal": float(max(b.law.primal(g) for b, g in zip(blocks, gaps)) / ls),
+        "dual": float(max(b.law.dual(mk, b.weights, mus) for b, mk in zip(blocks, mus)) / fs),
         "complementarity": float(comp.max(initial=0.0)),
     }
 
@@ -171,8 +187,8 @@ def residuals(qp: QP, x: np.ndarray, multipliers: np.ndarray) -> dict:
     constant)."""
     x = np.asarray(x, dtype=float)
     mu = np.asarray(multipliers, dtype=float)
-    if x.shape != (qp.n,) or mu.shape != (qp.m,):
-        raise ValueError(f"x must have length {qp.n} and multipliers length {qp.m}")
+    if x.shape != (qp.n,) or mu.shape != (qp.m_total,):
+        raise ValueError(f"x must have length {qp.n} and multipliers length {qp.m_total}")
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(mu))):
         nan = float("nan")
         return {"stationarity": nan, "stationarity_raw": nan, "primal": nan, "dual": nan,
@@ -180,6 +196,8 @@ def residuals(qp: QP, x: np.ndarray, multipliers: np.ndarray) -> dict:
     Kx = qp.K @ x                        # the one product with K (two for a shifted QP)
     out = _frame(qp, x, mu, Kx, qp.F, None)
     energy = qp.energy(x, Kx)
+    if qp.blocks:                        # a law's own objective term (friction's sum g w |gap|; 0 for constraints)
+        energy += sum(b.law.energy(g, b.weights) for b, g in zip(qp.constraints, split(qp.constraints, qp.G @ x)))
     objective = energy
     uf = user_frame(qp, x)
     if uf is not None:
@@ -187,7 +205,7 @@ def residuals(qp: QP, x: np.ndarray, multipliers: np.ndarray) -> dict:
         Ky = qp.K @ y
         user = _frame(qp, y, mu, Ky, Fu, hu)
         out = {k: max(v, user[k]) for k, v in out.items()}
-        objective = float(0.5 * y @ Ky - Fu @ y)
+        objective = float(0.5 * y @ Ky - Fu @ y) + (energy - qp.energy(x, Kx) if qp.blocks else 0.0)
     return {**out, "energy": energy, "objective": objective, "finite": True}
 
 

@@ -31,8 +31,10 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from dualfem.core.constraints import Constraint, stack
 from dualfem.core.errors import InputError
 from dualfem.core.io import atomic_write
+from dualfem.core.laws import SIGNORINI
 from dualfem.core.parts import GeometryPart, LocalPart, MaterialPart, ShiftPart, UnitsPart
 from dualfem.core.qpfile import VECTOR_MAPS, check_maps, check_params, coo_from_arrays, export_matrix, read_arrays  # noqa: F401  (they lived here: still importable)
 
@@ -94,6 +96,9 @@ class QP:
     local unknowns: ``K_fixed=``/``local_dofs=`` are a shorthand for it), ``shift``, ``geometry``,
     ``units``, ``material``. ``params``: write-only provenance (the scene's parameters; no algorithm reads it).
     ``maps``: problem-specific extras (defect node maps for post-processing and export).
+    ``blocks``: constraint blocks beyond the Signorini block ``(B, weights)``
+    (:class:`dualfem.core.constraints.Constraint`, each with its :mod:`law <dualfem.core.laws>`);
+    :attr:`constraints` lists them all, the Signorini block first (today's QPs have only that one).
     ``store``: the owner of reusable derived data (the factorizations of ``K_fixed``: a
     :class:`dualfem.numerics.linalg.FactorStore`), set by the workspace that built the QP
     (:class:`dualfem.workspace.Workspace`: its QPs share one across deltas and loads); None = the QP
@@ -115,6 +120,7 @@ class QP:
     geometry: GeometryPart | None = None
     units: UnitsPart | None = None
     material: MaterialPart | None = None
+    blocks: tuple[Constraint, ...] = ()
     store: object | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self, K_fixed, local_dofs) -> None:
@@ -140,6 +146,11 @@ class QP:
                 raise InputError(f"{nm} contains NaN or infinite entries")
         if np.any(self.weights <= 0):
             raise InputError("weights must be > 0")
+        self.blocks = tuple(self.blocks or ())
+        for block in self.blocks:
+            if not isinstance(block, Constraint):
+                raise InputError(f"QP blocks must be dualfem.core.constraints.Constraint, got {type(block).__name__}")
+            block.validate(n)
         self._init_parts(K_fixed, local_dofs)
 
     def _init_parts(self, K_fixed, local_dofs) -> None:
@@ -195,6 +206,22 @@ class QP:
         """Number of constraints (defect nodes)."""
         return self.B.shape[0]
 
+    @property
+    def constraints(self) -> tuple[Constraint, ...]:
+        """Every constraint block: the Signorini block ``(B, weights)`` first, then :attr:`blocks`."""
+        return (Constraint(self.B, self.weights, SIGNORINI), *self.blocks)  # type: ignore[arg-type]
+
+    @property
+    def G(self) -> sp.csr_matrix:
+        """The operators of all blocks stacked (``B`` itself when the QP has only the Signorini block):
+        ``K x - F = G' mu`` at the solution, mu the blocks' multipliers concatenated."""
+        return self.B if not self.blocks else stack(self.constraints)
+
+    @property
+    def m_total(self) -> int:
+        """Rows of all blocks: the length of a solution's multipliers (``m`` with one block)."""
+        return self.B.shape[0] + sum(b.m for b in self.blocks)
+
     # -------------------------------------------------------------- helpers
     def energy(self, x: np.ndarray, Kx: np.ndarray | None = None) -> float:
         """Discrete potential energy Pi(x) = 1/2 x'Kx - F'x (``Kx``: the product K x, if known)."""
@@ -209,6 +236,10 @@ class QP:
         h = hashlib.sha1()
         for a in (self.K.indptr, self.K.indices, self.K.data, self.F, self.B.indptr, self.B.indices, self.B.data):
             h.update(np.ascontiguousarray(a).tobytes())
+        for b in self.blocks:                 # further blocks (none in today's QPs: their keys are unchanged)
+            h.update(b.law.name.encode() + repr(b.law).encode())
+            for a in (b.G.indptr, b.G.indices, b.G.data, b.weights):
+                h.update(np.ascontiguousarray(a).tobytes())
         return h.hexdigest()[:16]
 
     def check(self, *, symmetric_tol: float = 1e-10) -> None:
@@ -222,7 +253,11 @@ class QP:
 
     # ---------------------------------------------------------------- export
     def to_dict(self) -> dict:
-        """Plain arrays (for .npz/.mat); sparse matrices as CSC/CSR triplet arrays."""
+        """Plain arrays (for .npz/.mat); sparse matrices as CSC/CSR triplet arrays. A QP with blocks
+        beyond the Signorini one has no file format yet: InputError (never an export that drops them)."""
+        if self.blocks:
+            raise InputError(f"QP {self.name!r} has constraint blocks beyond the Signorini one "
+                             f"({', '.join(b.law.name for b in self.blocks)}): QP files hold only B")
         K = self.K.tocoo()
         B = self.B.tocoo()
         out = {

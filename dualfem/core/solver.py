@@ -30,7 +30,9 @@ solver-specific parameters keep their own names.
 
 and implements ``setup(qp)`` (work that depends on the matrices only: scaling, factorizations)
 and ``solve()`` returning a :class:`~dualfem.solution.Solution`. ``skip(qp)`` returns a reason
-string when the solver does not apply to ``qp`` (for example, too large), else None.
+string when the solver does not apply to ``qp`` (for example, too large), else None. ``accepts``: the
+constraint laws it handles (:mod:`dualfem.core.laws`; default ``("signorini",)``); the runner skips it,
+before ``skip()``, on a QP with a block of another law.
 
 **Iterates (optional).** A solver with an outer iteration may call
 ``self.report_iterate(iteration, x, mu)`` once per iteration (:meth:`Solver.report_iterate`): a no-op
@@ -83,6 +85,9 @@ class Solver:
     reference_params: ClassVar[dict[str, Any]] = {}
     #: the solver's family (one of :data:`SOLVER_FAMILIES`): figures derive its colour and marker from it
     family: ClassVar[str] = "other"
+    #: the names of the constraint laws (:attr:`dualfem.core.laws.Law.name`) it handles; the runner skips it,
+    #: with the reason, on a QP with a block of any other law (:func:`unhandled_law`)
+    accepts: ClassVar[tuple[str, ...]] = ("signorini",)
     #: optional: the :class:`dualfem.numerics.linalg.LocalReduction` of the QP this solver built in
     #: ``setup``; the runner's certification then reuses its factorization and dense blocks
     #: (accepted only if it is exactly that class and belongs to the QP being certified)
@@ -200,6 +205,18 @@ class Solver:
         monitor = self._iterate_monitor
         if monitor is not None:
             monitor.report(iteration, x, mu)
+
+
+def unhandled_law(solver: Solver | type[Solver], qp: QP) -> str | None:
+    """Why ``solver`` does not apply to ``qp`` by its constraint laws (a block whose law's name is not in
+    the solver's ``accepts``), or None: a solver is never run on a law it does not declare."""
+    accepts = getattr(solver, "accepts", ("signorini",))
+    accepts = (accepts,) if isinstance(accepts, str) else tuple(accepts or ())
+    for k, block in enumerate(qp.constraints):
+        if block.m and block.law.name not in accepts:
+            return (f"solver {_who(solver)} does not handle the {block.law.name!r} law of constraint block {k} "
+                    f"(it accepts: {', '.join(map(repr, accepts)) or 'none'})")
+    return None
 
 
 def declared_tolerance(solver: Solver | type[Solver]) -> float:

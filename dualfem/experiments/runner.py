@@ -40,7 +40,7 @@ from dualfem.core.qp import QP, Maps
 from dualfem.core.quiet import plugin_output
 from dualfem.core.registry import builtin_names, get_solver
 from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver, check_declared
+from dualfem.core.solver import Solver, check_declared, unhandled_law
 
 #: ``Solution.info`` keys that belong to the runner: whatever a plugin puts there is dropped
 #: the work counters a solver may report in Solution.info, copied to the JSON record's ``counters``
@@ -164,7 +164,7 @@ def _attempt(solver: Solver, view: QP, qp: QP, tick: Callable[[str, float], None
         try:
             solver.check_params()      # again: a plugin may override __init__ or change params after it
             att.declared = check_declared(solver)  # tolerance in (0, 1), exact a bool (InputError otherwise)
-            reason = solver.missing() or solver.skip(view)
+            reason = solver.missing() or unhandled_law(solver, view) or solver.skip(view)
             if reason:
                 att.why, att.status = str(reason), Status.SKIPPED
             else:
@@ -257,7 +257,7 @@ def _checked_solution(returned: Any, qp: QP, name: str) -> tuple[Solution | None
         return empty, (f"solver {name!r} returned the unknown status {returned.status!r} "
                        f"(one of {', '.join(str(s) for s in Status)})")
     arrays = {}
-    for field, size, what in (("x", qp.n, "unknowns"), ("multipliers", qp.m, "constraints")):
+    for field, size, what in (("x", qp.n, "unknowns"), ("multipliers", qp.m_total, "constraints")):
         a = getattr(returned, field)
         if a is None:
             arrays[field] = None
@@ -363,8 +363,10 @@ def guarded_view(qp: QP) -> QP:
     if qp.geometry is not None:
         g = qp.geometry
         d["geometry"] = dataclasses.replace(g, nodes=_ro(g.nodes), cells=_ro(g.cells), node_dofs=_ro(g.node_dofs))
+    if qp.blocks:
+        d["blocks"] = tuple(dataclasses.replace(b, G=_ro_sparse(b.G), weights=_ro(b.weights)) for b in qp.blocks)
     d["store"] = store
-    view._guarded = {k: d[k] for k in ("K", "F", "B", "weights", "local", "shift")}   # type: ignore[attr-defined]
+    view._guarded = {k: d[k] for k in ("K", "F", "B", "weights", "local", "shift", "blocks")}   # type: ignore[attr-defined]
     return view
 
 
@@ -394,6 +396,9 @@ def fingerprint(qp: QP) -> dict[str, int]:
         out["local"] = crc(qp.local.K_fixed, qp.local.dofs)
     if qp.shift is not None:
         out["shift"] = crc(qp.shift.x, np.array([qp.shift.objective], dtype=float))
+    if qp.blocks:
+        out["blocks"] = crc(*[a for b in qp.blocks for a in (b.G, b.weights)]) ^ zlib.crc32(
+            repr([(b.law.name, repr(b.law)) for b in qp.blocks]).encode())
     return out
 
 
@@ -461,7 +466,7 @@ def attach_residuals(qp: QP, sol: Solution) -> Solution:
     if sol.x is None:
         return sol
     if sol.multipliers is None:
-        sol.multipliers = np.zeros(qp.m)
+        sol.multipliers = np.zeros(qp.m_total)
     sol.residuals = evaluator.residuals(qp, sol.x, sol.multipliers)
     if not sol.residuals["finite"] and sol.status == Status.SOLVED:
         sol.status = Status.NUMERICAL_ERROR
@@ -494,7 +499,7 @@ def summary(qp: QP, sol: Solution) -> dict:
             "max_jump": float(jump.max(initial=0.0)),
             "n_contact": int(evaluator.contact_set(qp, sol.x).sum()),
             "contact_rtol": evaluator.CONTACT_RTOL,
-            "total_contact_force": float(np.sum(sol.multipliers)),
+            "total_contact_force": float(np.sum(sol.multipliers[:qp.m])),     # the Signorini block's
             "residuals": evaluator.kkt_residuals(sol.residuals),
             "stationarity_raw": sol.residuals.get("stationarity_raw"),
         })

@@ -21,6 +21,13 @@ keeps strict complementarity with margins larger than the step (mu_A > 10 |dmu|,
 gaps > 10 |B dx|), A is the true active set and |dx|_K / |x|_K estimates the error to first
 order. :func:`certified_error` returns both and their minimum.
 
+**Constraint laws** (:mod:`dualfem.core.laws`): the formulas above are the Signorini law's; in the code
+``mu`` is projected by each block's law (``max(mu, 0)`` for Signorini), feasibility is the law's primal
+residual and ``mu'Bx`` is the sum of the laws' support terms (``Law.support``), on the stacked ``qp.G``; the
+active set is the law's face (``Law.face``). A QP with further blocks gets the face step of
+:mod:`dualfem.numerics.faces`; the duplicated-row handling and :func:`infeasible_bound` are the Signorini
+block's (nan with further blocks).
+
 **Dependent rows** (non-unique multipliers are normal): duplicated rows (positive multiples of one
 another, :func:`parallel_rows`) are one constraint, judged by the force of the group; a row off A whose
 normal is a combination of A's (:func:`_implied_rows`) has gap 0 at the exact point by construction and
@@ -59,7 +66,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
+from dualfem.core import constraints
 from dualfem.core.evaluator import force_scale, size_energy, size_max
+from dualfem.core.laws import SIGNORINI
 from dualfem.core.qp import QP
 from dualfem.numerics.ksolver import CERT_K_RTOL, KSolver, OperatorHints, solver_for  # noqa: F401 (public here)
 from dualfem.numerics.linalg import step_size
@@ -95,13 +104,17 @@ MU_ROUNDING = 100.0
 FEAS_RTOL = 1e-12
 
 
-def guess_active_set(D: np.ndarray, mu: np.ndarray, gap: np.ndarray, diagonal: np.ndarray | None = None) -> np.ndarray:
-    """The primal-dual active-set guess ``{mu_j - c gap_j > 0}``, c = 1 / mean diag of the Delassus
+def guess_active_set(D: np.ndarray, mu: np.ndarray, gap: np.ndarray, diagonal: np.ndarray | None = None,
+                     blocks: tuple | None = None) -> np.ndarray:
+    """The active face of every block's law (:meth:`dualfem.core.laws.Law.face`; ``blocks`` None: the
+    Signorini law, the primal-dual guess ``{mu_j - c gap_j > 0}``), c = 1 / mean diag of the Delassus
     matrix D (so that c gap is a force); for an active-set answer this is {mu > 0}. ``diagonal``: diag(D)
     when D itself is not formed (matrix-free; D is then unused)."""
     dD = np.diag(D) if diagonal is None else np.asarray(diagonal)
     c = 1.0 / dD.mean() if dD.size and dD.mean() > 0 else 1.0
-    return (np.asarray(mu, float) - c * gap) > 0
+    if blocks is None:
+        return SIGNORINI.face(mu, gap, c)
+    return constraints.face(blocks, mu, gap, c)
 
 
 def parallel_rows(B) -> np.ndarray | None:
@@ -194,7 +207,7 @@ def _residual_solve(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve,
                     Kx: np.ndarray | None = None) -> tuple[float, np.ndarray]:
     """(r'K^-1 r, B K^-1 r) for r = K x - F - B'mu; ``ksolve`` a :class:`KSolver` or a callable r -> K^-1 r;
     ``Kx`` the product K x, if known."""
-    r = (qp.K @ x if Kx is None else Kx) - qp.F - qp.B.T @ mu
+    r = (qp.K @ x if Kx is None else Kx) - qp.F - qp.G.T @ mu
     if isinstance(ksolve, KSolver):
         return ksolve.quad(r)
     z = ksolve(r)
@@ -209,11 +222,12 @@ def error_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve=None, _quad=None, 
     """
     if not _finite(x, mu):
         return float("nan")
-    if -(qp.B @ x).min(initial=0.0) > FEAS_RTOL * size_max(qp, x):
+    blocks, gap = qp.constraints, qp.G @ x
+    if max(b.law.primal(g) for b, g in zip(blocks, constraints.split(blocks, gap))) > FEAS_RTOL * size_max(qp, x):
         return float("nan")
-    mu = np.maximum(np.asarray(mu, float), 0.0)
+    mu = constraints.project(blocks, np.asarray(mu, float))
     t1 = (_quad or _residual_solve(qp, x, mu, ksolve or solver_for(qp), _Kx))[0]
-    t2 = 2.0 * max(0.0, float(mu @ (qp.B @ x)))
+    t2 = 2.0 * max(0.0, constraints.support(blocks, mu, gap))
     nx = size_energy(qp, x, _Kx)      # |x|_K (or the load's size); shifted QP: the smaller of both frames
     if nx == 0.0:
         return float("nan")
@@ -251,6 +265,10 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     if not _finite(x, mu):
         return nan
     ksolve = ksolve or solver_for(qp)
+    if qp.blocks:                   # several laws: the face step on the stacked G (dualfem.numerics.faces)
+        from dualfem.numerics.faces import blocks_active_set_check
+
+        return blocks_active_set_check(qp, x, mu, ksolve, margin, _Kx)
     mu = np.asarray(mu, float)
     if isinstance(ksolve, KSolver) and _quad is None:
         ksolve.reset_k_error()
@@ -262,9 +280,9 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
             return nan
         D, A = np.zeros((0, 0)), np.zeros(mu.size, bool)
     else:
-        A = guess_active_set(D, mu, gap, None if D is not None else op.diagonal())
+        A = guess_active_set(D, mu, gap, None if D is not None else op.diagonal(), qp.constraints)
     mu_A = np.where(A, mu, 0.0)
-    same = np.array_equal(mu_A, np.maximum(mu, 0.0))
+    same = np.array_equal(mu_A, constraints.project(qp.constraints, mu))
     rKr, Bz = (_quad if (_quad is not None and same) else None) or _residual_solve(qp, x, mu_A, ksolve, _Kx)
     dmu = np.zeros_like(mu)
     face = None
@@ -377,10 +395,10 @@ def multiplier_floor(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     ksolve = ksolve or solver_for(qp)
     op = getattr(ksolve, "op", None)
     D = ksolve.delassus() if qp.m else None
-    if (D is None and op is None) or not qp.m or not _finite(x, mu):
+    if (D is None and op is None) or not qp.m or not _finite(x, mu) or qp.blocks:
         return float("nan")
     mu = np.asarray(mu, float)
-    A = guess_active_set(D, mu, qp.B @ x, None if D is not None else op.diagonal())
+    A = guess_active_set(D, mu, qp.B @ x, None if D is not None else op.diagonal(), qp.constraints)
     if not A.any():
         return 0.0
     s = abs_product(qp.K, np.abs(x)) + np.abs(qp.F) + abs_product(qp.B.T, np.abs(mu))
@@ -408,12 +426,12 @@ def infeasible_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver, _qu
 
     Rigorous to rounding on the dense path (D^+ from a symmetric eigendecomposition of D, p checked to
     lie in D's range to 1e-10 of its size); relative to :func:`dualfem.core.evaluator.size_energy`."""
-    if not _finite(x, mu):
+    if not _finite(x, mu) or qp.blocks:      # D^+ of the Signorini block only: no bound claimed with more
         return float("nan")
     D = ksolve.delassus() if qp.m else np.zeros((0, 0))
     if D is None:
         return float("nan")
-    mu = np.maximum(np.asarray(mu, float), 0.0)
+    mu = constraints.project(qp.constraints, np.asarray(mu, float))
     rKr, BKr = _quad or _residual_solve(qp, x, mu, ksolve, _Kx)
     g = qp.B @ x - BKr
     p = np.maximum(-g, 0.0)
@@ -447,7 +465,7 @@ def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | Non
     if _finite(x, mu):
         mu = np.asarray(mu, float)
         Kx = qp.K @ x
-        quad = _residual_solve(qp, x, np.maximum(mu, 0.0), ksolve, Kx)
+        quad = _residual_solve(qp, x, constraints.project(qp.constraints, mu), ksolve, Kx)
     b = error_bound(qp, x, mu, ksolve, _quad=quad, _Kx=Kx)
     a, m = active_set_check(qp, x, mu, ksolve, _quad=quad, _Kx=Kx)
     f = infeasible_bound(qp, x, mu, ksolve, _quad=quad, _Kx=Kx) if np.isnan(b) and not ksolve.amg else float("nan")

@@ -9,6 +9,8 @@ has a unit diagonal, a unit load and unit constraint rows, whatever the units, t
 magnitude or delta. Its multiplier nu maps back to ours by ``mu = c R nu`` (from
 ``D (K x - F) / c = D B' R nu``). (Scaling the objective instead of the unknowns made the
 Hessian grow like 1 / load, and OSQP/Clarabel failed at load scales 1e-6 and 1e6.)
+With several constraint blocks, ``B`` is the stacked ``qp.G`` (:attr:`dualfem.core.qp.QP.G`) and nu the
+blocks' multipliers concatenated.
 """
 from __future__ import annotations
 
@@ -38,16 +40,16 @@ class ScaledQP:
 
 def scale(qp: QP, enable: bool = True) -> ScaledQP:
     """Jacobi/objective/row scaling of ``qp`` (identity factors if ``enable`` is False)."""
-    n, m = qp.n, qp.m
+    n, m = qp.n, qp.m_total
     if not enable:
-        return ScaledQP(qp.K.tocsc(), -qp.F, qp.B.tocsr(), np.ones(n), np.ones(m), 1.0)
+        return ScaledQP(qp.K.tocsc(), -qp.F, qp.G.tocsr(), np.ones(n), np.ones(m), 1.0)
     d = 1.0 / np.sqrt(qp.K.diagonal())
     Dm = sp.diags(d)
     qd = d * qp.F
     c = float(np.abs(qd).max(initial=0.0))
     if not np.isfinite(c) or c == 0.0:
         c = 1.0
-    A = (qp.B @ Dm).tocsr()
+    A = (qp.G @ Dm).tocsr()
     rn = np.abs(A).max(axis=1).toarray().ravel()
     r = 1.0 / np.where(rn > 0, rn, 1.0)
     A = (sp.diags(r) @ A).tocsr()

@@ -1,0 +1,67 @@
+"""The certificate's exact face step for a QP with several constraint blocks (:attr:`dualfem.core.qp.QP.blocks`).
+
+The same measurement as :func:`dualfem.numerics.certify.active_set_check` (read its docstring: one exact
+Newton step onto the face the laws guess, verified when the exact point of that face keeps every law's
+conditions with margins larger than the step), on the stacked operator ``G`` of all blocks, with each
+block's law deciding its face (:meth:`dualfem.core.laws.Law.face`), the multipliers it holds off the face
+(:meth:`dualfem.core.laws.Law.complementary`) and whether the exact point holds
+(:meth:`dualfem.core.laws.Law.face_holds`). The Delassus matrix ``D = G K^-1 G'`` is formed densely from
+``m_total`` K-solves (exact factorizations only: with AMG K-solves no value is claimed), up to
+:data:`MAX_ROWS` rows.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+
+from dualfem.core import constraints
+from dualfem.core.evaluator import force_scale, size_energy
+from dualfem.core.qp import QP
+from dualfem.numerics.linalg import step_size
+
+#: the face step of a multi-block QP forms D densely: above this many rows no value is claimed
+MAX_ROWS = 2000
+
+
+def blocks_active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, margin: float = 10.0,
+                            Kx: np.ndarray | None = None) -> tuple[float, float]:
+    """(error of x relative to :func:`size_energy`, error of mu relative to :func:`force_scale`) through the
+    verified face of every block's law; (nan, nan) when the face is not verified or the step cannot be taken
+    (AMG K-solves, more than :data:`MAX_ROWS` rows, a singular D on the face)."""
+    nan = (float("nan"), float("nan"))
+    if getattr(ksolve, "amg", False) or qp.m_total > MAX_ROWS:
+        return nan
+    blocks, G = qp.constraints, qp.G
+    mu = np.asarray(mu, float)
+    gap = G @ x
+    Z = np.column_stack([ksolve(G[j].toarray().ravel()) for j in range(qp.m_total)]) if qp.m_total else \
+        np.zeros((qp.n, 0))
+    D = np.asarray(G @ Z)
+    D = 0.5 * (D + D.T)
+    dD = np.diag(D)
+    c = 1.0 / dD.mean() if dD.size and dD.mean() > 0 else 1.0
+    A = constraints.face(blocks, mu, gap, c)
+    mus, gaps = tuple(constraints.split(blocks, mu)), constraints.split(blocks, gap)
+    held = [b.law.complementary(mk, gk, b.weights, mus) for b, mk, gk in zip(blocks, mus, gaps)]
+    mu_A = np.where(A, mu, np.concatenate(held) if held else mu)
+    r = (qp.K @ x if Kx is None else Kx) - qp.F - G.T @ mu_A
+    z = ksolve(r)
+    rKr, Gz = float(r @ z), G @ z
+    dmu = np.zeros_like(mu)
+    if A.any():
+        try:
+            dmu[A] = sla.cho_solve(sla.cho_factor(D[np.ix_(A, A)]), -(gap[A] - Gz[A]))
+        except (np.linalg.LinAlgError, ValueError):
+            return nan
+    Ddmu = D @ dmu
+    gap1, mu1 = gap - Gz + Ddmu, mu_A + dmu
+    step_mu = max(np.abs(dmu).max(initial=0.0), np.abs(mu - mu_A).max(initial=0.0))
+    step_gap = np.abs(Ddmu - Gz).max(initial=0.0)
+    parts = zip(blocks, constraints.split(blocks, mu1), constraints.split(blocks, gap1), constraints.split(blocks, A))
+    if not all(b.law.face_holds(m1, g1, a, margin * step_mu, margin * step_gap) for b, m1, g1, a in parts):
+        return nan
+    nx = size_energy(qp, x, Kx)
+    err_mu = float(np.abs(mu - mu1).max(initial=0.0)) / force_scale(qp, mu1)
+    if nx == 0.0:
+        return float("nan"), err_mu
+    return step_size(rKr, Gz, dmu, Ddmu) / nx, err_mu
