@@ -34,6 +34,18 @@ def short_grace(monkeypatch):
     monkeypatch.setattr(watchdog, "GUARD_SLACK", 0.5)
 
 
+@pytest.fixture(autouse=True)
+def forkable(monkeypatch):
+    """These tests fork workers from the test process, which earlier tests may have let run MKL PARDISO
+    (then the watchdog would run the command in-process: see the last test): the workers factorize
+    with SuperLU, and the process counts as fork-safe."""
+    from dualfem.numerics import factor
+    from dualfem.numerics.factor import pardiso
+
+    monkeypatch.setattr(pardiso, "STARTED", False)
+    monkeypatch.setattr(factor, "_DEFAULT", "superlu")
+
+
 @pytest.fixture
 def register():
     registry.solvers()
