@@ -185,9 +185,10 @@ def _method(runs: list[dict], shift: float, sources: list[dict] | None = None) -
             "relative max error of the multipliers, relative objective gap. A run of the reference's own solver "
             "is compared against itself (error 0 or near): its accuracy is certified by the KKT residuals only.",
             f"- Success and correct rate per tier and delta: see the section of that name. Shifted geometric mean of "
-            f"time: shift {shift:g} s, failures counted at the time limit, over the scenes every ranked solver ran, "
-            "normalised to the best (1.00). Solvers without tolerance options (tier `any`) are scored in every tier "
-            "with one run.",
+            f"time: shift {shift:g} s, over each solver's successful runs (a failure is shown as a failure, never "
+            "as a time), normalised to the best (1.00); qpbenchmark's convention (failures counted at the time limit, "
+            "over the scenes every ranked solver ran) in its own labelled column. Solvers without tolerance options "
+            "(tier `any`) are scored in every tier with one run.",
             "- Failed runs (error, time_limit, max_iter, ...) are rows with their status and message, never "
             "results: they have no error columns unless the solver returned an iterate.", ""]
 

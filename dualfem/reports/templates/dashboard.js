@@ -352,7 +352,7 @@
       box.appendChild(tab);
     }
     byId("rank-note").textContent = `As in 'dualfem report bench': ranked by success rate, then the shifted ` +
-      `geometric mean of time (shift ${D.shift} s; a run that is not a success counts at its time limit), then the ` +
+      `geometric mean of time of the successful runs (shift ${D.shift} s; a failure is not given a time), then the ` +
       "correct rate; for the scene and delta selected (all tiers or the one selected).";
   }
   function drawTargets(sel) {
