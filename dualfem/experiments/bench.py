@@ -7,7 +7,7 @@ the results folder: :mod:`dualfem.experiments.store`; worker processes and execu
 Three kinds of rows: ``run`` (a solver on a scene at a tier), ``reference`` (the certified exact
 solve a scene's errors are measured against, chosen by :mod:`dualfem.experiments.reference`)
 and ``floor`` (one sparse factorization + one solve of the unconstrained K: the lower bound on
-the time of any direct method). Each run is graded by :func:`dualfem.core.grade.grade`.
+the time of any direct method). Each run is graded by :func:`dualfem.verify.grading.grade`.
 """
 from __future__ import annotations
 

@@ -4,7 +4,7 @@
 QP, through :func:`dualfem.experiments.runner.run` (so statuses, timings and the evaluator's
 independent residuals are the same as for ``dualfem solve``), picks the reference, and grades
 each run. Every run is one :class:`~dualfem.experiments.row.Row` (``kind = "compare"``), the
-record bench and stress produce too, graded by the one policy :func:`dualfem.core.grade.grade`
+record bench and stress produce too, graded by the one policy :func:`dualfem.verify.grading.grade`
 (:meth:`Row.regrade`); the JSON record of a run (:data:`RUN_FIELDS`, the stable interface of
 ``dualfem compare --json``) is a view of its Row (:func:`record`).
 
@@ -20,7 +20,7 @@ cross-checked against the next best trusted run of any exact solver: their diffe
 one's declared tolerance plus both bounds. Runs whose x is bit-for-bit the reference's are listed
 (``identical_to_reference``) but skipped as cross-checks.
 
-``grade`` of each run (the vocabulary of :mod:`dualfem.core.grade`, as in bench and stress):
+``grade`` of each run (the vocabulary of :mod:`dualfem.verify.grading`, as in bench and stress):
 ``correct``, ``failed`` (an honest non-success status), ``flagged`` (claims ``solved``, but the
 evaluator's residuals exceed its declared tolerance), ``silent_wrong`` (claims ``solved``,
 residuals clean, answer off the reference by more than its tolerance + the reference's bound),
@@ -190,7 +190,7 @@ def record(row: Row, ref: dict | None = None) -> dict[str, Any]:
         # errors against the reference (None without one): x in the energy norm, the multipliers
         # |mu - mu_ref|_inf / max(|mu_ref|_inf, |F|_inf)
         "err_x_energy": row.err_x_energy, "err_multipliers": row.err_multipliers,
-        # graded apart (dualfem.core.grade): the displacements, the multipliers, and their certificates
+        # graded apart (dualfem.verify.grading): the displacements, the multipliers, and their certificates
         "grade_x": row.grade_x, "grade_mu": row.grade_mu, "cert_x": row.cert_x, "cert_mu": row.cert_mu,
     }
 

@@ -6,7 +6,7 @@ text in CSV. Anything else a producer wants to keep (``scene_*`` parameters, ``r
 goes to :attr:`Row.extra` and is written as its own column.
 
 Units: times in seconds (``*_s``), memory in MB (``peak_rss_mb``), errors relative (see
-:mod:`dualfem.core.grade` for the grading policy, :mod:`dualfem.core.evaluator` for residuals).
+:mod:`dualfem.verify.grading` for the grading policy, :mod:`dualfem.core.evaluator` for residuals).
 """
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 from dualfem.core.evaluator import RESIDUALS
-from dualfem.core.grade import combined, grade, grade_multipliers
 from dualfem.core.io import jsonable
+from dualfem.verify.grading import combined, grade, grade_multipliers
 
 
 @dataclass
@@ -40,7 +40,7 @@ class Row:
     status: str | None = None
     claimed_status: str | None = None
     grade: str | None = None
-    grades: str | None = None                # what the tier grades: "x" or "x,mu" (dualfem.core.grade)
+    grades: str | None = None                # what the tier grades: "x" or "x,mu" (dualfem.verify.grading)
     grade_x: str | None = None               # the displacements' grade
     grade_mu: str | None = None              # the multipliers' grade
     message: str = ""
@@ -127,7 +127,7 @@ class Row:
 
     def regrade(self) -> str:
         """Set :attr:`grade_x`, :attr:`grade_mu` and :attr:`grade` (returned) from the row's status, errors,
-        certificates, KKT error and tolerance (:mod:`dualfem.core.grade`).
+        certificates, KKT error and tolerance (:mod:`dualfem.verify.grading`).
 
         ``grades`` None (compare, stress: runs certified at the declared tolerance, x and multipliers
         both): the grade of the certified status and x's error, as before grades were separated. Under

@@ -10,7 +10,7 @@ own needs are features of that engine: the N axis is a chain of task dependencie
 with a gate (:func:`gate`): a run is attempted only when the previous N of the same solver
 finished and the predicted time and memory fit. Each run is measured against the reference
 chosen by the one reference policy (:mod:`dualfem.experiments.reference`; for the units and load
-axes the base scene's reference mapped exactly) and graded by :func:`dualfem.core.grade.grade`
+axes the base scene's reference mapped exactly) and graded by :func:`dualfem.verify.grading.grade`
 with the tolerance the solver instance declares. Each worker caches QPs and references.
 
 Results: the store's files plus ``DIR/meta.json`` (the grid's description for the report).
@@ -408,7 +408,7 @@ def row_from_record(rec: dict) -> Row:
     d.update(rec.get("residuals") or {})
     ref = rec.get("reference") or {}
     # records of that format carry no certified bound of their reference: the reference is trusted to
-    # its own declared tolerance, which is the slack it grants (dualfem.core.grade)
+    # its own declared tolerance, which is the slack it grants (dualfem.verify.grading)
     d.update(kind="stress", ref_solver=ref.get("name"), ref_kkt=ref.get("kkt"), ref_time_s=ref.get("time_s"),
              ref_bound=ref.get("tolerance"))
     if ref.get("reason"):

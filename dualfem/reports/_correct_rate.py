@@ -5,7 +5,7 @@ Definitions (printed in the reports by :data:`DEFINITION`):
 * a **solved claim** is a run whose ``claimed_status`` -- the plugin's own word, before dualfem's
   certification -- is ``solved`` (rows written before ``claimed_status`` existed fall back to
   ``status``);
-* a claim is **certified correct** when :func:`dualfem.core.grade.grade` gives ``correct``: the
+* a claim is **certified correct** when :func:`dualfem.verify.grading.grade` gives ``correct``: the
   runner's certification stands (status still ``solved``: the evaluator's KKT residuals, and for
   exact solvers the a-posteriori energy-norm error bound, within the tolerance), the evaluator's
   largest KKT residual is <= tol and the relative energy-norm error against the certified
@@ -30,7 +30,7 @@ import math
 from collections.abc import Iterable
 from typing import Any
 
-from dualfem.core.grade import combined, grade, grade_multipliers
+from dualfem.verify.grading import combined, grade, grade_multipliers
 
 #: the correct rate in words (both reports print it)
 DEFINITION = (
@@ -83,7 +83,7 @@ def certified_correct(r: Any, tol: float | None = None) -> bool:
 
 def _grade_at(r: Any, tol: float) -> str:
     """The run's grade regraded at ``tol``: x's, or the worse of x's and the multipliers' where the row's
-    tier grades ``"x,mu"`` (:mod:`dualfem.core.grade`)."""
+    tier grades ``"x,mu"`` (:mod:`dualfem.verify.grading`)."""
     slack = _f(_get(r, "ref_bound"))
     slack = slack if math.isfinite(slack) else 0.0
     status, kkt = _certified_status(r), _f(_get(r, "kkt_error"))

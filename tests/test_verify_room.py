@@ -1,0 +1,39 @@
+"""The verify room (issue 34 item 4): grading, the reference policy and the one judge in one room;
+old import paths keep working with a DeprecationWarning."""
+from __future__ import annotations
+
+import importlib
+import sys
+import warnings
+
+import pytest
+
+
+def test_old_grade_path_is_a_deprecated_shim_to_the_same_objects():
+    sys.modules.pop("dualfem.core.grade", None)
+    with pytest.warns(DeprecationWarning, match="dualfem.verify"):
+        old = importlib.import_module("dualfem.core.grade")
+    from dualfem.verify import grading as new
+
+    for name in old.__all__:
+        assert getattr(old, name) is getattr(new, name), name
+
+
+def test_the_room_re_exports_evaluator_and_certificate():
+    import dualfem.verify as v
+    from dualfem.core import evaluator
+    from dualfem.numerics import certify
+
+    assert v.residuals is evaluator.residuals and v.kkt_error is evaluator.kkt_error
+    assert v.certified_error is certify.certified_error and v.KSolver is certify.KSolver
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")          # the room itself does not touch a deprecated path
+        importlib.reload(v)
+    assert set(v.__all__) <= set(dir(v))
+
+
+def test_verify_sits_between_the_plugins_and_experiments():
+    from _imports import LEVEL, SHIMS, room
+
+    assert LEVEL["numerics"] < LEVEL["post"] < LEVEL["verify"] < LEVEL["experiments"]
+    assert room("dualfem.verify.grading") == "verify" and "dualfem.core.grade" in SHIMS
