@@ -37,3 +37,21 @@ def test_verify_sits_between_the_plugins_and_experiments():
 
     assert LEVEL["numerics"] < LEVEL["post"] < LEVEL["verify"] < LEVEL["experiments"]
     assert room("dualfem.verify.grading") == "verify" and "dualfem.core.grade" in SHIMS
+
+
+def test_reference_policy_lives_in_the_room_and_compare_uses_it(monkeypatch):
+    """choose() ranks trusted runs by certificate, KKT error, time; the first that may serve is the
+    reference; a run above its own kkt_max or without a finite certificate is never trusted."""
+    from dualfem.experiments import reference as old
+    from dualfem.verify import reference as ref
+
+    assert old.trusted is ref.trusted and old.choose is ref.choose and old.Reference is ref.Reference
+    monkeypatch.setattr(ref, "may_serve", lambda name: name != "third_party")
+    C = ref.Candidate
+    runs = [C("slow", "solved", True, 1e-12, 1e-9, 5.0, 1e-8), C("fast", "solved", True, 1e-12, 1e-9, 1.0, 1e-8),
+            C("third_party", "solved", True, 1e-13, 1e-12, 0.1, 1e-8),
+            C("loose", "solved", True, 1e-6, 1e-9, 0.1, 1e-8),
+            C("inexact", "solved", False, 0.0, 0.0, 0.1, 1e-8), C("nan", "solved", True, 0.0, float("nan"), 0.1, 1e-8),
+            C("failed", "max_iter", True, 0.0, 0.0, 0.1, 1e-8)]
+    assert ref.choose(runs) == ("fast", ["third_party", "slow"])
+    assert ref.choose(runs[2:]) == (None, ["third_party"])

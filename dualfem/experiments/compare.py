@@ -55,6 +55,7 @@ from dualfem.experiments import reference
 from dualfem.experiments.row import Row
 from dualfem.experiments.runner import jsonable_params
 from dualfem.numerics.certify import certified_error, solver_for
+from dualfem.verify.reference import Candidate, choose
 
 #: fields of each run record (stable JSON interface of ``dualfem compare --json``; ``verdict`` is a
 #: deprecated alias of ``grade``)
@@ -228,20 +229,11 @@ def _reference_record(qp: QP, rows: list[Row], sols: dict[str, Solution], ref_na
 
 
 def _choose_reference(rows: list[Row]) -> tuple[str | None, list[str]]:
-    """The one reference policy (:mod:`dualfem.experiments.reference`) applied to the runs made:
-    trusted runs (exact, solved, KKT error within the solver's own tolerance, finite certificate)
-    ranked by certificate, KKT error, time; the reference is the first of them whose solver declares
-    ``reference`` (:func:`reference.may_serve`: a third-party solver never is unless it says so), the
-    others are the cross-check candidates. Returns (reference or None, the other trusted runs in order)."""
-    ranked = []
-    for r in rows:
-        ok, _ = reference.trusted(r.status, r.exact, r.kkt_error, r.get("error_bound"), kkt_max=r.tol)
-        if ok:
-            ranked.append((reference.rank_key(r["error_bound"], r.kkt_error, r.total_s), r.solver))
-    ranked.sort()
-    names = [n for _, n in ranked]
-    ref = next((n for n in names if reference.may_serve(n)), None)
-    return ref, [n for n in names if n != ref]
+    """The one reference policy (:func:`dualfem.verify.reference.choose`) applied to the runs made, each
+    trusted at most at its own tolerance (KKT error within it, finite certificate). Returns (reference or
+    None, the other trusted runs in order)."""
+    return choose(Candidate(r.solver or "", str(r.status), bool(r.exact), r.kkt_error, r.get("error_bound"),
+                            r.total_s, kkt_max=r.tol) for r in rows)  # type: ignore[arg-type]
 
 
 def grade_record(rec: dict, ref: dict | None) -> str:
