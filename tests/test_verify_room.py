@@ -55,3 +55,46 @@ def test_reference_policy_lives_in_the_room_and_compare_uses_it(monkeypatch):
             C("failed", "max_iter", True, 0.0, 0.0, 0.1, 1e-8)]
     assert ref.choose(runs) == ("fast", ["third_party", "slow"])
     assert ref.choose(runs[2:]) == (None, ["third_party"])
+
+
+@pytest.fixture(scope="module")
+def small():
+    from dualfem.core.scene import load_scene
+    from dualfem.experiments.runner import run
+
+    qp = load_scene("f2", {"N": 8}).build()
+    return qp, run("pdas", qp)
+
+
+def test_the_runner_keeps_claim_and_verdict_apart(small):
+    """A claim the judge demotes: ``claim`` and ``info["claimed_status"]`` keep the plugin's word,
+    ``status`` (as before) and ``verdict.status`` the certified one, ``verdict.why`` the reason."""
+    from dualfem.core.solution import Solution, Status
+    from dualfem.experiments.runner import attach_residuals, certify_status
+    from dualfem.verify import Verdict
+
+    qp, sol = small
+    assert sol.claim == "solved" and isinstance(sol.verdict, Verdict) and sol.verdict.status == str(sol.status)
+    assert sol.verdict.outcome == "unverified" and sol.verdict.cert_x is not None  # no reference: at best unverified
+    loose = Solution("pdas", Status.SOLVED, x=sol.x + 1e-3 * abs(sol.x).max(), multipliers=sol.multipliers)
+    certify_status(qp, attach_residuals(qp, loose), 1e-9, exact=True)
+    v = loose.verdict
+    assert loose.claim == loose.info["claimed_status"] == "solved" and loose.status == Status.INACCURATE
+    assert v.demoted and v.status == "inaccurate" and v.outcome == "failed" and v.why in loose.message
+    assert Solution("s", Status.SOLVED).verdict is None and Solution("s", Status.SOLVED).claim is None
+
+
+def test_judge_against_a_reference(small):
+    """judge() reuses the runner's certification and grades against a trusted answer: the same answer is
+    correct; one off by more than tol + the reference's bound whose residuals look fine is silent_wrong."""
+    from dataclasses import replace
+
+    from dualfem.verify import Answer, judge
+
+    qp, sol = small
+    tol = sol.verdict.tol
+    same = judge(qp, sol, tol, reference=Answer("ref", sol.x, sol.multipliers, 0.0))
+    assert same.outcome == "correct" and same.err_x == 0.0 and same.certificate is sol.verdict.certificate
+    far = Answer("ref", 2.0 * sol.x, 2.0 * sol.multipliers, 0.0)
+    assert judge(qp, sol, tol, reference=far).outcome == "silent_wrong"
+    assert judge(qp, sol, tol, reference=replace(far, bound=10.0)).outcome == "correct"   # the slack it grants

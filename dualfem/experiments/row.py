@@ -17,7 +17,7 @@ from typing import Any
 
 from dualfem.core.evaluator import RESIDUALS
 from dualfem.core.io import jsonable
-from dualfem.verify.grading import combined, grade, grade_multipliers
+from dualfem.verify.judge import cert_facts, outcome
 
 
 @dataclass
@@ -126,43 +126,24 @@ class Row:
         self.within_tol = bool(tol is not None and math.isfinite(tol) and self.kkt_error <= tol)
 
     def regrade(self) -> str:
-        """Set :attr:`grade_x`, :attr:`grade_mu` and :attr:`grade` (returned) from the row's status, errors,
-        certificates, KKT error and tolerance (:mod:`dualfem.verify.grading`).
+        """Set :attr:`grade_x`, :attr:`grade_mu` and :attr:`grade` (returned) from the row's status, claim,
+        errors, certificates, KKT error and tolerance: the one judge's grading of facts,
+        :func:`dualfem.verify.judge.outcome` (a stored row has no QP to re-judge).
 
         ``grades`` None (compare, stress: runs certified at the declared tolerance, x and multipliers
         both): the grade of the certified status and x's error, as before grades were separated. Under
-        ``"x,mu"`` a run the runner demoted for its multipliers alone
-        (claimed ``solved``, KKT error and certified x error within ``tol``, certified multiplier error
-        above it) keeps a ``grade_x`` of its x.
+        ``"x,mu"`` a run the runner demoted for its multipliers alone keeps a ``grade_x`` of its x.
         """
-        tol = self.tol if self.tol is not None and math.isfinite(self.tol) else float("nan")
-        status = self.status or "error"
-        status_x = "solved" if self._demoted_for_multipliers(tol) else status
-        self.grade_x = grade(status_x, self.err_x_energy, self.kkt_error, tol, self.ref_bound)
-        self.grade_mu = grade_multipliers(status_x, self.err_multipliers, self.kkt_error, tol, self.ref_bound,
-                                          self.cert_mu)
-        self.grade = (grade(status, self.err_x_energy, self.kkt_error, tol, self.ref_bound) if not self.grades
-                      else combined(self.grade_x, self.grade_mu, self.grades))
+        self.grade, self.grade_x, self.grade_mu = outcome(
+            self.status or "error", self.tol, self.kkt_error, self.err_x_energy, self.err_multipliers,
+            self.ref_bound, self.cert_x, self.cert_mu, self.claimed_status, self.grades)
         return self.grade
-
-    def _demoted_for_multipliers(self, tol: float) -> bool:
-        def fin(v: Any) -> bool:
-            return isinstance(v, (int, float)) and math.isfinite(v)
-
-        return bool(self.status == "inaccurate" and self.claimed_status == "solved" and fin(self.kkt_error)
-                    and self.kkt_error <= tol and fin(self.cert_mu) and self.cert_mu > tol
-                    and (not fin(self.cert_x) or self.cert_x <= tol))
 
     def set_certificate(self, cert: dict | None) -> None:
         """Copy the runner's certificate (``Solution.info["certificate"]``): ``cert_x`` its energy-norm
-        bound, ``cert_mu`` its multiplier error beyond the rounding floor of mu* (None when absent)."""
-        def ok(v: Any) -> bool:
-            return isinstance(v, (int, float)) and math.isfinite(v)
-
-        cert = cert if isinstance(cert, dict) else {}
-        val, mu, floor = cert.get("value"), cert.get("multipliers"), cert.get("multipliers_floor", 0.0)
-        self.cert_x = float(val) if ok(val) else None
-        self.cert_mu = max(float(mu) - (float(floor) if ok(floor) else 0.0), 0.0) if ok(mu) else None
+        bound, ``cert_mu`` its multiplier error beyond the rounding floor of mu* (None when absent;
+        :func:`dualfem.verify.judge.cert_facts`)."""
+        self.cert_x, self.cert_mu = cert_facts(cert)
 
     # ----------------------------------------------------------- serialisation
     def to_dict(self) -> dict:

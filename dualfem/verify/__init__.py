@@ -8,6 +8,9 @@ A solver plugin *claims* an answer (a :class:`~dualfem.core.solution.Solution` w
   ``multiplier_floor``, ``KSolver``, ...), re-exported here (their modules move into this room later:
   import them from ``dualfem.verify``);
 * the grading policy and the one outcome vocabulary (:mod:`dualfem.verify.grading`, docs/conventions.md);
+* the reference policy (:mod:`dualfem.verify.reference`: when an answer is trusted as a reference);
+* the one judge (:mod:`dualfem.verify.judge`): ``judge(qp, claim, tol, reference=...)`` -> :class:`Verdict`,
+  used by solve (the runner's certification is its first half), compare, bench and stress.
 
 Room order (docs/layout.md, tests/_imports.py): ``core <- numerics <- {solvers, problems, post} <- verify
 <- experiments``; verify imports core and numerics only, never a plugin.
@@ -50,6 +53,7 @@ from dualfem.verify.grading import (
     grade_multipliers,
     within,
 )
+from dualfem.verify.judge import OUTCOMES, Answer, Verdict, against, certify, judge, outcome
 
 __all__ = [
     # evaluator (dualfem.core.evaluator)
@@ -61,4 +65,6 @@ __all__ = [
     # grading (dualfem.verify.grading)
     "DEFAULT_GRADES", "GRADED", "GRADES", "HONEST", "SEVERITY", "check_grades", "combined", "grade",
     "grade_multipliers", "within",
+    # the one judge (dualfem.verify.judge)
+    "OUTCOMES", "Answer", "Verdict", "against", "certify", "judge", "outcome",
 ]
