@@ -55,6 +55,7 @@ from dualfem.experiments import reference
 from dualfem.experiments.row import Row
 from dualfem.experiments.runner import jsonable_params
 from dualfem.numerics.certify import certified_error, solver_for
+from dualfem.verify import Answer, against
 from dualfem.verify.reference import Candidate, choose
 
 #: fields of each run record (stable JSON interface of ``dualfem compare --json``; ``verdict`` is a
@@ -201,12 +202,13 @@ def _reference_record(qp: QP, rows: list[Row], sols: dict[str, Solution], ref_na
     """Differences of every run to the reference (into its row), and the cross-check of the reference."""
     ref = sols[ref_name]
     rrow = next(r for r in rows if r.solver == ref_name)
+    answer = Answer(ref_name, ref.x, ref.multipliers, rrow["error_bound"])   # type: ignore[arg-type]
     for row in rows:
-        s = sols[row.solver]
-        if row.get("energy") is not None:
-            d = evaluator.compare(qp, s.x, s.multipliers, ref.x, ref.multipliers)
-            row.update(diff=d, err_x_energy=d["x_energy"], err_x_max=d["x_max"], err_multipliers=d["multipliers"],
-                       err_energy=d["energy"], contact_mismatch=d["contact_mismatch"])
+        # the one judge: measured against the reference and graded (dualfem.verify.judge)
+        v = against(row.facts(), qp, sols[row.solver], answer, measurable=row.get("energy") is not None)
+        row.take(v)
+        if v.diff is not None:
+            row["diff"] = v.diff
         row.update(ref_solver=ref_name, ref_kkt=rrow.kkt_error, ref_bound=rrow["error_bound"])
     out: dict[str, Any] = {
         "solver": ref_name, "error_bound": rrow["error_bound"], "kkt_error": rrow.kkt_error,

@@ -17,7 +17,7 @@ from typing import Any
 
 from dualfem.core.evaluator import RESIDUALS
 from dualfem.core.io import jsonable
-from dualfem.verify.judge import cert_facts, outcome
+from dualfem.verify.judge import Verdict, cert_facts, outcome
 
 
 @dataclass
@@ -137,6 +137,24 @@ class Row:
         self.grade, self.grade_x, self.grade_mu = outcome(
             self.status or "error", self.tol, self.kkt_error, self.err_x_energy, self.err_multipliers,
             self.ref_bound, self.cert_x, self.cert_mu, self.claimed_status, self.grades)
+        return self.grade
+
+    def facts(self) -> Verdict:
+        """The row's facts as a :class:`dualfem.verify.Verdict` (status, claim, tolerance, KKT error,
+        certificates, grades), to be judged against a reference (:func:`dualfem.verify.against`)."""
+        return Verdict(outcome=self.grade or "", status=self.status or "error", claim=self.claimed_status or "",
+                       tol=self.tol if self.tol is not None else float("nan"), kkt=self.kkt_error,
+                       cert_x=self.cert_x, cert_mu=self.cert_mu)
+
+    def take(self, v: Verdict) -> str:
+        """Copy a judged verdict's measurements against its reference (``err_*``, ``contact_mismatch``,
+        ``ref_solver``, ``ref_bound``; only when it was measured) and its grades; returns the grade."""
+        if v.diff is not None:
+            d = v.diff
+            self.update(err_x_energy=d["x_energy"], err_x_max=d["x_max"], err_multipliers=d["multipliers"],
+                        err_energy=d["energy"], contact_mismatch=d["contact_mismatch"], ref_solver=v.ref_solver,
+                        ref_bound=v.ref_bound)
+        self.grade, self.grade_x, self.grade_mu = v.outcome, v.grade_x, v.grade_mu
         return self.grade
 
     def set_certificate(self, cert: dict | None) -> None:

@@ -181,13 +181,12 @@ def execute(task: Task, cache: _Cache) -> Row:
             else _reference(cache, task, exclude=(task.solver,))
         if ref is None:
             row["reason"] = why
-        else:
-            from dualfem.core import evaluator
+        else:       # the one judge: measured against the reference and graded (dualfem.verify.judge)
+            from dualfem.verify import Answer, against
 
-            cmp = evaluator.compare(qp, sol.x, sol.multipliers, ref.x, ref.multipliers)
-            row.update(err_x_energy=cmp["x_energy"], err_x_max=cmp["x_max"], err_multipliers=cmp["multipliers"],
-                       err_energy=cmp["energy"], contact_mismatch=cmp["contact_mismatch"], ref_solver=ref.solver,
-                       ref_kkt=ref.kkt, ref_bound=ref.bound)
+            row.take(against(row.facts(), qp, sol, Answer(ref.solver, ref.x, ref.multipliers, ref.bound),
+                             grades=row.grades, measurable=True))
+            row.ref_kkt = ref.kkt
             row["ref_time_s"] = ref.time_s
     row.regrade()
     if row.grade == "unverified" and not row.get("reason"):

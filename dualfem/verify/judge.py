@@ -204,15 +204,13 @@ class Answer:
     bound: float | None = None
 
 
-def against(v: Verdict, qp: QP, sol: Solution, ref: Answer | None, *, status: str | None = None,
-            kkt: float | None = None, grades: str | None = None) -> Verdict:
+def against(v: Verdict, qp: QP, sol: Solution, ref: Answer | None, *, grades: str | None = None,
+            measurable: bool | None = None) -> Verdict:
     """The second half of :func:`judge`: ``v`` measured against the reference ``ref`` (when there is one
-    and ``sol`` has a finite answer) and graded. ``status``/``kkt`` override the verdict's facts where the
-    caller knows more (bench: a run over its time limit is ``time_limit``; compare: a claimed ``solved``
-    without a finite answer has an infinite KKT error)."""
-    v = replace(v, status=v.status if status is None else str(status), kkt=v.kkt if kkt is None else kkt)
+    and ``sol`` has an answer to measure) and graded (``grades``: what the tier grades). ``measurable``:
+    whether ``sol``'s answer is measured (default: x and the evaluator's residuals are finite)."""
     finite = sol.x is not None and sol.residuals is not None and bool(sol.residuals.get("finite"))
-    if ref is not None and finite:
+    if ref is not None and (finite if measurable is None else measurable):
         d = measure(qp, sol.x, sol.multipliers, ref.x, ref.multipliers)  # type: ignore[arg-type]
         v = replace(v, diff=d, err_x=d["x_energy"], err_mu=d["multipliers"], ref_solver=ref.solver,
                     ref_bound=ref.bound)
