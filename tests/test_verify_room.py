@@ -98,3 +98,20 @@ def test_judge_against_a_reference(small):
     far = Answer("ref", 2.0 * sol.x, 2.0 * sol.multipliers, 0.0)
     assert judge(qp, sol, tol, reference=far).outcome == "silent_wrong"
     assert judge(qp, sol, tol, reference=replace(far, bound=10.0)).outcome == "correct"   # the slack it grants
+
+
+def test_one_outcome_vocabulary_documented_once():
+    """docs/conventions.md's "Outcomes" table lists exactly the judge's outcomes, and every command's
+    vocabulary derives from it (compare's deprecated verdict words, the harness's lost tasks)."""
+    import re
+
+    from _imports import ROOT
+
+    from dualfem.experiments.compare import VERDICT_OF_GRADE
+    from dualfem.verify import OUTCOMES, outcome_without_answer
+
+    text = (ROOT / "docs" / "conventions.md").read_text()
+    table = text.split("### Outcomes", 1)[1].split("\n\n")[2]
+    assert sorted(re.findall(r"^\| `(\w+)` \|", table, re.M)) == sorted(OUTCOMES)
+    assert set(VERDICT_OF_GRADE) == set(OUTCOMES)
+    assert {outcome_without_answer(s) for s in ("time_limit", "crashed", "skipped", "error")} <= set(OUTCOMES)

@@ -53,7 +53,7 @@ from dualfem.verify.grading import (
     grade_multipliers,
     within,
 )
-from dualfem.verify.judge import OUTCOMES, Answer, Verdict, against, certify, judge, outcome
+from dualfem.verify.judge import OUTCOMES, Answer, Verdict, against, certify, judge, outcome, outcome_without_answer
 
 __all__ = [
     # evaluator (dualfem.core.evaluator)
@@ -66,5 +66,5 @@ __all__ = [
     "DEFAULT_GRADES", "GRADED", "GRADES", "HONEST", "SEVERITY", "check_grades", "combined", "grade",
     "grade_multipliers", "within",
     # the one judge (dualfem.verify.judge)
-    "OUTCOMES", "Answer", "Verdict", "against", "certify", "judge", "outcome",
+    "OUTCOMES", "Answer", "Verdict", "against", "certify", "judge", "outcome", "outcome_without_answer",
 ]

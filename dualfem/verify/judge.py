@@ -193,6 +193,13 @@ def _graded(v: Verdict, grades: str | None = None) -> Verdict:
     return replace(v, outcome=g, grade_x=gx, grade_mu=gmu)
 
 
+def outcome_without_answer(status: str) -> str:
+    """The outcome of a run that returned no answer to judge (the harness's row of a lost task): killed at
+    its wall-clock limit (``time_limit``) is ``timeout``, a dead worker ``crashed``, ``skipped`` stays, any
+    other status (an error before an answer) is ``failed``."""
+    return {"time_limit": "timeout", "crashed": "crashed", "skipped": "skipped"}.get(str(status), "failed")
+
+
 @dataclass(frozen=True)
 class Answer:
     """A trusted reference answer to judge against: its solver, (x, mu), and its certified relative
