@@ -6,6 +6,7 @@ import importlib
 import sys
 import warnings
 
+import numpy as np
 import pytest
 
 
@@ -115,3 +116,26 @@ def test_one_outcome_vocabulary_documented_once():
     assert sorted(re.findall(r"^\| `(\w+)` \|", table, re.M)) == sorted(OUTCOMES)
     assert set(VERDICT_OF_GRADE) == set(OUTCOMES)
     assert {outcome_without_answer(s) for s in ("time_limit", "crashed", "skipped", "error")} <= set(OUTCOMES)
+
+
+def test_the_verdict_agrees_with_the_status_on_a_non_finite_answer(small):
+    """x = 1e308 (K x overflows, NaN > tol is False): the judge itself makes it numerical_error, so the
+    verdict, not only the runner's status, says so; a plugin cannot hand in its own claim or verdict."""
+    from dualfem.core.solution import Solution, Status
+    from dualfem.core.solver import Solver
+    from dualfem.experiments.runner import run
+
+    qp, sol = small
+
+    class Huge(Solver):
+        name = "verify_huge"
+
+        def solve(self):
+            return Solution(self.name, Status.SOLVED, x=np.full(self.qp.n, 1e308),
+                            multipliers=np.full(self.qp.m, 1e308), claim="max_iter", verdict=sol.verdict)
+
+    with np.errstate(all="ignore"):
+        out = run(Huge(), qp)
+    assert out.status == Status.NUMERICAL_ERROR and out.claim == "solved"
+    assert out.verdict is not sol.verdict and out.verdict.status == "numerical_error" and out.verdict.demoted
+    assert out.verdict.outcome == "failed" and "not finite" in out.verdict.why

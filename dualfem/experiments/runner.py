@@ -399,8 +399,9 @@ def fingerprint(qp: QP) -> dict[str, int]:
 
 def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: Any = None,
                    multipliers: bool = True) -> Solution:
-    """Demote an uncertified ``solved`` claim to ``inaccurate`` (see the module docstring): the first half of
-    the one judge, :func:`dualfem.verify.judge.certify`, applied to ``sol``.
+    """Demote an uncertified ``solved`` claim to ``inaccurate`` (``numerical_error`` where the evaluator's
+    residuals or energy are not finite; see the module docstring): the first half of the one judge,
+    :func:`dualfem.verify.judge.certify`, applied to ``sol``.
 
     The plugin's claim stays in ``sol.claim`` (and ``info["claimed_status"]``), the verdict in
     ``sol.verdict``; ``sol.status`` becomes the certified status, ``info["certificate"]`` the certificate.
@@ -425,7 +426,7 @@ def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: An
     if v.note:
         sol.message = (f"{sol.message}; " if sol.message else "") + v.note
     if v.why:
-        sol.status = Status.INACCURATE
+        sol.status = Status(v.status)
         sol.message = f"{sol.message}; not certified: {v.why}" if sol.message else f"not certified: {v.why}"
     return sol
 

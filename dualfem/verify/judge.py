@@ -146,13 +146,12 @@ def certify(qp: QP, sol: Solution, tol: float, exact: bool, reduction: Any = Non
     ``reduction``: the solver's LocalReduction of ``qp`` (``Solver.reduction``), reused if valid, or the
     hints of its matrix-free operator. Nothing in ``sol`` is changed.
     """
-    claim = str(sol.status)
+    status = str(sol.status)
     res = sol.residuals
-    kkt = _kkt(res)
-    v = Verdict(outcome="", status=claim, claim=claim, tol=tol, residuals=res, kkt=kkt)
+    v = Verdict(outcome="", status=status, claim=sol.claim or status, tol=tol, residuals=res, kkt=_kkt(res))
     if sol.status != Status.SOLVED or res is None or not res.get("finite", False) or sol.x is None \
             or sol.multipliers is None or not all(np.isfinite(res[k]) for k in RESIDUALS):
-        return _graded(v)                 # not finite: never 'solved' (the runner says so)
+        return _graded(_not_finite(v, res))
     worst = max(RESIDUALS, key=lambda k: res[k])
     if res[worst] > tol:
         why = f"evaluator residual {worst} = {res[worst]:.1e} exceeds the declared tolerance {tol:g}"
@@ -160,8 +159,19 @@ def certify(qp: QP, sol: Solution, tol: float, exact: bool, reduction: Any = Non
     cert = _certificate(qp, sol, tol, reduction)
     why, note = _why(cert, tol, exact, multipliers)
     cert_x, cert_mu = cert_facts(cert)
-    return _graded(replace(v, status=str(Status.INACCURATE) if why else claim, certificate=cert, cert_x=cert_x,
-                           cert_mu=cert_mu, why=why, note=note))
+    v = replace(v, status=str(Status.INACCURATE) if why else status, certificate=cert, cert_x=cert_x,
+                cert_mu=cert_mu, why=why, note=note)
+    return _graded(_not_finite(v, res))
+
+
+def _not_finite(v: Verdict, res: dict | None) -> Verdict:
+    """A ``solved`` that stands but whose evaluator residuals or energy are not finite (e.g. x = 1e308:
+    K x overflows, and NaN > tol is False) is never ``solved``: ``numerical_error``."""
+    bad = [k for k in (*RESIDUALS, "energy") if res is not None and not np.isfinite(res.get(k, np.nan))]
+    if v.status != str(Status.SOLVED) or not bad:
+        return v
+    return replace(v, status=str(Status.NUMERICAL_ERROR),
+                   why=f"the evaluator's {', '.join(bad)} is not finite (NaN/inf)")
 
 
 def outcome(status: str, tol: float | None, kkt: float | None, err_x: float | None = None,
