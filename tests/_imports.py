@@ -97,6 +97,8 @@ def upward(es: list[Edge]) -> list[Edge]:
         a, b = room(e.src), room(e.dst)
         if a is None or b is None or a == b or a == "facade":
             continue
+        if e.dst == "dualfem":
+            continue        # the package itself (its __version__), as test_no_room_imports_the_facade allows
         if LEVEL[b] > LEVEL[a] or (LEVEL[b] == LEVEL[a]) or b == "facade":
             bad.append(e)
     return bad
