@@ -8,7 +8,7 @@ record bench and stress produce too, graded by the one policy :func:`dualfem.ver
 (:meth:`Row.regrade`); the JSON record of a run (:data:`RUN_FIELDS`, the stable interface of
 ``dualfem compare --json``) is a view of its Row (:func:`record`).
 
-Reference: chosen by the one reference policy (:mod:`dualfem.experiments.reference`): among the
+Reference: chosen by the one reference policy (:mod:`dualfem.verify.reference`): among the
 runs of the solvers that declare ``reference`` (``Solver.reference``, docs/plugins.md 1.5: a
 third-party solver never is one unless it says so) that claim success with an evaluator KKT error
 within their own declared tolerance, the one with the smallest a-posteriori energy-norm error certificate
@@ -51,12 +51,10 @@ from dualfem.core.registry import get_solver
 from dualfem.core.registry import solvers as registered
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import reference_solvers
-from dualfem.experiments import reference
 from dualfem.experiments.row import Row
 from dualfem.experiments.runner import jsonable_params
-from dualfem.numerics.certify import certified_error, solver_for
-from dualfem.verify import Answer, against
-from dualfem.verify.reference import Candidate, choose
+from dualfem.verify import Answer, against, certified_error, solver_for
+from dualfem.verify.reference import Candidate, choose, exact_zero
 
 #: fields of each run record (stable JSON interface of ``dualfem compare --json``; ``verdict`` is a
 #: deprecated alias of ``grade``)
@@ -173,7 +171,7 @@ def _run_one(qp: QP, nm: str, inst, ksolve, asked: float | None = None, given: d
                         "error": f"{type(exc).__name__}: {exc}"}
         row["certificate"] = cert
         row.set_certificate(cert)
-        row["error_bound"] = 0.0 if reference.exact_zero(qp, sol.x, sol.multipliers) else cert["value"]
+        row["error_bound"] = 0.0 if exact_zero(qp, sol.x, sol.multipliers) else cert["value"]
     return row, sol
 
 
