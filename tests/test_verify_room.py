@@ -139,3 +139,15 @@ def test_the_verdict_agrees_with_the_status_on_a_non_finite_answer(small):
     assert out.status == Status.NUMERICAL_ERROR and out.claim == "solved"
     assert out.verdict is not sol.verdict and out.verdict.status == "numerical_error" and out.verdict.demoted
     assert out.verdict.outcome == "failed" and "not finite" in out.verdict.why
+
+
+def test_judge_re_certifies_the_claim_at_another_tolerance(small):
+    """At a tolerance the runner did not certify, judge() judges the plugin's claim afresh, without
+    touching the solution it was given."""
+    from dualfem.verify import Answer, judge
+
+    qp, sol = small
+    status, verdict = sol.status, sol.verdict
+    v = judge(qp, sol, 1e-30, reference=Answer("ref", sol.x, sol.multipliers, 0.0))
+    assert v.tol == 1e-30 and v.demoted and v.status == "inaccurate" and v.outcome == "failed" and v.err_x == 0.0
+    assert sol.status is status and sol.verdict is verdict

@@ -22,6 +22,7 @@ second answer measured it); ``inaccurate`` is a *status* (a demoted claim), whos
 """
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, replace
 from typing import Any
@@ -243,17 +244,9 @@ def judge(qp: QP, sol: Solution, tol: float, *, exact: bool = True, reference: A
     (``sol.claim``, else its status). ``reference``: a trusted answer (:class:`Answer`) to measure and
     grade against; without one the outcome is at best ``unverified``.
     """
-    v = getattr(sol, "verdict", None)
+    v = sol.verdict
     if not isinstance(v, Verdict) or v.tol != tol:
-        claim = getattr(sol, "claim", None) or str(sol.status)
-        v = certify(qp, replace_status(sol, claim), tol, exact, reduction, multipliers)
+        claimed = copy.copy(sol)          # the claim re-judged without touching ``sol``
+        claimed.status = Status(sol.claim or str(sol.status))
+        v = certify(qp, claimed, tol, exact, reduction, multipliers)
     return against(v, qp, sol, reference, grades=grades)
-
-
-def replace_status(sol: Solution, status: str) -> Solution:
-    """A shallow copy of ``sol`` with ``status`` (the claim re-judged without touching the original)."""
-    import copy
-
-    out = copy.copy(sol)
-    out.status = Status(status)
-    return out
