@@ -9,12 +9,12 @@ import pytest
 
 from dualfem.cli.main import main
 from dualfem.core import registry
-from dualfem.core.grade import grade
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import Solver
 from dualfem.experiments.compare import RUN_FIELDS, compare_solvers
 from dualfem.experiments.row import Row
+from dualfem.verify.grading import grade
 
 
 @pytest.fixture(scope="module")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from dualfem.core.grade import check_grades, combined, grade_multipliers
 from dualfem.core.scene import load_scene
 from dualfem.experiments.row import Row
 from dualfem.experiments.runner import run
+from dualfem.verify.grading import check_grades, combined, grade_multipliers
 
 
 def _row(**kw):

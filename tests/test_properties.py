@@ -29,7 +29,7 @@ from dualfem.experiments.runner import run
 REG = solvers()
 EXACT = sorted(n for n, c in REG.items() if c.exact and c.missing() is None)
 REF_NAME, REF_PARAMS = candidates()[0]
-#: this test's margin over the declared tolerances (the grading policy itself has none: dualfem.core.grade)
+#: this test's margin over the declared tolerances (the grading policy itself has none: dualfem.verify.grading)
 SAFETY = 10.0
 
 values = st.floats(min_value=-50.0, max_value=50.0, allow_nan=False, allow_infinity=False)

@@ -29,7 +29,7 @@ from dualfem.experiments.stress import UNITS, scene_in_units
 REG = solvers()
 EXACT = sorted(n for n, c in REG.items() if c.exact and c.missing() is None)
 REF_NAME, REF_PARAMS = candidates()[0]
-#: this test's margin over the declared tolerances (the grading policy itself has none: dualfem.core.grade)
+#: this test's margin over the declared tolerances (the grading policy itself has none: dualfem.verify.grading)
 SAFETY = 10.0
 #: the paper's scene, lengths read as mm: MPa/mm
 BASE = {"load": "f2", "N": 16, "delta": 1e-5, "E": 69000.0, "nu": 0.3, "plane": "strain"}

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from dualfem.cli.main import main
-from dualfem.core.grade import grade
 from dualfem.experiments import store, stress
 from dualfem.experiments.stress import Task
+from dualfem.verify.grading import grade
 
 
 @pytest.mark.parametrize("status,err,kkt,tol,slack,expected", [
@@ -195,9 +195,9 @@ def test_committed_stress_folders_still_load(tmp_path):
     graded Rows through dualfem.experiments.stress.load_results, dualfem.results.load and the report."""
     import shutil
 
-    from dualfem.core.grade import GRADES
     from dualfem.experiments.row import Row
     from dualfem.experiments.stress import load_results
+    from dualfem.verify.grading import GRADES
 
     for name in ("stress", "stress_breadth"):
         meta, rows = load_results(stress_results().parent / name)
@@ -248,15 +248,15 @@ def test_stress_on_a_signorini_scene(tmp_path, capsys):
 
 def test_compare_bench_and_stress_make_the_same_graded_row(tmp_path):
     """One Row type, one grade function: the rows of all three commands are Rows whose grade is
-    dualfem.core.grade.grade of their own status, error, KKT error, tolerance and reference bound."""
+    dualfem.verify.grading.grade of their own status, error, KKT error, tolerance and reference bound."""
     import os
 
-    from dualfem.core.grade import GRADES, grade
     from dualfem.core.scene import load_scene
     from dualfem.experiments import bench
     from dualfem.experiments.compare import compare_solvers
     from dualfem.experiments.row import COLUMNS, Row
     from dualfem.experiments.spec import parse_spec
+    from dualfem.verify.grading import GRADES, grade
 
     cmp_rows = compare_solvers(load_scene("f2", {"N": 8}).build(), ["pdas", "clarabel"]).rows
     spec = parse_spec({"name": "tiny", "repeats": 1, "warmup": False, "tiers": {"mid": 1e-6},

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -33,6 +34,14 @@ class Solution:
     (e.g. ``{"outer": k, "inner": m}``), ``history`` a list of per-iteration dicts where the
     solver has one, ``time_s`` holds ``setup`` and ``solve`` wall times in seconds.
     ``residuals`` is filled by :func:`dualfem.evaluator.residuals`, never by the solver.
+
+    **Claim and verdict apart.** A plugin returns its *claim* in ``status``. The runner
+    (:func:`dualfem.experiments.runner.run`) then judges it (:func:`dualfem.verify.judge`) and keeps both:
+    ``claim`` is the plugin's own status (a string; also in ``info["claimed_status"]``, where JSON
+    records read it), ``verdict`` the judge's :class:`dualfem.verify.Verdict` (its outcome, certified
+    error bounds, residuals and why), and ``status`` -- for compatibility, as before -- the *certified*
+    status: the claim, or ``inaccurate`` when the judge demoted it (``numerical_error`` for a non-finite
+    answer). A solver leaves ``claim`` and ``verdict`` None; a Solution no runner judged has both None.
     """
 
     solver: str
@@ -46,6 +55,8 @@ class Solution:
     params: dict = field(default_factory=dict)
     residuals: dict | None = None
     info: dict = field(default_factory=dict)
+    claim: str | None = None
+    verdict: Any = None     # a dualfem.verify.Verdict (the core does not import the room above it)
 
     @property
     def ok(self) -> bool:

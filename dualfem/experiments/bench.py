@@ -7,7 +7,7 @@ the results folder: :mod:`dualfem.experiments.store`; worker processes and execu
 Three kinds of rows: ``run`` (a solver on a scene at a tier), ``reference`` (the certified exact
 solve a scene's errors are measured against, chosen by :mod:`dualfem.experiments.reference`)
 and ``floor`` (one sparse factorization + one solve of the unconstrained K: the lower bound on
-the time of any direct method). Each run is graded by :func:`dualfem.core.grade.grade`.
+the time of any direct method). Each run is graded by :func:`dualfem.verify.grading.grade`.
 """
 from __future__ import annotations
 
@@ -77,8 +77,8 @@ def execute(task: dict, tick: Callable[[str, float], None] = lambda phase, budge
 
 def _execute_run(task: dict, qp, row: Row, tick) -> tuple[Row, dict | None]:
     """The run's row, and its convergence curve (:mod:`dualfem.experiments.curves`) or None."""
-    from dualfem.core import evaluator
     from dualfem.core.solution import Status
+    from dualfem.verify import Answer, against
 
     ref = task.get("ref")
     sol, setups, solves, done, note, monitor = timed_runs(task, qp, task["solver"], task["params"], tick,
@@ -104,11 +104,10 @@ def _execute_run(task: dict, qp, row: Row, tick) -> tuple[Row, dict | None]:
         elif ref["qp_key"] != qp.key():
             row.message = (row.message + "; " if row.message else "") + \
                 "reference is stale (the scene's QP changed): errors not measured; delete the refs cache"
-        else:
-            c = evaluator.compare(qp, sol.x, sol.multipliers, ref["x"], ref["multipliers"])
-            row.update(err_x_energy=c["x_energy"], err_x_max=c["x_max"], err_multipliers=c["multipliers"],
-                       err_energy=c["energy"], contact_mismatch=c["contact_mismatch"],
-                       ref_solver=ref["solver"], ref_kkt=ref["kkt"], ref_bound=ref.get("bound"))
+        else:       # the one judge: measured against the reference and graded (dualfem.verify.judge)
+            row.take(against(row.facts(), qp, sol, Answer(ref["solver"], ref["x"], ref["multipliers"],
+                                                          ref.get("bound")), grades=row.grades))
+            row.ref_kkt = ref["kkt"]
     row.regrade()
     tick("curve errors", task["hard_limit"])
     curve = sample_errors(qp, monitor, ref)

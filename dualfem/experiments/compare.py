@@ -4,11 +4,11 @@
 QP, through :func:`dualfem.experiments.runner.run` (so statuses, timings and the evaluator's
 independent residuals are the same as for ``dualfem solve``), picks the reference, and grades
 each run. Every run is one :class:`~dualfem.experiments.row.Row` (``kind = "compare"``), the
-record bench and stress produce too, graded by the one policy :func:`dualfem.core.grade.grade`
+record bench and stress produce too, graded by the one policy :func:`dualfem.verify.grading.grade`
 (:meth:`Row.regrade`); the JSON record of a run (:data:`RUN_FIELDS`, the stable interface of
 ``dualfem compare --json``) is a view of its Row (:func:`record`).
 
-Reference: chosen by the one reference policy (:mod:`dualfem.experiments.reference`): among the
+Reference: chosen by the one reference policy (:mod:`dualfem.verify.reference`): among the
 runs of the solvers that declare ``reference`` (``Solver.reference``, docs/plugins.md 1.5: a
 third-party solver never is one unless it says so) that claim success with an evaluator KKT error
 within their own declared tolerance, the one with the smallest a-posteriori energy-norm error certificate
@@ -20,7 +20,7 @@ cross-checked against the next best trusted run of any exact solver: their diffe
 one's declared tolerance plus both bounds. Runs whose x is bit-for-bit the reference's are listed
 (``identical_to_reference``) but skipped as cross-checks.
 
-``grade`` of each run (the vocabulary of :mod:`dualfem.core.grade`, as in bench and stress):
+``grade`` of each run (the vocabulary of :mod:`dualfem.verify.grading`, as in bench and stress):
 ``correct``, ``failed`` (an honest non-success status), ``flagged`` (claims ``solved``, but the
 evaluator's residuals exceed its declared tolerance), ``silent_wrong`` (claims ``solved``,
 residuals clean, answer off the reference by more than its tolerance + the reference's bound),
@@ -51,10 +51,10 @@ from dualfem.core.registry import get_solver
 from dualfem.core.registry import solvers as registered
 from dualfem.core.solution import Solution, Status
 from dualfem.core.solver import reference_solvers
-from dualfem.experiments import reference
 from dualfem.experiments.row import Row
 from dualfem.experiments.runner import jsonable_params
-from dualfem.numerics.certify import certified_error, solver_for
+from dualfem.verify import Answer, against, certified_error, solver_for
+from dualfem.verify.reference import Candidate, choose, exact_zero
 
 #: fields of each run record (stable JSON interface of ``dualfem compare --json``; ``verdict`` is a
 #: deprecated alias of ``grade``)
@@ -171,7 +171,7 @@ def _run_one(qp: QP, nm: str, inst, ksolve, asked: float | None = None, given: d
                         "error": f"{type(exc).__name__}: {exc}"}
         row["certificate"] = cert
         row.set_certificate(cert)
-        row["error_bound"] = 0.0 if reference.exact_zero(qp, sol.x, sol.multipliers) else cert["value"]
+        row["error_bound"] = 0.0 if exact_zero(qp, sol.x, sol.multipliers) else cert["value"]
     return row, sol
 
 
@@ -190,7 +190,7 @@ def record(row: Row, ref: dict | None = None) -> dict[str, Any]:
         # errors against the reference (None without one): x in the energy norm, the multipliers
         # |mu - mu_ref|_inf / max(|mu_ref|_inf, |F|_inf)
         "err_x_energy": row.err_x_energy, "err_multipliers": row.err_multipliers,
-        # graded apart (dualfem.core.grade): the displacements, the multipliers, and their certificates
+        # graded apart (dualfem.verify.grading): the displacements, the multipliers, and their certificates
         "grade_x": row.grade_x, "grade_mu": row.grade_mu, "cert_x": row.cert_x, "cert_mu": row.cert_mu,
     }
 
@@ -200,12 +200,13 @@ def _reference_record(qp: QP, rows: list[Row], sols: dict[str, Solution], ref_na
     """Differences of every run to the reference (into its row), and the cross-check of the reference."""
     ref = sols[ref_name]
     rrow = next(r for r in rows if r.solver == ref_name)
+    answer = Answer(ref_name, ref.x, ref.multipliers, rrow["error_bound"])   # type: ignore[arg-type]
     for row in rows:
-        s = sols[row.solver]
-        if row.get("energy") is not None:
-            d = evaluator.compare(qp, s.x, s.multipliers, ref.x, ref.multipliers)
-            row.update(diff=d, err_x_energy=d["x_energy"], err_x_max=d["x_max"], err_multipliers=d["multipliers"],
-                       err_energy=d["energy"], contact_mismatch=d["contact_mismatch"])
+        # the one judge: measured against the reference and graded (dualfem.verify.judge)
+        v = against(row.facts(), qp, sols[row.solver], answer, measurable=row.get("energy") is not None)
+        row.take(v)
+        if v.diff is not None:
+            row["diff"] = v.diff
         row.update(ref_solver=ref_name, ref_kkt=rrow.kkt_error, ref_bound=rrow["error_bound"])
     out: dict[str, Any] = {
         "solver": ref_name, "error_bound": rrow["error_bound"], "kkt_error": rrow.kkt_error,
@@ -228,20 +229,11 @@ def _reference_record(qp: QP, rows: list[Row], sols: dict[str, Solution], ref_na
 
 
 def _choose_reference(rows: list[Row]) -> tuple[str | None, list[str]]:
-    """The one reference policy (:mod:`dualfem.experiments.reference`) applied to the runs made:
-    trusted runs (exact, solved, KKT error within the solver's own tolerance, finite certificate)
-    ranked by certificate, KKT error, time; the reference is the first of them whose solver declares
-    ``reference`` (:func:`reference.may_serve`: a third-party solver never is unless it says so), the
-    others are the cross-check candidates. Returns (reference or None, the other trusted runs in order)."""
-    ranked = []
-    for r in rows:
-        ok, _ = reference.trusted(r.status, r.exact, r.kkt_error, r.get("error_bound"), kkt_max=r.tol)
-        if ok:
-            ranked.append((reference.rank_key(r["error_bound"], r.kkt_error, r.total_s), r.solver))
-    ranked.sort()
-    names = [n for _, n in ranked]
-    ref = next((n for n in names if reference.may_serve(n)), None)
-    return ref, [n for n in names if n != ref]
+    """The one reference policy (:func:`dualfem.verify.reference.choose`) applied to the runs made, each
+    trusted at most at its own tolerance (KKT error within it, finite certificate). Returns (reference or
+    None, the other trusted runs in order)."""
+    return choose(Candidate(r.solver or "", str(r.status), bool(r.exact), r.kkt_error, r.get("error_bound"),
+                            r.total_s, kkt_max=r.tol) for r in rows)  # type: ignore[arg-type]
 
 
 def grade_record(rec: dict, ref: dict | None) -> str:

@@ -198,6 +198,7 @@ def error_row(task: dict, message: str, status: str = "error") -> dict:
     """The row of a task that produced no result (``status`` error, time_limit, crashed, skipped)."""
     from dualfem.experiments.machine import utc_now
     from dualfem.experiments.row import Row
+    from dualfem.verify.judge import outcome_without_answer
 
     row = Row(run_id=task.get("run_id", ""), kind=task.get("kind", "run"), status=status, claimed_status=None,
               message=message, started_utc=utc_now())
@@ -206,7 +207,7 @@ def error_row(task: dict, message: str, status: str = "error") -> dict:
         if task.get(k) is not None:
             row[k] = task[k]
     row.solver_params = dict(task.get("params") or {})
-    row.grade = {"time_limit": "timeout", "crashed": "crashed", "skipped": "skipped"}.get(status, "failed")
+    row.grade = outcome_without_answer(status)
     return row.to_dict()
 
 

@@ -6,7 +6,7 @@ text in CSV. Anything else a producer wants to keep (``scene_*`` parameters, ``r
 goes to :attr:`Row.extra` and is written as its own column.
 
 Units: times in seconds (``*_s``), memory in MB (``peak_rss_mb``), errors relative (see
-:mod:`dualfem.core.grade` for the grading policy, :mod:`dualfem.core.evaluator` for residuals).
+:mod:`dualfem.verify.grading` for the grading policy, :mod:`dualfem.core.evaluator` for residuals).
 """
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 from dualfem.core.evaluator import RESIDUALS
-from dualfem.core.grade import combined, grade, grade_multipliers
 from dualfem.core.io import jsonable
+from dualfem.verify.judge import Verdict, cert_facts, outcome
 
 
 @dataclass
@@ -40,7 +40,7 @@ class Row:
     status: str | None = None
     claimed_status: str | None = None
     grade: str | None = None
-    grades: str | None = None                # what the tier grades: "x" or "x,mu" (dualfem.core.grade)
+    grades: str | None = None                # what the tier grades: "x" or "x,mu" (dualfem.verify.grading)
     grade_x: str | None = None               # the displacements' grade
     grade_mu: str | None = None              # the multipliers' grade
     message: str = ""
@@ -126,43 +126,42 @@ class Row:
         self.within_tol = bool(tol is not None and math.isfinite(tol) and self.kkt_error <= tol)
 
     def regrade(self) -> str:
-        """Set :attr:`grade_x`, :attr:`grade_mu` and :attr:`grade` (returned) from the row's status, errors,
-        certificates, KKT error and tolerance (:mod:`dualfem.core.grade`).
+        """Set :attr:`grade_x`, :attr:`grade_mu` and :attr:`grade` (returned) from the row's status, claim,
+        errors, certificates, KKT error and tolerance: the one judge's grading of facts,
+        :func:`dualfem.verify.judge.outcome` (a stored row has no QP to re-judge).
 
         ``grades`` None (compare, stress: runs certified at the declared tolerance, x and multipliers
         both): the grade of the certified status and x's error, as before grades were separated. Under
-        ``"x,mu"`` a run the runner demoted for its multipliers alone
-        (claimed ``solved``, KKT error and certified x error within ``tol``, certified multiplier error
-        above it) keeps a ``grade_x`` of its x.
+        ``"x,mu"`` a run the runner demoted for its multipliers alone keeps a ``grade_x`` of its x.
         """
-        tol = self.tol if self.tol is not None and math.isfinite(self.tol) else float("nan")
-        status = self.status or "error"
-        status_x = "solved" if self._demoted_for_multipliers(tol) else status
-        self.grade_x = grade(status_x, self.err_x_energy, self.kkt_error, tol, self.ref_bound)
-        self.grade_mu = grade_multipliers(status_x, self.err_multipliers, self.kkt_error, tol, self.ref_bound,
-                                          self.cert_mu)
-        self.grade = (grade(status, self.err_x_energy, self.kkt_error, tol, self.ref_bound) if not self.grades
-                      else combined(self.grade_x, self.grade_mu, self.grades))
+        self.grade, self.grade_x, self.grade_mu = outcome(
+            self.status or "error", self.tol, self.kkt_error, self.err_x_energy, self.err_multipliers,
+            self.ref_bound, self.cert_x, self.cert_mu, self.claimed_status, self.grades)
         return self.grade
 
-    def _demoted_for_multipliers(self, tol: float) -> bool:
-        def fin(v: Any) -> bool:
-            return isinstance(v, (int, float)) and math.isfinite(v)
+    def facts(self) -> Verdict:
+        """The row's facts as a :class:`dualfem.verify.Verdict` (status, claim, tolerance, KKT error,
+        certificates, grades), to be judged against a reference (:func:`dualfem.verify.against`)."""
+        return Verdict(outcome=self.grade or "", status=self.status or "error", claim=self.claimed_status or "",
+                       tol=self.tol if self.tol is not None else float("nan"), kkt=self.kkt_error,
+                       cert_x=self.cert_x, cert_mu=self.cert_mu)
 
-        return bool(self.status == "inaccurate" and self.claimed_status == "solved" and fin(self.kkt_error)
-                    and self.kkt_error <= tol and fin(self.cert_mu) and self.cert_mu > tol
-                    and (not fin(self.cert_x) or self.cert_x <= tol))
+    def take(self, v: Verdict) -> str:
+        """Copy a judged verdict's measurements against its reference (``err_*``, ``contact_mismatch``,
+        ``ref_solver``, ``ref_bound``; only when it was measured) and its grades; returns the grade."""
+        if v.diff is not None:
+            d = v.diff
+            self.update(err_x_energy=d["x_energy"], err_x_max=d["x_max"], err_multipliers=d["multipliers"],
+                        err_energy=d["energy"], contact_mismatch=d["contact_mismatch"], ref_solver=v.ref_solver,
+                        ref_bound=v.ref_bound)
+        self.grade, self.grade_x, self.grade_mu = v.outcome, v.grade_x, v.grade_mu
+        return self.grade
 
     def set_certificate(self, cert: dict | None) -> None:
         """Copy the runner's certificate (``Solution.info["certificate"]``): ``cert_x`` its energy-norm
-        bound, ``cert_mu`` its multiplier error beyond the rounding floor of mu* (None when absent)."""
-        def ok(v: Any) -> bool:
-            return isinstance(v, (int, float)) and math.isfinite(v)
-
-        cert = cert if isinstance(cert, dict) else {}
-        val, mu, floor = cert.get("value"), cert.get("multipliers"), cert.get("multipliers_floor", 0.0)
-        self.cert_x = float(val) if ok(val) else None
-        self.cert_mu = max(float(mu) - (float(floor) if ok(floor) else 0.0), 0.0) if ok(mu) else None
+        bound, ``cert_mu`` its multiplier error beyond the rounding floor of mu* (None when absent;
+        :func:`dualfem.verify.judge.cert_facts`)."""
+        self.cert_x, self.cert_mu = cert_facts(cert)
 
     # ----------------------------------------------------------- serialisation
     def to_dict(self) -> dict:

@@ -404,60 +404,35 @@ def fingerprint(qp: QP) -> dict[str, int]:
 
 def certify_status(qp: QP, sol: Solution, tol: float, exact: bool, reduction: Any = None,
                    multipliers: bool = True) -> Solution:
-    """Demote an uncertified ``solved`` claim to ``inaccurate`` (see the module docstring).
+    """Demote an uncertified ``solved`` claim to ``inaccurate`` (``numerical_error`` where the evaluator's
+    residuals or energy are not finite; see the module docstring): the first half of the one judge,
+    :func:`dualfem.verify.judge.certify`, applied to ``sol``.
 
+    The plugin's claim stays in ``sol.claim`` (and ``info["claimed_status"]``), the verdict in
+    ``sol.verdict``; ``sol.status`` becomes the certified status, ``info["certificate"]`` the certificate.
     ``multipliers=False``: a certified multiplier error above ``tol`` is reported in the message but
-    does not demote (a tier that grades x only, :mod:`dualfem.core.grade`).
+    does not demote (a tier that grades x only, :mod:`dualfem.verify.grading`).
 
     ``reduction``: the solver's LocalReduction of ``qp`` (``Solver.reduction``), reused if valid, or the hints of
     its matrix-free operator (:class:`dualfem.numerics.certify.OperatorHints`).
     """
+    from dualfem.verify.judge import certify
+
     sol.info.setdefault("claimed_status", str(sol.status))
     sol.info["certified_tol"] = tol
-    res = sol.residuals
-    if sol.status != Status.SOLVED or res is None or not res.get("finite", False) or sol.x is None \
-            or sol.multipliers is None:
-        return sol
-    if not all(np.isfinite(res[k]) for k in evaluator.RESIDUALS):
-        return sol                        # not finite: never 'solved' (:func:`_certified` says so)
-    worst = max(evaluator.RESIDUALS, key=lambda k: res[k])
-    why = None
-    if res[worst] > tol:
-        why = f"evaluator residual {worst} = {res[worst]:.1e} exceeds the declared tolerance {tol:g}"
-    else:
-        from dualfem.numerics.certify import KSolver, certified_error, multiplier_floor
-
-        try:
-            ks = KSolver(qp, reduction=reduction)
-            sol.info["certificate"] = certified_error(qp, sol.x, sol.multipliers, ks)
-            sol.info["certificate"]["path"] = ks.path
-            cm = sol.info["certificate"].get("multipliers", float("nan"))
-            if np.isfinite(cm) and cm > tol:      # only then: the rounding floor of mu* costs one more solve
-                sol.info["certificate"]["multipliers_floor"] = multiplier_floor(qp, sol.x, sol.multipliers, ks)
-        except (np.linalg.LinAlgError, ValueError, RuntimeError) as exc:
-            sol.info["certificate"] = {"bound": float("nan"), "active_set": float("nan"), "value": float("nan"),
-                                       "error": f"{type(exc).__name__}: {exc}"}
-            sol.message = f"{sol.message}; certificate unavailable ({type(exc).__name__}: {exc})".lstrip("; ")
-        cert = sol.info["certificate"]["value"]
-        cmu = sol.info["certificate"].get("multipliers", float("nan"))
-        cfloor = sol.info["certificate"].get("multipliers_floor", 0.0)
-        cmu = cmu - (cfloor if np.isfinite(cfloor) else 0.0)      # beyond the rounding of mu* itself
-        if np.isfinite(cert) and cert > tol:
-            why = (f"certified energy-norm error bound {cert:.1e} exceeds the declared tolerance {tol:g} "
-                   f"(residuals are within it)")
-        elif not exact and not np.isfinite(cert):
-            why = ("no error bound applies to this answer of an inexact solver (residuals alone do not bound "
-                   "the error of x)")
-        elif np.isfinite(cmu) and cmu > tol and not multipliers:
-            sol.message = (f"{sol.message}; " if sol.message else "") + \
-                f"certified multiplier error {cmu:.1e} exceeds {tol:g} (not graded: x only)"
-        elif np.isfinite(cmu) and cmu > tol:
-            why = (f"certified multiplier error {cmu:.1e} (|mu - mu*|_inf against the exact multipliers of the "
-                   f"verified active set, relative to max(|mu*|, |F|), beyond their rounding floor "
-                   f"{cfloor:.1e}) exceeds the declared tolerance {tol:g}")
-    if why:
-        sol.status = Status.INACCURATE
-        sol.message = f"{sol.message}; not certified: {why}" if sol.message else f"not certified: {why}"
+    if sol.claim is None:
+        sol.claim = str(sol.info["claimed_status"])
+    v = certify(qp, sol, tol, exact, reduction, multipliers)
+    sol.verdict = v
+    if v.certificate is not None:
+        sol.info["certificate"] = v.certificate
+        if "error" in v.certificate:
+            sol.message = f"{sol.message}; certificate unavailable ({v.certificate['error']})".lstrip("; ")
+    if v.note:
+        sol.message = (f"{sol.message}; " if sol.message else "") + v.note
+    if v.why:
+        sol.status = Status(v.status)
+        sol.message = f"{sol.message}; not certified: {v.why}" if sol.message else f"not certified: {v.why}"
     return sol
 
 

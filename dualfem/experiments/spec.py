@@ -16,7 +16,7 @@ A sweep is described by a TOML spec (see ``benchmarks/default.toml``)::
     curves = false         # true: record each run's error along its iterations (curves.csv beside
                            # results.csv, dualfem.experiments.curves); only solvers reporting iterates
     grades = "x"           # what every tier grades: "x" (default: the displacements, energy norm) or
-                           # "x,mu" (the multipliers too); dualfem.core.grade says why
+                           # "x,mu" (the multipliers too); dualfem.verify.grading says why
     [tiers]                # tolerance tiers -> each solver's Solver.tolerance_params(tol)
     low = 1e-3
     high = 1e-9
@@ -54,10 +54,10 @@ from pathlib import Path
 from typing import Any
 
 from dualfem.core.errors import InputError
-from dualfem.core.grade import DEFAULT_GRADES, check_grades
 from dualfem.core.solver import reference_solvers
 from dualfem.experiments.spec_select import Selection, apply_selection, effective_text
 from dualfem.experiments.watchdog import GUARD_FACTOR, GUARD_SLACK
+from dualfem.verify.grading import DEFAULT_GRADES, check_grades
 
 SPEC_KEYS = {"name", "description", "repeats", "warmup", "time_limit", "guard_factor", "guard_slack",
              "build_limit", "cold_setup", "curves", "tiers", "grades", "reference", "floor", "scenes", "solvers"}

@@ -10,7 +10,7 @@ own needs are features of that engine: the N axis is a chain of task dependencie
 with a gate (:func:`gate`): a run is attempted only when the previous N of the same solver
 finished and the predicted time and memory fit. Each run is measured against the reference
 chosen by the one reference policy (:mod:`dualfem.experiments.reference`; for the units and load
-axes the base scene's reference mapped exactly) and graded by :func:`dualfem.core.grade.grade`
+axes the base scene's reference mapped exactly) and graded by :func:`dualfem.verify.grading.grade`
 with the tolerance the solver instance declares. Each worker caches QPs and references.
 
 Results: the store's files plus ``DIR/meta.json`` (the grid's description for the report).
@@ -181,13 +181,12 @@ def execute(task: Task, cache: _Cache) -> Row:
             else _reference(cache, task, exclude=(task.solver,))
         if ref is None:
             row["reason"] = why
-        else:
-            from dualfem.core import evaluator
+        else:       # the one judge: measured against the reference and graded (dualfem.verify.judge)
+            from dualfem.verify import Answer, against
 
-            cmp = evaluator.compare(qp, sol.x, sol.multipliers, ref.x, ref.multipliers)
-            row.update(err_x_energy=cmp["x_energy"], err_x_max=cmp["x_max"], err_multipliers=cmp["multipliers"],
-                       err_energy=cmp["energy"], contact_mismatch=cmp["contact_mismatch"], ref_solver=ref.solver,
-                       ref_kkt=ref.kkt, ref_bound=ref.bound)
+            row.take(against(row.facts(), qp, sol, Answer(ref.solver, ref.x, ref.multipliers, ref.bound),
+                             grades=row.grades, measurable=True))
+            row.ref_kkt = ref.kkt
             row["ref_time_s"] = ref.time_s
     row.regrade()
     if row.grade == "unverified" and not row.get("reason"):
@@ -408,7 +407,7 @@ def row_from_record(rec: dict) -> Row:
     d.update(rec.get("residuals") or {})
     ref = rec.get("reference") or {}
     # records of that format carry no certified bound of their reference: the reference is trusted to
-    # its own declared tolerance, which is the slack it grants (dualfem.core.grade)
+    # its own declared tolerance, which is the slack it grants (dualfem.verify.grading)
     d.update(kind="stress", ref_solver=ref.get("name"), ref_kkt=ref.get("kkt"), ref_time_s=ref.get("time_s"),
              ref_bound=ref.get("tolerance"))
     if ref.get("reason"):

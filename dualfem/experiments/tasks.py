@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from dualfem.core.grade import DEFAULT_GRADES
 from dualfem.experiments.spec import SCENE_KEYS_RESERVED, Spec, _as_list, _grid
 from dualfem.experiments.store import content_ident
+from dualfem.verify.grading import DEFAULT_GRADES
 
 
 def _canon(o: Any) -> Any:

@@ -5,7 +5,7 @@ Definitions (printed in the reports by :data:`DEFINITION`):
 * a **solved claim** is a run whose ``claimed_status`` -- the plugin's own word, before dualfem's
   certification -- is ``solved`` (rows written before ``claimed_status`` existed fall back to
   ``status``);
-* a claim is **certified correct** when :func:`dualfem.core.grade.grade` gives ``correct``: the
+* a claim is **certified correct** when :func:`dualfem.verify.grading.grade` gives ``correct``: the
   runner's certification stands (status still ``solved``: the evaluator's KKT residuals, and for
   exact solvers the a-posteriori energy-norm error bound, within the tolerance), the evaluator's
   largest KKT residual is <= tol and the relative energy-norm error against the certified
@@ -30,7 +30,7 @@ import math
 from collections.abc import Iterable
 from typing import Any
 
-from dualfem.core.grade import combined, grade, grade_multipliers
+from dualfem.verify.judge import outcome
 
 #: the correct rate in words (both reports print it)
 DEFINITION = (
@@ -82,16 +82,15 @@ def certified_correct(r: Any, tol: float | None = None) -> bool:
 
 
 def _grade_at(r: Any, tol: float) -> str:
-    """The run's grade regraded at ``tol``: x's, or the worse of x's and the multipliers' where the row's
-    tier grades ``"x,mu"`` (:mod:`dualfem.core.grade`)."""
+    """The run's grade regraded at ``tol`` by the one judge's grading of facts
+    (:func:`dualfem.verify.judge.outcome`): x's, or the worse of x's and the multipliers' where the row's tier
+    grades ``"x,mu"``. The status is the certified one as recorded (no claim is passed: a run the
+    certification demoted at its own tolerance is not re-certified at ``tol``)."""
     slack = _f(_get(r, "ref_bound"))
     slack = slack if math.isfinite(slack) else 0.0
-    status, kkt = _certified_status(r), _f(_get(r, "kkt_error"))
-    gx = grade(status, _f(_get(r, "err_x_energy")), kkt, tol, slack)
-    if _get(r, "grades") != "x,mu":
-        return gx
-    gmu = grade_multipliers(status, _f(_get(r, "err_multipliers")), kkt, tol, slack, _f(_get(r, "cert_mu")))
-    return combined(gx, gmu, "x,mu")
+    return outcome(_certified_status(r), tol, _f(_get(r, "kkt_error")), _f(_get(r, "err_x_energy")),
+                   _f(_get(r, "err_multipliers")), slack, cert_mu=_f(_get(r, "cert_mu")),
+                   grades=_get(r, "grades"))[0]
 
 
 def claim_stats(rows: Iterable[Any], tol: float | None = None) -> dict[str, Any]:

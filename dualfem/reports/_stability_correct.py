@@ -2,7 +2,7 @@
 
 Per solver over the whole stress grid, then per solver and axis; definitions in
 :mod:`dualfem.reports._correct_rate` (the tolerance is the one each solver instance declares,
-the grade the one stored in each run's record by :func:`dualfem.core.grade.grade`).
+the grade the one stored in each run's record by :func:`dualfem.verify.grading.grade`).
 """
 from __future__ import annotations
 
