@@ -6,6 +6,8 @@ from dualfem.core.registry import (
     entry_point_errors,
     get_problem,
     get_solver,
+    problem_dims,
+    problem_for_dim,
     problems,
     register_problem,
     register_solver,
@@ -13,7 +15,8 @@ from dualfem.core.registry import (
 )
 
 __all__ = [
-    "DISTRIBUTION", "builtin_names", "entry_point_errors", "get_problem", "get_solver", "problems",
+    "DISTRIBUTION", "builtin_names", "entry_point_errors", "get_problem", "get_solver", "problem_dims",
+    "problem_for_dim", "problems",
     "register_problem", "register_solver", "solvers",
 ]
 
