@@ -39,8 +39,7 @@ counting k; ``solves``; ``cg_iterations`` of the polish; ``factorizations``) nex
 **Preconditioner** (``precond``, :mod:`dualfem.numerics.dual_precond`; none costs a K-solve;
 ``info["precond"]`` says which one ran). ``auto`` (default): ``dirichlet`` with the matrix-free
 operator, where a product is a K-solve, ``none`` with the dense one, where a product is so cheap
-that the preconditioner's setup would cost more than it saves (measured: f2 N = 256, 0.02 s
-setup without, 0.1 s with, same solve time).
+that the preconditioner's setup would cost more than it saves (docs/measurements.md).
 
 * ``dirichlet``: Dostal's preconditioning in face with FETI's Dirichlet preconditioner
   ``M^-1 = W B S_loc B' W`` (``W = diag(B B')^-1``; S_loc the Schur complements of K onto each
@@ -48,10 +47,8 @@ setup without, 0.1 s with, same solve time).
   block per crack, built once in the setup). The CG directions are built from
   ``z_F = (M^-1)_FF phi_F`` on the free set F only (expansion and proportioning steps unchanged),
   so a CG step still costs one product. cond(D) grows as crack length / h (the modes smooth along
-  a crack); M^-1 removes the modes shorter than about ``layers`` elements. Measured
-  (benchmarks/results/mprgp_precond/mprgp_precond.md): CG steps 47 -> 24 (layers 4) -> 18 (layers 8)
-  on 8 x 8 cracks at h = 0.0025, 39 -> 18 -> 13 on f2 N = 512; on the 269 k scene (8 nodes per crack)
-  26 -> 13, where the fixed costs above (power iterations, diagonal) dominate and the time is about the same;
+  a crack); M^-1 removes the modes shorter than about ``layers`` elements (CG steps with and without
+  it: benchmarks/results/mprgp_precond/mprgp_precond.md, docs/measurements.md);
 * ``lumped``: the same with FETI's lumped ``M^-1 = W B K B' W`` (spectrally a constant here: it
   does not cut iterations, kept for comparison);
 * ``jacobi``: the change of variables ``mu = S nu``, ``S = diag(D)^-1/2`` (the operator's

@@ -41,10 +41,10 @@ Choices where the paper is silent or misprinted (documented here once):
   proximal-point bound change / (r mu_min) (mu_min = smallest dual compliance, see below), which
   also holds after one outer iteration. With the relative test (``tol_mode="relative"``, the default)
   the iteration goes on until the larger is also <= tol (the answer's multipliers are certified to the
-  declared tolerance: on fractured scenes the last change alone left errors of 1.5-1.7e-6 against a
-  tolerance of 1e-6). With the paper's absolute test, when the larger exceeds ``error_factor * tol`` the
-  status is ``inaccurate`` (with both numbers in the message) instead of ``solved``; the iterates
-  and the counts k, m are then the paper's.
+  declared tolerance; why the last change alone is not enough: docs/measurements.md). With the
+  paper's absolute test, when the larger exceeds ``error_factor * tol`` the status is ``inaccurate``
+  (with both numbers in the message) instead of ``solved``; the iterates and the counts k, m are then
+  the paper's.
 * Shortcut (``shortcut=True``, with l^0 = 0): if the unconstrained minimizer has no negative
   jump, it already is the answer of the first Uzawa iteration and l^1 = 0; we return it with
   k = 1, m = 1 (one solve).
@@ -85,18 +85,11 @@ memory, so the method runs at every size and is never skipped for its number of 
   ``info["factorizations"]``); the start K^-1 F is one solve with the operator's factorization of K
   (shared with the certificate). Cost: one factorization of K, one analysis, one numeric
   factorization of K + B'B per active set met (each about as costly as K's), one sparse solve per
-  Newton step; memory: two sparse factors. Measured on a 269 k-unknown many-crack scene (400 cracks,
-  m = 3,200, 12,800 local unknowns, beyond the dense path; delta = 1e-5, load f1, 2 shared cores),
-  setup + solve against the floor (one factorization + solve of K in the same process, 1.6-2.8 s
-  with the machine's load): ``uzawa_auto`` 5 outer / 11 Newton steps, 1 analysis + 5 numeric
-  factorizations, 71 Lanczos products (2.9-5.5 s of it), 8-21 s = 4.8-7.6x the floor (four runs);
-  ``uzawa`` (r = 1e7) 23 / 53, 13 factorizations (17 with ``keep_factors=1``), 10-25 s = 5.8-9.2x.
-  On a 25 k-unknown scene (64 cracks, 1,536 local unknowns) the dense path is faster (uzawa_auto
-  0.66 s against 1.2 s): ``auto`` keeps it there.
+  Newton step; memory: two sparse factors (timings of both paths: docs/measurements.md).
   ``info`` reports the counters (``newton_*``, ``applications``, ``mu_min_applications``).
   mu_min (``r_rule="auto"``, and the honest-stop bound of every run that stops) is estimated by
   Lanczos (ARPACK ``eigsh``, which="SA", relative tolerance ``eig_tol`` = 1e-2) on products
-  W^1/2 D W^1/2 v, one K-solve each (about 70-80 products on the many-crack scenes). An estimate is
+  W^1/2 D W^1/2 v, one K-solve each. An estimate is
   enough: a Ritz value is an upper bound of mu_min, so r = r_factor / mu_min comes out slightly
   smaller than the exact rule's and the slowest dual mode contracts by 1 / (1 + r mu_min), slightly
   slower than 1 / (1 + r_factor) (a 1 % error costs nothing measurable); r only sets the speed of
@@ -387,7 +380,5 @@ class UzawaAuto(Uzawa):
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
         # the relative dual change cannot go much below ~1e-10: with r ~ 100/delta, r times the
-        # round-off of the jump is ~1e-10 of the pressure at delta = 1e-9 (measured: 1e-11 stalls,
-        # 1e-10 takes 27 ... 1000 outer iterations on f1 at delta = 1e-9 depending on the rounding of
-        # the factorization, 1e-9 takes 6 with certified errors <= 1e-12, N = 16 ... 64)
+        # round-off of the jump is ~1e-10 of the pressure at delta = 1e-9 (the floor 1e-9: docs/measurements.md)
         return {"tol": max(tol * 1e-2, 1e-9), "tol_inner": max(tol * 1e-2, 1e-12)}
