@@ -71,12 +71,12 @@ import time
 
 import numpy as np
 
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
+from dualfem.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics import dual_precond as dp
 from dualfem.numerics.dual_operator import power_norm
-from dualfem.numerics.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics.polish import refine_on_active_set
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
 
 
 def mprgp(matvec, b0: np.ndarray, alpha: float, gamma: float, tol: float, max_iter: int,

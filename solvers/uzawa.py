@@ -111,16 +111,16 @@ import time
 
 import numpy as np
 
-from dualfem.core.errors import InputError
-from dualfem.core.evaluator import load_energy, load_length
-from dualfem.core.parts import UnitsPart
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
-from dualfem.numerics.dual_solver import OPERATORS, DualOperatorSolver
+from dualfem.dual_solver import OPERATORS, DualOperatorSolver
+from dualfem.errors import InputError
+from dualfem.evaluator import load_energy, load_length
 from dualfem.numerics.factor import from_param
 from dualfem.numerics.newton_spaces import FullSpace as _FullSpace
 from dualfem.numerics.newton_spaces import ReducedSpace as _ReducedSpace
 from dualfem.numerics.newton_spaces import SparseSpace as _SparseSpace
+from dualfem.qp import UnitsPart
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
 
 #: the paper's unit system (Zhiltsov & Maksimova 2023, section 5): E in MPa, the unit square
 PAPER_E = 69000.0
