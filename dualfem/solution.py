@@ -1,2 +1,6 @@
 """Stable import path of the plugin API (docs/plugins.md); the code lives in :mod:`dualfem.core.solution`."""
-from dualfem.core.solution import *  # noqa: F401,F403
+from dualfem.core.solution import Solution, Status
+
+__all__ = [
+    "Solution", "Status",
+]

@@ -278,6 +278,8 @@ class Fractured(ThinDefect):
 
     name = "fractured"
     description = "2D elastic body with many random non-intersecting straight cracks (gmsh mesh)"
+    scene_default = False       # not inherited: scene files naming no problem stay thin-defect scenes
+    unit_map = None             # crack_length, min_gap, region have no unit map yet: no units axis
     defaults = {
         **{k: v for k, v in ThinDefect.defaults.items() if k not in _HIDDEN},
         "load": "f1",

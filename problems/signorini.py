@@ -49,6 +49,7 @@ from dualfem.core.parts import GeometryPart, MaterialPart, ShiftPart, UnitsPart
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
 from dualfem.core.registry import register_problem
+from dualfem.core.units import UnitMap
 
 #: the most grid squares a scene may have (N = 4096 on a square body; the N range's top): checked in validate,
 #: before anything is allocated, since height / width multiplies the rows of the grid
@@ -75,6 +76,10 @@ class Signorini(Problem):
 
     name = "signorini"
     description = "elastic rectangle pressed onto a rigid foundation (Signorini contact, frictionless)"
+    dim = 2
+    #: the stress grid's units axis: the gap obstacle(x) is a length, length * g(x / length)
+    unit_map = UnitMap({"E": "stress", "width": "length", "height": "length", "indent": "length",
+                        "obstacle": "length_field"})
     defaults = {
         "N": 32,
         "E": 69000.0,

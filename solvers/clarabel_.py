@@ -15,9 +15,8 @@ triangle of K is passed. Clarabel's own residuals are not trusted (Clarabel.cpp 
 evaluator recomputes them.
 
 With ``scale=True`` (default) the QP is normalised first (:mod:`dualfem.numerics.scaling`); unscaled,
-Clarabel stops 'AlmostSolved' with a wrong contact set on these badly scaled matrices. Measured
-accuracy limit: at delta = 1e-9 Clarabel reports 'Solved' with x off by ~5e-6 (energy norm)
-from the certified solution, hence the declared tolerance 1e-5 (what an unpolished answer is worth).
+Clarabel stops 'AlmostSolved' with a wrong contact set on these badly scaled matrices. The declared
+tolerance 1e-5 is what an unpolished answer is worth (its accuracy limit: docs/measurements.md).
 ``polish=True`` (the default; it is dualfem's, not part of Clarabel: ``polish=false`` gives Clarabel's
 own answer, as the reference solve does) re-solves the KKT system exactly on Clarabel's contact set and
 keeps it when its KKT error is smaller, like OSQP's polishing (``info["polished"]`` says which).

@@ -20,10 +20,9 @@ The declared ``tolerance`` of an instance depends on the backend (interior point
 ``polish`` (default true): after the backend, :func:`dualfem.numerics.polish.active_set_polish` guesses
 the active set from the backend's (x, mu), solves the equality-constrained problem on it exactly
 and keeps the result only if it is consistent (mu >= 0, open gaps >= 0); ``info["polish"]`` says
-what happened. Measured on f2, N = 64, delta = 1e-9: CLARABEL alone is 2.8e-6 off (energy norm),
-polished 2.4e-13. With polishing the instance promises 1e-8; when the polish is inconsistent a
-``solved`` status is downgraded to ``inaccurate`` (the backend's answer is then only as good as
-the backend's own tolerance, which the evaluator shows).
+what happened (how much it gains: docs/measurements.md). With polishing the instance promises
+1e-8; when the polish is inconsistent a ``solved`` status is downgraded to ``inaccurate`` (the
+backend's answer is then only as good as the backend's own tolerance, which the evaluator shows).
 """
 from __future__ import annotations
 

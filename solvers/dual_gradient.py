@@ -13,12 +13,11 @@ iteration costs exactly one solve with the (once factorized) K.
 
 Honest about cost: the number of iterations grows with the condition number kappa of the
 Delassus matrix ``B K^-1 B'`` (plain gradient ~ kappa, accelerated ~ sqrt(kappa) per digit); on
-the thin-defect and Signorini scenes kappa grows about linearly with N. Measured on f2
-(``dualfem report plugins``): plain 67 / 144 / 275 / 527 iterations at N = 16 / 32 / 64 / 128,
-accelerated 26 / 49 / 75 / 148, i.e. 1.5-2x the time of ``pdas`` up to N = 128; its accuracy is
-set by ``tol`` alone. It is no rival for active-set or semismooth Newton methods on fine meshes
-or ill-conditioned dual problems, and it exists as a readable reference and as the starting point
-of ``docs/plugins.md``; ``skip`` refuses QPs with more than ``max_n`` unknowns.
+the thin-defect and Signorini scenes kappa grows about linearly with N (iteration counts:
+``dualfem report plugins``, docs/measurements.md); its accuracy is set by ``tol`` alone. It is no
+rival for active-set or semismooth Newton methods on fine meshes or ill-conditioned dual problems,
+and it exists as a readable reference and as the starting point of ``docs/plugins.md``; ``skip``
+refuses QPs with more than ``max_n`` unknowns.
 
 Stopping test: the evaluator's own scale-free residuals (:mod:`dualfem.evaluator`) of
 ``(x(mu), mu)``. Stationarity and dual feasibility hold by construction (up to the solve's

@@ -39,8 +39,7 @@ counting k; ``solves``; ``cg_iterations`` of the polish; ``factorizations``) nex
 **Preconditioner** (``precond``, :mod:`dualfem.numerics.dual_precond`; none costs a K-solve;
 ``info["precond"]`` says which one ran). ``auto`` (default): ``dirichlet`` with the matrix-free
 operator, where a product is a K-solve, ``none`` with the dense one, where a product is so cheap
-that the preconditioner's setup would cost more than it saves (measured: f2 N = 256, 0.02 s
-setup without, 0.1 s with, same solve time).
+that the preconditioner's setup would cost more than it saves (docs/measurements.md).
 
 * ``dirichlet``: Dostal's preconditioning in face with FETI's Dirichlet preconditioner
   ``M^-1 = W B S_loc B' W`` (``W = diag(B B')^-1``; S_loc the Schur complements of K onto each
@@ -48,10 +47,8 @@ setup without, 0.1 s with, same solve time).
   block per crack, built once in the setup). The CG directions are built from
   ``z_F = (M^-1)_FF phi_F`` on the free set F only (expansion and proportioning steps unchanged),
   so a CG step still costs one product. cond(D) grows as crack length / h (the modes smooth along
-  a crack); M^-1 removes the modes shorter than about ``layers`` elements. Measured
-  (benchmarks/results/mprgp_precond/mprgp_precond.md): CG steps 47 -> 24 (layers 4) -> 18 (layers 8)
-  on 8 x 8 cracks at h = 0.0025, 39 -> 18 -> 13 on f2 N = 512; on the 269 k scene (8 nodes per crack)
-  26 -> 13, where the fixed costs above (power iterations, diagonal) dominate and the time is about the same;
+  a crack); M^-1 removes the modes shorter than about ``layers`` elements (CG steps with and without
+  it: benchmarks/results/mprgp_precond/mprgp_precond.md, docs/measurements.md);
 * ``lumped``: the same with FETI's lumped ``M^-1 = W B K B' W`` (spectrally a constant here: it
   does not cut iterations, kept for comparison);
 * ``jacobi``: the change of variables ``mu = S nu``, ``S = diag(D)^-1/2`` (the operator's
@@ -74,12 +71,12 @@ import time
 
 import numpy as np
 
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
+from dualfem.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics import dual_precond as dp
 from dualfem.numerics.dual_operator import power_norm
-from dualfem.numerics.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics.polish import refine_on_active_set
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
 
 
 def mprgp(matvec, b0: np.ndarray, alpha: float, gamma: float, tol: float, max_iter: int,
@@ -102,74 +99,95 @@ def mprgp(matvec, b0: np.ndarray, alpha: float, gamma: float, tol: float, max_it
     target = tol * nb0
     t0 = time.perf_counter()
 
-    def split(mu_, g_):
-        free = mu_ > 0
-        phi = np.where(free, g_, 0.0)
-        beta = np.where(free, 0.0, np.minimum(g_, 0.0))
-        return free, phi, beta
-
     def pnorm(phi_, beta_):
         return np.linalg.norm(phi_ + beta_ if unscale is None else (phi_ + beta_) * u)
 
     def prec(phi_, free_):
         return phi_.copy() if precond is None else precond(phi_, free_)
 
-    free, phi, beta = split(mu, g)
+    free, phi, beta = _split(mu, g)
     p = prec(phi, free)
     k = 0
     report = report or (lambda k_, mu_: None)
     report(0, mu)
     while True:
         gp = pnorm(phi, beta)
-        if gp <= target:
-            rel = gp / max(nb0, 1e-300)
-            return mu, counts, Status.SOLVED, f"converged: |g^P| = {rel:.1e} |b0|", history
-        if k >= max_iter:
-            return mu, counts, Status.MAX_ITER, f"no convergence in {max_iter} iterations (|g^P|/|b0| = " \
-                f"{gp / nb0:.1e})", history
-        if time.perf_counter() - t0 > time_limit:
-            return mu, counts, Status.TIME_LIMIT, f"time limit {time_limit:g} s after {k} iterations", history
+        done = _stop(gp, target, nb0, k, max_iter, t0, time_limit)
+        if done is not None:
+            return mu, counts, done[0], done[1], history
         k += 1
         phit = np.where(free, np.minimum(mu / alpha, phi), 0.0)
         if beta @ beta <= gamma ** 2 * (phit @ phi):
-            if not p.any():
-                p = prec(phi, free)
-            Ap = matvec(p)
-            pAp = p @ Ap
-            a_cg = (g @ p) / pAp
-            pos = p > 0
-            a_f = np.min(mu[pos] / p[pos]) if pos.any() else np.inf
-            if a_cg <= a_f:
-                mu = mu - a_cg * p
-                g = g - a_cg * Ap
-                free, phi, beta = split(mu, g)
-                z = prec(phi, free)
-                p = z - ((z @ Ap) / pAp) * p
-                counts["cg"] += 1
-                kind = "cg"
-            else:
-                mu = np.maximum(mu - a_f * p, 0.0)
-                g = g - a_f * Ap
-                free, phi, _ = split(mu, g)
-                mu = np.maximum(mu - alpha * phi, 0.0)
-                g = matvec(mu) + b0
-                free, phi, beta = split(mu, g)
-                p = prec(phi, free)
-                counts["expansion"] += 1
-                kind = "expansion"
+            mu, g, free, phi, beta, p, kind = _face_step(matvec, b0, alpha, prec, mu, g, p, free, phi)
         else:
-            Ad = matvec(beta)
-            a = (g @ beta) / (beta @ Ad)
-            mu = np.maximum(mu - a * beta, 0.0)
-            g = g - a * Ad
-            free, phi, beta = split(mu, g)
-            p = prec(phi, free)
-            counts["proportioning"] += 1
+            mu, g, free, phi, beta, p = _proportioning_step(matvec, prec, mu, g, beta)
             kind = "proportioning"
+        counts[kind] += 1
         report(k, mu)
         if verbose:
             history.append({"iter": k, "kind": kind, "active": int((~free).sum()),
                             "proj_grad": float(pnorm(phi, beta))})
+
+
+def _split(mu, g):
+    """(free set ``mu > 0``, free gradient phi, chopped gradient beta) of the gradient g = D mu + b0."""
+    free = mu > 0
+    phi = np.where(free, g, 0.0)
+    beta = np.where(free, 0.0, np.minimum(g, 0.0))
+    return free, phi, beta
+
+
+def _stop(gp, target, nb0, k, max_iter, t0, time_limit):
+    """(status, message) when MPRGP stops before iteration k + 1 (projected gradient ``gp`` at most
+    ``target``, ``max_iter`` iterations done, ``time_limit`` seconds since ``t0`` spent), else None."""
+    if gp <= target:
+        rel = gp / max(nb0, 1e-300)
+        return Status.SOLVED, f"converged: |g^P| = {rel:.1e} |b0|"
+    if k >= max_iter:
+        return Status.MAX_ITER, f"no convergence in {max_iter} iterations (|g^P|/|b0| = {gp / nb0:.1e})"
+    if time.perf_counter() - t0 > time_limit:
+        return Status.TIME_LIMIT, f"time limit {time_limit:g} s after {k} iterations"
+    return None
+
+
+def _face_step(matvec, b0, alpha, prec, mu, g, p, free, phi):
+    """One step in the face: the (preconditioned) CG step along p where it stays feasible, else the
+    feasible step to the boundary, then an expansion step (projected gradient with step ``alpha``)
+    and a restart. Returns (mu, g, free, phi, beta, p, kind) with kind "cg" or "expansion"."""
+    if not p.any():
+        p = prec(phi, free)
+    Ap = matvec(p)
+    pAp = p @ Ap
+    a_cg = (g @ p) / pAp
+    pos = p > 0
+    a_f = np.min(mu[pos] / p[pos]) if pos.any() else np.inf
+    if a_cg <= a_f:
+        mu = mu - a_cg * p
+        g = g - a_cg * Ap
+        free, phi, beta = _split(mu, g)
+        z = prec(phi, free)
+        p = z - ((z @ Ap) / pAp) * p
+        return mu, g, free, phi, beta, p, "cg"
+    mu = np.maximum(mu - a_f * p, 0.0)
+    g = g - a_f * Ap
+    free, phi, _ = _split(mu, g)
+    mu = np.maximum(mu - alpha * phi, 0.0)
+    g = matvec(mu) + b0
+    free, phi, beta = _split(mu, g)
+    p = prec(phi, free)
+    return mu, g, free, phi, beta, p, "expansion"
+
+
+def _proportioning_step(matvec, prec, mu, g, beta):
+    """The proportioning step: exact line search along the chopped gradient ``beta`` (releases
+    constraints), projected. Returns (mu, g, free, phi, beta, p)."""
+    Ad = matvec(beta)
+    a = (g @ beta) / (beta @ Ad)
+    mu = np.maximum(mu - a * beta, 0.0)
+    g = g - a * Ad
+    free, phi, beta = _split(mu, g)
+    p = prec(phi, free)
+    return mu, g, free, phi, beta, p
 
 
 @register_solver

@@ -36,8 +36,7 @@ current forces (``newton="cg"``, the default; its iterations in ``info["cg_itera
 FETI's Dirichlet preconditioner of :mod:`dualfem.numerics.dual_precond`, ``precond``), or by one
 sparse factorization of the Newton matrix K + B_A'C B_A per active set (one analysis for all, MKL
 PARDISO) with augmented-Lagrangian steps (``newton="factor"``; ``info["al_steps"]``,
-``info["newton_factorizations"]``). On 269 k unknowns with 3,200 defect nodes both took 4 Newton
-steps and tied in time (8.2 s against 7.9 s, machine loaded); cg keeps no extra factor.
+``info["newton_factorizations"]``). The two tie in time (docs/measurements.md); cg keeps no extra factor.
 
 Multipliers are the nodal contact forces mu >= 0 with ``K x - F = B' mu``; x is recovered as
 ``K^-1 (F + B'mu)`` (dense: ``xI = S^-1 (g + BI' mu)`` and one solve with the cached factor of K_fixed),
@@ -163,7 +162,7 @@ class PDASSolver(DualOperatorSolver):
         """The stopping tolerance: ``tol``; matrix-free at least :data:`MATRIX_FREE_TOL`: the Newton points
         are known to the face solves' accuracy (CG to :data:`FACE_RTOL`), and the gaps D mu + b0 are
         computed through K-solves whose rounding differs from the factorization of the Newton systems by
-        ~1e-12 relative (measured on f2 N = 48: the residual of an exact face solution stalls at 2.3e-12)."""
+        ~1e-12 relative (docs/measurements.md)."""
         tol = float(self.params["tol"])
         return tol if self.op.kind == "dense" else max(tol, MATRIX_FREE_TOL)
 

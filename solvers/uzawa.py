@@ -41,10 +41,10 @@ Choices where the paper is silent or misprinted (documented here once):
   proximal-point bound change / (r mu_min) (mu_min = smallest dual compliance, see below), which
   also holds after one outer iteration. With the relative test (``tol_mode="relative"``, the default)
   the iteration goes on until the larger is also <= tol (the answer's multipliers are certified to the
-  declared tolerance: on fractured scenes the last change alone left errors of 1.5-1.7e-6 against a
-  tolerance of 1e-6). With the paper's absolute test, when the larger exceeds ``error_factor * tol`` the
-  status is ``inaccurate`` (with both numbers in the message) instead of ``solved``; the iterates
-  and the counts k, m are then the paper's.
+  declared tolerance; why the last change alone is not enough: docs/measurements.md). With the
+  paper's absolute test, when the larger exceeds ``error_factor * tol`` the status is ``inaccurate``
+  (with both numbers in the message) instead of ``solved``; the iterates and the counts k, m are then
+  the paper's.
 * Shortcut (``shortcut=True``, with l^0 = 0): if the unconstrained minimizer has no negative
   jump, it already is the answer of the first Uzawa iteration and l^1 = 0; we return it with
   k = 1, m = 1 (one solve).
@@ -85,18 +85,11 @@ memory, so the method runs at every size and is never skipped for its number of 
   ``info["factorizations"]``); the start K^-1 F is one solve with the operator's factorization of K
   (shared with the certificate). Cost: one factorization of K, one analysis, one numeric
   factorization of K + B'B per active set met (each about as costly as K's), one sparse solve per
-  Newton step; memory: two sparse factors. Measured on a 269 k-unknown many-crack scene (400 cracks,
-  m = 3,200, 12,800 local unknowns, beyond the dense path; delta = 1e-5, load f1, 2 shared cores),
-  setup + solve against the floor (one factorization + solve of K in the same process, 1.6-2.8 s
-  with the machine's load): ``uzawa_auto`` 5 outer / 11 Newton steps, 1 analysis + 5 numeric
-  factorizations, 71 Lanczos products (2.9-5.5 s of it), 8-21 s = 4.8-7.6x the floor (four runs);
-  ``uzawa`` (r = 1e7) 23 / 53, 13 factorizations (17 with ``keep_factors=1``), 10-25 s = 5.8-9.2x.
-  On a 25 k-unknown scene (64 cracks, 1,536 local unknowns) the dense path is faster (uzawa_auto
-  0.66 s against 1.2 s): ``auto`` keeps it there.
+  Newton step; memory: two sparse factors (timings of both paths: docs/measurements.md).
   ``info`` reports the counters (``newton_*``, ``applications``, ``mu_min_applications``).
   mu_min (``r_rule="auto"``, and the honest-stop bound of every run that stops) is estimated by
   Lanczos (ARPACK ``eigsh``, which="SA", relative tolerance ``eig_tol`` = 1e-2) on products
-  W^1/2 D W^1/2 v, one K-solve each (about 70-80 products on the many-crack scenes). An estimate is
+  W^1/2 D W^1/2 v, one K-solve each. An estimate is
   enough: a Ritz value is an upper bound of mu_min, so r = r_factor / mu_min comes out slightly
   smaller than the exact rule's and the slowest dual mode contracts by 1 / (1 + r mu_min), slightly
   slower than 1 / (1 + r_factor) (a 1 % error costs nothing measurable); r only sets the speed of
@@ -117,23 +110,18 @@ import sys
 import time
 
 import numpy as np
-import scipy.linalg as la
-import scipy.sparse as sp
 
-from dualfem.core.errors import InputError
-from dualfem.core.evaluator import load_energy, load_length
-from dualfem.core.parts import UnitsPart
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
-from dualfem.numerics.dual_solver import OPERATORS, DualOperatorSolver
+from dualfem.dual_solver import OPERATORS, DualOperatorSolver
+from dualfem.errors import InputError
+from dualfem.evaluator import load_energy, load_length
 from dualfem.numerics.factor import from_param
-from dualfem.numerics.linalg import LocalReduction, sparse_factor
-from dualfem.numerics.newton_matrix import NewtonMatrix
+from dualfem.numerics.newton_spaces import FullSpace as _FullSpace
+from dualfem.numerics.newton_spaces import ReducedSpace as _ReducedSpace
+from dualfem.numerics.newton_spaces import SparseSpace as _SparseSpace
+from dualfem.qp import UnitsPart
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
 
-EPS = float(np.finfo(float).eps)
-
-#: the matrix-free path computes mu_min densely (one block of m products) up to this many rows
-DENSE_EIG_MAX = 32
 #: the paper's unit system (Zhiltsov & Maksimova 2023, section 5): E in MPa, the unit square
 PAPER_E = 69000.0
 PAPER_WIDTH = 1.0
@@ -156,195 +144,6 @@ def _contraction(history: list[dict], last: int = 5) -> float:
     if len(ch) < 3 or min(ch) <= 0:
         return 0.0
     return float(np.exp(np.mean(np.diff(np.log(ch)))))
-
-
-class _ReducedSpace:
-    """Dense linear algebra on the local unknowns I (exact reduction).
-
-    A Newton matrix Q + B_A' C_A B_A (C_A = diag(coef) on the active set A) is never formed: with
-    Q = L L' and V = L^-1 B' (so that the Delassus matrix is D = B Q^-1 B' = V'V), the
-    Sherman-Morrison-Woodbury identity gives its solve as
-    ``d = L'^-1 (h - V_A t)``,  h = L^-1 g,  t = (C_A^-1 + D_AA)^-1 V_A' h,
-    with L, V and D shared with the reduction (and with the certificate). Per active set one
-    |A| x |A| Cholesky factorization (|A| <= m = |I| / 4) instead of one of |I| x |I|: 1/64 of the
-    work or less; per step two triangular solves, as with a factor of the Newton matrix.
-    C_A^-1 + D_AA is symmetric positive definite and its conditioning is D's, however large C_A.
-    """
-
-    kind = "dense"
-
-    def __init__(self, qp, norm: str, factor: str | None = None, reduction: LocalReduction | None = None):
-
-        if norm != "energy":
-            raise InputError("parameter 'inner_norm' of solver 'uzawa' must be 'energy' with "
-                             "linalg='reduced' ('euclidean' needs linalg='full')")
-        self.red = red = reduction if reduction is not None else LocalReduction(qp, factor=factor)
-        self.Q, self.q, self.B = red.S, red.g, red.BI
-        self.c0 = red.c0
-        self._chol_S = red.S_cho
-        self._cache: dict[bytes, tuple] = {}
-        self.factorizations = 0
-
-    def start(self) -> np.ndarray:
-        return la.cho_solve(self._chol_S, self.q, check_finite=False)
-
-    def dual_compliance(self, w: np.ndarray) -> np.ndarray:
-        """G W with G = B K^-1 B' (jump per nodal force): the Hessian of the dual in l."""
-        return self.red.delassus() * w[None, :]
-
-    def mu_min(self, w: np.ndarray) -> tuple[float, dict]:
-        """(smallest eigenvalue of W^1/2 G W^1/2, how): a dense symmetric eigensolver on the m x m matrix."""
-        GW = self.dual_compliance(w)
-        sw = np.sqrt(w)
-        sym = (GW / w[None, :]) * sw[:, None] * sw[None, :]   # W^1/2 G W^1/2
-        return _range_min(np.linalg.eigvalsh(0.5 * (sym + sym.T))), {"mu_min_method": "dense eigvalsh"}
-
-    def qgrad(self, z):
-        return self.Q @ z - self.q
-
-    def qform(self, d):
-        return float(d @ (self.Q @ d))
-
-    def norm2(self, z):
-        return float(z @ (self.Q @ z) - 2.0 * self.c0)
-
-    def newton(self, coef: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-        """Solve (Q + B' diag(coef) B) d = rhs; coef = r*w on the active set, 0 elsewhere."""
-        L = self._chol_S[0]
-        h = la.solve_triangular(L, rhs, lower=True, check_finite=False)
-        A = np.flatnonzero(coef)
-        if A.size:
-            key = coef.tobytes()
-            fac = self._cache.get(key)
-            if fac is None:
-                cap = self.red.delassus()[np.ix_(A, A)]
-                cap[np.diag_indices_from(cap)] += 1.0 / coef[A]
-                fac = la.cho_factor(cap, lower=True, check_finite=False)
-                self.factorizations += 1
-                if len(self._cache) >= 64:
-                    self._cache.pop(next(iter(self._cache)))
-                self._cache[key] = fac
-            VA = self.red.half_delassus()[:, A]
-            h = h - VA @ la.cho_solve(fac, VA.T @ h, check_finite=False)
-        return la.solve_triangular(L, h, lower=True, trans="T", check_finite=False)
-
-    def full(self, z):
-        return self.red.full(z)
-
-
-def _range_min(ev: np.ndarray) -> float:
-    """The smallest eigenvalue of the dual compliance on its range: dependent or duplicated rows of B
-    (multipliers not unique) give eigenvalues 0 to rounding (below m eps max, numpy's rank threshold),
-    whose directions change no x; the dual is strongly concave on the rest, and r is chosen from that."""
-    top = float(ev.max(initial=0.0))
-    kept = ev[ev > ev.size * EPS * top]
-    return float(kept.min()) if kept.size else float(ev.min(initial=0.0))
-
-
-class _FullSpace:
-    """Textbook sparse linear algebra on all unknowns (refactorizes every Newton step)."""
-
-    kind = "full"
-
-    def __init__(self, qp, norm: str, factor: str | None = None):
-        self.Q, self.q, self.B = qp.K.tocsr(), qp.F, qp.B.tocsr()
-        self.qp, self.norm, self.factor = qp, norm, factor
-        self.factorizations = 0
-
-    def start(self):
-        self.factorizations += 1
-        return sparse_factor(self.Q, self.factor).solve(self.q)
-
-    def qgrad(self, z):
-        return self.Q @ z - self.q
-
-    def qform(self, d):
-        return float(d @ (self.Q @ d))
-
-    def norm2(self, z):
-        return float(z @ (self.Q @ z)) if self.norm == "energy" else float(z @ z)
-
-    def newton(self, coef, rhs):
-        H = (self.Q + self.B.T @ sp.diags(coef) @ self.B).tocsr()
-        self.factorizations += 1
-        return sparse_factor(H, self.factor).solve(rhs)
-
-    def full(self, z):
-        return z
-
-    def mu_min(self, w):
-        return _ReducedSpace(self.qp, "energy", self.factor).mu_min(w)
-
-
-class _SparseSpace:
-    """Sparse linear algebra on all unknowns with one analysis (the matrix-free operator's path).
-
-    The Newton matrices K + B' diag(coef) B share the pattern of K + B'B
-    (:class:`dualfem.numerics.newton_matrix.NewtonMatrix`): analyzed once, one numeric factorization
-    per new active set (``keep`` factors kept). The start K^-1 F and the products D v of the
-    Lanczos estimate of mu_min use the operator's factorization of K (shared with the certificate
-    through the QP's store). Every quantity of the inner and outer tests is the full-space one,
-    equal to the reduced space's (module docstring), so the iterates are the dense path's to rounding.
-    """
-
-    kind = "matrix_free"
-
-    def __init__(self, qp, op, factor: str | None = None, keep: int = 4):
-        self.qp, self.op = qp, op
-        self.Q, self.q, self.B = qp.K.tocsr(), np.asarray(qp.F, float), op.B
-        self.nm = op.newton_matrix(keep) if getattr(op, "ksolve", "factor") == "amg" \
-            else NewtonMatrix(qp.K, qp.B, factor, keep=keep)
-
-    @property
-    def factorizations(self) -> int:
-        return self.nm.counters.factorizations
-
-    def start(self):
-        return self.op.k_solve(self.q)
-
-    def qgrad(self, z):
-        return self.Q @ z - self.q
-
-    def qform(self, d):
-        return float(d @ (self.Q @ d))
-
-    def norm2(self, z):
-        return float(z @ (self.Q @ z))
-
-    def newton(self, coef, rhs):
-        return self.nm.solve(coef, rhs)
-
-    def full(self, z):
-        return z
-
-    def mu_min(self, w, tol: float = 1e-2):
-        """(estimate of the smallest eigenvalue of W^1/2 D W^1/2, how): Lanczos (ARPACK ``eigsh``,
-        which="SA") on products with the matrix-free operator, each one K-solve. Its Ritz value is an
-        upper bound of mu_min, accurate to about ``tol`` relative (module docstring: why that is enough)."""
-        from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigsh
-
-        op, m = self.op, self.qp.m
-        sw = np.sqrt(w)
-        before = op.counters.applications
-        t0 = time.perf_counter()
-        if m <= DENSE_EIG_MAX:      # a few rows: the whole matrix is one block of m products
-            sym = sw[:, None] * op.apply(sw[:, None] * np.eye(m))
-            mu = _range_min(np.linalg.eigvalsh(0.5 * (sym + sym.T)))
-            how = f"dense eigvalsh (m <= {DENSE_EIG_MAX})"
-        else:
-            A = LinearOperator((m, m), matvec=lambda v: sw * op.apply(sw * np.ravel(v)), dtype=float)
-            v0 = np.ones(m) / np.sqrt(m)
-            how = f"Lanczos (eigsh SA, tol {tol:g})"
-            try:
-                mu = float(eigsh(A, k=1, which="SA", tol=tol, v0=v0, return_eigenvectors=False,
-                                 maxiter=max(1000, 10 * m))[0])
-            except ArpackNoConvergence as exc:   # a Ritz value is still an upper bound of mu_min
-                if not np.size(exc.eigenvalues):
-                    raise
-                mu = float(np.min(exc.eigenvalues))
-                how += ", not converged: the last Ritz value"
-        return mu, {"mu_min_method": how, "mu_min_applications": op.counters.applications - before,
-                    "mu_min_time_s": time.perf_counter() - t0}
 
 
 @register_solver
@@ -581,7 +380,5 @@ class UzawaAuto(Uzawa):
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
         # the relative dual change cannot go much below ~1e-10: with r ~ 100/delta, r times the
-        # round-off of the jump is ~1e-10 of the pressure at delta = 1e-9 (measured: 1e-11 stalls,
-        # 1e-10 takes 27 ... 1000 outer iterations on f1 at delta = 1e-9 depending on the rounding of
-        # the factorization, 1e-9 takes 6 with certified errors <= 1e-12, N = 16 ... 64)
+        # round-off of the jump is ~1e-10 of the pressure at delta = 1e-9 (the floor 1e-9: docs/measurements.md)
         return {"tol": max(tol * 1e-2, 1e-9), "tol_inner": max(tol * 1e-2, 1e-12)}

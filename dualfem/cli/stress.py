@@ -172,7 +172,7 @@ def _meta(args, reg: dict, names: list[str], axes: tuple, tasks: list, refs: lis
 
     return {"quick": bool(args.quick), "scene": getattr(args, "scene", None) or "f2 (paper)",
             "solvers": names, "axes": sorted({t.axis for t in tasks}, key=stress.AXES.index),
-            "grading": "dualfem.core.grade: error <= declared tolerance + the reference's certified bound",
+            "grading": "dualfem.verify.grading: error <= declared tolerance + the reference's certified bound",
             "ref_kkt": stress.REF_KKT, "references": refs,
             "tolerances": {n: reg[n]().tolerance for n in names if reg[n].missing() is None},
             "exact": {n: reg[n].exact for n in names},

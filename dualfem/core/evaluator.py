@@ -24,21 +24,14 @@ largest over the blocks.
 (``|mu_j| |b_j|_inf / f_s``: setting mu_j to 0 makes that row exactly complementary and moves the
 stationarity residual by that much, in its own scale). A far inactive row (a big-M bound x >= -1e4 with
 |x| ~ 10) carrying an interior-point multiplier mu_j ~ tau / 1e4 has a product 1e4 / |x| times larger than
-its effect on the answer: measured on a QP file with 8 such bounds, an answer with x and mu errors 2.9e-7
-and 1.5e-7 had the product 4.5e-3 against a tolerance 1e-5. The accuracy of x and mu themselves is certified
+its effect on the answer (an example: docs/measurements.md). The accuracy of x and mu themselves is certified
 by the error certificate (:mod:`dualfem.numerics.certify`), which the runner asks of every ``solved``.
 
 **Rounding floor** (Oettli-Prager, componentwise): ``s = |K||x| + |F| + |B'||mu|``; a residual
 component within ``c eps s_i`` is what the rounding of evaluating ``K x - F - B'mu`` alone leaves
-for the exact answer rounded to double, so it is not counted. ``c`` = :data:`ROUNDING_C` = 4,
-measured (pdas refined to the rounding floor, ``refine_tol=1e-16``): on f1/f2/f3 at N = 16 and 32
-with delta = 1e-12, 1e-9, 1e-5, 0.1, 1e3, nu = 0.4999999 (also with delta = 1e-12) and E = 1 at
-delta = 1e-12, and on every scene of the library, the rounding of the product K x against an 80-bit
-product is at most 1.04 eps s_i; the whole residual at most 2.4 eps s_i at N = 32 and 1.5 eps s_i
-on f1/f2 at N = 64 and 128 (delta 1e-12 ... 1e3); a not converged solve (f1, N = 16,
-nu = 0.4999999) has 1023 eps s_i, uzawa_auto's answers 6-41 eps s_i: counted as before (the floor
-is only 4 eps s_i, a few 1e-16 of the force scale where no term cancels).
-The floor excuses only the residual test:
+for the exact answer rounded to double, so it is not counted. ``c`` = :data:`ROUNDING_C` = 4 (dimensionless;
+chosen above what exact answers leave and far below what a not converged solve leaves: the measurements
+are in docs/measurements.md). The floor excuses only the residual test:
 the accuracy of x is judged by the certificate (:mod:`dualfem.numerics.certify`), which catches the
 real error of an ill-conditioned (near-incompressible) problem.
 
@@ -70,7 +63,7 @@ RESIDUALS = ("stationarity", "primal", "dual", "complementarity")
 CONTACT_RTOL = 1e-6
 
 #: c of the componentwise rounding floor c eps (|K||x| + |F| + |B'||mu|)_i of the stationarity
-#: residual (measured: at most 2.4 for exact answers on the paper's scenes, see the module docstring)
+#: residual (what exact answers leave: docs/measurements.md)
 ROUNDING_C = 4.0
 
 

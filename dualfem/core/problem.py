@@ -17,6 +17,7 @@ from typing import Any, ClassVar
 from dualfem.core.errors import InputError, MissingDependency, missing_module
 from dualfem.core.qp import QP
 from dualfem.core.solver import _coerce
+from dualfem.core.units import UnitMap
 
 
 class Shared:
@@ -43,6 +44,15 @@ class Problem:
     #: scene keys whose change keeps ``self.shared`` valid (e.g. delta and the load of a thin-defect
     #: scene: they leave the mesh and the delta-free stiffness K_fixed as they are)
     update_keys: ClassVar[tuple[str, ...]] = ()
+    #: the spatial dimension of the problem's bodies: 2 (plane) or 3
+    dim: ClassVar[int] = 2
+    #: True: this problem reads the scene files of its :attr:`dim` that name no ``problem`` (nor a base
+    #: ``scene``): the framework finds it by :func:`dualfem.core.registry.problem_for_dim`. Declare it on
+    #: the class that means it: a subclass of such a problem sets it back to False.
+    scene_default: ClassVar[bool] = False
+    #: how the scene's parameters change with the unit system (the stress grid's ``units`` axis), or
+    #: None: the units axis does not apply to this problem (:class:`dualfem.core.units.UnitMap`)
+    unit_map: ClassVar[UnitMap | None] = None
 
     @classmethod
     def missing(cls) -> str | None:

@@ -146,3 +146,21 @@ def get_problem(name: str) -> type[Problem]:
     if name not in reg:
         raise InputError(f"unknown problem {name!r}; known problems: {', '.join(sorted(reg))}")
     return reg[name]
+
+
+def problem_for_dim(dim: int) -> str:
+    """The problem that reads a scene file of dimension ``dim`` naming no problem: the registered
+    problem with ``scene_default`` and that ``dim`` (a built-in one first, then by name: a third-party
+    plugin cannot take over the built-in choice); InputError naming the dimensions there are."""
+    reg = problems()
+    builtin = builtin_names("problem")
+    found = sorted((n for n, cls in reg.items() if cls.scene_default and cls.dim == dim),
+                   key=lambda n: (n not in builtin, n))
+    if not found:
+        raise InputError(f"dim must be one of {', '.join(map(str, problem_dims()))}, got {dim!r}")
+    return found[0]
+
+
+def problem_dims() -> list[int]:
+    """The dimensions a scene file may have: those of the registered problems with ``scene_default``."""
+    return sorted({cls.dim for cls in problems().values() if cls.scene_default})

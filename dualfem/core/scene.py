@@ -9,15 +9,16 @@ from typing import Any
 from dualfem.core.errors import InputError
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
-from dualfem.core.registry import builtin_names, get_problem, problems
+from dualfem.core.registry import builtin_names, get_problem, problem_dims, problem_for_dim, problems
 
 #: the scene the framework uses when it needs one and none is given (probes, crafted test files,
 #: the default of a study): a preset of the thin_defect problem plugin (the paper's f2 load). The
 #: one place the framework names a scene; report studies reproducing the paper name the paper's
 #: loads in :mod:`dualfem.experiments.paper`.
 DEFAULT_SCENE = "f2"
-#: the problem plugin of a scene file without ``problem`` or ``scene``, by its ``dim`` key (default 2)
-DIM_PROBLEMS = {2: "thin_defect", 3: "three_d"}
+#: the problem plugin that reads a ``.npz``/``.mat`` QP file (problems/generic_qp.py): the one place the
+#: framework dispatches a QP file; such a scene has no scene parameters but its path
+QP_FILE_PROBLEM = "qp_file"
 
 
 class PresetConflictWarning(UserWarning):
@@ -136,7 +137,7 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
         pname, params = pre[spec]
     elif Path(spec).suffix in (".npz", ".mat"):
         # a QP file (qpsolvers' P, q, G, h: G x <= h, or dualfem's K, F, B: an export): problems/generic_qp.py
-        pname, params = "qp_file", {"path": spec}
+        pname, params = QP_FILE_PROBLEM, {"path": spec}
     elif spec.endswith(".toml") or Path(spec).exists():
         from dualfem.core.io import check_input_path
 
@@ -165,7 +166,7 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
                          f"or a .npz/.mat QP file")
     params.update(overrides)
     if "dim" in params and "dim" not in get_problem(pname).defaults:
-        _drop_dim(params, spec)
+        _drop_dim(params, spec, pname)
     cls = get_problem(pname)
     from dualfem.core.quiet import plugin_output
 
@@ -183,23 +184,44 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
                              f"create the scene: {type(exc).__name__}: {exc}") from None
 
 
-def _dim_problem(dim: Any, where: str) -> str:
-    """The problem plugin of a scene of dimension ``dim`` (:data:`DIM_PROBLEMS`); InputError for another value."""
+def _dim(dim: Any, where: str) -> int:
+    """``dim`` as an integer that is a dimension of a problem (:func:`~dualfem.core.registry.problem_dims`);
+    InputError for another value."""
     try:
         d = int(dim) if float(dim) == int(float(dim)) and not isinstance(dim, bool) else None
     except (TypeError, ValueError, OverflowError):
         d = None
-    if d not in DIM_PROBLEMS:
-        raise InputError(f"dim in {where!r} must be one of {', '.join(map(str, DIM_PROBLEMS))}, got {dim!r}")
-    return DIM_PROBLEMS[d]
+    dims = problem_dims()
+    if d not in dims:
+        raise InputError(f"dim in {where!r} must be one of {', '.join(map(str, dims))}, got {dim!r}")
+    return d
 
 
-def _drop_dim(params: dict[str, Any], where: str) -> None:
-    """A problem without a ``dim`` key is 2D: ``dim = 2`` is accepted (and dropped), any other value refused."""
+def _dim_problem(dim: Any, where: str) -> str:
+    """The problem plugin of a scene file of dimension ``dim`` naming no problem: the problem declaring
+    ``scene_default`` for that ``Problem.dim`` (:func:`~dualfem.core.registry.problem_for_dim`)."""
+    return problem_for_dim(_dim(dim, where))
+
+
+def _drop_dim(params: dict[str, Any], where: str, pname: str) -> None:
+    """A problem without a ``dim`` key has the dimension it declares (``Problem.dim``): that ``dim`` is
+    accepted (and dropped), any other value refused."""
     dim = params.pop("dim")
-    if _dim_problem(dim, where) != DIM_PROBLEMS[2]:
-        raise InputError(f"dim = {dim!r} in {where!r}: this scene's problem is 2D; a 3D scene is a scene file with "
-                         f"dim = 3 (without 'scene = ...'), the library's 3D scenes or 'dualfem solve three_d'")
+    own = get_problem(pname).dim
+    if _dim(dim, where) != own:
+        raise InputError(f"dim = {dim!r} in {where!r}: this scene's problem is {own}D; a scene of another "
+                         f"dimension is a scene file with that dim (without 'scene = ...') or a library scene "
+                         f"of it, e.g. 'dualfem solve {problem_for_dim(_dim(dim, where))}'")
+
+
+def __getattr__(name: str) -> Any:
+    """``DIM_PROBLEMS`` (deprecated): the dimension -> problem map, now the problems' own declarations."""
+    if name == "DIM_PROBLEMS":
+        warnings.warn("dualfem.scene.DIM_PROBLEMS is deprecated (removed in the next release): the problems "
+                      "declare Problem.dim and scene_default; use dualfem.registry.problem_for_dim(dim)",
+                      DeprecationWarning, stacklevel=2)
+        return {d: problem_for_dim(d) for d in problem_dims()}
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def build_qp(problem: Problem) -> QP:

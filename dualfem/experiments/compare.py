@@ -320,7 +320,7 @@ def table(result: dict, scene: str | None = None) -> str:
                        "difference to the reference; dmu: multipliers, relative to max(|mu_ref|, |F|); bound: "
                        "certified relative energy-norm error bound (- where x is infeasible); tol: the certified "
                        "tolerance (--tol, else the solver's declared one); contact: contact set vs the reference; "
-                       "grade: dualfem.core.grade; "
+                       "grade: dualfem.verify.grading; "
                        "energies, every iteration counter and the skipped solvers' reasons: --json")
     if result["silent_wrong"]:
         lines.append("SILENT WRONG ANSWER: " + ", ".join(result["silent_wrong"]) +

@@ -94,7 +94,7 @@ def run(solver: Solver | str, qp: QP, params: dict[str, Any] | None = None, *, t
     (:class:`dualfem.experiments.curves.IterateMonitor`) attached to the solver for ``solve()`` only
     (:meth:`dualfem.core.solver.Solver.report_iterate`); the time spent in it is not counted in the
     solve time, and the answer returned becomes its last sample. ``grades``: what ``tol`` certifies
-    (:data:`dualfem.core.grade.GRADED`): ``"x"`` leaves the multipliers' certificate out of the status
+    (:data:`dualfem.verify.grading.GRADED`): ``"x"`` leaves the multipliers' certificate out of the status
     (it is still computed and reported), None or ``"x,mu"`` certifies both.
 
     Nothing the plugin says about itself is trusted (docs/plugins.md, sections 1.1-1.3):

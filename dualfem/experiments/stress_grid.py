@@ -4,7 +4,7 @@ The base scene is the paper's f2 (:data:`BASE`) or any scene of any registered p
 library scene, a preset or a TOML file: :func:`scene_base`); an axis is made only where it
 applies to the scene's problem (:func:`applicable_axes`: delta and r (a map over delta x r) need
 the scene key ``delta``, load ``load_scale``, nu ``nu``, the N axis ``N``, the units axis a unit
-map of the problem, :data:`UNIT_MAPS`).
+map the problem declares, ``Problem.unit_map``: :func:`unit_maps`).
 
 For the ``units`` and ``load`` axes the reference does not come from solving the scaled QP at
 all: it is the reference of the base scene mapped by the exact physics (a change of units maps
@@ -17,12 +17,14 @@ from __future__ import annotations
 import hashlib
 import json
 from collections import OrderedDict
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from dualfem.core.scene import DEFAULT_SCENE
+from dualfem.core.scene import DEFAULT_SCENE, QP_FILE_PROBLEM
+from dualfem.core.units import scaled_expression as _scaled_expression  # noqa: F401  (tests)
 from dualfem.experiments.paper import LOADS, PAPER_SCENE
 
 DELTAS = [1e-12, 1e-9, 1e-6, 1e-3, 1.0, 1e3]
@@ -82,106 +84,35 @@ def _sid(d: dict) -> str:
     return hashlib.sha1(json.dumps(d, sort_keys=True, default=str).encode()).hexdigest()[:10]
 
 
-def _scaled_expression(expr: str, length: float) -> str:
-    """A load expression in ``x``, ``y`` rewritten for coordinates ``length`` times larger
-    (checked by the one expression sandbox, :func:`dualfem.core.expressions.rewrite`)."""
-    from dualfem.core.expressions import rewrite
-
-    return rewrite(expr, {v: f"{v} / {float(length)!r}" for v in ("x", "y")}, parameter="load",
-                   variables=("x", "y"), hint="use f1, f2, f3 or a numpy expression in x, y")
-
-
-def _scaled_defects(tables, length: float, stress: float) -> list[dict]:
-    """``[[defects]]`` tables with their points (lengths) and own delta (length / stress) converted."""
-    out = []
-    for tab in tables:
-        t = dict(tab)
-        if "points" in t:
-            t["points"] = [[float(c) * length for c in pt] for pt in t["points"]]
-        if "delta" in t:
-            t["delta"] = float(t["delta"]) * length / stress
-        if isinstance(t.get("face_pressure"), str) and length != 1:
-            t["face_pressure"] = _scaled_expression(t["face_pressure"], length)
-        out.append(t)
-    return out
-
-
-def _scaled_loads(out: dict, d: dict, length: float) -> None:
-    """The supports-and-loads keys (docs/loads.md) for coordinates ``length`` times larger, into ``out``:
-    expressions evaluated at the unscaled coordinates; a body force (force per volume: stress / length)
-    divided by ``length`` (``load_scale`` carries the stress); tractions and the remote stress are stresses."""
-    def value(v):
-        return json.loads(v) if isinstance(v, str) and v.strip()[:1] in "[{" else v
-
-    def expr(v):
-        return _scaled_expression(v, length) if isinstance(v, str) else v
-
-    if length == 1:
-        return
-    bf = value(d.get("body_force"))
-    if isinstance(bf, (list, tuple)):
-        out["body_force"] = [f"({expr(v)}) / {float(length)!r}" if isinstance(v, str) else float(v) / length
-                             for v in bf]
-    tables = value(d.get("boundary"))
-    if isinstance(tables, (list, tuple)) and tables:
-        out["boundary"] = [{**t, "traction": [expr(v) for v in value(t["traction"])]}
-                           if isinstance(t, dict) and isinstance(value(t.get("traction")), (list, tuple)) else t
-                           for t in tables]
-
-
-def scene_in_units(base: dict, stress: float, length: float, problem: str = "thin_defect") -> dict:
-    """The same physics as ``base`` (paper units) in a unit system; see :data:`UNITS`.
-
-    thin_defect: E and tractions are stresses (x ``stress``); width, height, the defect, the points
-    of every ``[[defects]]`` table, ``mesh_size`` and ``tip_size`` are lengths (x ``length``); delta
-    (the scene's and each defect's own) is a length per stress (the interface pressure is [u]/delta).
-    A load expression in ``x``, ``y`` is rewritten so that it is evaluated at the unscaled
-    coordinates (the paper's f1/f2/f3 already scale with ``width``); a Python function is refused;
-    so are the expressions of ``[[boundary]]`` tractions and ``face_pressure``, and ``body_force`` (a
-    stress per length) is divided by ``length`` (:func:`_scaled_loads`).
-    signorini: E is a stress; width, height, the indentation and the obstacle's gap are lengths
-    (the gap expression in ``x`` becomes ``length * g(x / length)``). In both, x maps by ``length``
-    and the nodal forces mu by ``stress * length``.
+def scene_in_units(base: dict, stress: float, length: float, problem: str | None = None) -> dict:
+    """The same physics as ``base`` in a unit system ``stress`` times and ``length`` times the scene's
+    (see :data:`UNITS`): the unit map the problem declares (``Problem.unit_map``,
+    :class:`dualfem.core.units.UnitMap`) applied to ``base`` over the problem's defaults. x maps by
+    ``length`` and the nodal forces mu by ``stress * length``. ``problem``: default the problem of
+    :data:`~dualfem.core.scene.DEFAULT_SCENE`; InputError for a problem without a unit map.
     """
     from dualfem.core.errors import InputError
     from dualfem.core.registry import get_problem
 
-    if problem not in UNIT_MAPS:
-        raise InputError(f"the units axis has no unit map for problem {problem!r} (it has: {', '.join(UNIT_MAPS)})")
-    d = {**get_problem(problem).defaults, **base}
-    out = dict(base)
-    out["E"] = float(d["E"]) * stress
-    out["width"] = float(d["width"]) * length
-    out["height"] = float(d["height"]) * length
-    if problem == "signorini":
-        out["indent"] = float(d["indent"]) * length
-        g = d["obstacle"]
-        if callable(g):
-            raise InputError("scene_in_units: an obstacle given as a Python function cannot be converted to "
-                             "other units")
-        out["obstacle"] = f"{float(length)!r} * ({_scaled_expression(str(g).strip(), length)})" if length != 1 else g
-        return out
-    out["load_scale"] = float(d["load_scale"]) * stress
-    out["delta"] = float(d["delta"]) * length / stress
-    for k in ("mesh_size", "tip_size"):
-        if k in base:
-            out[k] = float(base[k]) * length
-    if base.get("defects"):      # the tables replace the single segment ``defect`` (left at its default)
-        out["defects"] = _scaled_defects(base["defects"], length, stress)
-        out.pop("defect", None)
-    else:
-        out["defect"] = [[float(c) * length for c in pt] for pt in np.asarray(d["defect"], dtype=float)]
-    _scaled_loads(out, d, length)
-    load = d["load"]
-    if callable(load):
-        raise InputError("scene_in_units: a load given as a Python function cannot be converted to other units")
-    if isinstance(load, str) and load.strip() not in LOADS and length != 1:
-        out["load"] = _scaled_expression(load.strip(), length)
-    return out
+    problem = problem or _default_problem()
+    cls = get_problem(problem)
+    if cls.unit_map is None:
+        raise InputError(f"the units axis has no unit map for problem {problem!r} (it has: {', '.join(unit_maps())})")
+    return cls.unit_map.convert(cls.defaults, base, stress, length)
 
 
-#: problems whose scenes the units axis can convert (:func:`scene_in_units`)
-UNIT_MAPS = ("thin_defect", "signorini")
+def unit_maps() -> tuple[str, ...]:
+    """The registered problems whose scenes the units axis can convert (they declare a ``unit_map``)."""
+    from dualfem.core.registry import problems
+
+    return tuple(sorted(n for n, cls in problems().items() if cls.unit_map is not None))
+
+
+def _default_problem() -> str:
+    """The problem of :data:`~dualfem.core.scene.DEFAULT_SCENE` (a built-in preset)."""
+    from dualfem.core.scene import presets
+
+    return presets()[DEFAULT_SCENE][0]
 
 
 def applicable_axes(problem: str, params: dict) -> tuple[str, ...]:
@@ -195,7 +126,7 @@ def applicable_axes(problem: str, params: dict) -> tuple[str, ...]:
     for ax in AXES:
         if ax in need and need[ax] not in params:
             continue
-        if ax == "units" and problem not in UNIT_MAPS:
+        if ax == "units" and get_problem(problem).unit_map is None:
             continue
         out.append(ax)
     return tuple(out)
@@ -217,15 +148,15 @@ def scene_base(spec: str) -> dict:
     from dualfem.core.scene import load_scene
 
     prob = load_scene(spec)
-    if prob.name == "qp_file":
+    if prob.name == QP_FILE_PROBLEM:
         raise InputError(f"--scene {spec!r} is a QP file: the stress grid varies scene parameters, a QP file has none")
     p = {k: v for k, v in prob.params.items() if not callable(v)}
     if len(p) < len(prob.params):
         raise InputError(f"--scene {spec!r}: a load given as a Python function cannot be converted to other units")
     if "defect" in p:
         p["defect"] = np.asarray(p["defect"], dtype=float).tolist()
-    if prob.name == "thin_defect" and p.get("defects") is not None:      # None: the single segment ``defect``
-        p["defects"] = [dict(t) for t in p["defects"]]
+    if isinstance(p.get("defects"), (list, tuple)):      # None: the single segment ``defect``
+        p["defects"] = [dict(t) if isinstance(t, Mapping) else t for t in p["defects"]]
     return jsonable(p)
 
 
@@ -271,7 +202,7 @@ def build_grid(solver_names: list[str], *, quick: bool, axes: tuple[str, ...] | 
     name = scene_name or DEFAULT_SCENE
     if Path(name).suffix == ".toml" and Path(name).is_file():
         name = str(Path(name).resolve())      # a scene file: found again by a resume from another folder
-    problem = scene_problem(name) if scene_name is not None else "thin_defect"
+    problem = scene_problem(name) if scene_name is not None else _default_problem()
     fits = applicable_axes(problem, scene if scene is not None else BASE)
     if axes is None:
         axes = fits

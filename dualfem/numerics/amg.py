@@ -4,7 +4,7 @@ Where a sparse factorization of K does not fit (3D: nnz(L) grows like n^1.4, tim
 :mod:`dualfem.numerics.memory`), K^-1 r is computed by conjugate gradients preconditioned by one
 V-cycle of a pyamg smoothed-aggregation hierarchy whose near-nullspace is the body's rigid-body modes
 (:func:`rigid_body_modes`: 6 in 3D, 3 in 2D, from ``GeometryPart.nodes`` / ``node_dofs``; with them the
-iteration count barely grows with n: 21-24 iterations to 1e-8 from 45 k to 670 k unknowns here).
+iteration count barely grows with n: docs/measurements.md).
 
 :class:`AmgKSolve` owns the hierarchy (built once; kept in the QP's
 :class:`~dualfem.numerics.linalg.FactorStore` by :func:`amg_for`, keyed like a factorization of K, so the
@@ -44,11 +44,11 @@ __all__ = ["AmgKSolve", "AmgCounters", "FullSpaceResult", "amg_for", "full_space
 #: the K-solve's relative residual per unit of the outer (dual solver's) relative tolerance
 INNER_RATIO = 1e-3
 #: clip of the inner tolerance: below RTOL_MIN the true residual of CG in double precision stalls
-#: (measured: ~1e-14 relative on the synthetic 3D QPs); above RTOL_MAX the dual operator is too noisy
+#: (docs/measurements.md); above RTOL_MAX the dual operator is too noisy
 RTOL_MIN, RTOL_MAX = 1e-13, 1e-8
 #: the default inner tolerance (pdas's declared 1e-9 x INNER_RATIO)
 RTOL = 1e-12
-#: CG iterations allowed per solve (a hierarchy that needs more is broken: 21-24 measured to 1e-8)
+#: CG iterations allowed per solve (a hierarchy that needs more is broken: docs/measurements.md)
 MAX_ITER = 500
 #: the LOBPCG Ritz value of lambda_min(K) is divided by this before it enters an error bound
 LAMBDA_SAFETY = 2.0
@@ -263,8 +263,7 @@ def full_space_newton(qp, tol: float = 1e-12, rtol: float = 1e-11, max_newton: i
     each H^-1 by CG preconditioned with a smoothed-aggregation hierarchy of H (rigid-body modes; one per
     Newton step) to ``rtol``, warm-started, until max|B_A x| <= ``tol`` max|x|. Stops when the active set
     repeats (then mu_A > 0 and B x >= 0 off A: the KKT conditions hold to the inner accuracy). At the end
-    ``K x - F - B'mu`` is H's CG residual. Measured on tests/_three_d_qp.py: 3-5 Newton steps, 3-4 AL steps
-    each (14 k unknowns: 1.6 s; 148 k: 35 s, against ~100 AMG K-solves of pdas on the amg operator).
+    ``K x - F - B'mu`` is H's CG residual (step counts and timings: docs/measurements.md).
     ``deadline``: a ``time.perf_counter()`` value after which it stops (``timed_out``) between two AL steps;
     ``report(k, x, mu)``: called with each Newton step's iterate (the solver plugin's iterate hook).
     The solver plugin is ``solvers/newton_amg.py``; the caller certifies the answer

@@ -108,8 +108,7 @@ def defect_clusters(qp) -> tuple[int, np.ndarray]:
 def dirichlet_by_default(qp) -> bool:
     """Whether a solver's ``precond="auto"`` takes :func:`dirichlet_inverse`: in 2D (a crack's layers hold a
     few hundred unknowns), not in 3D, where a surface's element layers make the local Schur complements
-    large (8.4 s of a 12.5 s pdas run at 36 k unknowns, unfinished after 7 minutes at 150 k): there the
-    solvers take a diagonal preconditioner."""
+    large (their cost: docs/measurements.md): there the solvers take a diagonal preconditioner."""
     return qp.geometry is None or qp.geometry.dim != 3
 
 
@@ -121,7 +120,7 @@ def dirichlet_inverse(qp, layers: int = 4) -> sp.csr_matrix:
     around them, clamped outside: ``S_c = K_cc - K_cR K_RR^-1 K_Rc`` (dense: a few hundred unknowns per
     crack), ``M_c = W_c B_c S_c B_c' W_c``; M^-1 is the block-diagonal sum of the
     M_c. As the layer widens S_c tends to the exact Schur complement of K onto the crack, with which
-    ``W B S B' W`` inverts D on the crack (measured: cond(M D) = 1.3 against cond(D) = 23 at h = 0.005);
+    ``W B S B' W`` inverts D on the crack (cond(M D) close to 1: docs/measurements.md);
     a layer of r rings catches the modes along the crack shorter than about r elements, so
     cond(M D) ~ crack length / (r h) instead of crack length / h. W = diag(B B')^-1. A cluster of
     more than :data:`MAX_BLOCK` rows is cut into pieces of consecutive rows (each its own block).

@@ -36,7 +36,7 @@ from dualfem.verify.judge import outcome
 DEFINITION = (
     "**Correct rate** (qpbenchmark's metric of how far a `solved` return code can be trusted) = certified "
     "correct / checkable solved claims, where a *solved claim* is a run whose `claimed_status` (the solver's own word, "
-    "before dualfem certifies it) is `solved`, and *certified correct* means `dualfem.core.grade` grades it "
+    "before dualfem certifies it) is `solved`, and *certified correct* means `dualfem.verify.grading` grades it "
     "`correct`: dualfem's certification kept the claim (status still `solved`), the evaluator's largest KKT "
     "residual is <= tol, and the relative energy-norm error against the certified reference is <= tol + the "
     "reference's certified bound (where the tier grades `x,mu`, the multipliers' error and certificate too); "

@@ -210,7 +210,7 @@ def _scatter_r_delta(recs, solver: str, path: Path) -> None:
 
 
 def _classification(meta: dict) -> list[str]:
-    """How runs are graded: the one policy of :mod:`dualfem.core.grade`, in words."""
+    """How runs are graded: the one policy of :mod:`dualfem.verify.grading`, in words."""
     refs = meta.get("references") or []
     return ["## How a run is graded", "",
             "Every run is compared with a reference solution of the same QP, chosen by dualfem's one reference "
@@ -223,7 +223,7 @@ def _classification(meta: dict) -> list[str]:
             "is the base scene's reference mapped by exact physics (change of units; x(sF) = s x(F)), so no solver is "
             "trusted on scaled data.", "",
             "The error is the relative energy-norm error |x - x_ref|_K / |x_ref|_K. With t the tolerance the solver "
-            "instance declares and b the reference's certified error bound (`dualfem.core.grade.grade`, the same "
+            "instance declares and b the reference's certified error bound (`dualfem.verify.grading.grade`, the same "
             "policy "
             "as `dualfem compare` and `dualfem bench`):", "",
             "- **correct** (`ok`): status solved, KKT residuals <= t and error <= t + b;",

@@ -53,6 +53,7 @@ from dualfem.core.parts import GeometryPart, MaterialPart, UnitsPart
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
 from dualfem.core.registry import register_problem
+from dualfem.core.units import UnitMap
 from dualfem.numerics.linalg import freeze
 
 from .. import _boundary as bd
@@ -83,6 +84,14 @@ class ThinDefect(Problem):
 
     name = "thin_defect"
     description = "2D elastic body with thin defects (Zhiltsov & Maksimova 2023)"
+    dim = 2
+    scene_default = True        # a 2D scene file naming no problem is a thin-defect scene
+    #: the stress grid's units axis: E, load_scale and tractions are stresses, delta a length per stress
+    unit_map = UnitMap({"E": "stress", "width": "length", "height": "length", "load_scale": "stress",
+                        "delta": "length/stress", "mesh_size": "length_if_set", "tip_size": "length_if_set",
+                        "defect": "points", "defects": "defect_tables", "body_force": "body_force",
+                        "boundary": "traction_tables", "load": "stress_field"},
+                       scaling_names=("f1", "f2", "f3"))   # the paper's loads scale with width by themselves
     defaults = {
         "N": 64,
         "delta": 1e-5,

@@ -85,6 +85,8 @@ class ThreeD(Problem):
 
     name = "three_d"
     description = "3D elastic box with defect surfaces (disk, ellipse, polygon, spherical cap), gmsh tetrahedra"
+    dim = 3
+    scene_default = True        # a scene file with dim = 3 naming no problem is a three_d scene
     requires = ("gmsh",)
     extra = "gmsh"
     defaults = {

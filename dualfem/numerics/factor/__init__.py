@@ -4,12 +4,8 @@
 the name given, else the process-wide choice (:func:`set_default`, e.g. from ``--factor``),
 else the environment variable ``DUALFEM_FACTOR``, else the fastest installed one.
 
-Preference pardiso > cholmod > superlu, f2 at N = 512 (526 k unknowns), 2 cores shared with other
-jobs (benchmarks/factor_backends.py, two runs): factorization of K_fixed with the Schur complement
-onto the 1,020 defect unknowns + one solve (what the exact solvers' setup does) PARDISO 3.8-5.7 s,
-SuperLU 12.7-13.6 s; factor + solve of K PARDISO 6.0 s, SuperLU 8.0-9.1 s; peak RSS 1.33 GB vs
-3.03 GB. CHOLMOD (not installed here; shared/notes/performance.md) 5.7 s for K. Below ~50 k
-unknowns SuperLU is as fast or faster (N = 128: 0.29 s vs 0.36 s), but every backend is < 0.4 s.
+Preference pardiso > cholmod > superlu: by time and memory on large scenes
+(benchmarks/factor_backends.py; the numbers: docs/measurements.md).
 """
 from __future__ import annotations
 
