@@ -163,7 +163,7 @@ def test_interface_term_and_B():
     nd = free_dofs(np.zeros((3, 4), bool))
     lower, upper = np.array([0, 1]), np.array([2, 3])
     normals = np.array([[0.0, 0.6], [0.0, 0.0], [1.0, 0.8]])
-    Ki, B = interface(nd, lower, upper, normals, np.array([2.0, 3.0]), 12)
+    Ki, B, _ = interface(nd, lower, upper, normals, np.array([2.0, 3.0]), 12)
     x = np.arange(12.0) ** 1.5
     u = x.reshape(4, 3)
     jump = u[upper] - u[lower]

@@ -56,8 +56,9 @@ from dualfem.core.registry import register_problem
 from dualfem.numerics.linalg import freeze
 
 from .. import _boundary as bd
+from .._interface import delta_coefficients, interface, local_unknowns
 from ..loads import resolve_load
-from .assemble import boundary_edges_on, free_dofs, interface, stiffness, traction_vector
+from .assemble import boundary_edges_on, free_dofs, stiffness, traction_vector
 from .cut import Cut, cut
 from .geometry import defects_label, parse_defect, parse_defects
 from .interface_sum import InterfaceSum
@@ -365,7 +366,7 @@ class ThinDefect(Problem):
         n = int(node_dofs.max()) + 1
         K_el = stiffness(pts, c.triangles, lam, mu, node_dofs, n)
         R = rotation(float(p["rotate_deg"]))
-        local = np.unique(np.concatenate([node_dofs[:, c.upper].ravel(), node_dofs[:, c.lower].ravel()]))
+        local = local_unknowns(node_dofs, c.lower, c.upper)
         maps = {
             "nodes": pts, "triangles": c.triangles, "node_dofs": node_dofs,
             "defect_upper": c.upper, "defect_lower": c.lower, "defect_tips": c.tips, "defect_s": c.s,
@@ -434,8 +435,8 @@ class ThinDefect(Problem):
         p = self.params
         a = self._delta_free()
         c, maps = a["cut"], dict(a["maps"])
-        delta = np.array([d["delta"] for d in self._defects])[c.defect_id]
-        K, B, J = self._stiffness(a, c.weights / delta)
+        _, coef = delta_coefficients(c.weights, c.defect_id, [d["delta"] for d in self._defects])
+        K, B, J = self._stiffness(a, coef)
         R = rotation(float(p["rotate_deg"]))
         if len(self._defects) == 1 and len(self._defects[0]["points"]) == 2:
             pa, pb = self._defects[0]["points"]

@@ -24,6 +24,8 @@ import numpy as np
 
 from dualfem.core.errors import InputError
 
+from .._interface import double_nodes
+
 
 @dataclass
 class Cut:
@@ -93,9 +95,9 @@ def cut(points: np.ndarray, triangles: np.ndarray, defects: list[np.ndarray], me
         length.append(ln.sum())
     _check_edges(triangles, defects, seen >= 0)
     lower_a = np.concatenate(lower)
-    upper_a = nn + np.arange(lower_a.size)
+    doubled, upper_a = double_nodes(points, lower_a)
     t = _assign_sides(points, triangles, lower_a, upper_a, np.concatenate(prev), np.concatenate(nxt))
-    return Cut(points=np.hstack([points, points[:, lower_a]]), triangles=t, lower=lower_a, upper=upper_a,
+    return Cut(points=doubled, triangles=t, lower=lower_a, upper=upper_a,
                defect_id=np.concatenate(ids), normals=np.hstack(nrm), tangents=np.hstack(tng),
                weights=np.concatenate(w), s=np.concatenate(s), tips=np.concatenate(tips),
                length=np.array(length))

@@ -49,7 +49,8 @@ from dualfem.core.registry import register_problem
 from dualfem.numerics.linalg import freeze
 
 from .. import _boundary as bd
-from .assemble import free_dofs, interface, stiffness
+from .._interface import delta_coefficients, interface, local_unknowns
+from .assemble import free_dofs, stiffness
 from .cut import Cut3, cut
 from .geometry import Surface, check_apart, parse_defects
 from .mesh import check_size, estimate_tetrahedra, mesh_box
@@ -261,7 +262,7 @@ class ThreeD(Problem):
         n = int(node_dofs.max()) + 1
         lam, mu = lame(p["E"], p["nu"], "strain")
         K_el = stiffness(pts, c.tets, lam, mu, node_dofs, n)
-        local = np.unique(np.concatenate([node_dofs[:, c.upper].ravel(), node_dofs[:, c.lower].ravel()]))
+        local = local_unknowns(node_dofs, c.lower, c.upper)
         R = self.rotation()
         maps = {"defect_upper": c.upper, "defect_lower": c.lower, "defect_id": c.defect_id,
                 "defect_normals": np.ascontiguousarray((R @ c.normals).T), "defect_front": c.front,
@@ -320,9 +321,9 @@ class ThreeD(Problem):
         p = self.params
         a = self._delta_free()
         c = a["cut"]
-        delta = np.array([s.delta for s in self._surfaces])[c.defect_id]
+        _, coef = delta_coefficients(c.weights, c.defect_id, [s.delta for s in self._surfaces])
         normals = np.asarray(a["maps"]["defect_normals"]).T
-        K_par, B = interface(a["node_dofs"], c.lower, c.upper, normals, c.weights / delta, a["n"])
+        K_par, B, _ = interface(a["node_dofs"], c.lower, c.upper, normals, coef, a["n"])
         K = (a["K_el"] + K_par).tocsc()
         nd = a["node_dofs"]
         Fn = self.nodal_load()
