@@ -49,7 +49,7 @@ import numpy as np
 
 from dualfem.core.elasticity import PLANES, lame  # noqa: F401  (re-exported)
 from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
-from dualfem.core.parts import GeometryPart, MaterialPart, UnitsPart
+from dualfem.core.parts import GeometryPart, InterfacePart, MaterialPart, UnitsPart
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
 from dualfem.core.registry import register_problem
@@ -435,7 +435,7 @@ class ThinDefect(Problem):
         p = self.params
         a = self._delta_free()
         c, maps = a["cut"], dict(a["maps"])
-        _, coef = delta_coefficients(c.weights, c.defect_id, [d["delta"] for d in self._defects])
+        delta, coef = delta_coefficients(c.weights, c.defect_id, [d["delta"] for d in self._defects])
         K, B, J = self._stiffness(a, coef)
         R = rotation(float(p["rotate_deg"]))
         if len(self._defects) == 1 and len(self._defects[0]["points"]) == 2:
@@ -450,9 +450,14 @@ class ThinDefect(Problem):
             params["loads"] = self._loads.label()
         self.jump_operators = J
         geometry = GeometryPart(2, maps.pop("nodes"), maps.pop("triangles"), maps.pop("node_dofs"))
+        for k in ("defect_upper", "defect_lower", "defect_tips", "defect_s", "defect_id"):
+            maps.pop(k)
+        iface = InterfacePart.make(geometry.node_dofs, c.upper, c.lower, maps.pop("defect_normals").T, c.weights,
+                                   c.defect_id, tangents=maps.pop("defect_tangents").T[:, None, :], front=c.tips,
+                                   s=c.s, delta=delta)
         return QP(K=K, F=self._load_vector(a), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],
                   name=self._qp_name(),
-                  params=params, maps=maps, geometry=geometry,
+                  params=params, maps=maps, geometry=geometry, interface=iface,
                   units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
                   material=MaterialPart(float(p["E"]), float(p["nu"]), str(p["plane"])))
 

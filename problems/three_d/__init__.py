@@ -42,7 +42,7 @@ import numpy as np
 
 from dualfem.core.elasticity import lame
 from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
-from dualfem.core.parts import GeometryPart, MaterialPart, UnitsPart
+from dualfem.core.parts import GeometryPart, InterfacePart, MaterialPart, UnitsPart
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
 from dualfem.core.registry import register_problem
@@ -321,7 +321,7 @@ class ThreeD(Problem):
         p = self.params
         a = self._delta_free()
         c = a["cut"]
-        _, coef = delta_coefficients(c.weights, c.defect_id, [s.delta for s in self._surfaces])
+        delta, coef = delta_coefficients(c.weights, c.defect_id, [s.delta for s in self._surfaces])
         normals = np.asarray(a["maps"]["defect_normals"]).T
         K_par, B, _ = interface(a["node_dofs"], c.lower, c.upper, normals, coef, a["n"])
         K = (a["K_el"] + K_par).tocsc()
@@ -333,9 +333,11 @@ class ThreeD(Problem):
                   for k, v in p.items() if not callable(v) and k != "defects"}
         params["defects"] = "; ".join(_label(s) for s in self._surfaces)
         geometry = GeometryPart(3, a["points"], c.tets, nd)
-        return QP(K=K, F=F, B=B, weights=c.weights.copy(), K_fixed=a["K_el"], local_dofs=a["local"],
-                  name=f"three_d[{self._load_label()}]", params=params,
-                  maps=dict(a["maps"]), geometry=geometry,
+        w = c.weights.copy()
+        iface = InterfacePart.make(nd, c.upper, c.lower, a["maps"]["defect_normals"], w, c.defect_id, front=c.front,
+                                   front_id=c.front_id, faces=None if c.faces is None else c.faces.T, delta=delta)
+        return QP(K=K, F=F, B=B, weights=w, K_fixed=a["K_el"], local_dofs=a["local"],
+                  name=f"three_d[{self._load_label()}]", params=params, geometry=geometry, interface=iface,
                   units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
                   material=MaterialPart(float(p["E"]), float(p["nu"]), "strain"))
 
