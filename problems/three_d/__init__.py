@@ -28,10 +28,10 @@ axis (right-hand rule); the mesh is made in the reference frame and rotated.
 
 The QP: ``geometry = GeometryPart(3, nodes (3, n_nodes), tetrahedra (4, n_tets), node_dofs (3,
 n_nodes))``; ``material = MaterialPart(E, nu, "strain")`` (3D elasticity is plane strain's law
-without the reduction: ``plane`` means nothing in 3D and is not a scene key); ``maps``:
-``defect_upper``/``defect_lower`` (m,) node ids of the "+" / "-" copies of constrained node j (row
-j of B), ``defect_id`` (m,), ``defect_normals`` (m, 3) unit "+" normals, ``defect_front`` (k,) the
-front nodes of every defect and ``defect_front_id`` (k,) their defects.
+without the reduction: ``plane`` means nothing in 3D and is not a scene key); ``interface`` (an
+:class:`~dualfem.core.parts.InterfacePart`): ``upper``/``lower`` (m,) node ids of the "+" / "-" copies of
+constrained node j (row j of B), ``defect_id`` (m,), ``normals`` (m, 3) unit "+" normals, ``front`` (k,)
+the front nodes of every defect and ``front_id`` (k,) their defects, ``faces``, ``delta``.
 """
 from __future__ import annotations
 
