@@ -103,3 +103,17 @@ def test_a_wrong_part_is_refused_naming_the_field(qp):
         _with(qp, weights=2 * it.weights)
     with pytest.raises(InputError, match=r"interface.delta must be > 0"):
         _with(qp, delta=-it.delta)
+
+
+def test_a_plugin_gets_the_part_read_only(qp, tmp_path):
+    from dualfem.experiments.runner import guarded_view
+
+    qp.save(tmp_path / "q.npz")
+    mine = QP.load(tmp_path / "q.npz")                           # its arrays are writable
+    assert mine.interface.normals.flags.writeable
+    it = guarded_view(mine).interface
+    for f in FIELDS:
+        a = getattr(it, f)
+        assert a is None or not a.flags.writeable, f
+    with pytest.raises(ValueError, match="read-only"):
+        it.normals[0] = 0
