@@ -17,8 +17,13 @@ Conventions: ``node_dofs`` (dim, n_nodes) unknown of component c of node i (-1: 
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import scipy.sparse as sp
+
+from dualfem.core.parts import InterfacePart
+from dualfem.numerics.linalg import freeze
 
 
 def double_nodes(points: np.ndarray, lower: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -62,6 +67,23 @@ def delta_coefficients(weights: np.ndarray, defect_id: np.ndarray, deltas) -> tu
     """(per-node delta ``deltas[defect_id[j]]``, the interface coefficients ``w_j / delta_j``)."""
     delta = np.asarray(deltas, dtype=float)[defect_id]
     return delta, weights / delta
+
+
+def delta_free_part(node_dofs: np.ndarray, cut, normals: np.ndarray, **extra) -> InterfacePart:
+    """The :class:`~dualfem.core.parts.InterfacePart` of a cut (``upper``, ``lower``, ``weights``, ``defect_id``
+    of a 2D or 3D cut) without delta, its arrays read-only but the weights (they become the QP's). ``normals``
+    (m, dim) in the scene's frame; ``extra``: tangents, front, front_id, faces, s."""
+    part = InterfacePart.make(node_dofs, cut.upper, cut.lower, normals, cut.weights, cut.defect_id, **extra)
+    frozen = ("upper", "lower", "plus_dofs", "minus_dofs", "normals", "tangents", "defect_id", "front", "front_id",
+              "faces", "s")
+    freeze(*(getattr(part, f) for f in frozen if getattr(part, f) is not None))
+    return part
+
+
+def with_delta(part: InterfacePart, deltas) -> tuple[InterfacePart, np.ndarray]:
+    """(the part with its per-node delta, the interface coefficients ``w_j / delta_j``) for one delta per defect."""
+    delta, coef = delta_coefficients(part.weights, part.defect_id, deltas)
+    return dataclasses.replace(part, delta=delta), coef
 
 
 def local_unknowns(node_dofs: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:

@@ -39,7 +39,7 @@ def patch_check(problem, qp) -> None:
     u = (eps @ X).T.ravel() + np.tile([0.3, -0.1], X.shape[1])  # DOF 2 i + c
     f = (K_all @ u).reshape(-1, 2)
     ref = face_forces(qp, sigma)
-    up, lo = qp.maps["defect_upper"], qp.maps["defect_lower"]
+    up, lo = qp.interface.upper, qp.interface.lower
     scale = np.abs(ref).max()
     assert np.abs(f[up] + ref).max() <= 1e-10 * scale
     assert np.abs(f[lo] - ref).max() <= 1e-10 * scale

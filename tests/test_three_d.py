@@ -234,7 +234,7 @@ def test_export_writes_the_3d_maps(tmp_path):
         assert back.geometry is not None and back.geometry.dim == 3
         assert back.geometry.nodes.shape == (3, qp.geometry.nodes.shape[1])
         assert back.geometry.cells.shape[0] == 4
-        assert np.shape(back.maps["defect_normals"]) == (qp.m, 3)
-        assert abs(back.K - qp.K).max() == 0 and np.array_equal(back.maps["defect_upper"], qp.maps["defect_upper"])
+        assert np.shape(back.interface.normals) == (qp.m, 3)
+        assert abs(back.K - qp.K).max() == 0 and np.array_equal(back.interface.upper, qp.interface.upper)
         if d is not None:
             assert d["map_nodes"].shape[0] == 3 and d["map_defect_normals"].shape == (qp.m, 3)

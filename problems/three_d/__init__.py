@@ -35,6 +35,7 @@ the front nodes of every defect and ``front_id`` (k,) their defects, ``faces``, 
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -42,14 +43,14 @@ import numpy as np
 
 from dualfem.core.elasticity import lame
 from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
-from dualfem.core.parts import GeometryPart, InterfacePart, MaterialPart, UnitsPart
+from dualfem.core.parts import GeometryPart, MaterialPart, UnitsPart
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
 from dualfem.core.registry import register_problem
 from dualfem.numerics.linalg import freeze
 
 from .. import _boundary as bd
-from .._interface import delta_coefficients, interface, local_unknowns
+from .._interface import delta_free_part, interface, local_unknowns, with_delta
 from .assemble import free_dofs, stiffness
 from .cut import Cut3, cut
 from .geometry import Surface, check_apart, parse_defects
@@ -264,11 +265,10 @@ class ThreeD(Problem):
         K_el = stiffness(pts, c.tets, lam, mu, node_dofs, n)
         local = local_unknowns(node_dofs, c.lower, c.upper)
         R = self.rotation()
-        maps = {"defect_upper": c.upper, "defect_lower": c.lower, "defect_id": c.defect_id,
-                "defect_normals": np.ascontiguousarray((R @ c.normals).T), "defect_front": c.front,
-                "defect_front_id": c.front_id, "defect_faces": c.faces}
-        a = {"cut": c, "points": pts, "node_dofs": node_dofs, "n": n, "K_el": K_el, "local": local, "maps": maps}
-        freeze(K_el.data, K_el.indices, K_el.indptr, local, node_dofs, pts, *maps.values())
+        part = delta_free_part(node_dofs, c, np.ascontiguousarray((R @ c.normals).T), front=c.front,
+                               front_id=c.front_id, faces=None if c.faces is None else c.faces.T)
+        a = {"cut": c, "points": pts, "node_dofs": node_dofs, "n": n, "K_el": K_el, "local": local, "interface": part}
+        freeze(K_el.data, K_el.indices, K_el.indptr, local, node_dofs, pts)
         self.shared.data["delta_free"] = a
         self.shared.assemblies += 1
         return a
@@ -301,7 +301,7 @@ class ThreeD(Problem):
             F = R @ bd.nodal_forces(self._loads, c.points, c.tets, self._sides(), scale)
         if any(f is not None for f in self._face_pressure):
             a = self._delta_free()
-            normals = np.asarray(a["maps"]["defect_normals"]).T
+            normals = a["interface"].normals.T
             pressure = np.zeros(c.lower.size)
             for k, f in enumerate(self._face_pressure):
                 j = np.flatnonzero(c.defect_id == k)
@@ -321,9 +321,8 @@ class ThreeD(Problem):
         p = self.params
         a = self._delta_free()
         c = a["cut"]
-        delta, coef = delta_coefficients(c.weights, c.defect_id, [s.delta for s in self._surfaces])
-        normals = np.asarray(a["maps"]["defect_normals"]).T
-        K_par, B, _ = interface(a["node_dofs"], c.lower, c.upper, normals, coef, a["n"])
+        iface, coef = with_delta(a["interface"], [s.delta for s in self._surfaces])
+        K_par, B, _ = interface(a["node_dofs"], c.lower, c.upper, iface.normals.T, coef, a["n"])
         K = (a["K_el"] + K_par).tocsc()
         nd = a["node_dofs"]
         Fn = self.nodal_load()
@@ -333,10 +332,8 @@ class ThreeD(Problem):
                   for k, v in p.items() if not callable(v) and k != "defects"}
         params["defects"] = "; ".join(_label(s) for s in self._surfaces)
         geometry = GeometryPart(3, a["points"], c.tets, nd)
-        w = c.weights.copy()
-        iface = InterfacePart.make(nd, c.upper, c.lower, a["maps"]["defect_normals"], w, c.defect_id, front=c.front,
-                                   front_id=c.front_id, faces=None if c.faces is None else c.faces.T, delta=delta)
-        return QP(K=K, F=F, B=B, weights=w, K_fixed=a["K_el"], local_dofs=a["local"],
+        iface = dataclasses.replace(iface, weights=c.weights.copy())       # each QP its own weights
+        return QP(K=K, F=F, B=B, weights=iface.weights, K_fixed=a["K_el"], local_dofs=a["local"],
                   name=f"three_d[{self._load_label()}]", params=params, geometry=geometry, interface=iface,
                   units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
                   material=MaterialPart(float(p["E"]), float(p["nu"]), "strain"))
