@@ -9,11 +9,10 @@ from dualfem.problems.thin_defect import lame
 
 
 def defect_polylines(qp) -> list[np.ndarray]:
-    """Ordered node ids (tips included, "-" copies inside) of each defect, from the maps."""
-    m = qp.maps
-    tips = np.asarray(m["defect_tips"]).reshape(-1, 2)
-    ids = np.asarray(m["defect_id"])
-    return [np.r_[tips[k, 0], np.asarray(m["defect_lower"])[ids == k], tips[k, 1]] for k in range(tips.shape[0])]
+    """Ordered node ids (tips included, "-" copies inside) of each defect, from the interface part."""
+    it = qp.interface
+    tips, ids = it.front.reshape(-1, 2), it.defect_id
+    return [np.r_[tips[k, 0], it.lower[ids == k], tips[k, 1]] for k in range(tips.shape[0])]
 
 
 def face_forces(qp, sigma: np.ndarray) -> np.ndarray:

@@ -235,8 +235,8 @@ def test_plot_deformed_draws_every_defect(two_defects):
     assert len(white) == 4 and len(dashed) == 2
     for k in range(2):
         rows = np.flatnonzero(ids == k)
-        for ln, copies in zip(white[2 * k: 2 * k + 2], ("defect_upper", "defect_lower"), strict=True):
-            nodes = np.r_[tips[k, 0], qp.maps[copies][rows], tips[k, 1]]
+        for ln, copies in zip(white[2 * k: 2 * k + 2], (qp.interface.upper, qp.interface.lower), strict=True):
+            nodes = np.r_[tips[k, 0], copies[rows], tips[k, 1]]
             np.testing.assert_allclose(np.vstack([ln.get_xdata(), ln.get_ydata()]), xy[:, nodes])
         ref = np.r_[tips[k, 0], qp.interface.lower[rows], tips[k, 1]]
         np.testing.assert_allclose(np.vstack([dashed[k].get_xdata(), dashed[k].get_ydata()]), X[:, ref])
