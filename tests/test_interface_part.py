@@ -59,13 +59,14 @@ def test_the_old_maps_keys_answer_in_their_old_layout_with_a_warning(qp):
 
 
 def test_an_exported_file_gives_the_same_part_and_an_older_one_too(qp, tmp_path):
-    qp.save(tmp_path / "q.npz")
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", DeprecationWarning)
-        back = QP.load(tmp_path / "q.npz").interface
-    for f in FIELDS:
-        a, b = getattr(qp.interface, f), getattr(back, f)
-        assert (a is None and b is None) or np.array_equal(a, b), f
+    for suffix in (".mat", ".npz"):
+        qp.save(tmp_path / f"q{suffix}")
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", DeprecationWarning)
+            back = QP.load(tmp_path / f"q{suffix}").interface
+        for f in FIELDS:
+            a, b = getattr(qp.interface, f), getattr(back, f)
+            assert (a is None and b is None) or np.array_equal(a, b), (suffix, f)
     d = dict(np.load(tmp_path / "q.npz"))
     del d["map_defect_delta"]                                   # a file of the last release: no per-node delta
     if qp.geometry.dim == 2:
