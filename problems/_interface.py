@@ -18,12 +18,28 @@ Conventions: ``node_dofs`` (dim, n_nodes) unknown of component c of node i (-1: 
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
 from dualfem.core.parts import InterfacePart
 from dualfem.numerics.linalg import freeze
+
+
+@dataclass
+class DoubledNodes:
+    """What every cut gives (2D: :class:`.thin_defect.cut.Cut`, 3D: :class:`.three_d.cut.Cut3`), defect by defect:
+    ``points`` (dim, n_nodes) the doubled mesh's nodes; per constrained node j (m of them): ``lower``/``upper``
+    node ids of its "-"/"+" copies, ``defect_id``, ``normals`` (dim, m) unit "+" normals (the cut's frame),
+    ``weights`` (m,) nodal weights (a length in 2D, an area in 3D)."""
+
+    points: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    defect_id: np.ndarray
+    normals: np.ndarray
+    weights: np.ndarray
 
 
 def double_nodes(points: np.ndarray, lower: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -69,7 +85,7 @@ def delta_coefficients(weights: np.ndarray, defect_id: np.ndarray, deltas) -> tu
     return delta, weights / delta
 
 
-def delta_free_part(node_dofs: np.ndarray, cut, normals: np.ndarray, **extra) -> InterfacePart:
+def delta_free_part(node_dofs: np.ndarray, cut: DoubledNodes, normals: np.ndarray, **extra) -> InterfacePart:
     """The :class:`~dualfem.core.parts.InterfacePart` of a cut (``upper``, ``lower``, ``weights``, ``defect_id``
     of a 2D or 3D cut) without delta, its arrays read-only but the weights (they become the QP's). ``normals``
     (m, dim) in the scene's frame; ``extra``: tangents, front, front_id, faces, s."""

@@ -24,11 +24,11 @@ import numpy as np
 
 from dualfem.core.errors import InputError
 
-from .._interface import double_nodes
+from .._interface import DoubledNodes, double_nodes
 
 
 @dataclass
-class Cut:
+class Cut(DoubledNodes):
     """The doubled mesh and the defect nodes, ordered defect by defect, first to last point.
 
     ``lower``/``upper`` (m,): node ids of the "-" / "+" copies; ``defect_id`` (m,): which defect;
@@ -37,14 +37,8 @@ class Cut:
     of each defect; ``length`` (ndef,).
     """
 
-    points: np.ndarray
     triangles: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    defect_id: np.ndarray
-    normals: np.ndarray
     tangents: np.ndarray
-    weights: np.ndarray
     s: np.ndarray
     tips: np.ndarray
     length: np.ndarray

@@ -32,7 +32,7 @@ from scipy.sparse.csgraph import connected_components
 
 from dualfem.core.errors import InputError
 
-from .._interface import double_nodes
+from .._interface import DoubledNodes, double_nodes
 from .geometry import Surface
 
 _FACES = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])     # face k of a tetrahedron: without corner k
@@ -43,7 +43,7 @@ class CutError(InputError):
 
 
 @dataclass
-class Cut3:
+class Cut3(DoubledNodes):
     """The doubled mesh. ``points`` (3, n_nodes), ``tets`` (4, n_tets); per constrained node j (m of them,
     defect by defect): ``lower``/``upper`` node ids, ``defect_id``, ``normals`` (3, m) unit "+" normals,
     ``weights`` (m,) nodal areas; ``front`` (k,) the front nodes of every defect and ``front_id`` (k,) theirs;
@@ -51,13 +51,7 @@ class Cut3:
     node ids of the "-" face (the original nodes: the front single, the "+" copy of node ``lower[j]`` is
     ``upper[j]``), for output (VTK, figures)."""
 
-    points: np.ndarray
     tets: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    defect_id: np.ndarray
-    normals: np.ndarray
-    weights: np.ndarray
     front: np.ndarray
     front_id: np.ndarray
     area: np.ndarray
