@@ -118,3 +118,13 @@ def test_a_plugin_gets_the_part_read_only(qp, tmp_path):
         assert a is None or not a.flags.writeable, f
     with pytest.raises(ValueError, match="read-only"):
         it.normals[0] = 0
+
+
+def test_old_maps_that_do_not_fit_the_qp_stay_plain_extras(qp):
+    """Another QP's maps (other rows of B) make no interface part: they stay unread extras, as before."""
+    import scipy.sparse as sp
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        q = QP(K=qp.K, F=qp.F, B=sp.eye(qp.n, format="csr"), maps=qp.maps)
+    assert q.interface is None and q.geometry is not None and "defect_upper" in list(q.maps)

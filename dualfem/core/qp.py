@@ -201,9 +201,15 @@ class QP:
 
     def _interface(self, rest: dict) -> dict:
         """The interface part from old-style defect ``maps`` keys (DeprecationWarning unless they came from a
-        :class:`Maps`); returns ``rest`` without the keys the part answers for."""
+        :class:`Maps`); returns ``rest`` without the keys the part answers for. Keys that do not make a valid
+        part of this QP (another QP's maps: other rows of B) stay plain extras, unread, as they were."""
         if self.interface is None and self.geometry is not None:
-            found = InterfacePart.from_maps(rest, self.geometry, np.asarray(self.weights))
+            try:
+                found = InterfacePart.from_maps(rest, self.geometry, np.asarray(self.weights))
+                if found is not None:
+                    found.validate(self.K.shape[0], self.B.shape[0], self.geometry, np.asarray(self.weights))
+            except (InputError, IndexError, ValueError):
+                found = None
             if found is not None and not isinstance(self.maps, Maps):
                 warnings.warn("QP(maps={'defect_upper', ...}) is deprecated: pass "
                               "interface=InterfacePart.make(...)", DeprecationWarning, stacklevel=5)
