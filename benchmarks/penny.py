@@ -55,7 +55,7 @@ def errors(case: str, qp, sol) -> dict:
     if sol.x is None:
         return {}
     nodes = qp.geometry.nodes
-    lo, up = qp.maps["defect_lower"], qp.maps["defect_upper"]
+    lo, up = qp.interface.lower, qp.interface.upper
     r = np.hypot(nodes[0, lo] - C, nodes[1, lo] - C)
     root = np.sqrt(np.maximum(A * A - r * r, 0.0))
     jump = qp.B @ sol.x

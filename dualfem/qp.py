@@ -1,11 +1,12 @@
 """Stable import path of the plugin API (docs/plugins.md); the code lives in :mod:`dualfem.core.qp`
 and :mod:`dualfem.core.parts` (the typed optional parts of a QP)."""
 from dualfem._facade import moved
-from dualfem.core.parts import GeometryPart, LocalPart, MaterialPart, ShiftPart, UnitsPart
+from dualfem.core.parts import GeometryPart, InterfacePart, LocalPart, MaterialPart, ShiftPart, UnitsPart
 from dualfem.core.qp import PROMOTED_MAPS, QP, Maps
 
 __all__ = [
-    "GeometryPart", "LocalPart", "Maps", "MaterialPart", "PROMOTED_MAPS", "QP", "ShiftPart", "UnitsPart",
+    "GeometryPart", "InterfacePart", "LocalPart", "Maps", "MaterialPart", "PROMOTED_MAPS", "QP", "ShiftPart",
+    "UnitsPart",
 ]
 
 #: names this module re-exported by accident before it had ``__all__`` (deprecated; see dualfem/_facade.py)

@@ -9,11 +9,10 @@ from dualfem.problems.thin_defect import lame
 
 
 def defect_polylines(qp) -> list[np.ndarray]:
-    """Ordered node ids (tips included, "-" copies inside) of each defect, from the maps."""
-    m = qp.maps
-    tips = np.asarray(m["defect_tips"]).reshape(-1, 2)
-    ids = np.asarray(m["defect_id"])
-    return [np.r_[tips[k, 0], np.asarray(m["defect_lower"])[ids == k], tips[k, 1]] for k in range(tips.shape[0])]
+    """Ordered node ids (tips included, "-" copies inside) of each defect, from the interface part."""
+    it = qp.interface
+    tips, ids = it.front.reshape(-1, 2), it.defect_id
+    return [np.r_[tips[k, 0], it.lower[ids == k], tips[k, 1]] for k in range(tips.shape[0])]
 
 
 def face_forces(qp, sigma: np.ndarray) -> np.ndarray:
@@ -39,7 +38,7 @@ def patch_check(problem, qp) -> None:
     u = (eps @ X).T.ravel() + np.tile([0.3, -0.1], X.shape[1])  # DOF 2 i + c
     f = (K_all @ u).reshape(-1, 2)
     ref = face_forces(qp, sigma)
-    up, lo = qp.maps["defect_upper"], qp.maps["defect_lower"]
+    up, lo = qp.interface.upper, qp.interface.lower
     scale = np.abs(ref).max()
     assert np.abs(f[up] + ref).max() <= 1e-10 * scale
     assert np.abs(f[lo] - ref).max() <= 1e-10 * scale

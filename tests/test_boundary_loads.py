@@ -486,7 +486,7 @@ def test_fractured_face_pressure_opens_every_crack():
     kw = {"cracks": 3, "mesh_size": 0.05, "tip_size": 0.05, "crack_length": 0.2, "min_gap": 0.1}
     qp = _scene("fractured", face_pressure=2.0, remote_stress=[[0.0, 0.0], [0.0, 0.0]], **kw).build()
     jump = qp.B @ _solve_qp(qp).x
-    ids = qp.maps["defect_id"]
+    ids = qp.interface.defect_id
     assert all(jump[ids == k].max() > 0 for k in range(3)) and jump.min() >= -1e-12
     with pytest.raises(InputError, match="face_pressure"):
         _scene("fractured", face_pressure="foo", **kw)

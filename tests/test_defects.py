@@ -19,11 +19,11 @@ def test_kinked_polyline_on_the_grid():
     qp = problem.build()
     assert qp.m == 7 and "normal" not in qp.maps  # 3 + kink + 3 doubled nodes; no single normal
     j = 3  # the kink at (0.5, 0.5)
-    assert np.allclose(qp.geometry.nodes[:, qp.maps["defect_lower"][j]], [0.5, 0.5])
+    assert np.allclose(qp.geometry.nodes[:, qp.interface.lower[j]], [0.5, 0.5])
     n = np.array([0, 1]) + np.array([-1, 1]) / np.sqrt(2)
-    assert np.allclose(qp.maps["defect_normals"][:, j], n / np.linalg.norm(n), atol=1e-15)
+    assert np.allclose(qp.interface.normals[j], n / np.linalg.norm(n), atol=1e-15)
     assert qp.weights[j] == pytest.approx((1 + np.sqrt(2)) / 32, rel=1e-14)
-    assert np.allclose(qp.maps["defect_s"], np.r_[np.arange(1, 5) / 16, 0.25 + np.arange(1, 4) * np.sqrt(2) / 16])
+    assert np.allclose(qp.interface.s, np.r_[np.arange(1, 5) / 16, 0.25 + np.arange(1, 4) * np.sqrt(2) / 16])
     patch_check(problem, qp)
     # rigid motions only in the kernel (the doubled nodes add none): exactly three zero eigenvalues
     ev = np.linalg.eigvalsh(problem.assemble()[0].toarray())
@@ -37,15 +37,15 @@ def test_defects_table_equals_defect_key_and_deltas_add_up():
     two = [{"points": [[0.25, 0.25], [0.5, 0.25]], "delta": 1e-3}, {"points": [[0.5, 0.75], [0.25, 0.5]]}]
     problem = load_scene("f2", {"N": 16, "delta": 1e-2, "defects": two})
     qp = problem.build()
-    assert np.array_equal(np.unique(qp.maps["defect_id"]), [0, 1]) and qp.m == 3 + 3
+    assert np.array_equal(np.unique(qp.interface.defect_id), [0, 1]) and qp.m == 3 + 3
     # second defect runs from upper right to lower left: its normal is the tangent turned by +90 degrees
-    assert np.allclose(qp.maps["defect_normals"][:, qp.maps["defect_id"] == 1].T, [np.sqrt(0.5), -np.sqrt(0.5)])
+    assert np.allclose(qp.interface.normals[qp.interface.defect_id == 1], [np.sqrt(0.5), -np.sqrt(0.5)])
     patch_check(problem, qp)
     # interface term: sum_j w_j / delta_j |jump_j|^2 with each defect's delta
     x = np.random.default_rng(1).standard_normal(qp.n)
-    nd, up, lo = qp.geometry.node_dofs, qp.maps["defect_upper"], qp.maps["defect_lower"]
+    nd, up, lo = qp.geometry.node_dofs, qp.interface.upper, qp.interface.lower
     jump2 = (x[nd[0, up]] - x[nd[0, lo]]) ** 2 + (x[nd[1, up]] - x[nd[1, lo]]) ** 2
-    delta = np.where(qp.maps["defect_id"] == 0, 1e-3, 1e-2)
+    delta = np.where(qp.interface.defect_id == 0, 1e-3, 1e-2)
     assert x @ ((qp.K - qp.K_fixed) @ x) == pytest.approx(np.sum(qp.weights / delta * jump2), rel=1e-12)
 
 

@@ -32,7 +32,7 @@ def test_perturbed_x_is_caught(solved):
 
 def test_penetration_is_caught(solved):
     qp, sol = solved
-    nd, up = qp.geometry.node_dofs, qp.maps["defect_upper"]
+    nd, up = qp.geometry.node_dofs, qp.interface.upper
     x = sol.x.copy()
     j = int(np.flatnonzero(evaluator.contact_set(qp, sol.x))[0])
     x[nd[1, up[j]]] -= 1e-3 * np.abs(x).max()

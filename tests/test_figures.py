@@ -229,22 +229,22 @@ def test_plot_deformed_draws_every_defect(two_defects):
     ax = F.plot_deformed(qp, sol, scale=300.0, reference=True, contact=True, labels=True)
     xy = Post(qp, sol).deformed(300.0)
     X = qp.geometry.nodes
-    tips, ids = qp.maps["defect_tips"].reshape(-1, 2), qp.maps["defect_id"]
+    tips, ids = qp.interface.front.reshape(-1, 2), qp.interface.defect_id
     white = [ln for ln in ax.get_lines() if ln.get_color() == "w"]
     dashed = [ln for ln in ax.get_lines() if ln.get_linestyle() == "--"]
     assert len(white) == 4 and len(dashed) == 2
     for k in range(2):
         rows = np.flatnonzero(ids == k)
-        for ln, copies in zip(white[2 * k: 2 * k + 2], ("defect_upper", "defect_lower"), strict=True):
-            nodes = np.r_[tips[k, 0], qp.maps[copies][rows], tips[k, 1]]
+        for ln, copies in zip(white[2 * k: 2 * k + 2], (qp.interface.upper, qp.interface.lower), strict=True):
+            nodes = np.r_[tips[k, 0], copies[rows], tips[k, 1]]
             np.testing.assert_allclose(np.vstack([ln.get_xdata(), ln.get_ydata()]), xy[:, nodes])
-        ref = np.r_[tips[k, 0], qp.maps["defect_lower"][rows], tips[k, 1]]
+        ref = np.r_[tips[k, 0], qp.interface.lower[rows], tips[k, 1]]
         np.testing.assert_allclose(np.vstack([dashed[k].get_xdata(), dashed[k].get_ydata()]), X[:, ref])
     closed = evaluator.contact_set(qp, sol.x)
     assert 0 < closed.sum() < closed.size
     (marks,) = [ln for ln in ax.get_lines() if ln.get_marker() == "o"]
     np.testing.assert_allclose(np.vstack([marks.get_xdata(), marks.get_ydata()]),
-                               xy[:, qp.maps["defect_lower"][closed]])
+                               xy[:, qp.interface.lower[closed]])
     assert sorted(t.get_text() for t in ax.texts) == ["0", "1"]
     # the jump: one curve per defect, from 0 at its first tip to 0 at its last
     ax = F.plot_jump([("j", qp, sol)], unit=1.0)
@@ -281,15 +281,15 @@ def test_defect_fields_and_pressure_per_defect(two_defects):
     """defect_fields: each defect with its own tips and s from 0; forces and pressures on the right rows."""
     qp, sol = two_defects
     d = Post(qp, sol).defect
-    ids = qp.maps["defect_id"]
+    ids = qp.interface.defect_id
     for k in range(2):
         idx = np.flatnonzero(d["defect_id"] == k)
         assert d["s"][idx][0] == 0 and np.all(np.diff(d["s"][idx]) > 0)
-        assert list(d["upper"][idx][[0, -1]]) == list(qp.maps["defect_tips"][2 * k: 2 * k + 2])
+        assert list(d["upper"][idx][[0, -1]]) == list(qp.interface.front[2 * k: 2 * k + 2])
         rows = d["row"][idx][1:-1]
         assert np.array_equal(rows, np.flatnonzero(ids == k)) and np.all(d["row"][idx][[0, -1]] == -1)
         np.testing.assert_allclose(d["force"][idx][1:-1], sol.multipliers[rows])
-        np.testing.assert_allclose(d["normal"][idx][1:-1], qp.maps["defect_normals"][:, rows].T)
+        np.testing.assert_allclose(d["normal"][idx][1:-1], qp.interface.normals[rows])
     ax = F.plot_pressure([("p", qp, sol)])
     for k, ln in enumerate(ax.get_lines()[:2]):
         np.testing.assert_allclose(ln.get_ydata()[1:-1], qp.pressure(sol.multipliers)[ids == k])

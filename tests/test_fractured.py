@@ -182,24 +182,24 @@ def test_doubled_nodes_and_normals_are_those_of_each_crack():
     "+" copy and -nu on the "-" copy."""
     pr = load_scene("fractured", {**TINY, "cracks": 4, "crack_length": 0.2, "tip_size": 0.02})
     qp = pr.build()
-    maps, P = qp.maps, qp.geometry.nodes
+    it, P = qp.interface, qp.geometry.nodes
     nd = qp.geometry.node_dofs
-    assert qp.B.shape[0] == maps["defect_id"].size
+    assert qp.B.shape[0] == it.defect_id.size
     total = 0
     for k, (p0, p1) in enumerate(pr.crack_points):
         tau = (p1 - p0) / np.linalg.norm(p1 - p0)
         nu = np.array([-tau[1], tau[0]])
-        rel = P.T[: maps["defect_upper"].min()] - p0          # the mesh before doubling
+        rel = P.T[: it.upper.min()] - p0          # the mesh before doubling
         s = rel @ tau
         off = np.abs(rel @ nu)
         inside = np.flatnonzero((off < 1e-12) & (s > 1e-12) & (s < np.linalg.norm(p1 - p0) - 1e-12))
-        rows = np.flatnonzero(maps["defect_id"] == k)
-        assert sorted(maps["defect_lower"][rows]) == sorted(inside) and len(rows) >= 2
+        rows = np.flatnonzero(it.defect_id == k)
+        assert sorted(it.lower[rows]) == sorted(inside) and len(rows) >= 2
         total += len(inside)
-        assert np.allclose(maps["defect_normals"][:, rows], nu[:, None], atol=1e-12)
+        assert np.allclose(it.normals[rows], nu[None, :], atol=1e-12)
         B = qp.B[rows].toarray()
         for r, j in enumerate(rows):
-            up, lo = nd[:, maps["defect_upper"][j]], nd[:, maps["defect_lower"][j]]
+            up, lo = nd[:, it.upper[j]], nd[:, it.lower[j]]
             assert np.allclose(B[r, up], nu) and np.allclose(B[r, lo], -nu)
             assert np.count_nonzero(B[r]) == np.count_nonzero(nu) * 2
     assert total == qp.B.shape[0]

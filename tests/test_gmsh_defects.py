@@ -27,14 +27,14 @@ GEOMETRIES = {
 def test_patch_test_on_gmsh_defects(name):
     problem = load_scene("f2", {"mesh": "gmsh", "mesh_size": 0.1, "defects": GEOMETRIES[name]})
     qp = problem.build()
-    assert qp.m >= 3 and np.array_equal(np.unique(qp.maps["defect_id"]), np.arange(len(GEOMETRIES[name])))
+    assert qp.m >= 3 and np.array_equal(np.unique(qp.interface.defect_id), np.arange(len(GEOMETRIES[name])))
     patch_check(problem, qp)
     again = load_scene("f2", {"mesh": "gmsh", "mesh_size": 0.1, "defects": GEOMETRIES[name]}).build()
     assert again.key() == qp.key()  # same input, same mesh, same QP
 
 
 def _jump_profile(qp, sol) -> tuple[np.ndarray, np.ndarray]:
-    x = np.r_[0.25, qp.geometry.nodes[0, qp.maps["defect_lower"]], 0.75]
+    x = np.r_[0.25, qp.geometry.nodes[0, qp.interface.lower], 0.75]
     j = np.r_[0.0, qp.B @ sol.x, 0.0]
     o = np.argsort(x)
     return x[o], j[o]
@@ -58,8 +58,8 @@ def test_gmsh_straight_defect_agrees_with_structured_and_gap_closes():
         gaps.append((abs(q1.energy(s1.x) / q0.energy(s0.x) - 1), np.sqrt(np.mean((a - b) ** 2) / np.mean(a ** 2))))
         # both see contact on the left part of the defect only (f2 presses there)
         c0, c1 = evaluator.contact_set(q0, s0.x), evaluator.contact_set(q1, s1.x)
-        xc0 = q0.geometry.nodes[0, q0.maps["defect_lower"]][c0]
-        xc1 = q1.geometry.nodes[0, q1.maps["defect_lower"]][c1]
+        xc0 = q0.geometry.nodes[0, q0.interface.lower][c0]
+        xc1 = q1.geometry.nodes[0, q1.interface.lower][c1]
         assert xc0.max() < 0.5 and xc1.max() < 0.5 and abs(xc0.max() - xc1.max()) <= 2.0 / N
     e, j = np.array(gaps).T
     assert np.all(np.diff(e) < 0) and e[-1] < 5e-3 and e[0] / e[-1] > 4
@@ -81,7 +81,7 @@ def test_gmsh_symmetric_scene_nearly_symmetric_contact(h):
     qp = load_scene("f1", {"mesh": "gmsh", "mesh_size": h, "tip_size": h / 4, "load": "-10*cos(2*pi*x) - 2",
                            "defects": [{"points": [[0.25, 0.5], [0.75, 0.5]]}]}).build()
     sol = run("pdas", qp)
-    x = qp.geometry.nodes[0, qp.maps["defect_lower"]]
+    x = qp.geometry.nodes[0, qp.interface.lower]
     o = np.argsort(x)
     assert np.allclose(x[o], 1 - x[o][::-1], atol=1e-12)
     c = evaluator.contact_set(qp, sol.x)[o]

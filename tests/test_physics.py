@@ -165,7 +165,7 @@ def uncracked(qp: QP) -> tuple[QP, sp.csr_matrix]:
     """The body without the defect on the same mesh: every upper copy of a defect node is the lower
     copy (P maps the glued unknowns to the cracked ones), K = P' K_el P, no constraint."""
     nd = qp.geometry.node_dofs
-    up, lo = np.asarray(qp.maps["defect_upper"]), np.asarray(qp.maps["defect_lower"])
+    up, lo = np.asarray(qp.interface.upper), np.asarray(qp.interface.lower)
     target = np.arange(qp.n)
     target[nd[:, up].ravel()] = nd[:, lo].ravel()
     keep = np.unique(target)
@@ -208,7 +208,7 @@ def test_glued_limit_approaches_the_uncracked_body():
     glued, P = uncracked(qp0)
     xg = P @ sla.spsolve(glued.K, glued.F)
     nd = qp0.geometry.node_dofs
-    sigma_nu = -(qp0.K_fixed @ xg)[nd[1, qp0.maps["defect_upper"]]] / qp0.weights
+    sigma_nu = -(qp0.K_fixed @ xg)[nd[1, qp0.interface.upper]] / qp0.weights
     assert 2.5 < sigma_nu.min() <= sigma_nu.max() < 3.5                # ~ the 3 MPa pulled on the top side
     e_glued = 0.5 * xg @ (qp0.K_fixed @ xg) - qp0.F @ xg
     dj, dx, de = [], [], []
@@ -239,7 +239,7 @@ def test_free_limit_is_the_crack_with_non_penetration():
     closed = evaluator.contact_set(free, s_inf.x)
     assert 0 < closed.sum() < free.m                                   # partial contact: the limit is a crack
     u = nodal_displacement(free, s_inf.x)
-    jump = u[free.maps["defect_upper"]] - u[free.maps["defect_lower"]]  # whole jump vector (tips: 0)
+    jump = u[free.interface.upper] - u[free.interface.lower]  # whole jump vector (tips: 0)
     half_jump2 = 0.5 * np.sum(free.weights * np.sum(jump**2, axis=1))  # trapezoid rule of 1/2 int |[u]|^2
     dx, dj, de = [], [], []
     for delta in (1e2, 1e3, 1e4):

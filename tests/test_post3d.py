@@ -52,10 +52,10 @@ def test_vtu_holds_tetrahedra_and_both_defect_faces(penny, tmp_path):
     (path,) = write_outputs(qp, sol, vtk=str(tmp_path / "p.vtu"))
     m = meshio.read(path)
     blocks = {c.type: c.data for c in m.cells}
-    nf = np.asarray(qp.maps["defect_faces"]).shape[1]
+    nf = qp.interface.faces.shape[0]
     assert blocks["tetra"].shape == (qp.geometry.cells.shape[1], 4) and blocks["triangle"].shape == (2 * nf, 3)
     opening = m.point_data["opening"]
-    assert np.allclose(opening[qp.maps["defect_upper"]], opening[qp.maps["defect_lower"]])
+    assert np.allclose(opening[qp.interface.upper], opening[qp.interface.lower])
     on = m.point_data["defect_id"] >= 0
     assert opening[on].min() > 0 and on.sum() == 2 * qp.m
     # no NaN in any point field: 0 away from the defects (and the pressure 0 at the front)
@@ -66,7 +66,7 @@ def test_vtu_holds_tetrahedra_and_both_defect_faces(penny, tmp_path):
     assert set(np.unique(face[1])) == {-1, 1} and np.all(face[0] == 0)
     # the "+" triangles use the "+" copies: none of their nodes is a "-" copy
     plus = blocks["triangle"][:nf]
-    assert not np.isin(plus, qp.maps["defect_lower"]).any()
+    assert not np.isin(plus, qp.interface.lower).any()
 
 
 def test_solve_figure_writes_maps_and_cut(tmp_path):

@@ -67,8 +67,8 @@ def test_interface_term_is_trapezoid_rule_of_jump_squared():
     problem = load_scene("f2", {"N": 8, "delta": delta})
     qp = problem.build()
     nd = qp.geometry.node_dofs
-    up, lo = qp.maps["defect_upper"], qp.maps["defect_lower"]
-    s = qp.maps["defect_s"]
+    up, lo = qp.interface.upper, qp.interface.lower
+    s = qp.interface.s
     rng = np.random.default_rng(0)
     x = rng.normal(size=qp.n)
     jx = x[nd[0, up]] - x[nd[0, lo]]
@@ -87,7 +87,7 @@ def test_interface_term_is_trapezoid_rule_of_jump_squared():
 def test_defect_doubling_structure(scene):
     _, qp = scene("f2", 16, 1e-5)
     p, t = qp.geometry.nodes, qp.geometry.cells
-    up, lo = qp.maps["defect_upper"], qp.maps["defect_lower"]
+    up, lo = qp.interface.upper, qp.interface.lower
     assert np.allclose(p[:, up], p[:, lo])                 # same place
     assert np.allclose(p[1, up], 0.5)
     cen = p[:, t].mean(axis=1)
@@ -95,7 +95,7 @@ def test_defect_doubling_structure(scene):
     uses_lo = np.isin(t, lo).any(axis=0)
     assert np.all(cen[1, uses_up] > 0.5) and np.all(cen[1, uses_lo & ~uses_up] < 0.5)
     assert not np.any(uses_up & uses_lo)
-    tips = qp.maps["defect_tips"]
+    tips = qp.interface.front
     assert np.allclose(p[:, tips].T, [[0.25, 0.5], [0.75, 0.5]])
     # B is the normal (x2) jump: +1 on the upper y-DOF, -1 on the lower one
     nd = qp.geometry.node_dofs
@@ -211,7 +211,7 @@ def test_planned_stiffness_sum_equals_scipys_sum_bit_for_bit(scene_name):
         a = sc.shared.data["delta_free"]
         c, maps = a["cut"], a["maps"]
         coef = c.weights / np.array([d["delta"] for d in sc._defects])[c.defect_id]
-        K_par, B_ref, _ = interface(maps["node_dofs"], c.lower, c.upper, maps["defect_normals"], coef, a["n"])
+        K_par, B_ref, _ = interface(maps["node_dofs"], c.lower, c.upper, a["interface"].normals.T, coef, a["n"])
         ref = (a["K_el"] + K_par).tocsc()
         assert qp.K.format == "csc" and qp.K.has_canonical_format
         assert np.array_equal(qp.K.indptr, ref.indptr) and np.array_equal(qp.K.indices, ref.indices)
@@ -242,7 +242,7 @@ def test_planned_stiffness_sum_falls_back_on_an_exact_cancellation():
     up = maps["node_dofs"][0, c.upper[j]]
     coef[j] = -a["K_el"][up, up]
     K, _, _ = ThinDefect._stiffness(a, coef)
-    ref = (a["K_el"] + interface(maps["node_dofs"], c.lower, c.upper, maps["defect_normals"], coef,
+    ref = (a["K_el"] + interface(maps["node_dofs"], c.lower, c.upper, a["interface"].normals.T, coef,
                                  a["n"])[0]).tocsc()
     assert plan and K.nnz == ref.nnz and abs(K - ref).max() == 0.0 and K[up, up] == 0.0
 

@@ -66,9 +66,11 @@ def test_old_maps_keys_are_answered_with_a_deprecation_warning(qp):
         assert qp.maps.get("triangles") is qp.geometry.cells
     assert "nodes" in qp.maps and "defect_upper" in qp.maps
     assert "nodes" not in list(qp.maps)            # stored once, in the part
+    with pytest.warns(DeprecationWarning, match=r"qp.interface.upper"):
+        assert qp.maps["defect_upper"] is qp.interface.upper
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        qp.maps["defect_upper"]                    # a problem-specific extra: no warning
+        qp.maps["normal"]                          # a problem-specific extra: no warning
 
 
 def test_old_style_construction_makes_the_parts_with_a_warning():

@@ -40,7 +40,7 @@ def _node_order(qp, length: float) -> np.ndarray:
     """Node ids sorted by (position / length, face): gmsh numbers the nodes of a scaled copy of a
     geometry differently, so two QPs are compared node by node through this order."""
     X = np.round(qp.geometry.nodes / length, 9)
-    face = np.isin(np.arange(X.shape[1]), qp.maps["defect_upper"])
+    face = np.isin(np.arange(X.shape[1]), qp.interface.upper)
     return np.lexsort((face, X[1], X[0]))
 
 
@@ -63,8 +63,8 @@ def test_gmsh_scene_in_other_units_gives_the_same_relative_answer(name):
     assert np.abs(ub / fl - ua).max() <= 1e-8 * np.abs(ua).max()
     # constraint rows matched through their lower node; forces are stress x length
     rank_a, rank_b = np.argsort(ia), np.argsort(ib)      # node id -> position in the common order
-    ra, rb = np.argsort(rank_a[a.maps["defect_lower"]]), np.argsort(rank_b[b.maps["defect_lower"]])
-    np.testing.assert_array_equal(a.maps["defect_id"][ra], b.maps["defect_id"][rb])
+    ra, rb = np.argsort(rank_a[a.interface.lower]), np.argsort(rank_b[b.interface.lower])
+    np.testing.assert_array_equal(a.interface.defect_id[ra], b.interface.defect_id[rb])
     mu_a, mu_b = sa.multipliers[ra], sb.multipliers[rb] / (fs * fl)
     assert np.abs(mu_b - mu_a).max() <= 1e-8 * np.abs(mu_a).max()
     ca, cb = evaluator.contact_set(a, sa.x)[ra], evaluator.contact_set(b, sb.x)[rb]

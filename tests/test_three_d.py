@@ -163,7 +163,7 @@ def test_interface_term_and_B():
     nd = free_dofs(np.zeros((3, 4), bool))
     lower, upper = np.array([0, 1]), np.array([2, 3])
     normals = np.array([[0.0, 0.6], [0.0, 0.0], [1.0, 0.8]])
-    Ki, B = interface(nd, lower, upper, normals, np.array([2.0, 3.0]), 12)
+    Ki, B, _ = interface(nd, lower, upper, normals, np.array([2.0, 3.0]), 12)
     x = np.arange(12.0) ** 1.5
     u = x.reshape(4, 3)
     jump = u[upper] - u[lower]
@@ -234,7 +234,7 @@ def test_export_writes_the_3d_maps(tmp_path):
         assert back.geometry is not None and back.geometry.dim == 3
         assert back.geometry.nodes.shape == (3, qp.geometry.nodes.shape[1])
         assert back.geometry.cells.shape[0] == 4
-        assert np.shape(back.maps["defect_normals"]) == (qp.m, 3)
-        assert abs(back.K - qp.K).max() == 0 and np.array_equal(back.maps["defect_upper"], qp.maps["defect_upper"])
+        assert np.shape(back.interface.normals) == (qp.m, 3)
+        assert abs(back.K - qp.K).max() == 0 and np.array_equal(back.interface.upper, qp.interface.upper)
         if d is not None:
             assert d["map_nodes"].shape[0] == 3 and d["map_defect_normals"].shape == (qp.m, 3)

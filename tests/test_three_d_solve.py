@@ -59,7 +59,7 @@ def _penny(stress_zz: float):
     qp = load_scene("penny", {"remote_stress": [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, stress_zz]]}).build()
     sol = run("pdas", qp)
     assert sol.ok
-    X = qp.geometry.nodes[:, qp.maps["defect_lower"]]
+    X = qp.geometry.nodes[:, qp.interface.lower]
     r = np.hypot(X[0] - 5.0, X[1] - 5.0)
     return qp, sol, r
 
@@ -73,7 +73,7 @@ def test_penny_crack_opens_under_tension():
     assert 0.6 * w0 < jump.max() < 1.1 * w0                            # coarse mesh: P1 opens it less
     # the opening falls towards the front like sqrt(a^2 - r^2): decreasing in r on average
     assert np.corrcoef(r, jump)[0, 1] < -0.8
-    assert np.allclose(qp.maps["defect_normals"], [0.0, 0.0, 1.0])
+    assert np.allclose(qp.interface.normals, [0.0, 0.0, 1.0])
 
 
 def test_penny_crack_closes_under_compression_with_the_remote_pressure():

@@ -57,8 +57,8 @@ def _check(mesh, qp, sol):
     assert np.allclose(pr[1:m], 0.5 * (press[:-1] + press[1:]))
     # nodal defect fields: both copies carry the value, 0 elsewhere and at the tips; no point field holds NaN
     pj = mesh.point_data["jump_normal"]
-    assert np.allclose(pj[qp.maps["defect_upper"]], qp.B @ sol.x)
-    assert np.allclose(pj[qp.maps["defect_lower"]], qp.B @ sol.x)
+    assert np.allclose(pj[qp.interface.upper], qp.B @ sol.x)
+    assert np.allclose(pj[qp.interface.lower], qp.B @ sol.x)
     for k, v in mesh.point_data.items():
         assert np.all(np.isfinite(v)), k
     away = mesh.point_data["defect_id"] < 0
@@ -66,7 +66,7 @@ def _check(mesh, qp, sol):
     for k in ("jump_normal", "jump_tangent", "pressure"):
         assert np.all(mesh.point_data[k][away] == 0), k
     pp = mesh.point_data["pressure"]
-    assert np.allclose(pp[qp.maps["defect_upper"]], press) and pp.max() > 0  # f2 has a contact zone
+    assert np.allclose(pp[qp.interface.upper], press) and pp.max() > 0  # f2 has a contact zone
 
 
 def test_vtu_roundtrip(case, tmp_path):
@@ -138,13 +138,13 @@ def test_two_defect_gmsh_scene(two_defects, tmp_path, kind):
     qp, sol = two_defects
     write = write_vtu if kind == "vtu" else write_xdmf
     mesh = meshio.read(write(tmp_path / f"two.{kind}", qp, sol))
-    mp = qp.maps
+    it = qp.interface
     nn = qp.geometry.nodes.shape[1]
-    ids, tips = mp["defect_id"], mp["defect_tips"]
+    ids, tips = it.defect_id, it.front
     sizes = np.bincount(ids)
     assert sizes.size == 2 and tips.size == 4
     tri, line = mesh.cells[0].data, mesh.cells[1].data
-    assert np.array_equal(tri, mp["triangles"].T)
+    assert np.array_equal(tri, qp.geometry.cells.T)
     assert line.shape == (2 * int(np.sum(sizes + 1)), 2)       # k + 1 edges per face of a defect with k nodes
     # every line is an edge of a triangle, and joins two nodes of its own defect
     tedges = {tuple(sorted(e)) for t in tri for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
@@ -153,25 +153,25 @@ def test_two_defect_gmsh_scene(two_defects, tmp_path, kind):
     assert np.all(cid[0] == -1)
     assert np.array_equal(pid[line[:, 0]], cid[1]) and np.array_equal(pid[line[:, 1]], cid[1])
     assert np.bincount(cid[1]).tolist() == [2 * (sizes[0] + 1), 2 * (sizes[1] + 1)]
-    assert np.array_equal(pid[mp["defect_upper"]], ids) and np.array_equal(pid[mp["defect_lower"]], ids)
+    assert np.array_equal(pid[it.upper], ids) and np.array_equal(pid[it.lower], ids)
     assert np.array_equal(pid[tips], [0, 0, 1, 1])
     assert np.sum(pid >= 0) == 2 * qp.m + 4
     # faces: +1 edges run over upper copies and tips only, -1 edges over lower copies and tips
     face = mesh.cell_data["face"][1]
-    upper_or_tip = np.isin(line, np.r_[mp["defect_upper"], tips]).all(axis=1)
-    lower_or_tip = np.isin(line, np.r_[mp["defect_lower"], tips]).all(axis=1)
+    upper_or_tip = np.isin(line, np.r_[it.upper, tips]).all(axis=1)
+    lower_or_tip = np.isin(line, np.r_[it.lower, tips]).all(axis=1)
     assert np.all(upper_or_tip[face == 1]) and np.all(lower_or_tip[face == -1])
     # per-node normals: the QP's at both copies, unit length on the defects, zero elsewhere
     nrm = mesh.point_data["normal"]
     assert nrm.shape == (nn, 3) and np.all(nrm[:, 2] == 0)
-    for copies in (mp["defect_upper"], mp["defect_lower"]):
-        np.testing.assert_allclose(nrm[copies, :2], mp["defect_normals"].T, rtol=0, atol=1e-14)
+    for copies in (it.upper, it.lower):
+        np.testing.assert_allclose(nrm[copies, :2], it.normals, rtol=0, atol=1e-14)
     np.testing.assert_allclose(np.linalg.norm(nrm[pid >= 0], axis=1), 1.0, rtol=1e-12)
     assert np.all(nrm[pid < 0] == 0)
     # nodal jumps are B x on both copies, 0 at the tips
     pj = mesh.point_data["jump_normal"]
-    np.testing.assert_allclose(pj[mp["defect_upper"]], qp.B @ sol.x, rtol=0, atol=1e-14 * np.abs(sol.x).max())
-    np.testing.assert_allclose(pj[mp["defect_lower"]], qp.B @ sol.x, rtol=0, atol=1e-14 * np.abs(sol.x).max())
+    np.testing.assert_allclose(pj[it.upper], qp.B @ sol.x, rtol=0, atol=1e-14 * np.abs(sol.x).max())
+    np.testing.assert_allclose(pj[it.lower], qp.B @ sol.x, rtol=0, atol=1e-14 * np.abs(sol.x).max())
     assert np.all(pj[tips] == 0) and np.all(pj[pid < 0] == 0) and (pid < 0).sum() == nn - 2 * qp.m - 4
     assert all(np.all(np.isfinite(v)) for v in mesh.point_data.values())
     assert np.all(mesh.point_data["pressure"][tips] == 0)

@@ -17,6 +17,9 @@ provenance) and never ``QP.maps`` (problem-specific extras for post-processing).
 ``units``       the scene's Young's modulus ``E`` (stress units) and length scale ``length`` (the
                 body's width), for scale-free parameter rules such as uzawa's ``r_rule="scaled"``
 ``material``    ``E``, ``nu`` and ``plane`` of the elastic body, for stresses in post-processing
+``interface``   the defect interface: node pairs and their unknowns, normals and tangent frames,
+                nodal weights, defect ids, front/tips, faces (3D), per-node delta, the jump operator
+                (:class:`InterfacePart`; every per-node array (m, ...), 2D and 3D alike)
 ==============  ==================================================================================
 """
 from __future__ import annotations
@@ -191,3 +194,197 @@ class MaterialPart:
             raise InputError(f"material.nu must lie in (-1, 0.5), got {self.nu!r}")
         if self.plane not in ("strain", "stress"):
             raise InputError(f"material.plane must be 'strain' or 'stress', got {self.plane!r}")
+
+
+#: the ``maps`` keys the interface part answers for one release (2D layout of the normals: (2, m))
+INTERFACE_MAPS = {"defect_upper": "upper", "defect_lower": "lower", "defect_id": "defect_id",
+                  "defect_normals": "normals", "defect_tangents": "tangents", "defect_s": "s",
+                  "defect_tips": "front", "defect_front": "front", "defect_front_id": "front_id",
+                  "defect_faces": "faces", "defect_delta": "delta"}
+
+
+def _frame(normals: np.ndarray) -> np.ndarray:
+    """Unit tangents (m, dim - 1, dim) completing each unit normal to a right-handed orthonormal frame.
+
+    2D: ``t = (n_1, -n_0)`` (the normal is the tangent turned by +90 degrees). 3D: ``t_1`` is the
+    normalised ``n x e_k`` with ``e_k`` the coordinate axis least aligned with ``n``, ``t_2 = n x t_1``."""
+    m, dim = normals.shape
+    if dim == 2:
+        return np.stack([normals[:, 1], -normals[:, 0]], axis=1)[:, None, :]
+    axis = np.zeros((m, 3))
+    axis[np.arange(m), np.argmin(np.abs(normals), axis=1)] = 1.0
+    t1 = np.cross(normals, axis)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    return np.stack([t1, np.cross(normals, t1)], axis=1)
+
+
+@dataclass(frozen=True)
+class InterfacePart:
+    """The defect interface of a cut mesh: m constrained node pairs (row j of B is pair j), 2D and 3D alike.
+
+    Every per-node array has one row per pair (shape (m, ...)):
+
+    ``dim``: 2 or 3. ``upper``/``lower`` (m,): mesh node ids of the "+" and "-" copies; ``plus_dofs``/
+    ``minus_dofs`` (m, dim): their unknowns (``geometry.node_dofs[:, upper].T``; never fixed);
+    ``normals`` (m, dim): unit "+" normals (the "+" face is the side the normal points to);
+    ``tangents`` (m, dim - 1, dim): unit tangents, with the normal an orthonormal frame (2D: the
+    defect's direction of travel, ``(n_1, -n_0)``); ``weights`` (m,): nodal weights, a length in 2D and an
+    area in 3D (``integral over the defect of phi ~ sum_j w_j phi_j``; equal to ``QP.weights``);
+    ``defect_id`` (m,): which defect (from 0); ``front``/``front_id`` (k,): the single (not doubled) nodes
+    bounding each defect and their defect (2D: its two tips, first and last; 3D: its front);
+    ``faces`` (n_faces, 3) or None: the defect triangles as node ids of the "-" face (3D);
+    ``s`` (m,) or None: arc length from the defect's first tip (2D); ``delta`` (m,) or None: the defect's
+    thickness at each node (length units; None when unknown, e.g. a QP file without it).
+
+    Sign convention: the jump is ``[u] = u^+ - u^-``; the normal jump ``[u_nu] = nu . [u]`` is row j of B
+    (``B x >= 0``: no interpenetration); :meth:`jump_operator` gives normal and tangential jumps.
+    """
+
+    dim: int
+    upper: np.ndarray
+    lower: np.ndarray
+    plus_dofs: np.ndarray
+    minus_dofs: np.ndarray
+    normals: np.ndarray
+    tangents: np.ndarray
+    weights: np.ndarray
+    defect_id: np.ndarray
+    front: np.ndarray
+    front_id: np.ndarray
+    faces: np.ndarray | None = None
+    s: np.ndarray | None = None
+    delta: np.ndarray | None = None
+
+    @classmethod
+    def make(cls, node_dofs, upper, lower, normals, weights, defect_id=None, *, tangents=None, front=None,
+             front_id=None, faces=None, s=None, delta=None) -> InterfacePart:
+        """From the mesh's ``node_dofs`` (dim, n_nodes) and the cut (normals (m, dim); tangents (m, dim - 1,
+        dim), default :func:`_frame`; 2D ``front`` without ``front_id``: the tips, two per defect)."""
+        nd = _int_array(node_dofs, "interface.node_dofs")
+        up, lo = _int_array(upper, "interface.upper").ravel(), _int_array(lower, "interface.lower").ravel()
+        nrm = np.asarray(normals, dtype=float)
+        dim = int(nd.shape[0])
+        if nrm.ndim == 1 and nrm.size == 0:
+            nrm = nrm.reshape(0, dim)
+        tng = _frame(nrm) if tangents is None and nrm.ndim == 2 and nrm.shape[1] == dim else \
+            np.asarray(tangents, dtype=float)
+        fr = np.zeros(0, np.int64) if front is None else _int_array(front, "interface.front").ravel()
+        fid = np.repeat(np.arange(fr.size // 2), 2) if front_id is None else _int_array(front_id, "interface.front_id")
+        return cls(dim, up, lo, nd[:, up].T, nd[:, lo].T, nrm, tng, np.asarray(weights, dtype=float).ravel(),
+                   np.zeros(up.size, np.int64) if defect_id is None else _int_array(defect_id, "interface.defect_id"),
+                   fr, fid.ravel(), None if faces is None else _int_array(faces, "interface.faces"),
+                   None if s is None else np.asarray(s, dtype=float).ravel(),
+                   None if delta is None else np.asarray(delta, dtype=float).ravel())
+
+    @property
+    def m(self) -> int:
+        """The number of node pairs (rows of B)."""
+        return int(self.upper.size)
+
+    def validate(self, n: int, m: int, geometry: GeometryPart | None, weights: np.ndarray) -> None:
+        """Shapes, finiteness, unit normals and frames, indices in range, the dofs those of ``geometry``."""
+        d = self.dim
+        if d not in (2, 3):
+            raise InputError(f"interface.dim must be 2 or 3, got {d}")
+        shapes = {"upper": (m,), "lower": (m,), "plus_dofs": (m, d), "minus_dofs": (m, d), "normals": (m, d),
+                  "tangents": (m, d - 1, d), "weights": (m,), "defect_id": (m,),
+                  "front_id": self.front.shape, "s": (m,), "delta": (m,), "faces": (-1, 3)}
+        for k, want in shapes.items():
+            a = getattr(self, k)
+            if a is not None and (a.shape != want if want[0] != -1 else a.ndim != 2 or a.shape[1] != 3):
+                raise InputError(f"interface.{k} must have shape {want} (m = {m} rows of B), got {a.shape}")
+        for k in ("normals", "tangents", "weights", "s", "delta"):
+            if getattr(self, k) is not None:
+                _finite(getattr(self, k), f"interface.{k}")
+        frame = np.concatenate([self.normals[:, None, :], self.tangents], axis=1)
+        if m and np.abs(np.einsum("jak,jbk->jab", frame, frame) - np.eye(d)).max() > 1e-8:
+            raise InputError("interface.normals and interface.tangents must be an orthonormal frame at every node")
+        if not np.array_equal(self.weights, weights):
+            raise InputError("interface.weights must equal the QP's weights")
+        if self.delta is not None and np.any(self.delta <= 0):
+            raise InputError("interface.delta must be > 0")
+        if self.defect_id.size and self.defect_id.min() < 0:
+            raise InputError("interface.defect_id must be >= 0")
+        for k in ("plus_dofs", "minus_dofs"):
+            a = getattr(self, k)
+            if a.size and (a.min() < 0 or a.max() >= n):
+                raise InputError(f"interface.{k} must hold unknown indices in [0, {n}) (a defect node is never "
+                                 f"fixed), got [{a.min()}, {a.max()}]")
+        if geometry is None:
+            raise InputError("an interface part needs the QP's geometry (the mesh its node ids refer to)")
+        nn = geometry.nodes.shape[1]
+        for k in ("upper", "lower", "front", "faces"):
+            a = getattr(self, k)
+            if a is not None and a.size and (a.min() < 0 or a.max() >= nn):
+                raise InputError(f"interface.{k} must hold node ids in [0, {nn}), got [{a.min()}, {a.max()}]")
+        nd = geometry.node_dofs
+        if d != geometry.dim or nd.shape[0] != d or not (np.array_equal(nd[:, self.upper].T, self.plus_dofs)
+                                                       and np.array_equal(nd[:, self.lower].T, self.minus_dofs)):
+            raise InputError("interface.plus_dofs/minus_dofs must be geometry.node_dofs at the upper/lower nodes")
+
+    # ------------------------------------------------------------------ jumps
+    def jump_operator(self, n: int) -> sp.csr_matrix:
+        """The (dim m) x n jump operator, rows in blocks of m: block 0 the normal jumps ``nu_j . [u]_j``
+        (= B), block 1 (and 2 in 3D) the tangential jumps ``t_j . [u]_j`` (length units)."""
+        m, d = self.m, self.dim
+        frame = np.concatenate([self.normals[:, None, :], self.tangents], axis=1)      # (m, d, d)
+        rows = np.broadcast_to((np.arange(d)[:, None] * m + np.arange(m)[None, :]).T[:, :, None], (m, d, d))
+        cols_p = np.broadcast_to(self.plus_dofs[:, None, :], (m, d, d))
+        cols_m = np.broadcast_to(self.minus_dofs[:, None, :], (m, d, d))
+        return sp.csr_matrix((np.r_[frame.ravel(), -frame.ravel()],
+                              (np.r_[rows.ravel(), rows.ravel()], np.r_[cols_p.ravel(), cols_m.ravel()])),
+                             shape=(d * m, n))
+
+    def jumps(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(normal jumps (m,), tangential jumps (m, dim - 1)) of the unknowns ``x``: ``[u] = u^+ - u^-``."""
+        x = np.asarray(x, dtype=float)
+        j = x[self.plus_dofs] - x[self.minus_dofs]
+        return np.einsum("jk,jk->j", j, self.normals), np.einsum("jak,jk->ja", self.tangents, j)
+
+    # ------------------------------------------------------------ old maps
+    def legacy_maps(self) -> dict[str, np.ndarray]:
+        """The ``maps``/``map_*`` arrays of earlier releases (what QP files hold): 2D normals and tangents
+        as (2, m), tips as ``defect_tips``; 3D normals (m, 3), faces (3, n_faces), ``defect_front(_id)``."""
+        out = {"defect_upper": self.upper, "defect_lower": self.lower, "defect_id": self.defect_id}
+        if self.dim == 2:
+            out.update(defect_tips=self.front, defect_normals=np.ascontiguousarray(self.normals.T),
+                       defect_tangents=np.ascontiguousarray(self.tangents[:, 0, :].T))
+            if self.s is not None:
+                out["defect_s"] = self.s
+        else:
+            out.update(defect_normals=self.normals, defect_front=self.front, defect_front_id=self.front_id)
+            if self.faces is not None:
+                out["defect_faces"] = np.ascontiguousarray(self.faces.T)
+        if self.delta is not None:
+            out["defect_delta"] = self.delta
+        return out
+
+    @classmethod
+    def from_maps(cls, maps: dict, geometry: GeometryPart, weights: np.ndarray) -> InterfacePart | None:
+        """The part from the old ``maps`` keys (a QP file's ``map_*`` arrays, checked by
+        :func:`dualfem.core.qpfile.check_maps`), or None without ``defect_upper``/``defect_lower`` or when the
+        mesh's ``node_dofs`` is not (dim, n_nodes). A 2D file without ``defect_normals`` (one straight
+        defect) takes ``normal`` (default (0, 1)) and ``tangent`` at every node."""
+        nd, dim = geometry.node_dofs, geometry.dim
+        if "defect_upper" not in maps or "defect_lower" not in maps or nd.shape != (dim, geometry.nodes.shape[1]) \
+                or (dim == 3 and "defect_normals" not in maps):
+            return None
+        up = np.asarray(maps["defect_upper"]).ravel()
+        m = up.size
+        nrm = np.asarray(maps.get("defect_normals", np.zeros((0, dim))), dtype=float)
+        tng = None
+        if dim == 2:
+            if "defect_normals" in maps:
+                nrm = nrm.T
+            else:
+                nrm = np.tile(np.asarray(maps.get("normal", (0.0, 1.0)), dtype=float).ravel(), (m, 1))
+            t = maps.get("defect_tangents")
+            if t is None and "tangent" in maps:
+                t = np.tile(np.asarray(maps["tangent"], dtype=float).ravel(), (m, 1)).T
+            tng = None if t is None else np.asarray(t, dtype=float).T[:, None, :]
+        faces = maps.get("defect_faces")
+        return cls.make(nd, up, maps["defect_lower"], nrm, weights, maps.get("defect_id"), tangents=tng,
+                        front=maps.get("defect_tips" if dim == 2 else "defect_front"),
+                        front_id=None if dim == 2 else maps.get("defect_front_id"),
+                        faces=None if faces is None else np.asarray(faces).T, s=maps.get("defect_s"),
+                        delta=maps.get("defect_delta"))

@@ -35,13 +35,21 @@ from dualfem.core.constraints import Constraint, stack
 from dualfem.core.errors import InputError
 from dualfem.core.io import atomic_write
 from dualfem.core.laws import SIGNORINI
-from dualfem.core.parts import GeometryPart, LocalPart, MaterialPart, ShiftPart, UnitsPart
+from dualfem.core.parts import (
+    INTERFACE_MAPS,
+    GeometryPart,
+    InterfacePart,
+    LocalPart,
+    MaterialPart,
+    ShiftPart,
+    UnitsPart,
+)
 from dualfem.core.qpfile import VECTOR_MAPS, check_maps, check_params, coo_from_arrays, export_matrix, read_arrays  # noqa: F401  (they lived here: still importable)
 
 #: ``maps`` keys that became typed parts (read through ``maps`` with a DeprecationWarning for one release)
 PROMOTED_MAPS = {"x_shift": ("shift", "x"), "objective_offset": ("shift", "objective"),
                  "nodes": ("geometry", "nodes"), "triangles": ("geometry", "cells"),
-                 "node_dofs": ("geometry", "node_dofs")}
+                 "node_dofs": ("geometry", "node_dofs"), **{k: ("interface", f) for k, f in INTERFACE_MAPS.items()}}
 
 
 class Maps(dict):
@@ -74,10 +82,15 @@ class Maps(dict):
     def __contains__(self, key) -> bool:
         return dict.__contains__(self, key) or key in self._promoted
 
+    def legacy(self) -> dict:
+        """Every array, the typed parts' under their old keys too, as a plain dict (no warning): what a QP
+        file holds as ``map_*`` arrays."""
+        return {**self._promoted, **self}
+
 
 def _parts_from_maps(maps: dict, n: int) -> tuple[dict, dict]:
     """Split an old-style ``maps`` into (remaining extras, typed parts found in it)."""
-    rest = {k: v for k, v in maps.items() if k not in PROMOTED_MAPS}
+    rest = {k: v for k, v in maps.items() if k not in PROMOTED_MAPS or k in INTERFACE_MAPS}   # see QP._interface
     parts: dict = {}
     if "x_shift" in maps and np.shape(maps["x_shift"]) == (n,):
         parts["shift"] = ShiftPart.make(maps["x_shift"], maps.get("objective_offset", 0.0))
@@ -94,7 +107,8 @@ class QP:
 
     Optional typed parts (:mod:`dualfem.core.parts`), validated here: ``local`` (``K_fixed`` and the
     local unknowns: ``K_fixed=``/``local_dofs=`` are a shorthand for it), ``shift``, ``geometry``,
-    ``units``, ``material``. ``params``: write-only provenance (the scene's parameters; no algorithm reads it).
+    ``units``, ``material``, ``interface``. ``params``: write-only provenance (the scene's parameters; no
+    algorithm reads it).
     ``maps``: problem-specific extras (defect node maps for post-processing and export).
     ``blocks``: constraint blocks beyond the Signorini block ``(B, weights)``
     (:class:`dualfem.core.constraints.Constraint`, each with its :mod:`law <dualfem.core.laws>`);
@@ -121,6 +135,7 @@ class QP:
     units: UnitsPart | None = None
     material: MaterialPart | None = None
     blocks: tuple[Constraint, ...] = ()
+    interface: InterfacePart | None = None
     store: object | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self, K_fixed, local_dofs) -> None:
@@ -182,13 +197,37 @@ class QP:
         for part in (self.units, self.material):
             if part is not None:
                 part.validate()
+        rest = self._interface(rest)
+        if self.interface is not None:
+            self.interface.validate(n, self.B.shape[0], self.geometry, np.asarray(self.weights))
         promoted: dict[str, np.ndarray] = {}
         if self.shift is not None:
             promoted.update(x_shift=self.shift.x, objective_offset=np.array(self.shift.objective))
         if self.geometry is not None:
             g = self.geometry
             promoted.update(nodes=g.nodes, triangles=g.cells, node_dofs=g.node_dofs)
+        if self.interface is not None:
+            promoted.update(self.interface.legacy_maps())
         self.maps = Maps(rest, promoted)
+
+    def _interface(self, rest: dict) -> dict:
+        """The interface part from old-style defect ``maps`` keys (DeprecationWarning unless they came from a
+        :class:`Maps`); returns ``rest`` without the keys the part answers for. Keys that do not make a valid
+        part of this QP (another QP's maps: other rows of B) stay plain extras, unread, as they were."""
+        if self.interface is None and self.geometry is not None:
+            try:
+                found = InterfacePart.from_maps(rest, self.geometry, np.asarray(self.weights))
+                if found is not None:
+                    found.validate(self.K.shape[0], self.B.shape[0], self.geometry, np.asarray(self.weights))
+            except (InputError, IndexError, ValueError):
+                found = None
+            if found is not None and not isinstance(self.maps, Maps):
+                warnings.warn("QP(maps={'defect_upper', ...}) is deprecated: pass "
+                              "interface=InterfacePart.make(...)", DeprecationWarning, stacklevel=5)
+            self.interface = found
+        if self.interface is None:
+            return rest
+        return {k: v for k, v in rest.items() if k not in INTERFACE_MAPS}
 
     def __getstate__(self) -> dict:
         """Pickling and copies leave the store behind (a factorization is neither picklable nor the
@@ -270,7 +309,7 @@ class QP:
         for k, v in self.params.items():
             if isinstance(v, (int, float, str)):
                 out[f"param_{k}"] = np.array(v)
-        maps = {**(self.maps._promoted if isinstance(self.maps, Maps) else {}), **self.maps}
+        maps = self.maps.legacy() if isinstance(self.maps, Maps) else self.maps
         for k, v in maps.items():            # the typed parts are written as the documented map_ arrays
             out[f"map_{k}"] = np.asarray(v)
         return out
@@ -348,12 +387,16 @@ class QP:
         if "E" in params and "nu" in params:        # validated by check_params: for post-processing only
             parts["material"] = MaterialPart(float(params["E"]), float(params["nu"]),
                                              str(params.get("plane", "strain")))
-        qp = cls(K=K, F=F, B=B, weights=w, name=path.stem, maps=rest, params=params, **parts)
+        g = parts.get("geometry")
+        if g is not None:       # the defect maps, checked before the interface part is made from them
+            check_maps(rest, B.shape[0], g.nodes.shape[1], where, dim=g.dim)
+        qp = cls(K=K, F=F, B=B, weights=w, name=path.stem, maps=Maps(rest), params=params, **parts)
         geometry_keys = [k for k in ("nodes", "triangles", "node_dofs") if k in maps]
         if geometry_keys and qp.geometry is None:
             raise InputError(f"{where} holds map_{geometry_keys[0]} but not a consistent mesh: map_nodes (2 or 3, "
                              f"n_nodes), map_triangles and map_node_dofs are needed together")
-        check_maps(qp.maps, qp.m, None if qp.geometry is None else qp.geometry.nodes.shape[1], where,
+        legacy = qp.maps.legacy() if isinstance(qp.maps, Maps) else qp.maps
+        check_maps(legacy, qp.m, None if qp.geometry is None else qp.geometry.nodes.shape[1], where,
                    dim=2 if qp.geometry is None else qp.geometry.dim)
         qp.check()
         return qp

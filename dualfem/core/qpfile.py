@@ -221,7 +221,7 @@ def check_params(params: dict, where: str) -> None:
 
 #: the documented maps that are vectors (a .mat file stores them as 1 x k)
 VECTOR_MAPS = ("defect_upper", "defect_lower", "defect_s", "defect_id", "defect_tips", "normal", "tangent",
-               "defect_front", "defect_front_id")
+               "defect_front", "defect_front_id", "defect_delta")
 
 
 def check_maps(maps: dict, m: int, n_nodes: int | None, where: str, dim: int = 2) -> None:
@@ -231,7 +231,8 @@ def check_maps(maps: dict, m: int, n_nodes: int | None, where: str, dim: int = 2
     ``defect_upper``/``defect_lower`` (m,) node ids in [0, n_nodes); ``defect_s`` (m,) finite;
     ``defect_id`` (m,) in [0, number of defects) (= len(defect_tips) / 2 when the tips are given);
     ``defect_tips`` (2 per defect,) node ids; ``defect_normals``/``defect_tangents`` (2, m) finite;
-    ``normal``/``tangent`` (2,) finite. ``n_nodes``: the mesh's node count (None: not checked).
+    ``normal``/``tangent`` (2,) finite; ``defect_delta`` (m,) > 0. ``n_nodes``: the mesh's node count (None:
+    not checked).
     With ``dim = 3`` (a 3D mesh): ``defect_normals`` (m, 3) finite, ``defect_front`` (k,) node ids and
     ``defect_front_id`` (k,) defect numbers (one per front node), ``defect_faces`` (3, n_faces) node ids
     of the defect surfaces' triangles on the "-" face (output: VTK, figures).
@@ -259,6 +260,9 @@ def check_maps(maps: dict, m: int, n_nodes: int | None, where: str, dim: int = 2
     for k in ("defect_upper", "defect_lower"):
         nodes(k, arr(k, "iu", (m,)))
     arr("defect_s", "iuf", (m,))
+    delta = arr("defect_delta", "iuf", (m,))
+    if delta is not None and delta.size and delta.min() <= 0:
+        raise InputError(f"map 'defect_delta' of {where} must be > 0, got {delta.min()!r}")
     tips = arr("defect_tips", "iu", (-1,))
     nodes("defect_tips", tips)
     if tips is not None and tips.size % 2:

@@ -143,7 +143,7 @@ def picture_row(qp, sol, scene: str, delta: float, caption: str) -> dict:
     jump, closed defect nodes, total contact force (force per unit thickness), KKT error."""
 
     p = Post(qp, sol)
-    tips = qp.geometry.nodes[:, qp.maps["defect_tips"]]
+    tips = qp.geometry.nodes[:, qp.interface.front]
     cen = p.nodes[:, p.triangles].mean(axis=1)
     near = np.min(np.linalg.norm(cen[:, :, None] - tips[:, None, :], axis=0), axis=1) < TIP_RADIUS
     return {"scene": scene, "delta": delta, "caption": caption, "von_mises": float(p.von_mises.max()),
@@ -198,8 +198,8 @@ def library_runs(solver: str, progress: Callable[[str], None], overrides: dict |
                     "mesh": prob.params.get("mesh"), "mesh_size": prob.params.get("mesh_size"),
                     "tip_size": prob.params.get("tip_size"), "build_s": t_build, "solve_s": t_solve,
                     "closed_per_defect": [int(c) for c in np.bincount(
-                        qp.maps["defect_id"], weights=evaluator.contact_set(qp, sol.x), minlength=len(deltas))],
-                    "nodes_per_defect": [int(c) for c in np.bincount(qp.maps["defect_id"], minlength=len(deltas))]})
+                        qp.interface.defect_id, weights=evaluator.contact_set(qp, sol.x), minlength=len(deltas))],
+                    "nodes_per_defect": [int(c) for c in np.bincount(qp.interface.defect_id, minlength=len(deltas))]})
         out.append({"name": name, "qp": qp, "sol": sol, "row": row})
     return out
 

@@ -365,6 +365,9 @@ def guarded_view(qp: QP) -> QP:
         d["geometry"] = dataclasses.replace(g, nodes=_ro(g.nodes), cells=_ro(g.cells), node_dofs=_ro(g.node_dofs))
     if qp.blocks:
         d["blocks"] = tuple(dataclasses.replace(b, G=_ro_sparse(b.G), weights=_ro(b.weights)) for b in qp.blocks)
+    if qp.interface is not None:
+        it = qp.interface
+        d["interface"] = dataclasses.replace(it, **{f.name: _ro(getattr(it, f.name)) for f in dataclasses.fields(it)})
     d["store"] = store
     view._guarded = {k: d[k] for k in ("K", "F", "B", "weights", "local", "shift", "blocks")}   # type: ignore[attr-defined]
     return view

@@ -2,8 +2,8 @@
 triangle, von Mises stress, fields along the defect, deformed coordinates.
 
 Everything is computed from the QP's mesh (``qp.geometry``: ``nodes``, ``cells``, ``node_dofs``),
-its defect maps (``qp.maps``: ``defect_upper``/``defect_lower``/``defect_tips``/``defect_s``,
-``normal``, ``tangent``) and its material (``qp.material``: ``E``, ``nu``, ``plane``), so a QP
+its defect interface (``qp.interface``: node pairs, normals and tangents, tips, arc length ``s``;
+:class:`~dualfem.core.parts.InterfacePart`) and its material (``qp.material``: ``E``, ``nu``, ``plane``), so a QP
 built by a scene is enough; a QP read back from a file may pass ``E``, ``nu``, ``plane`` explicitly.
 Nothing is computed until asked for: :class:`Post` evaluates each field on first access and
 caches it.
@@ -130,24 +130,20 @@ def deformed_nodes(qp, x: np.ndarray, scale: float = 1.0) -> np.ndarray:
     return _geometry(qp).nodes + scale * nodal_displacement(qp, x).T
 
 
-def _defect_pieces(m: dict, nodes: np.ndarray, up: np.ndarray, lo: np.ndarray, s_in: np.ndarray):
-    """Per defect: (id, rows of B in order, first tip, last tip, its length) from the maps; the
-    tips are None when the maps do not give them (one entry for every defect then)."""
-    tips = np.asarray(m.get("defect_tips", []), dtype=np.int64)
-    ids = np.asarray(m.get("defect_id", np.zeros(up.size, dtype=np.int64)), dtype=np.int64)
+def _defect_pieces(it, nodes: np.ndarray):
+    """Per defect: (id, rows of B in order, first tip, last tip, its length) from the interface part
+    (:class:`~dualfem.core.parts.InterfacePart`: its ``front`` holds two tips per defect in 2D); the tips
+    are None when the part does not give them (one entry for every defect then)."""
+    tips, ids, lo = it.front, it.defect_id, it.lower
     ndef = int(ids.max()) + 1 if ids.size else 0
     if tips.size != 2 * ndef:
-        return [(0, np.arange(up.size), None, None, None)]
+        return [(0, np.arange(it.m), None, None, None)]
     out = []
     for k in range(ndef):
         rows = np.flatnonzero(ids == k)
         t0, t1 = tips[2 * k], tips[2 * k + 1]
-        if "defect_normals" in m:       # arc length (kinked, curved): the last interior node's s + its last edge
-            L = float(s_in[rows[-1]] + np.linalg.norm(nodes[:, t1] - nodes[:, lo[rows[-1]]]))
-        else:                           # a single straight defect of an older QP file: along its tangent
-            nrm = np.asarray(m.get("normal", (0.0, 1.0)), dtype=float)
-            tau = np.asarray(m.get("tangent", (nrm[1], -nrm[0])), dtype=float)
-            L = float(tau @ (nodes[:, t1] - nodes[:, t0]))
+        # arc length (kinked, curved): the last interior node's s + its last edge
+        L = float(it.s[rows[-1]] + np.linalg.norm(nodes[:, t1] - nodes[:, lo[rows[-1]]]))
         out.append((k, rows, t0, t1, L))
     return out
 
@@ -162,22 +158,17 @@ def defect_fields(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> d
     ``jump_normal``, ``jump_tangent`` (0 at the tips), ``pressure`` and ``force`` (NaN at the
     tips, which carry no constraint; only when ``multipliers`` given). ``interior`` is a boolean
     mask of the constrained (doubled) nodes. :func:`defect_stretches` splits the arrays by defect.
+    Read from ``qp.interface`` (a 2D :class:`~dualfem.core.parts.InterfacePart` with its arc length ``s``).
     """
-    m = qp.maps
+    it = getattr(qp, "interface", None)
     nodes = _geometry(qp).nodes
-    for k in ("defect_upper", "defect_lower", "defect_s"):
-        if k not in m:
-            raise InputError(f"post-processing of the defect needs qp.maps[{k!r}]")
-    up = np.asarray(m["defect_upper"], dtype=np.int64)
-    lo = np.asarray(m["defect_lower"], dtype=np.int64)
-    s_in = np.asarray(m["defect_s"], dtype=float)
-    nrm = np.asarray(m.get("normal", (0.0, 1.0)), dtype=float)
-    tau = np.asarray(m.get("tangent", (nrm[1], -nrm[0])), dtype=float)
-    # per-node normals and tangents of general (kinked, curved, several) defects, else the single ones
-    nrm_j = np.asarray(m["defect_normals"], dtype=float).T if "defect_normals" in m else np.tile(nrm, (up.size, 1))
-    tau_j = np.asarray(m["defect_tangents"], dtype=float).T if "defect_tangents" in m else np.tile(tau, (up.size, 1))
+    if it is None or it.dim != 2 or it.s is None:
+        raise InputError("post-processing of the defect needs qp.interface, a 2D interface part with its arc "
+                         "length s (a QP file: map_defect_upper, map_defect_lower and map_defect_s)")
+    up, lo, s_in = it.upper, it.lower, it.s
+    nrm_j, tau_j = it.normals, it.tangents[:, 0, :]
     parts: dict[str, list] = {k: [] for k in ("s", "upper", "lower", "row", "id", "nrm", "tau")}
-    for k, rows, t0, t1, L in _defect_pieces(m, nodes, up, lo, s_in):
+    for k, rows, t0, t1, L in _defect_pieces(it, nodes):
         if t0 is None:
             row, near = rows, rows
             parts["s"].append(s_in[rows])

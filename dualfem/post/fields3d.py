@@ -67,11 +67,12 @@ def stresses3d(qp, x: np.ndarray, E: float | None = None, nu: float | None = Non
 
 
 def defect_normals(qp) -> np.ndarray:
-    """The unit normals of the defect nodes, (m, 3) (a 3D QP's ``maps['defect_normals']``)."""
-    nrm = np.asarray(qp.maps.get("defect_normals"), dtype=float)
-    if nrm.shape != (qp.m, 3):
-        raise InputError(f"maps['defect_normals'] must have shape (m, 3) with m = {qp.m}, got {nrm.shape}")
-    return nrm
+    """The unit normals of the defect nodes, (m, 3) (a 3D QP's ``qp.interface.normals``)."""
+    it = getattr(qp, "interface", None)
+    if it is None or it.dim != 3:
+        raise InputError("3D defect fields need qp.interface, a 3D interface part (a QP file: map_defect_upper, "
+                         "map_defect_lower and map_defect_normals (m, 3))")
+    return it.normals
 
 
 def defect_fields3d(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> dict[str, np.ndarray]:
@@ -79,18 +80,16 @@ def defect_fields3d(qp, x: np.ndarray, multipliers: np.ndarray | None = None) ->
     ``opening``, ``slip`` (m,), ``defect_id``, ``upper``/``lower`` node ids; with multipliers also
     ``force`` (= mu) and ``pressure`` (= mu / w)."""
     g = _geometry3d(qp)
-    for k in ("defect_upper", "defect_lower"):
-        if k not in qp.maps:
-            raise InputError(f"3D defect fields need maps['{k}'] (the QP has no defect maps)")
-    up, lo = np.asarray(qp.maps["defect_upper"], int), np.asarray(qp.maps["defect_lower"], int)
-    u = nodal_displacement(qp, x)
     nrm = defect_normals(qp)
+    it = qp.interface
+    up, lo = it.upper, it.lower
+    u = nodal_displacement(qp, x)
     jump = u[up] - u[lo]
     opening = np.einsum("ij,ij->i", jump, nrm)
     tangential = jump - opening[:, None] * nrm
     out = {"points": g.nodes[:, up].T, "normal": nrm, "jump": jump, "opening": opening,
            "slip": np.linalg.norm(tangential, axis=1), "upper": up, "lower": lo,
-           "defect_id": np.asarray(qp.maps.get("defect_id", np.zeros(up.size, int)), int)}
+           "defect_id": it.defect_id}
     if multipliers is not None:
         mu = np.asarray(multipliers, dtype=float)
         w = np.asarray(qp.weights, dtype=float)

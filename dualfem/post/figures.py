@@ -78,7 +78,7 @@ def _along(post: Post) -> tuple[np.ndarray, str]:
     """Abscissa along the defect: x1 for a horizontal defect (as in the paper), else s."""
     d = post.defect
     tau = np.asarray(post.qp.maps.get("tangent", (1.0, 0.0)), dtype=float)
-    if "tangent" in post.qp.maps or "defect_tangents" not in post.qp.maps:
+    if "tangent" in post.qp.maps or getattr(post.qp, "interface", None) is None:
         if abs(abs(tau[0]) - 1) < 1e-12:
             return d["X"][0], "x1"
     return d["s"], "s (distance from the defect's first tip)"
@@ -111,7 +111,7 @@ def plot_deformed(qp, sol, ax=None, *, scale: float = 300.0, title: str | None =
     coll = ax.tripcolor(xy[0], xy[1], p.triangles.T, facecolors=vm, cmap=cmap, vmin=0.0,
                         vmax=vmax if vmax is not None else float(vm.max()),
                         edgecolors="k" if edges else "none", linewidth=0.1 if edges else 0.0)
-    if "defect_upper" in qp.maps:
+    if getattr(qp, "interface", None) is not None:
         _draw_defects(ax, qp, p, xy, reference=reference, contact=contact, labels=labels)
     if colorbar:
         ax.figure.colorbar(coll, ax=ax, label=f"von Mises stress [{_units(qp)}]")

@@ -3,7 +3,7 @@ a plane cut through the body coloured by the von Mises stress (matplotlib, Agg-s
 
 The defect maps are drawn in the defect's own plane coordinates (the plane through its nodes' centroid
 orthogonal to their mean normal; for a curved defect, its projection), triangulated by the defect's
-surface triangles when the QP has them (``maps['defect_faces']``: (3, n_faces) node ids of the "-"
+surface triangles when the QP has them (``qp.interface.faces``: (n_faces, 3) node ids of the "-"
 face, the front nodes single; the front drawn with opening and slip 0), else by a Delaunay
 triangulation of the projected defect nodes restricted to the defect's outline. Units: lengths of the
 scene, opening and slip in displacement units, pressure in stress units (E's).
@@ -77,8 +77,8 @@ def plane_basis(normal) -> tuple[np.ndarray, np.ndarray]:
 
 def _surface(qp, d: dict, k: int):
     """(node coordinates (p, 3), triangles (nf, 3) into them or None, row of each vertex (p,) or -1 at the
-    front) of defect ``k``, from ``maps['defect_faces']`` ((3, n_faces) node ids of the "-" face)."""
-    faces = qp.maps.get("defect_faces")
+    front) of defect ``k``, from ``qp.interface.faces`` ((n_faces, 3) node ids of the "-" face)."""
+    faces = None if qp.interface is None or qp.interface.faces is None else qp.interface.faces.T
     rows = np.flatnonzero(d["defect_id"] == k)
     if faces is None or not np.size(faces):
         return d["points"][rows], None, rows

@@ -52,7 +52,7 @@ def solution_figure(qp, sol):
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), layout="constrained")
     plot_deformed(qp, sol, ax=axes[0], contact=True)
-    if "defect_upper" in qp.maps:
+    if qp.interface is not None:
         plot_jump([(sol.solver or "solution", qp, sol)], ax=axes[1])
     else:
         axes[1].set_axis_off()

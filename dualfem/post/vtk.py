@@ -75,8 +75,9 @@ def check_qp(qp) -> None:
     if g.node_dofs.shape[0] != g.dim:
         raise InputError(f"--vtk/--xdmf write {g.dim}-D displacements: geometry.node_dofs (map_node_dofs) must have "
                          f"{g.dim} rows (one per component), got shape {g.node_dofs.shape}")
-    check_maps(qp.maps, qp.m, g.nodes.shape[1], "the QP", dim=g.dim)
-    if "defect_upper" in qp.maps and not ("defect_lower" in qp.maps and ("defect_s" in qp.maps or g.dim == 3)):
+    maps = qp.maps.legacy() if hasattr(qp.maps, "legacy") else qp.maps
+    check_maps(maps, qp.m, g.nodes.shape[1], "the QP", dim=g.dim)
+    if "defect_upper" in maps and not ("defect_lower" in maps and ("defect_s" in maps or g.dim == 3)):
         raise InputError("the defect maps of the QP need defect_upper, defect_lower and defect_s together")
 
 
@@ -103,7 +104,7 @@ def to_meshio(qp, sol=None, *, post: Post | None = None):
     cell_data = {k: [np.asarray(st[k], dtype=float)] for k in ("von_mises", "s11", "s22", "s12", "s33")}
     face = [np.zeros(ntri, dtype=np.int32)]
     defect_keys = ("jump_normal", "jump_tangent", "pressure")
-    if "defect_upper" in qp.maps and qp.m:       # (defects = []: an uncracked body, no defect cells)
+    if qp.interface is not None and qp.m:       # (defects = []: an uncracked body, no defect cells)
         d = p.defect
         nodal = {"jump_normal": d["jump_normal"], "jump_tangent": d["jump_tangent"],
                  "pressure": d.get("pressure", np.full(d["s"].size, np.nan))}

@@ -5,7 +5,7 @@ One unstructured grid holds the points (every node, both copies of a defect node
 with multipliers; 0 away from the defects and at front nodes, which carry no constraint; both copies of
 a defect node carry its value; no point field holds NaN), ``defect_id`` (-1 elsewhere) and
 ``normal`` (the unit normal pointing to the "+" face at defect nodes, 0 elsewhere); cell blocks: the
-tetrahedra, then, when the QP has its defect surface triangles (``maps['defect_faces']``, (3, n_faces)
+tetrahedra, then, when the QP has its defect surface triangles (``qp.interface.faces``, (n_faces, 3)
 node ids of the "-" face, the front nodes single), the triangles of every "+" face followed by those
 of every "-" face. Cell data: the stress
 components ``s11 s22 s33 s23 s13 s12`` and ``von_mises`` (units of E, NaN on the surface cells),
@@ -37,7 +37,7 @@ def to_meshio3d(qp, sol):
     cell_data = {k: [np.asarray(st[k], float)] for k in (*VOIGT, "von_mises")}
     point_data = {"displacement": u}
     face = [np.zeros(ntet, dtype=np.int32)]
-    if "defect_upper" in qp.maps:
+    if qp.interface is not None:
         d = defect_fields3d(qp, sol.x, sol.multipliers)
         has_p = "pressure" in d
         d.setdefault("pressure", np.full(qp.m, np.nan))
@@ -53,9 +53,9 @@ def to_meshio3d(qp, sol):
         for ids in (d["lower"], d["upper"]):
             point_data["defect_id"][ids] = d["defect_id"]
             point_data["normal"][ids] = d["normal"]
-        faces = qp.maps.get("defect_faces")
+        faces = qp.interface.faces
         if faces is not None and np.size(faces):
-            f = np.asarray(faces, dtype=np.int64)          # node ids of the "-" face; the front single
+            f = np.asarray(faces, dtype=np.int64).T        # node ids of the "-" face; the front single
             plus = np.arange(npts)
             plus[d["lower"]] = d["upper"]
             tri = np.vstack([plus[f].T, f.T])

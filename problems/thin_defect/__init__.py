@@ -57,8 +57,9 @@ from dualfem.core.units import UnitMap
 from dualfem.numerics.linalg import freeze
 
 from .. import _boundary as bd
+from .._interface import delta_free_part, interface, local_unknowns, with_delta
 from ..loads import resolve_load
-from .assemble import boundary_edges_on, free_dofs, interface, stiffness, traction_vector
+from .assemble import boundary_edges_on, free_dofs, stiffness, traction_vector
 from .cut import Cut, cut
 from .geometry import defects_label, parse_defect, parse_defects
 from .interface_sum import InterfaceSum
@@ -374,13 +375,11 @@ class ThinDefect(Problem):
         n = int(node_dofs.max()) + 1
         K_el = stiffness(pts, c.triangles, lam, mu, node_dofs, n)
         R = rotation(float(p["rotate_deg"]))
-        local = np.unique(np.concatenate([node_dofs[:, c.upper].ravel(), node_dofs[:, c.lower].ravel()]))
-        maps = {
-            "nodes": pts, "triangles": c.triangles, "node_dofs": node_dofs,
-            "defect_upper": c.upper, "defect_lower": c.lower, "defect_tips": c.tips, "defect_s": c.s,
-            "defect_id": c.defect_id, "defect_normals": R @ c.normals, "defect_tangents": R @ c.tangents,
-        }
-        a = {"cut": c, "n": n, "K_el": K_el, "local": local, "maps": maps}
+        local = local_unknowns(node_dofs, c.lower, c.upper)
+        maps = {"nodes": pts, "triangles": c.triangles, "node_dofs": node_dofs}
+        part = delta_free_part(node_dofs, c, (R @ c.normals).T, tangents=(R @ c.tangents).T[:, None, :], front=c.tips,
+                               s=c.s)
+        a = {"cut": c, "n": n, "K_el": K_el, "local": local, "maps": maps, "interface": part}
         freeze(K_el.data, K_el.indices, K_el.indptr, local, *maps.values())
         shared.data["delta_free"] = a
         shared.assemblies += 1
@@ -420,7 +419,7 @@ class ThinDefect(Problem):
         if K is not None:
             return K, a["B"].copy(), [j.copy() for j in a["J"]]
         maps, c = a["maps"], a["cut"]            # scipy's sum (also on an exact cancellation)
-        K_par, B, J = interface(maps["node_dofs"], c.lower, c.upper, maps["defect_normals"], coef, a["n"])
+        K_par, B, J = interface(maps["node_dofs"], c.lower, c.upper, a["interface"].normals.T, coef, a["n"])
         K = (a["K_el"] + K_par).tocsc()
         sums = a["stiffness_sums"] = a.get("stiffness_sums", 0) + 1
         if plan is None and sums >= 2:      # plan False: none can be made (an exact cancellation)
@@ -443,8 +442,8 @@ class ThinDefect(Problem):
         p = self.params
         a = self._delta_free()
         c, maps = a["cut"], dict(a["maps"])
-        delta = np.array([d["delta"] for d in self._defects])[c.defect_id]
-        K, B, J = self._stiffness(a, c.weights / delta)
+        iface, coef = with_delta(a["interface"], [d["delta"] for d in self._defects])
+        K, B, J = self._stiffness(a, coef)
         R = rotation(float(p["rotate_deg"]))
         if len(self._defects) == 1 and len(self._defects[0]["points"]) == 2:
             pa, pb = self._defects[0]["points"]
@@ -460,7 +459,7 @@ class ThinDefect(Problem):
         geometry = GeometryPart(2, maps.pop("nodes"), maps.pop("triangles"), maps.pop("node_dofs"))
         return QP(K=K, F=self._load_vector(a), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],
                   name=self._qp_name(),
-                  params=params, maps=maps, geometry=geometry,
+                  params=params, maps=maps, geometry=geometry, interface=iface,
                   units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
                   material=MaterialPart(float(p["E"]), float(p["nu"]), str(p["plane"])))
 

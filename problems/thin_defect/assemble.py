@@ -8,13 +8,14 @@
 * Traction on the loaded side: 4-point Gauss-Legendre per boundary edge (exact for P1 times a
   polynomial of degree <= 6), the traction evaluated in the reference (unrotated) frame.
 * Interface: (1/delta_d) sum_j w_j |u_j^+ - u_j^-|^2 (whole jump vector, trapezoid rule);
-  B row j = nu_j . (u_j^+ - u_j^-).
+  B row j = nu_j . (u_j^+ - u_j^-): :func:`dualfem.problems._interface.interface` (shared with 3D).
 """
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
 
+from .._interface import interface  # noqa: F401  (the interface term and B: one code for 2D and 3D)
 from .._pattern import distinct_pairs
 
 
@@ -169,18 +170,3 @@ def traction_vector(p_ref: np.ndarray, edges: np.ndarray, g, scale: float) -> np
         np.add.at(F[c], edges[0], (wt * (1 - q)).sum(axis=1))
         np.add.at(F[c], edges[1], (wt * q).sum(axis=1))
     return F
-
-
-def interface(node_dofs: np.ndarray, lower: np.ndarray, upper: np.ndarray, normals: np.ndarray,
-              coef: np.ndarray, n: int) -> tuple[sp.csc_matrix, sp.csr_matrix, list[sp.csr_matrix]]:
-    """(sum_j coef_j |u_j^+ - u_j^-|^2 as a CSC matrix, B, the jump operators J_c (u_c^+ - u_c^-))."""
-    m = lower.size
-    rows = np.arange(m)
-    J = [sp.csr_matrix((np.r_[np.ones(m), -np.ones(m)], (np.r_[rows, rows], np.r_[node_dofs[c, upper],
-                                                                                  node_dofs[c, lower]])),
-                       shape=(m, n)) for c in range(2)]
-    W = sp.diags(coef)
-    Ki = (J[0].T @ W @ J[0] + J[1].T @ W @ J[1]).tocsc()
-    B = (sp.diags(normals[0]) @ J[0] + sp.diags(normals[1]) @ J[1]).tocsr()
-    B.eliminate_zeros()
-    return Ki, B, J

@@ -24,9 +24,11 @@ import numpy as np
 
 from dualfem.core.errors import InputError
 
+from .._interface import DoubledNodes, double_nodes
+
 
 @dataclass
-class Cut:
+class Cut(DoubledNodes):
     """The doubled mesh and the defect nodes, ordered defect by defect, first to last point.
 
     ``lower``/``upper`` (m,): node ids of the "-" / "+" copies; ``defect_id`` (m,): which defect;
@@ -35,14 +37,8 @@ class Cut:
     of each defect; ``length`` (ndef,).
     """
 
-    points: np.ndarray
     triangles: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    defect_id: np.ndarray
-    normals: np.ndarray
     tangents: np.ndarray
-    weights: np.ndarray
     s: np.ndarray
     tips: np.ndarray
     length: np.ndarray
@@ -93,9 +89,9 @@ def cut(points: np.ndarray, triangles: np.ndarray, defects: list[np.ndarray], me
         length.append(ln.sum())
     _check_edges(triangles, defects, seen >= 0)
     lower_a = np.concatenate(lower)
-    upper_a = nn + np.arange(lower_a.size)
+    doubled, upper_a = double_nodes(points, lower_a)
     t = _assign_sides(points, triangles, lower_a, upper_a, np.concatenate(prev), np.concatenate(nxt))
-    return Cut(points=np.hstack([points, points[:, lower_a]]), triangles=t, lower=lower_a, upper=upper_a,
+    return Cut(points=doubled, triangles=t, lower=lower_a, upper=upper_a,
                defect_id=np.concatenate(ids), normals=np.hstack(nrm), tangents=np.hstack(tng),
                weights=np.concatenate(w), s=np.concatenate(s), tips=np.concatenate(tips),
                length=np.array(length))

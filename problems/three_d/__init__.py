@@ -28,13 +28,14 @@ axis (right-hand rule); the mesh is made in the reference frame and rotated.
 
 The QP: ``geometry = GeometryPart(3, nodes (3, n_nodes), tetrahedra (4, n_tets), node_dofs (3,
 n_nodes))``; ``material = MaterialPart(E, nu, "strain")`` (3D elasticity is plane strain's law
-without the reduction: ``plane`` means nothing in 3D and is not a scene key); ``maps``:
-``defect_upper``/``defect_lower`` (m,) node ids of the "+" / "-" copies of constrained node j (row
-j of B), ``defect_id`` (m,), ``defect_normals`` (m, 3) unit "+" normals, ``defect_front`` (k,) the
-front nodes of every defect and ``defect_front_id`` (k,) their defects.
+without the reduction: ``plane`` means nothing in 3D and is not a scene key); ``interface`` (an
+:class:`~dualfem.core.parts.InterfacePart`): ``upper``/``lower`` (m,) node ids of the "+" / "-" copies of
+constrained node j (row j of B), ``defect_id`` (m,), ``normals`` (m, 3) unit "+" normals, ``front`` (k,)
+the front nodes of every defect and ``front_id`` (k,) their defects, ``faces``, ``delta``.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -49,7 +50,8 @@ from dualfem.core.registry import register_problem
 from dualfem.numerics.linalg import freeze
 
 from .. import _boundary as bd
-from .assemble import free_dofs, interface, stiffness
+from .._interface import delta_free_part, interface, local_unknowns, with_delta
+from .assemble import free_dofs, stiffness
 from .cut import Cut3, cut
 from .geometry import Surface, check_apart, parse_defects
 from .mesh import check_size, estimate_tetrahedra, mesh_box
@@ -263,13 +265,12 @@ class ThreeD(Problem):
         n = int(node_dofs.max()) + 1
         lam, mu = lame(p["E"], p["nu"], "strain")
         K_el = stiffness(pts, c.tets, lam, mu, node_dofs, n)
-        local = np.unique(np.concatenate([node_dofs[:, c.upper].ravel(), node_dofs[:, c.lower].ravel()]))
+        local = local_unknowns(node_dofs, c.lower, c.upper)
         R = self.rotation()
-        maps = {"defect_upper": c.upper, "defect_lower": c.lower, "defect_id": c.defect_id,
-                "defect_normals": np.ascontiguousarray((R @ c.normals).T), "defect_front": c.front,
-                "defect_front_id": c.front_id, "defect_faces": c.faces}
-        a = {"cut": c, "points": pts, "node_dofs": node_dofs, "n": n, "K_el": K_el, "local": local, "maps": maps}
-        freeze(K_el.data, K_el.indices, K_el.indptr, local, node_dofs, pts, *maps.values())
+        part = delta_free_part(node_dofs, c, np.ascontiguousarray((R @ c.normals).T), front=c.front,
+                               front_id=c.front_id, faces=None if c.faces is None else c.faces.T)
+        a = {"cut": c, "points": pts, "node_dofs": node_dofs, "n": n, "K_el": K_el, "local": local, "interface": part}
+        freeze(K_el.data, K_el.indices, K_el.indptr, local, node_dofs, pts)
         self.shared.data["delta_free"] = a
         self.shared.assemblies += 1
         return a
@@ -302,7 +303,7 @@ class ThreeD(Problem):
             F = R @ bd.nodal_forces(self._loads, c.points, c.tets, self._sides(), scale)
         if any(f is not None for f in self._face_pressure):
             a = self._delta_free()
-            normals = np.asarray(a["maps"]["defect_normals"]).T
+            normals = a["interface"].normals.T
             pressure = np.zeros(c.lower.size)
             for k, f in enumerate(self._face_pressure):
                 j = np.flatnonzero(c.defect_id == k)
@@ -322,9 +323,8 @@ class ThreeD(Problem):
         p = self.params
         a = self._delta_free()
         c = a["cut"]
-        delta = np.array([s.delta for s in self._surfaces])[c.defect_id]
-        normals = np.asarray(a["maps"]["defect_normals"]).T
-        K_par, B = interface(a["node_dofs"], c.lower, c.upper, normals, c.weights / delta, a["n"])
+        iface, coef = with_delta(a["interface"], [s.delta for s in self._surfaces])
+        K_par, B, _ = interface(a["node_dofs"], c.lower, c.upper, iface.normals.T, coef, a["n"])
         K = (a["K_el"] + K_par).tocsc()
         nd = a["node_dofs"]
         Fn = self.nodal_load()
@@ -334,9 +334,9 @@ class ThreeD(Problem):
                   for k, v in p.items() if not callable(v) and k != "defects"}
         params["defects"] = "; ".join(_label(s) for s in self._surfaces)
         geometry = GeometryPart(3, a["points"], c.tets, nd)
-        return QP(K=K, F=F, B=B, weights=c.weights.copy(), K_fixed=a["K_el"], local_dofs=a["local"],
-                  name=f"three_d[{self._load_label()}]", params=params,
-                  maps=dict(a["maps"]), geometry=geometry,
+        iface = dataclasses.replace(iface, weights=c.weights.copy())       # each QP its own weights
+        return QP(K=K, F=F, B=B, weights=iface.weights, K_fixed=a["K_el"], local_dofs=a["local"],
+                  name=f"three_d[{self._load_label()}]", params=params, geometry=geometry, interface=iface,
                   units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
                   material=MaterialPart(float(p["E"]), float(p["nu"]), "strain"))
 

@@ -12,7 +12,8 @@
   into CSR by scipy's BSR conversion (canonical: sorted, no duplicates) with each block row laid out
   as [transposed lower blocks, diagonal, upper blocks], and the fixed unknowns dropped. K is
   symmetric: its CSR arrays are its CSC arrays.
-* Interface term: sum_j coef_j |u_j^+ - u_j^-|^2 (all three components), B row j = nu_j . (u_j^+ - u_j^-).
+* Interface term: sum_j coef_j |u_j^+ - u_j^-|^2 (all three components), B row j = nu_j . (u_j^+ - u_j^-):
+  :func:`dualfem.problems._interface.interface` (shared with 2D).
 """
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ import scipy.sparse as sp
 
 from dualfem.numerics.p1 import tet_gradients
 
+from .._interface import interface  # noqa: F401  (the interface term and B: one code for 2D and 3D)
 from .._pattern import distinct_pairs
 
 
@@ -143,25 +145,6 @@ def free_dofs(fixed: np.ndarray) -> np.ndarray:
     free = ~np.asarray(fixed, bool).T.ravel()
     idx = np.cumsum(free) - 1
     return np.where(free, idx, -1).reshape(-1, 3).T.copy()
-
-
-def interface(node_dofs: np.ndarray, lower: np.ndarray, upper: np.ndarray, normals: np.ndarray,
-              coef: np.ndarray, n: int) -> tuple[sp.csc_matrix, sp.csr_matrix]:
-    """(sum_j coef_j |u_j^+ - u_j^-|^2 as an n x n CSC matrix, B (m x n): B x = nu_j . (u_j^+ - u_j^-)).
-
-    ``normals`` (3, m) unit "+" normals; a fixed component (-1) of a defect node is refused."""
-    m = lower.size
-    rows = np.arange(m)
-    if (node_dofs[:, lower] < 0).any() or (node_dofs[:, upper] < 0).any():
-        raise ValueError("a defect node has a fixed component")
-    J = [sp.csr_matrix((np.r_[np.ones(m), -np.ones(m)], (np.r_[rows, rows],
-                                                        np.r_[node_dofs[c, upper], node_dofs[c, lower]])),
-                       shape=(m, n)) for c in range(3)]
-    W = sp.diags(coef)
-    Ki = (J[0].T @ W @ J[0] + J[1].T @ W @ J[1] + J[2].T @ W @ J[2]).tocsc()
-    B = (sp.diags(normals[0]) @ J[0] + sp.diags(normals[1]) @ J[1] + sp.diags(normals[2]) @ J[2]).tocsr()
-    B.eliminate_zeros()
-    return Ki, B
 
 
 def boundary_faces(t: np.ndarray) -> np.ndarray:

@@ -32,6 +32,7 @@ from scipy.sparse.csgraph import connected_components
 
 from dualfem.core.errors import InputError
 
+from .._interface import DoubledNodes, double_nodes
 from .geometry import Surface
 
 _FACES = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])     # face k of a tetrahedron: without corner k
@@ -42,7 +43,7 @@ class CutError(InputError):
 
 
 @dataclass
-class Cut3:
+class Cut3(DoubledNodes):
     """The doubled mesh. ``points`` (3, n_nodes), ``tets`` (4, n_tets); per constrained node j (m of them,
     defect by defect): ``lower``/``upper`` node ids, ``defect_id``, ``normals`` (3, m) unit "+" normals,
     ``weights`` (m,) nodal areas; ``front`` (k,) the front nodes of every defect and ``front_id`` (k,) theirs;
@@ -50,13 +51,7 @@ class Cut3:
     node ids of the "-" face (the original nodes: the front single, the "+" copy of node ``lower[j]`` is
     ``upper[j]``), for output (VTK, figures)."""
 
-    points: np.ndarray
     tets: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    defect_id: np.ndarray
-    normals: np.ndarray
-    weights: np.ndarray
     front: np.ndarray
     front_id: np.ndarray
     area: np.ndarray
@@ -115,10 +110,10 @@ def cut(points: np.ndarray, tets: np.ndarray, faces: list[np.ndarray], surfaces:
     plus = _sides(points, tets, slot, normals, ids, np.hstack(faces), nn)
     out = tets.astype(np.int64, copy=True)
     inc_t, inc_c = np.nonzero(slot[out.T] >= 0)
-    upper = nn + np.arange(lower.size)
+    doubled, upper = double_nodes(points, lower)
     js = slot[out[inc_c, inc_t]]
     out[inc_c[plus], inc_t[plus]] = upper[js[plus]]
-    c = Cut3(points=np.hstack([points, points[:, lower]]), tets=out, lower=lower, upper=upper, defect_id=ids,
+    c = Cut3(points=doubled, tets=out, lower=lower, upper=upper, defect_id=ids,
              normals=normals, weights=np.concatenate([p[3] for p in parts]), front=front,
              front_id=np.concatenate([np.full(p[1].size, k) for k, p in enumerate(parts)]),
              area=np.array([p[4] for p in parts]), faces=np.hstack(faces).astype(np.int64))
