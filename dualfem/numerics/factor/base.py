@@ -189,11 +189,34 @@ class Backend(ABC):
     name: str = "?"
     #: pip requirement that installs it (shown in error messages)
     install_hint: str = ""
+    #: True: a direct factorization (exact to rounding, Schur complements; what ``factor=`` names). False: an
+    #: inexact K-solve (AMG-preconditioned CG) that the dual operator and the certificate use where no
+    #: factorization fits, its residuals recorded (:mod:`dualfem.numerics.amg`)
+    direct: bool = True
+    #: the entry of :data:`dualfem.numerics.memory.CALIBRATION` whose fit models this backend's factor
+    #: (default: its own name; CHOLMOD, not measured, is modelled as PARDISO)
+    memory_model: str = ""
 
     @classmethod
     @abstractmethod
     def available(cls) -> bool:
         """True if the library imports here."""
+
+    @classmethod
+    def missing(cls) -> str | None:
+        """None when the backend can run here, else why not and how to install it (one sentence)."""
+        if cls.available():
+            return None
+        return f"{cls.name} is not installed here; install it with: {cls.install_hint}"
+
+    @classmethod
+    def peak_bytes(cls, n_unknowns: int, dim: int = 2, analysis: dict | None = None) -> int:
+        """Extra peak RSS (bytes) of factorizing K with ``n_unknowns`` unknowns in ``dim`` dimensions in a
+        process that already holds the QP (the backend's memory model; ``analysis``: a factorization's
+        ``info`` after its analysis, whose ``peak_bytes`` replaces the model where the library reports it)."""
+        from dualfem.numerics.memory import direct_factor_bytes
+
+        return direct_factor_bytes(n_unknowns, cls.memory_model or cls.name, analysis, dim)
 
     @abstractmethod
     def make(self, local: np.ndarray | None = None, order: OrderHint = None) -> Factorization: ...
