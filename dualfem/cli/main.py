@@ -62,15 +62,12 @@ def add_factor_arg(p: argparse.ArgumentParser) -> None:
 
 
 def apply_factor(args: argparse.Namespace) -> str:
-    """Make ``--factor`` the process-wide backend (and the one worker processes inherit); its name."""
-    import os
+    """Choose the run's linear-algebra context from ``--factor``, ``--threads``, ``--max-memory``
+    (:func:`dualfem.numerics.la.from_args`; InputError for an unknown/uninstalled backend); its backend.
+    Forked workers share it; the bench harness hands it to its child processes."""
+    from dualfem.numerics import la
 
-    from dualfem.numerics.factor import get_default, set_default
-
-    if getattr(args, "factor", None):
-        set_default(args.factor)                       # InputError for an unknown/uninstalled name
-        os.environ["DUALFEM_FACTOR"] = get_default()
-    return get_default()
+    return la.use(la.from_args(args)).factor
 
 
 def add_param_args(p: argparse.ArgumentParser) -> None:

@@ -41,7 +41,7 @@ class OperatorHints:
     def of(cls, op, m: int) -> OperatorHints:
         import scipy.sparse as sp
 
-        d = getattr(op, "_diag", None)
+        d = getattr(op, "diagonal_estimate", None)
         ok_d = isinstance(d, np.ndarray) and d.shape == (m,) and bool(np.all(np.isfinite(d) & (d > 0)))
         P = getattr(op, "face_preconditioner", None)
         ok_p = sp.issparse(P) and P.shape == (m, m) and bool(np.all(np.isfinite(P.data)))
@@ -62,10 +62,14 @@ class KSolver:
     bounds of the module docstring); a plain sparse factorization of K (D by m solves for m <= 2000) when
     the QP has no usable local structure."""
 
-    def __init__(self, qp: QP, factor=None, reduction=None, ksolve: str = "auto"):
-        from dualfem.numerics.dual_operator import MatrixFreeDualOperator, choose_operator
+    def __init__(self, qp: QP, factor=None, reduction=None, ksolve: str = "auto", la=None):
+        from dualfem.numerics.dual_operator import MatrixFreeDualOperator
+        from dualfem.numerics.la import current
         from dualfem.numerics.linalg import LocalReduction
 
+        #: the linear-algebra context (:mod:`dualfem.numerics.la`): the solver's, the current one by default
+        self.la = current() if la is None else la
+        factor = self.la.factor if factor is None else factor
         self.qp = qp
         self.red = None
         self.op: MatrixFreeDualOperator | None = None
@@ -81,14 +85,14 @@ class KSolver:
             kind = "amg"
         elif qp.m:
             try:
-                kind = choose_operator(qp, "auto", backend=getattr(factor, "name", factor))[0]
+                kind = self.la.choose_operator(qp, "auto", factor=getattr(factor, "name", factor))[0]
             except InputError as exc:     # no operator fits: the certificate is unavailable, said so
                 raise RuntimeError(str(exc)) from exc
         if kind in ("matrix_free", "amg"):
             self.op = MatrixFreeDualOperator(qp, factor, ksolve="factor" if kind == "matrix_free" else "amg",
                                              k_rtol=CERT_K_RTOL)
             if hints is not None:
-                self.op._diag = hints.diagonal
+                self.op.diagonal_estimate = hints.diagonal
                 self.op.face_preconditioner = hints.face_preconditioner
             if kind == "amg":
                 # no factorization: D_AA^-1 by the augmented Lagrangian on K + B_A'C B_A (one AMG hierarchy, a
@@ -97,8 +101,8 @@ class KSolver:
                 from dualfem.numerics.amg import lumped_delassus_diagonal
 
                 self.op.face = "factor"
-                if self.op._diag is None:
-                    self.op._diag = lumped_delassus_diagonal(qp.K.tocsr(), qp.B.tocsr())
+                if self.op.diagonal_estimate is None:
+                    self.op.diagonal_estimate = lumped_delassus_diagonal(qp.K.tocsr(), qp.B.tocsr())
             return
         try:
             self.red = LocalReduction(qp, factor=factor)

@@ -1,8 +1,14 @@
-"""Sparse SPD factorization backends behind one interface (:mod:`.base`).
+"""The K-solve backends behind one interface (:mod:`.base`), in one registry.
 
-``available()`` lists the installed backends, fastest first; ``choose(name)`` returns one:
-the name given, else the process-wide choice (:func:`set_default`, e.g. from ``--factor``),
-else the environment variable ``DUALFEM_FACTOR``, else the fastest installed one.
+Registered: the direct factorizations ``pardiso``, ``cholmod``, ``superlu`` (fastest first) and the AMG
+K-solve ``amg`` (``direct = False``: :mod:`.amg`). A new backend (a GPU or a distributed one) is one module
+with a :class:`Backend` subclass (``available``, ``missing``, ``make`` -> a :class:`Factorization` with
+``analyze``/``factorize``/``solve`` of one right-hand side or a block, ``peak_bytes``: its memory model) and
+one :func:`register` call. No code outside a backend's own module branches on its name.
+
+``available()`` lists the installed direct backends, fastest first; ``choose(name)`` returns one: the name
+given, else the linear-algebra context's (:mod:`dualfem.numerics.la`: ``--factor``, a Workspace's, else
+the environment variable ``DUALFEM_FACTOR``, else the fastest installed one).
 
 Preference pardiso > cholmod > superlu, f2 at N = 512 (526 k unknowns), 2 cores shared with other
 jobs (benchmarks/factor_backends.py, two runs): factorization of K_fixed with the Schur complement
@@ -24,6 +30,7 @@ from .pardiso import PardisoBackend
 from .superlu import SuperLUBackend
 
 __all__ = ["Backend", "Factorization", "Forward", "available", "choose", "names", "set_default", "get_default",
+           "get_default_unset", "is_available",
            "missing_fast_backend_hint", "schur_by_solves", "ENV", "register", "registered", "backend_class"]
 
 #: environment variable naming the backend
@@ -96,19 +103,27 @@ def _check(name: str, source: str) -> str:
 
 
 def set_default(name: str | None) -> None:
-    """Process-wide backend (``--factor NAME``); None returns to env var / fastest."""
-    global _DEFAULT
-    _DEFAULT = None if name is None else _check(name, "factor")
+    """Process-wide backend (``--factor NAME``): sets the factor of the linear-algebra context
+    (:func:`dualfem.numerics.la.use`); None returns to the default context (environment variable / fastest)."""
+    from dualfem.numerics import la
+
+    la.use(None if name is None else la.current().with_(factor=_check(name, "factor")))
 
 
-def get_default() -> str:
-    """Name of the backend :func:`choose` returns without an argument."""
-    if _DEFAULT is not None:
-        return _DEFAULT
+def get_default_unset() -> str:
+    """The backend without a process-wide choice: ``DUALFEM_FACTOR``, else the fastest installed."""
     env = os.environ.get(ENV, "").strip()
     if env:
         return _check(env, f"environment variable {ENV}")
     return available()[0]
+
+
+def get_default() -> str:
+    """Name of the backend :func:`choose` returns without an argument: the linear-algebra context's
+    (:func:`dualfem.numerics.la.current`)."""
+    from dualfem.numerics import la
+
+    return la.current().factor
 
 
 def choose(name: str | Backend | None = None) -> Backend:
