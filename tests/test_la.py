@@ -102,3 +102,11 @@ def test_the_memory_budget_enters_the_operator_choice():
     with pytest.raises(InputError, match="available 0.0 GB"):
         tiny.choose_operator(ws.qp)
     assert LinearAlgebra(fb.available()[0]).choose_operator(ws.qp)[0] == "dense"
+
+
+def test_a_command_run_in_process_leaves_no_context_behind(capsys):
+    from dualfem.cli.main import main
+
+    assert main(["solve", "f2", "--set", "N=8", "--factor", "superlu", "--max-memory", "4", "--json"]) == 0
+    assert '"factor": "superlu"' in capsys.readouterr().out
+    assert la.chosen() is None and fb.ENV not in os.environ

@@ -399,6 +399,9 @@ def main(argv: list[str] | None = None) -> int:
         from dualfem.core.quiet import set_verbose
 
         set_verbose(True)
+    from dualfem.numerics import la
+
+    before = la.chosen()         # the command's linear-algebra context ends with it (in-process callers)
     try:
         rc = run(args)
         sys.stdout.flush()       # a full disk behind `> file` shows here, not at interpreter exit
@@ -427,6 +430,8 @@ def main(argv: list[str] | None = None) -> int:
                else f"{what} (writing the standard output or an output file)")
         print(f"dualfem {args.command}: error: {msg}", file=sys.stderr)
         return 2
+    finally:
+        la.use(before)
 
 
 def _open_std_streams() -> list[str]:

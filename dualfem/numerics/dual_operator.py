@@ -52,6 +52,7 @@ import scipy.linalg as sla
 
 from dualfem.core.errors import InputError
 from dualfem.core.qp import QP
+from dualfem.numerics.factor import backend_class, registered
 from dualfem.numerics.linalg import factor_whole
 from dualfem.numerics.operator_choice import (  # noqa: F401 (public here, as before the split)
     CROSSOVER_LOCAL,
@@ -66,7 +67,7 @@ from dualfem.numerics.operator_choice import (  # noqa: F401 (public here, as be
 from dualfem.numerics.pcg import pcg
 
 #: how the matrix-free operator applies K^-1: a sparse factorization, or AMG-preconditioned CG
-KSOLVES = ("factor", "amg")
+KSOLVES = ("factor", *registered(direct=False))
 #: how the matrix-free operator applies D_AA^-1 (MatrixFreeDualOperator.face)
 FACE_METHODS = ("cg", "factor")
 #: the factorized face solve's penalty C = AL_SCALE / diag(D): each step divides the error by ~ 1 + AL_SCALE
@@ -112,6 +113,8 @@ class DualOperator(ABC):
     """The dual operator D = B K^-1 B' of a QP and what dual methods need with it (module docstring)."""
 
     kind: str = "?"
+    #: True when the K-solves are exact to rounding (a factorization); False on an iterative K-solve backend
+    exact: bool = True
 
     def __init__(self, qp: QP):
         self.qp = qp
@@ -251,8 +254,11 @@ class MatrixFreeDualOperator(DualOperator):
             raise InputError(f"face solve method must be one of {', '.join(FACE_METHODS)}, got {face!r}")
         if ksolve not in KSOLVES:
             raise InputError(f"ksolve must be one of {', '.join(KSOLVES)}, got {ksolve!r}")
-        #: "factor" (one sparse factorization of K) or "amg" (AMG-preconditioned CG to k_rtol)
+        #: "factor" (one sparse factorization of K) or a non-direct K-solve backend (``amg``: AMG-preconditioned
+        #: CG to k_rtol; :func:`dualfem.numerics.factor.registered` with ``direct=False``)
         self.ksolve = ksolve
+        #: True when K-solves are exact to rounding (a factorization), False for an iterative K-solve backend
+        self.exact = ksolve == "factor"
         #: how D_AA^-1 is applied: "cg" (preconditioned CG, one K-solve per iteration) or "factor" (one
         #: factorization of K + B_A' C B_A per set, augmented-Lagrangian refinement: a few solves)
         self.face = face
@@ -260,13 +266,12 @@ class MatrixFreeDualOperator(DualOperator):
         self._newton = None
         t0 = time.perf_counter()
         before = _factorizations(qp, store)
-        if ksolve == "amg":
-            from dualfem.numerics.amg import RTOL, amg_for
-
-            #: relative residual of every AMG K-solve (|r - K z| <= k_rtol |r|)
-            self.k_rtol = float(RTOL if k_rtol is None else k_rtol)
+        if not self.exact:
+            kb = backend_class(ksolve)
+            #: relative residual of every iterative K-solve (|r - K z| <= k_rtol |r|)
+            self.k_rtol = float(kb.default_rtol() if k_rtol is None else k_rtol)
             self.accuracy = self.k_rtol
-            self.fact = amg_for(qp, store)
+            self.fact = kb.for_qp(qp, store)
             self._its0 = self.fact.counters.iterations
         else:
             self.k_rtol = 0.0
@@ -286,7 +291,7 @@ class MatrixFreeDualOperator(DualOperator):
 
     def _solve(self, b: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
         self.counters.solves += 1 if b.ndim == 1 else b.shape[1]
-        if self.ksolve == "amg":
+        if not self.exact:
             z = self.fact.solve(b, x0=x0, rtol=self.k_rtol)
             self.counters.amg_iterations = self.fact.counters.iterations - self._its0
             return z
@@ -307,7 +312,7 @@ class MatrixFreeDualOperator(DualOperator):
 
     def x_of(self, mu):
         x = self._solve(self.qp.F + self.BT @ np.asarray(mu, float), x0=self._x_last)
-        if self.ksolve == "amg":
+        if not self.exact:
             self._x_last = x.copy()          # the next x(mu) starts from this one (mu changes little)
         return x
 
@@ -388,10 +393,10 @@ class MatrixFreeDualOperator(DualOperator):
         if self._newton is None:
             from dualfem.numerics.newton_matrix import NewtonMatrix
 
-            if self.ksolve == "amg":
+            if not self.exact:
                 from dualfem.numerics.amg import rigid_body_modes
 
-                self._newton = NewtonMatrix(self.qp.K, self.B, "amg", keep=keep,
+                self._newton = NewtonMatrix(self.qp.K, self.B, self.ksolve, keep=keep,
                                             modes=rigid_body_modes(self.qp.geometry, self.qp.n), rtol=self.k_rtol)
             else:
                 self._newton = NewtonMatrix(self.qp.K, self.B, self._factor_name, keep=keep)
@@ -440,9 +445,9 @@ class MatrixFreeDualOperator(DualOperator):
         out = super().info()
         out["face_method"] = self.face
         out["ksolve"] = self.ksolve
-        if self.ksolve == "amg":
+        if not self.exact:
             out["k_rtol"] = self.k_rtol
-            out["amg"] = {**self.fact.info, **self.fact.counters.as_dict()}
+            out[self.ksolve] = {**self.fact.info, **self.fact.counters.as_dict()}
         if self._newton is not None:
             out.update(self._newton.info())
         return out
@@ -469,11 +474,10 @@ def make_operator(qp: QP, operator: str = "auto", factor=None, store=None, tol: 
     kind, why = chosen
     if kind == "dense":
         op: DualOperator = DenseDualOperator(qp, factor, store)
-    elif kind == "amg":
-        from dualfem.numerics.amg import RTOL, inner_rtol
-
-        op = MatrixFreeDualOperator(qp, factor, store, ksolve="amg", k_rtol=RTOL if tol is None else inner_rtol(tol))
-    else:
+    elif kind == "matrix_free":
         op = MatrixFreeDualOperator(qp, factor, store)
+    else:                           # the matrix-free operator on the non-direct K-solve backend of that name
+        op = MatrixFreeDualOperator(qp, factor, store, ksolve=kind,
+                                    k_rtol=None if tol is None else backend_class(kind).inner_rtol(tol))
     op.chosen_because = why
     return op

@@ -35,7 +35,7 @@ from typing import Any
 from dualfem.core.errors import InputError
 from dualfem.numerics import factor as _factor
 
-__all__ = ["LinearAlgebra", "current", "use", "from_args", "ENV"]
+__all__ = ["LinearAlgebra", "chosen", "current", "use", "from_args", "ENV"]
 
 #: environment variable naming the factorization backend (read only: nothing here writes it)
 ENV = _factor.ENV
@@ -96,7 +96,8 @@ class LinearAlgebra:
         from dualfem.numerics.operator_choice import choose_operator
 
         asked = self.operator if asked in (None, "auto") else asked
-        return choose_operator(qp, asked, limit_bytes=self.memory_limit(), backend=factor or self.factor)
+        return choose_operator(qp, asked, limit_bytes=self.memory_limit(), backend=factor or self.factor,
+                               ksolve=self.ksolve)
 
     def ksolver(self, qp, reduction=None, ksolve: str = "auto"):
         """The certificate's K-solver of ``qp`` in this context (:class:`dualfem.numerics.ksolver.KSolver`)."""
@@ -127,6 +128,11 @@ def current() -> LinearAlgebra:
     """The context chosen for this run (:func:`use`, a Workspace's :meth:`~LinearAlgebra.active`), else
     :meth:`LinearAlgebra.default` (read now: a changed environment variable counts)."""
     return _CURRENT if _CURRENT is not None else LinearAlgebra.default()
+
+
+def chosen() -> LinearAlgebra | None:
+    """The context chosen explicitly for this process (:func:`use`), None when it runs on the default."""
+    return _CURRENT
 
 
 def use(la: LinearAlgebra | None) -> LinearAlgebra:

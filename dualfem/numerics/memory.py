@@ -211,6 +211,9 @@ def check_fits(problem, max_bytes: float | None = None, backend: str | None = No
     """InputError naming the size, the estimate and the memory when a scene cannot fit (before assembly).
     3D scenes (:func:`_problem_dim`) use the 3D factor model and pass when the AMG K-solve fits."""
 
+    from dualfem.numerics.factor import backend_class
+    from dualfem.numerics.la import current
+
     est = problem.size_estimate() if hasattr(problem, "size_estimate") else None
     if est is None:
         return
@@ -219,13 +222,14 @@ def check_fits(problem, max_bytes: float | None = None, backend: str | None = No
     dim = _problem_dim(problem, est)
     limit = None if max_bytes is None else int(max_bytes)
     ok, need, have = fits(n, backend, limit, dim=dim)
-    if not ok and dim == 3 and amg_installed():      # 3D: where no factorization fits, the AMG K-solve may
-        ok = fits(n, "amg", limit, dim=3)[0]
+    ks = backend_class(current().ksolve)             # the context's non-direct K-solve (AMG)
+    if not ok and dim == 3 and ks.missing() is None:  # 3D: where no factorization fits, the AMG K-solve may
+        ok = fits(n, ks.name, limit, dim=3)[0]
     if not ok:
         alt = ""
         if dim == 3:
-            alt = (f" or about {fits(n, 'amg', limit, dim=3)[1] / 1e9:.0f} GB with the AMG K-solve"
-                   + ("" if amg_installed() else " (pip install 'dualfem[amg]')"))
+            alt = (f" or about {fits(n, ks.name, limit, dim=3)[1] / 1e9:.0f} GB with the {ks.name} K-solve"
+                   + ("" if ks.missing() is None else f" ({ks.install_hint})"))
         raise InputError(f"{label} ({n / 1e6:.1f} M unknowns) needs about {need / 1e9:.0f} GB of memory with the "
                          f"{backend} factorization{alt} (estimate x {SAFETY:g}), "
                          f"{'allowed' if max_bytes is not None else 'available'}: {have / 1e9:.1f} GB; use a smaller "

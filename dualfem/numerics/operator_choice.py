@@ -11,9 +11,10 @@ import numpy as np
 
 from dualfem.core.errors import InputError
 from dualfem.core.qp import QP
+from dualfem.numerics.factor import registered
 
 #: the dual-operator kinds (``operator=`` of the dual solvers)
-OPERATORS = ("auto", "dense", "matrix_free", "amg")
+OPERATORS = ("auto", "dense", "matrix_free", *registered(direct=False))
 #: ``auto`` takes the dense reduction while |I|^2 <= CROSSOVER_RATIO * n (n unknowns, |I| local unknowns):
 #: the dense phases cost ~|I|^3 flops and a 2D sparse factorization ~n^1.5, so the crossover is a ratio
 #: of |I|^2 to n. Measured (benchmarks/results/operator_crossover.md, pdas setup + solve, medians of 3,
@@ -47,37 +48,43 @@ def qp_dim(qp: QP) -> int:
     return int(qp.geometry.dim) if qp.geometry is not None else 2
 
 
-def estimates(qp: QP, backend: str | None = None) -> dict:
+def estimates(qp: QP, backend: str | None = None, ksolve: str = "amg") -> dict:
     """Extra peak memory (bytes, x the model's SAFETY) of each operator for a QP the process already holds:
     the factorization (:func:`dualfem.numerics.memory.factor_bytes`, of the QP's dimension) plus, dense, the
-    dense blocks (:func:`dense_extra_bytes`), matrix-free, a few n-vectors; amg: the AMG hierarchy
-    (:func:`dualfem.numerics.memory.amg_bytes`) and a few n-vectors. Compared with the memory available now."""
-    from dualfem.numerics.factor import get_default
-    from dualfem.numerics.memory import SAFETY, amg_bytes, factor_bytes
+    dense blocks (:func:`dense_extra_bytes`), matrix-free, a few n-vectors; under the name of the non-direct
+    K-solve backend ``ksolve`` (``amg``): its memory model (:meth:`~dualfem.numerics.factor.base.Backend.
+    peak_bytes`, the AMG hierarchy) and a few n-vectors. Compared with the memory available now."""
+    from dualfem.numerics.factor import backend_class, get_default
+    from dualfem.numerics.memory import SAFETY, factor_bytes
 
     backend = backend or get_default()
     base = factor_bytes(max(qp.n, 1), backend, dim=qp_dim(qp))
     nI = int(np.asarray(qp.local_dofs).size)
     return {"dense": int(SAFETY * (base + dense_extra_bytes(nI, qp.m))),
             "matrix_free": int(SAFETY * (base + 8 * 8 * qp.n)),
-            "amg": int(SAFETY * (amg_bytes(max(qp.n, 1)) + 8 * 16 * qp.n))}
+            ksolve: int(SAFETY * (backend_class(ksolve).peak_bytes(max(qp.n, 1)) + 8 * 16 * qp.n))}
 
 
 def choose_operator(qp: QP, asked: str = "auto", limit_bytes: int | None = None,
-                    backend: str | None = None) -> tuple[str, str]:
+                    backend: str | None = None, ksolve: str = "amg") -> tuple[str, str]:
     """(operator, why) for ``asked`` in :data:`OPERATORS`.
 
     ``auto``: dense while |I|^2 <= :data:`CROSSOVER_RATIO` n and |I| <= :data:`CROSSOVER_LOCAL` (and <=
-    MAX_LOCAL) and its estimate fits the
-    memory available, else matrix-free if that fits. InputError when the asked one (or, for auto,
-    neither) fits, naming the sizes, the estimates, the memory and the other operator.
+    MAX_LOCAL) and its estimate fits the memory available (``limit_bytes``), else matrix-free (one
+    factorization of K by ``backend``) if that fits, else the matrix-free operator on the non-direct K-solve
+    backend ``ksolve`` (kind: its name, ``amg``) if installed and fitting. InputError when the asked one (or,
+    for auto, none) fits, naming the sizes, the estimates, the memory and the other operator;
+    MissingDependency when the asked K-solve backend is not installed.
     """
+    from dualfem.numerics.factor import backend_class, registered
     from dualfem.numerics.linalg import MAX_LOCAL
     from dualfem.numerics.memory import available_bytes
 
     asked = check_operator(asked, "?") if asked not in OPERATORS else asked
+    ks = asked if asked in registered(direct=False) else ksolve
+    kb = backend_class(ks)
     nI = int(np.asarray(qp.local_dofs).size)
-    est = estimates(qp, backend)
+    est = estimates(qp, backend, ks)
     have = available_bytes() if limit_bytes is None else int(limit_bytes)
     sizes = f"n = {qp.n} unknowns, {nI} local unknowns, m = {qp.m}"
 
@@ -85,13 +92,11 @@ def choose_operator(qp: QP, asked: str = "auto", limit_bytes: int | None = None,
         return InputError(f"operator={kind}: {sizes}: needs about {est[kind] / 1e9:.1f} GB, available "
                           f"{have / 1e9:.1f} GB; operator={other} needs about {est[other] / 1e9:.1f} GB")
 
-    if asked == "amg":
-        from dualfem.numerics.amg import require_pyamg
-
-        require_pyamg()
-        if est["amg"] > have:
-            raise refuse("amg", "matrix_free")
-        return "amg", "asked"
+    if asked == ks:
+        kb.require()
+        if est[ks] > have:
+            raise refuse(ks, "matrix_free")
+        return ks, "asked"
     if asked == "dense":
         if nI > MAX_LOCAL:
             raise InputError(f"operator=dense: {sizes}: the dense reduced matrix would exceed {MAX_LOCAL}^2 "
@@ -102,7 +107,7 @@ def choose_operator(qp: QP, asked: str = "auto", limit_bytes: int | None = None,
         return "dense", "asked"
     if asked == "matrix_free":
         if est["matrix_free"] > have:
-            raise refuse("matrix_free", "amg")
+            raise refuse("matrix_free", ks)
         return "matrix_free", "asked"
     limit = int(min(CROSSOVER_LOCAL, MAX_LOCAL, np.sqrt(CROSSOVER_RATIO * qp.n)))
     if nI <= limit and est["dense"] <= have:
@@ -110,14 +115,11 @@ def choose_operator(qp: QP, asked: str = "auto", limit_bytes: int | None = None,
     if est["matrix_free"] <= have:
         return "matrix_free", f"auto: {nI} local unknowns > {limit}" if nI > limit \
             else "auto: the dense blocks do not fit in memory"
-    from dualfem.numerics.memory import amg_installed
-
-    if est["amg"] <= have and amg_installed():
-        return "amg", (f"auto: no factorization of K fits ({est['matrix_free'] / 1e9:.1f} GB estimated, "
-                       f"{have / 1e9:.1f} GB available)")
-    hint = "" if amg_installed() else " (operator=amg needs pyamg: pip install 'dualfem[amg]')"
+    missing = kb.missing()
+    if est[ks] <= have and missing is None:
+        return ks, (f"auto: no factorization of K fits ({est['matrix_free'] / 1e9:.1f} GB estimated, "
+                    f"{have / 1e9:.1f} GB available)")
+    hint = "" if missing is None else f" (operator={ks}: {missing})"
     raise InputError(f"operator=auto: {sizes}: neither operator fits: dense about {est['dense'] / 1e9:.1f} GB, "
-                     f"matrix_free about {est['matrix_free'] / 1e9:.1f} GB, amg about {est['amg'] / 1e9:.1f} GB, "
+                     f"matrix_free about {est['matrix_free'] / 1e9:.1f} GB, {ks} about {est[ks] / 1e9:.1f} GB, "
                      f"available {have / 1e9:.1f} GB{hint}")
-
-

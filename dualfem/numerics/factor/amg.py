@@ -65,12 +65,40 @@ class AmgBackend(Backend):
         return importlib.util.find_spec("pyamg") is not None
 
     @classmethod
+    def require(cls) -> None:
+        """MissingDependency naming the ``amg`` extra unless pyamg imports (:func:`dualfem.numerics.amg.
+        require_pyamg`)."""
+        from dualfem.numerics.amg import require_pyamg
+
+        require_pyamg()
+
+    @classmethod
     def peak_bytes(cls, n_unknowns: int, dim: int = 2, analysis: dict | None = None) -> int:
         """The hierarchy and CG's vectors: :func:`dualfem.numerics.memory.amg_bytes` (``dim``, ``analysis``
         unused)."""
         from dualfem.numerics.memory import amg_bytes
 
         return amg_bytes(n_unknowns)
+
+    @classmethod
+    def default_rtol(cls) -> float:
+        from dualfem.numerics.amg import RTOL
+
+        return RTOL
+
+    @classmethod
+    def inner_rtol(cls, outer_tol: float) -> float:
+        from dualfem.numerics.amg import inner_rtol
+
+        return inner_rtol(outer_tol)
+
+    @classmethod
+    def for_qp(cls, qp, store=None):
+        """The QP's :class:`~dualfem.numerics.amg.AmgKSolve` (rigid-body modes; once per store:
+        :func:`dualfem.numerics.amg.amg_for`)."""
+        from dualfem.numerics.amg import amg_for
+
+        return amg_for(qp, store)
 
     def make(self, local: np.ndarray | None = None, order: OrderHint = None) -> Factorization:
         return AmgFactorization(local, order, self.modes, self.rtol)
