@@ -36,6 +36,7 @@ from __future__ import annotations
 import time
 from collections import OrderedDict
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -81,7 +82,8 @@ class NewtonMatrix:
         #: factorization (module docstring)
         self.amg = isinstance(factor, str) and factor.strip().lower() in registered(direct=False)
         self.modes, self.rtol = modes, rtol
-        self.backend = backend_class(factor)(modes, rtol) if self.amg else choose_backend(factor)
+        kb: Any = backend_class(str(factor)) if self.amg else None
+        self.backend: Any = kb(modes, rtol) if self.amg else choose_backend(factor)
         ensure_threads()
         t0 = time.perf_counter()
         K, B = _canonical(K), _canonical(B)
@@ -195,7 +197,7 @@ class NewtonMatrix:
     def _select(self, slot: int) -> Factorization:
         """The factorization object of ``slot``, made current (PARDISO: one object, factor ``slot``)."""
         if self._shared is not None:
-            self._shared.slot(slot)
+            self._shared.slot(slot)  # type: ignore[union-attr]
             return self._shared
         while len(self._facts) <= slot:
             self._facts.append(self.backend.make())

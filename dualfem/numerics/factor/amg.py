@@ -15,6 +15,7 @@ Schur complement, when asked for, is the generic one by |I| solves (inexact, as 
 from __future__ import annotations
 
 import importlib.util
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -32,7 +33,7 @@ class AmgFactorization(Factorization):
         super().__init__(local, order)
         self.modes = modes
         self.rtol = rtol
-        self.ksolve = None
+        self.ksolve: Any = None          # the AmgKSolve, made by factorize
 
     def _analyze(self, A: sp.csr_matrix) -> None:
         """Nothing: the hierarchy depends on the values."""
