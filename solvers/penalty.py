@@ -139,7 +139,7 @@ class _SparseSpace:
     def __init__(self, op, qp, factor=None, keep: int = 4):
         self.qp, self.op = qp, op
         self.Q, self.q, self.B = qp.K.tocsr(), np.asarray(qp.F, float), op.B
-        self.nm = op.newton_matrix(keep) if getattr(op, "ksolve", "factor") == "amg" \
+        self.nm = op.newton_matrix(keep) if not getattr(op, "exact", True) \
             else NewtonMatrix(qp.K, qp.B, factor, keep=keep)
         self.I = np.asarray(qp.local_dofs) if np.size(qp.local_dofs) else slice(None)
         self.refinements = 0

@@ -7,6 +7,7 @@ import pytest
 from _backend import newton_analyses
 
 import dualfem.numerics.dual_operator as dop
+import dualfem.numerics.operator_choice as operator_choice
 from dualfem.core.errors import InputError
 from dualfem.core.scene import load_scene
 from dualfem.experiments.runner import run
@@ -49,7 +50,7 @@ def test_dense_and_matrix_free_agree(delta):
 def test_auto_choice_and_refusals(monkeypatch):
     qp = _qp()
     assert choose_operator(qp, "auto")[0] == "dense"
-    monkeypatch.setattr(dop, "CROSSOVER_LOCAL", 10)
+    monkeypatch.setattr(operator_choice, "CROSSOVER_LOCAL", 10)
     kind, why = choose_operator(qp, "auto")
     assert kind == "matrix_free" and "local unknowns" in why
     assert choose_operator(qp, "dense")[0] == "dense"            # asked: taken while it fits
@@ -65,7 +66,7 @@ def test_auto_choice_and_refusals(monkeypatch):
 
 def test_auto_never_picks_what_does_not_fit(monkeypatch):
     qp = _qp()
-    monkeypatch.setattr(dop, "dense_extra_bytes", lambda n_local, m: 10**10)     # dense blocks of 10 GB
+    monkeypatch.setattr(operator_choice, "dense_extra_bytes", lambda n_local, m: 10**10)     # dense blocks of 10 GB
     est = dop.estimates(qp)
     assert est["dense"] > est["matrix_free"] > 0
     kind, _ = choose_operator(qp, "auto", limit_bytes=(est["dense"] + est["matrix_free"]) // 2)
@@ -96,7 +97,7 @@ def test_certificate_matrix_free_equals_dense(monkeypatch):
     qp = _qp(1e-5)
     s = run("pdas", qp, {"operator": "dense"})
     dense = certified_error(qp, s.x, s.multipliers, KSolver(qp))
-    monkeypatch.setattr(dop, "CROSSOVER_LOCAL", 0)
+    monkeypatch.setattr(operator_choice, "CROSSOVER_LOCAL", 0)
     ks = KSolver(qp)
     assert ks.op is not None and ks.delassus() is None
     mf = certified_error(qp, s.x, s.multipliers, ks)
@@ -140,7 +141,7 @@ def test_certificate_takes_only_speed_hints_from_the_solver(monkeypatch):
     import scipy.sparse as sp
 
     qp = load_scene("two_defects", {}).build()
-    monkeypatch.setattr(dop, "CROSSOVER_LOCAL", 0)
+    monkeypatch.setattr(operator_choice, "CROSSOVER_LOCAL", 0)
     good = run("pdas", qp, {"operator": "matrix_free"})
     fresh = certified_error(qp, good.x, good.multipliers, KSolver(qp))
     assert good.info["certificate"]["value"] == pytest.approx(fresh["value"], rel=1e-4)

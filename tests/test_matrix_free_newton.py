@@ -104,12 +104,12 @@ def test_penalty_matrix_free_agrees(delta):
 def test_never_skipped_above_the_dense_sizes(monkeypatch):
     """Above the dense limit (forced small here) operator=auto switches to matrix_free: the paper's
     uzawa, uzawa_auto and penalty run and solve; only an explicit operator=dense is refused."""
-    import dualfem.numerics.dual_operator as dual_operator
     import dualfem.numerics.linalg as linalg
+    import dualfem.numerics.operator_choice as operator_choice
 
     qp = cracks(1e-5)
     monkeypatch.setattr(linalg, "MAX_LOCAL", 10)
-    monkeypatch.setattr(dual_operator, "CROSSOVER_LOCAL", 10)
+    monkeypatch.setattr(operator_choice, "CROSSOVER_LOCAL", 10)
     assert qp.local_dofs.size > 10
     for name in ("uzawa", "uzawa_auto", "penalty"):
         s = solvers()[name]()

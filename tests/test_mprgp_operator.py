@@ -15,7 +15,7 @@ from dualfem.core.registry import solvers
 from dualfem.core.scene import build_qp, load_scene
 from dualfem.core.solution import Status
 from dualfem.experiments.runner import make_solver
-from dualfem.numerics import dual_operator, linalg
+from dualfem.numerics import linalg, operator_choice
 from dualfem.numerics.dual_precond import PRECONDS, defect_clusters, dirichlet_inverse, lumped_inverse
 
 _QP: dict = {}
@@ -116,7 +116,7 @@ def test_preconditioners_are_spd_and_per_crack():
 def test_matrix_free_when_dense_does_not_fit(monkeypatch):
     qp = f2(32, 1e-5)
     ref = solve(qp, operator="dense")
-    monkeypatch.setattr(dual_operator, "CROSSOVER_LOCAL", 10)
+    monkeypatch.setattr(operator_choice, "CROSSOVER_LOCAL", 10)
     auto = solve(qp)                                      # operator=auto, the default
     assert auto.info["operator"] == "matrix_free" and "auto" in auto.info["operator_chosen_because"]
     assert_agree(qp, ref, auto)

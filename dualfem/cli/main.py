@@ -62,15 +62,12 @@ def add_factor_arg(p: argparse.ArgumentParser) -> None:
 
 
 def apply_factor(args: argparse.Namespace) -> str:
-    """Make ``--factor`` the process-wide backend (and the one worker processes inherit); its name."""
-    import os
+    """Choose the run's linear-algebra context from ``--factor``, ``--threads``, ``--max-memory``
+    (:func:`dualfem.numerics.la.from_args`; InputError for an unknown/uninstalled backend); its backend.
+    Forked workers share it; the bench harness hands it to its child processes."""
+    from dualfem.numerics import la
 
-    from dualfem.numerics.factor import get_default, set_default
-
-    if getattr(args, "factor", None):
-        set_default(args.factor)                       # InputError for an unknown/uninstalled name
-        os.environ["DUALFEM_FACTOR"] = get_default()
-    return get_default()
+    return la.use(la.from_args(args)).factor
 
 
 def add_param_args(p: argparse.ArgumentParser) -> None:
@@ -407,6 +404,9 @@ def main(argv: list[str] | None = None) -> int:
         from dualfem.core.quiet import set_verbose
 
         set_verbose(True)
+    from dualfem.numerics import la
+
+    before = la.chosen()         # the command's linear-algebra context ends with it (in-process callers)
     try:
         rc = run(args)
         sys.stdout.flush()       # a full disk behind `> file` shows here, not at interpreter exit
@@ -435,6 +435,8 @@ def main(argv: list[str] | None = None) -> int:
                else f"{what} (writing the standard output or an output file)")
         print(f"dualfem {args.command}: error: {msg}", file=sys.stderr)
         return 2
+    finally:
+        la.use(before)
 
 
 def _open_std_streams() -> list[str]:

@@ -230,6 +230,9 @@ class GuardedWorker:
         env = dict(os.environ)
         env.setdefault("MPLBACKEND", "Agg")
         env["DUALFEM_HARNESS_PARENT"] = str(os.getpid())     # the child exits when this process is gone
+        from dualfem.numerics.la import current
+
+        env.update(current().child_env())                    # the run's linear-algebra context (--factor)
         group = {"process_group": 0} if hasattr(os, "killpg") else {}    # its own group: killed with its children
         self.proc = subprocess.Popen([sys.executable, "-m", "dualfem.experiments.harness", "--child"],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env, bufsize=0, **group)

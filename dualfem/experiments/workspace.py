@@ -11,6 +11,8 @@ Who owns what is reused (nothing is kept by a module):
 * the delta-free assembly (mesh, DOF maps, elastic stiffness K_el, the planned interface sum, F of
   the last load): the workspace's problem instance (its ``shared``, a :class:`dualfem.core.problem.Shared`),
   handed on by :meth:`~dualfem.core.problem.Problem.with_params` to the instance of each update;
+* the linear-algebra context (backend, dual-operator kind, threads, memory budget: ``la``, a
+  :class:`~dualfem.numerics.la.LinearAlgebra`), active while it sets up, solves and certifies;
 * the factorization of K_fixed with its Schur complement onto the defect unknowns: the workspace's
   :class:`~dualfem.numerics.linalg.FactorStore`, which every QP it builds names (``QP.store``), so
   every delta, load, solver and certificate of the workspace works on one factorization.
@@ -35,6 +37,7 @@ from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
 from dualfem.core.solution import Solution
 from dualfem.core.solver import Solver
+from dualfem.numerics.la import LinearAlgebra
 
 
 class Workspace:
@@ -42,13 +45,16 @@ class Workspace:
 
     ``scene``: a built-in scene name, a ``.toml`` scene file, a ``.npz``/``.mat`` QP file
     (:func:`dualfem.core.scene.load_scene`, with ``params`` as overrides) or a problem instance.
-    ``factor``: the factorization backend (default: the process-wide choice); solvers with a
-    ``factor`` parameter are given it unless their params name one.
+    ``la``: the linear-algebra context (:class:`dualfem.numerics.la.LinearAlgebra`: backend, operator kind,
+    threads, memory budget; default: the process's current one, taken now), active while the workspace sets
+    up, solves and certifies; ``factor``: its backend instead (solvers with a ``factor`` parameter are given
+    it unless their params name one).
     """
 
-    def __init__(self, scene: str | Problem, params: dict[str, Any] | None = None, *, factor: str | None = None):
+    def __init__(self, scene: str | Problem, params: dict[str, Any] | None = None, *, factor: str | None = None,
+                 la: LinearAlgebra | None = None):
         from dualfem.core.scene import load_scene
-        from dualfem.numerics.factor import choose
+        from dualfem.numerics.la import current
         from dualfem.numerics.linalg import FactorStore
 
         if isinstance(scene, Problem):
@@ -57,8 +63,8 @@ class Workspace:
             self.problem = scene
         else:
             self.problem = load_scene(scene, params)          # validated now; nothing assembled yet
-        if factor is not None:
-            choose(factor)                                      # an unknown or missing backend: InputError now
+        #: the linear-algebra context of every setup, solve and certificate of this workspace
+        self.la = (current() if la is None else la).with_(factor=factor)  # unknown/missing backend: InputError
         self.factor = factor
         self.store = FactorStore()
         self.builds = 0
@@ -71,7 +77,7 @@ class Workspace:
 
         qp = self._build(self.problem)
         if factorize and too_many_local(qp) is None:
-            factor_fixed(qp, self.factor)
+            factor_fixed(qp, self.la.factor)
         return self
 
     def update(self, delta: float | None = None, load: Any = None, **keys: Any) -> Workspace:
@@ -109,7 +115,8 @@ class Workspace:
         if isinstance(solver, str) and self.factor is not None and "factor" not in params \
                 and "factor" in get_solver(solver).defaults:
             params["factor"] = self.factor
-        return run(solver, self.qp, params, tol=tol)
+        with self.la.active():             # the solver and the certificate take it from the context
+            return run(solver, self.qp, params, tol=tol)
 
     def clear(self) -> Workspace:
         """Drop the factorizations (the next solve factorizes again: cold timings); the assembly is kept."""

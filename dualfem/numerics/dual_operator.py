@@ -52,22 +52,22 @@ import scipy.linalg as sla
 
 from dualfem.core.errors import InputError
 from dualfem.core.qp import QP
+from dualfem.numerics.factor import backend_class, registered
 from dualfem.numerics.linalg import factor_whole
+from dualfem.numerics.operator_choice import (  # noqa: F401 (public here, as before the split)
+    CROSSOVER_LOCAL,
+    CROSSOVER_RATIO,
+    OPERATORS,
+    check_operator,
+    choose_operator,
+    dense_extra_bytes,
+    estimates,
+    qp_dim,
+)
 from dualfem.numerics.pcg import pcg
 
-#: the operator names of the dual solvers' ``operator`` parameter
-OPERATORS = ("auto", "dense", "matrix_free", "amg")
 #: how the matrix-free operator applies K^-1: a sparse factorization, or AMG-preconditioned CG
-KSOLVES = ("factor", "amg")
-#: ``auto`` takes the dense reduction while |I|^2 <= CROSSOVER_RATIO * n (n unknowns, |I| local unknowns):
-#: the dense phases cost ~|I|^3 flops and a 2D sparse factorization ~n^1.5, so the crossover is a ratio
-#: of |I|^2 to n. Measured (benchmarks/results/operator_crossover.md, pdas setup + solve, medians of 3,
-#: fractured scenes of 260-277 k unknowns, 2 cores): |I|^2 / n = 3.1: dense 1.1x the floor, matrix-free
-#: 1.1x; 12: 0.9x / 1.3x; 28: 1.8x / 2.0x; 49: 3.3x / 2.7x; 191: 10.7x / 3.6x; 421: 34.6x / 4.5x
-#: (the one-crack structured scenes have |I|^2 / n ~ 2: dense up to N = 2048)
-CROSSOVER_RATIO = 32.0
-#: and never more local unknowns than this on the dense path (tests lower it to force matrix-free)
-CROSSOVER_LOCAL = 12000
+KSOLVES = ("factor", *registered(direct=False))
 #: how the matrix-free operator applies D_AA^-1 (MatrixFreeDualOperator.face)
 FACE_METHODS = ("cg", "factor")
 #: the factorized face solve's penalty C = AL_SCALE / diag(D): each step divides the error by ~ 1 + AL_SCALE
@@ -93,17 +93,6 @@ def power_norm(matvec, m: int, iters: int) -> float:
     return lam
 
 
-def check_operator(value, solver: str) -> str:
-    """The operator name of a solver parameter (``matrixfree``, the old spelling, is accepted)."""
-    v = str(value).strip().lower()
-    if v == "matrixfree":
-        v = "matrix_free"
-    if v not in OPERATORS:
-        raise InputError(f"parameter 'operator' of solver {solver!r} must be one of {', '.join(OPERATORS)}, "
-                         f"got {value!r}")
-    return v
-
-
 @dataclass
 class OperatorCounters:
     """Work done through an operator (PERMON-style counters; every result reports them)."""
@@ -124,6 +113,8 @@ class DualOperator(ABC):
     """The dual operator D = B K^-1 B' of a QP and what dual methods need with it (module docstring)."""
 
     kind: str = "?"
+    #: True when the K-solves are exact to rounding (a factorization); False on an iterative K-solve backend
+    exact: bool = True
 
     def __init__(self, qp: QP):
         self.qp = qp
@@ -263,8 +254,11 @@ class MatrixFreeDualOperator(DualOperator):
             raise InputError(f"face solve method must be one of {', '.join(FACE_METHODS)}, got {face!r}")
         if ksolve not in KSOLVES:
             raise InputError(f"ksolve must be one of {', '.join(KSOLVES)}, got {ksolve!r}")
-        #: "factor" (one sparse factorization of K) or "amg" (AMG-preconditioned CG to k_rtol)
+        #: "factor" (one sparse factorization of K) or a non-direct K-solve backend (``amg``: AMG-preconditioned
+        #: CG to k_rtol; :func:`dualfem.numerics.factor.registered` with ``direct=False``)
         self.ksolve = ksolve
+        #: True when K-solves are exact to rounding (a factorization), False for an iterative K-solve backend
+        self.exact = ksolve == "factor"
         #: how D_AA^-1 is applied: "cg" (preconditioned CG, one K-solve per iteration) or "factor" (one
         #: factorization of K + B_A' C B_A per set, augmented-Lagrangian refinement: a few solves)
         self.face = face
@@ -272,13 +266,12 @@ class MatrixFreeDualOperator(DualOperator):
         self._newton = None
         t0 = time.perf_counter()
         before = _factorizations(qp, store)
-        if ksolve == "amg":
-            from dualfem.numerics.amg import RTOL, amg_for
-
-            #: relative residual of every AMG K-solve (|r - K z| <= k_rtol |r|)
-            self.k_rtol = float(RTOL if k_rtol is None else k_rtol)
+        if not self.exact:
+            kb = backend_class(ksolve)
+            #: relative residual of every iterative K-solve (|r - K z| <= k_rtol |r|)
+            self.k_rtol = float(kb.default_rtol() if k_rtol is None else k_rtol)
             self.accuracy = self.k_rtol
-            self.fact = amg_for(qp, store)
+            self.fact = kb.for_qp(qp, store)
             self._its0 = self.fact.counters.iterations
         else:
             self.k_rtol = 0.0
@@ -298,7 +291,7 @@ class MatrixFreeDualOperator(DualOperator):
 
     def _solve(self, b: np.ndarray, x0: np.ndarray | None = None) -> np.ndarray:
         self.counters.solves += 1 if b.ndim == 1 else b.shape[1]
-        if self.ksolve == "amg":
+        if not self.exact:
             z = self.fact.solve(b, x0=x0, rtol=self.k_rtol)
             self.counters.amg_iterations = self.fact.counters.iterations - self._its0
             return z
@@ -319,7 +312,7 @@ class MatrixFreeDualOperator(DualOperator):
 
     def x_of(self, mu):
         x = self._solve(self.qp.F + self.BT @ np.asarray(mu, float), x0=self._x_last)
-        if self.ksolve == "amg":
+        if not self.exact:
             self._x_last = x.copy()          # the next x(mu) starts from this one (mu changes little)
         return x
 
@@ -329,6 +322,16 @@ class MatrixFreeDualOperator(DualOperator):
     def k_quad(self, r):
         z = self._solve(np.asarray(r, float))
         return float(r @ z), self.B @ z
+
+    @property
+    def diagonal_estimate(self) -> np.ndarray | None:
+        """The diag(D) estimate :meth:`diagonal` returns, None until computed or given; set it to reuse one
+        (the certificate takes the solver's, :class:`dualfem.numerics.ksolver.OperatorHints`)."""
+        return self._diag
+
+    @diagonal_estimate.setter
+    def diagonal_estimate(self, d: np.ndarray | None) -> None:
+        self._diag = d
 
     def diagonal(self) -> np.ndarray:
         """An estimate of diag(D): the lumped values |b_j|^4 / (b_j'K b_j) (lower bounds of D_jj, by
@@ -390,10 +393,10 @@ class MatrixFreeDualOperator(DualOperator):
         if self._newton is None:
             from dualfem.numerics.newton_matrix import NewtonMatrix
 
-            if self.ksolve == "amg":
+            if not self.exact:
                 from dualfem.numerics.amg import rigid_body_modes
 
-                self._newton = NewtonMatrix(self.qp.K, self.B, "amg", keep=keep,
+                self._newton = NewtonMatrix(self.qp.K, self.B, self.ksolve, keep=keep,
                                             modes=rigid_body_modes(self.qp.geometry, self.qp.n), rtol=self.k_rtol)
             else:
                 self._newton = NewtonMatrix(self.qp.K, self.B, self._factor_name, keep=keep)
@@ -442,9 +445,9 @@ class MatrixFreeDualOperator(DualOperator):
         out = super().info()
         out["face_method"] = self.face
         out["ksolve"] = self.ksolve
-        if self.ksolve == "amg":
+        if not self.exact:
             out["k_rtol"] = self.k_rtol
-            out["amg"] = {**self.fact.info, **self.fact.counters.as_dict()}
+            out[self.ksolve] = {**self.fact.info, **self.fact.counters.as_dict()}
         if self._newton is not None:
             out.update(self._newton.info())
         return out
@@ -457,104 +460,24 @@ def _factorizations(qp: QP, store) -> int:
     return (store_of(qp) if store is None else store).factorizations
 
 
-# --------------------------------------------------------------------------- choice and memory
-def dense_extra_bytes(n_local: int, m: int) -> int:
-    """Memory of the dense path beyond the factorization: S_I and its Cholesky factor (|I|^2 each),
-    V = L^-1 B_I' (|I| m) and D (m^2), 8 bytes each."""
-    return 8 * (2 * n_local * n_local + n_local * m + m * m)
-
-
-def qp_dim(qp: QP) -> int:
-    """The QP's space dimension (``geometry.dim``; 2 without a geometry)."""
-    return int(qp.geometry.dim) if qp.geometry is not None else 2
-
-
-def estimates(qp: QP, backend: str | None = None) -> dict:
-    """Extra peak memory (bytes, x the model's SAFETY) of each operator for a QP the process already holds:
-    the factorization (:func:`dualfem.numerics.memory.factor_bytes`, of the QP's dimension) plus, dense, the
-    dense blocks (:func:`dense_extra_bytes`), matrix-free, a few n-vectors; amg: the AMG hierarchy
-    (:func:`dualfem.numerics.memory.amg_bytes`) and a few n-vectors. Compared with the memory available now."""
-    from dualfem.numerics.factor import get_default
-    from dualfem.numerics.memory import SAFETY, amg_bytes, factor_bytes
-
-    backend = backend or get_default()
-    base = factor_bytes(max(qp.n, 1), backend, dim=qp_dim(qp))
-    nI = int(np.asarray(qp.local_dofs).size)
-    return {"dense": int(SAFETY * (base + dense_extra_bytes(nI, qp.m))),
-            "matrix_free": int(SAFETY * (base + 8 * 8 * qp.n)),
-            "amg": int(SAFETY * (amg_bytes(max(qp.n, 1)) + 8 * 16 * qp.n))}
-
-
-def choose_operator(qp: QP, asked: str = "auto", limit_bytes: int | None = None,
-                    backend: str | None = None) -> tuple[str, str]:
-    """(operator, why) for ``asked`` in :data:`OPERATORS`.
-
-    ``auto``: dense while |I|^2 <= :data:`CROSSOVER_RATIO` n and |I| <= :data:`CROSSOVER_LOCAL` (and <=
-    MAX_LOCAL) and its estimate fits the
-    memory available, else matrix-free if that fits. InputError when the asked one (or, for auto,
-    neither) fits, naming the sizes, the estimates, the memory and the other operator.
-    """
-    from dualfem.numerics.linalg import MAX_LOCAL
-    from dualfem.numerics.memory import available_bytes
-
-    asked = check_operator(asked, "?") if asked not in OPERATORS else asked
-    nI = int(np.asarray(qp.local_dofs).size)
-    est = estimates(qp, backend)
-    have = available_bytes() if limit_bytes is None else int(limit_bytes)
-    sizes = f"n = {qp.n} unknowns, {nI} local unknowns, m = {qp.m}"
-
-    def refuse(kind: str, other: str) -> InputError:
-        return InputError(f"operator={kind}: {sizes}: needs about {est[kind] / 1e9:.1f} GB, available "
-                          f"{have / 1e9:.1f} GB; operator={other} needs about {est[other] / 1e9:.1f} GB")
-
-    if asked == "amg":
-        from dualfem.numerics.amg import require_pyamg
-
-        require_pyamg()
-        if est["amg"] > have:
-            raise refuse("amg", "matrix_free")
-        return "amg", "asked"
-    if asked == "dense":
-        if nI > MAX_LOCAL:
-            raise InputError(f"operator=dense: {sizes}: the dense reduced matrix would exceed {MAX_LOCAL}^2 "
-                             f"(about {est['dense'] / 1e9:.1f} GB); use operator=matrix_free "
-                             f"(about {est['matrix_free'] / 1e9:.1f} GB)")
-        if est["dense"] > have:
-            raise refuse("dense", "matrix_free")
-        return "dense", "asked"
-    if asked == "matrix_free":
-        if est["matrix_free"] > have:
-            raise refuse("matrix_free", "amg")
-        return "matrix_free", "asked"
-    limit = int(min(CROSSOVER_LOCAL, MAX_LOCAL, np.sqrt(CROSSOVER_RATIO * qp.n)))
-    if nI <= limit and est["dense"] <= have:
-        return "dense", f"auto: {nI} local unknowns <= {limit}"
-    if est["matrix_free"] <= have:
-        return "matrix_free", f"auto: {nI} local unknowns > {limit}" if nI > limit \
-            else "auto: the dense blocks do not fit in memory"
-    from dualfem.numerics.memory import amg_installed
-
-    if est["amg"] <= have and amg_installed():
-        return "amg", (f"auto: no factorization of K fits ({est['matrix_free'] / 1e9:.1f} GB estimated, "
-                       f"{have / 1e9:.1f} GB available)")
-    hint = "" if amg_installed() else " (operator=amg needs pyamg: pip install 'dualfem[amg]')"
-    raise InputError(f"operator=auto: {sizes}: neither operator fits: dense about {est['dense'] / 1e9:.1f} GB, "
-                     f"matrix_free about {est['matrix_free'] / 1e9:.1f} GB, amg about {est['amg'] / 1e9:.1f} GB, "
-                     f"available {have / 1e9:.1f} GB{hint}")
-
-
-def make_operator(qp: QP, operator: str = "auto", factor=None, store=None, tol: float | None = None) -> DualOperator:
+def make_operator(qp: QP, operator: str = "auto", factor=None, store=None, tol: float | None = None,
+                  chosen: tuple[str, str] | None = None) -> DualOperator:
     """The dual operator of ``qp`` (``operator`` in :data:`OPERATORS`; see :func:`choose_operator`). ``amg``
     is the matrix-free operator (``kind`` "matrix_free") with AMG K-solves to the relative residual
-    :func:`dualfem.numerics.amg.inner_rtol` (``tol``), ``tol`` the dual solver's declared relative tolerance."""
-    kind, why = choose_operator(qp, operator, backend=getattr(factor, "name", factor))
+    :func:`dualfem.numerics.amg.inner_rtol` (``tol``), ``tol`` the dual solver's declared relative tolerance.
+    ``chosen``: the (kind, why) the linear-algebra context chose already (:meth:`dualfem.numerics.la.
+    LinearAlgebra.choose_operator`); None: chosen now in the current context."""
+    if chosen is None:
+        from dualfem.numerics.la import current
+
+        chosen = current().choose_operator(qp, operator, factor=getattr(factor, "name", factor))
+    kind, why = chosen
     if kind == "dense":
         op: DualOperator = DenseDualOperator(qp, factor, store)
-    elif kind == "amg":
-        from dualfem.numerics.amg import RTOL, inner_rtol
-
-        op = MatrixFreeDualOperator(qp, factor, store, ksolve="amg", k_rtol=RTOL if tol is None else inner_rtol(tol))
-    else:
+    elif kind == "matrix_free":
         op = MatrixFreeDualOperator(qp, factor, store)
+    else:                           # the matrix-free operator on the non-direct K-solve backend of that name
+        op = MatrixFreeDualOperator(qp, factor, store, ksolve=kind,
+                                    k_rtol=None if tol is None else backend_class(kind).inner_rtol(tol))
     op.chosen_because = why
     return op

@@ -5,8 +5,10 @@ DualOperatorSolver``). :class:`DualOperatorSolver` brings the parameters ``opera
 ``dense`` | ``matrix_free`` | ``amg``, :data:`dualfem.numerics.dual_operator.OPERATORS`; ``amg``:
 matrix-free with K-solves by AMG-preconditioned CG to 1e-3 x the solver's declared tolerance,
 :mod:`dualfem.numerics.amg`) and ``factor`` (the factorization backend) to a
-:class:`~dualfem.core.solver.Solver`; ``skip`` answers with the operator choice's refusal (a QP for
-which no operator fits the memory), ``setup`` builds ``self.op`` (:func:`make_operator`) and
+:class:`~dualfem.core.solver.Solver`; both select within the run's linear-algebra context
+(:mod:`dualfem.numerics.la`: ``auto`` takes the context's choice). ``skip`` answers with the operator
+choice's refusal (a QP for which no operator fits the memory budget), ``setup`` builds ``self.op`` on the
+same choice (:meth:`DualOperatorSolver.operator_choice`, :func:`make_operator`) and
 publishes the dense path's :class:`~dualfem.numerics.linalg.LocalReduction` as ``self.reduction``
 (the runner's certification reuses it; the matrix-free path's factorization of K is found by the
 certificate in the QP's store). A subclass declares only its own ``defaults`` and ``ranges``: the two
@@ -16,10 +18,13 @@ Plugins import it from :mod:`dualfem.dual_solver`, never from each other.
 """
 from __future__ import annotations
 
+import weakref
+
 from dualfem.core.errors import InputError, MissingDependency
 from dualfem.core.solver import Solver
-from dualfem.numerics.dual_operator import OPERATORS, DualOperator, check_operator, choose_operator, make_operator
+from dualfem.numerics.dual_operator import OPERATORS, DualOperator, check_operator, make_operator
 from dualfem.numerics.factor import from_param
+from dualfem.numerics.la import current
 
 __all__ = ["DualOperatorSolver", "OPERATORS"]
 
@@ -44,14 +49,26 @@ class DualOperatorSolver(Solver):
         from_param(self)
         self.params["operator"] = check_operator(self.params["operator"], self.name)
 
+    def operator_choice(self, qp) -> tuple[str, str]:
+        """(kind, why) of this solver's dual operator for ``qp``, chosen once per QP in the current
+        linear-algebra context (:mod:`dualfem.numerics.la`; ``operator`` and ``factor`` select within it):
+        ``skip`` chooses, ``setup`` reuses the choice. InputError / MissingDependency when none fits."""
+        held = getattr(self, "_operator_choice", None)
+        if held is not None and held[0]() is qp:
+            return held[1]
+        chosen = current().choose_operator(qp, self.params["operator"], factor=from_param(self))
+        self._operator_choice = (weakref.ref(qp), chosen)
+        return chosen
+
     def skip(self, qp) -> str | None:
         try:
-            choose_operator(qp, self.params["operator"], backend=from_param(self))
+            self.operator_choice(qp)
         except (InputError, MissingDependency) as exc:    # no operator fits; operator=amg without pyamg
             return str(exc)
         return None
 
     def setup(self, qp) -> None:
         self.qp = qp
-        self.op = make_operator(qp, self.params["operator"], factor=from_param(self), tol=self.tolerance)
+        self.op = make_operator(qp, self.params["operator"], factor=from_param(self), tol=self.tolerance,
+                                chosen=self.operator_choice(qp))
         self.reduction = self.op.reduction

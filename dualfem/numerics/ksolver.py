@@ -41,7 +41,7 @@ class OperatorHints:
     def of(cls, op, m: int) -> OperatorHints:
         import scipy.sparse as sp
 
-        d = getattr(op, "_diag", None)
+        d = getattr(op, "diagonal_estimate", None)
         ok_d = isinstance(d, np.ndarray) and d.shape == (m,) and bool(np.all(np.isfinite(d) & (d > 0)))
         P = getattr(op, "face_preconditioner", None)
         ok_p = sp.issparse(P) and P.shape == (m, m) and bool(np.all(np.isfinite(P.data)))
@@ -62,10 +62,14 @@ class KSolver:
     bounds of the module docstring); a plain sparse factorization of K (D by m solves for m <= 2000) when
     the QP has no usable local structure."""
 
-    def __init__(self, qp: QP, factor=None, reduction=None, ksolve: str = "auto"):
-        from dualfem.numerics.dual_operator import MatrixFreeDualOperator, choose_operator
+    def __init__(self, qp: QP, factor=None, reduction=None, ksolve: str = "auto", la=None):
+        from dualfem.numerics.dual_operator import MatrixFreeDualOperator
+        from dualfem.numerics.la import current
         from dualfem.numerics.linalg import LocalReduction
 
+        #: the linear-algebra context (:mod:`dualfem.numerics.la`): the solver's, the current one by default
+        self.la = current() if la is None else la
+        factor = self.la.factor if factor is None else factor
         self.qp = qp
         self.red = None
         self.op: MatrixFreeDualOperator | None = None
@@ -77,28 +81,28 @@ class KSolver:
             self.red = reduction          # a solver's reduction of this very QP: same factorization, reused
             return
         kind = "dense"
-        if ksolve == "amg":
-            kind = "amg"
+        if ksolve != "auto":              # a non-direct K-solve backend asked for by name (operator kind)
+            kind = ksolve
         elif qp.m:
             try:
-                kind = choose_operator(qp, "auto", backend=getattr(factor, "name", factor))[0]
+                kind = self.la.choose_operator(qp, "auto", factor=getattr(factor, "name", factor))[0]
             except InputError as exc:     # no operator fits: the certificate is unavailable, said so
                 raise RuntimeError(str(exc)) from exc
-        if kind in ("matrix_free", "amg"):
-            self.op = MatrixFreeDualOperator(qp, factor, ksolve="factor" if kind == "matrix_free" else "amg",
+        if kind != "dense":               # matrix_free, or the matrix-free operator on a non-direct K-solve
+            self.op = MatrixFreeDualOperator(qp, factor, ksolve="factor" if kind == "matrix_free" else kind,
                                              k_rtol=CERT_K_RTOL)
             if hints is not None:
-                self.op._diag = hints.diagonal
+                self.op.diagonal_estimate = hints.diagonal
                 self.op.face_preconditioner = hints.face_preconditioner
-            if kind == "amg":
+            if not self.op.exact:
                 # no factorization: D_AA^-1 by the augmented Lagrangian on K + B_A'C B_A (one AMG hierarchy, a
                 # few CG solves: 13 K-solves against 31 by CG on D_AA, 14 k unknowns), and the lumped diagonal
                 # of D (no sampled solves) unless the solver's operator knew a better one
                 from dualfem.numerics.amg import lumped_delassus_diagonal
 
                 self.op.face = "factor"
-                if self.op._diag is None:
-                    self.op._diag = lumped_delassus_diagonal(qp.K.tocsr(), qp.B.tocsr())
+                if self.op.diagonal_estimate is None:
+                    self.op.diagonal_estimate = lumped_delassus_diagonal(qp.K.tocsr(), qp.B.tocsr())
             return
         try:
             self.red = LocalReduction(qp, factor=factor)
@@ -111,13 +115,13 @@ class KSolver:
         ``matrix_free`` (one sparse factorization of K), ``amg`` (AMG-preconditioned CG, no factorization)
         or ``sparse`` (a plain factorization of K, no local structure)."""
         if self.op is not None:
-            return "amg" if self.op.ksolve == "amg" else "matrix_free"
+            return "matrix_free" if self.op.exact else self.op.ksolve
         return "dense" if self.red is not None else "sparse"
 
     @property
     def amg(self) -> bool:
         """True when the K-solves are AMG-preconditioned CG (inexact: see the module docstring)."""
-        return self.op is not None and self.op.ksolve == "amg"
+        return self.op is not None and not self.op.exact
 
     def _note(self) -> None:
         if self.amg:

@@ -83,11 +83,10 @@ def _coefficients() -> dict:
     A = np.column_stack([np.ones(len(build)), build[:, 0]])
     coef = {"build_peak": np.linalg.lstsq(A, build[:, 1], rcond=None)[0],
             "held": np.linalg.lstsq(A, build[:, 2], rcond=None)[0]}
-    for b in ("superlu", "pardiso"):
+    for b in (k for k in CALIBRATION if k != "build"):
         pts = np.array(CALIBRATION[b], float)
         x = pts[:, 0] * np.log2(pts[:, 0])
         coef[b] = float(x @ pts[:, 1] / (x @ x))          # MB per n log2 n, through the origin
-    coef["cholmod"] = coef["pardiso"]
     p3 = np.array(CALIBRATION_3D, float)
     A3 = np.column_stack([np.ones(len(p3)), np.log(p3[:, 0])])
     coef["nnz_l_3d"] = np.linalg.lstsq(A3, np.log(p3[:, 1]), rcond=None)[0]     # log c, exponent
@@ -114,9 +113,9 @@ def estimate_peak_bytes(n_unknowns: int, backend: str = "pardiso", analysis: dic
     """Estimated peak RSS (bytes) of building and factorizing a QP with n unknowns in ``dim`` dimensions.
 
     ``analysis``: a factorization's ``info`` after its analysis phase; PARDISO's ``peak_bytes``
-    replaces the model of the factor's peak. ``backend="amg"``: the AMG K-solve instead of a factorization.
+    replaces the model of the factor's peak. ``backend``: any registered one (``"amg"``: the AMG K-solve).
     """
-    factor = (amg_bytes(n_unknowns) if backend == "amg" else factor_bytes(n_unknowns, backend, analysis, dim))
+    factor = factor_bytes(n_unknowns, backend, analysis, dim)
     build_peak, held = build_bytes(n_unknowns, dim)
     return int(max(build_peak, held + factor))
 
@@ -128,25 +127,40 @@ def nnz_l(n_unknowns: int, dim: int = 3) -> float:
     if _check_dim(dim) == 3:
         lc, e = _coefficients()["nnz_l_3d"]
         return float(np.exp(lc) * max(n, 1) ** e)
-    return factor_bytes(n, "pardiso") / BYTES_PER_NNZ_L
+    return direct_factor_bytes(n, "pardiso") / BYTES_PER_NNZ_L
 
 
 def factor_bytes(n_unknowns: int, backend: str = "pardiso", analysis: dict | None = None, dim: int = 2) -> int:
     """Estimated extra peak RSS (bytes) of factorizing a QP with n unknowns that the process already holds
     (the ``factor_peak`` part of the model, without the build and the QP itself; ``analysis`` as in
-    :func:`estimate_peak_bytes`). ``dim=3``: BYTES_PER_NNZ_L x :func:`nnz_l` (PARDISO, CHOLMOD), SuperLU
-    by the 2D ratio of its coefficient to PARDISO's (not measured in 3D)."""
+    :func:`estimate_peak_bytes`): the registered backend's own model (:meth:`Backend.peak_bytes
+    <dualfem.numerics.factor.base.Backend.peak_bytes>`; the direct ones: :func:`direct_factor_bytes`, the
+    AMG K-solve: :func:`amg_bytes`). InputError for an unknown backend."""
+    from dualfem.numerics.factor import backend_class
+
+    n = int(n_unknowns)
+    if n < 1:
+        raise InputError(f"n_unknowns must be >= 1, got {n_unknowns!r}")
+    return int(backend_class(backend, "backend").peak_bytes(n, dim, analysis))
+
+
+def direct_factor_bytes(n_unknowns: int, model: str, analysis: dict | None = None, dim: int = 2) -> int:
+    """The model of a direct factorization's extra peak (bytes) fitted to ``CALIBRATION[model]``.
+
+    ``dim=3``: BYTES_PER_NNZ_L x :func:`nnz_l` scaled by the 2D ratio of the model's coefficient to PARDISO's
+    (SuperLU not measured in 3D); ``analysis["peak_bytes"]`` (PARDISO's report), when given, replaces the model."""
     n = int(n_unknowns)
     if n < 1:
         raise InputError(f"n_unknowns must be >= 1, got {n_unknowns!r}")
     c = _coefficients()
-    if backend not in ("superlu", "pardiso", "cholmod"):
-        raise InputError(f"backend must be superlu, pardiso or cholmod, got {backend!r}")
+    if model not in c:
+        raise InputError(f"no memory model {model!r} for the backend (calibrated: "
+                         f"{', '.join(k for k in CALIBRATION if k != 'build')})")
     if analysis and analysis.get("peak_bytes"):
         return int(c["pardiso_report"] * analysis["peak_bytes"])
     if _check_dim(dim) == 3:
-        return int(BYTES_PER_NNZ_L * nnz_l(n, 3) * c[backend] / c["pardiso"])
-    return int(c[backend] * n * np.log2(max(n, 2)) * MB)
+        return int(BYTES_PER_NNZ_L * nnz_l(n, 3) * c[model] / c["pardiso"])
+    return int(c[model] * n * np.log2(max(n, 2)) * MB)
 
 
 def amg_bytes(n_unknowns: int) -> int:
@@ -197,6 +211,9 @@ def check_fits(problem, max_bytes: float | None = None, backend: str | None = No
     """InputError naming the size, the estimate and the memory when a scene cannot fit (before assembly).
     3D scenes (:func:`_problem_dim`) use the 3D factor model and pass when the AMG K-solve fits."""
 
+    from dualfem.numerics.factor import backend_class
+    from dualfem.numerics.la import current
+
     est = problem.size_estimate() if hasattr(problem, "size_estimate") else None
     if est is None:
         return
@@ -205,13 +222,14 @@ def check_fits(problem, max_bytes: float | None = None, backend: str | None = No
     dim = _problem_dim(problem, est)
     limit = None if max_bytes is None else int(max_bytes)
     ok, need, have = fits(n, backend, limit, dim=dim)
-    if not ok and dim == 3 and amg_installed():      # 3D: where no factorization fits, the AMG K-solve may
-        ok = fits(n, "amg", limit, dim=3)[0]
+    ks = backend_class(current().ksolve)             # the context's non-direct K-solve (AMG)
+    if not ok and dim == 3 and ks.missing() is None:  # 3D: where no factorization fits, the AMG K-solve may
+        ok = fits(n, ks.name, limit, dim=3)[0]
     if not ok:
         alt = ""
         if dim == 3:
-            alt = (f" or about {fits(n, 'amg', limit, dim=3)[1] / 1e9:.0f} GB with the AMG K-solve"
-                   + ("" if amg_installed() else " (pip install 'dualfem[amg]')"))
+            alt = (f" or about {fits(n, ks.name, limit, dim=3)[1] / 1e9:.0f} GB with the {ks.name} K-solve"
+                   + ("" if ks.missing() is None else f" ({ks.install_hint})"))
         raise InputError(f"{label} ({n / 1e6:.1f} M unknowns) needs about {need / 1e9:.0f} GB of memory with the "
                          f"{backend} factorization{alt} (estimate x {SAFETY:g}), "
                          f"{'allowed' if max_bytes is not None else 'available'}: {have / 1e9:.1f} GB; use a smaller "

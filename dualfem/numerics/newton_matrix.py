@@ -36,13 +36,13 @@ from __future__ import annotations
 import time
 from collections import OrderedDict
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.numerics.factor import Backend, Factorization
+from dualfem.numerics.factor import Backend, Factorization, backend_class, registered
 from dualfem.numerics.factor import choose as choose_backend
-from dualfem.numerics.factor.pardiso import PardisoFactorization
 from dualfem.numerics.threads import ensure_threads
 
 __all__ = ["NewtonMatrix", "NewtonCounters"]
@@ -62,39 +62,6 @@ class NewtonCounters:
         return asdict(self)
 
 
-class _PardisoSlots(PardisoFactorization):
-    """PARDISO keeping ``maxfct`` numeric factors of one analyzed pattern (MKL's ``maxfct`` / ``mnum``:
-    "several factorizations with the same nonzero structure at the same time"): ``slot(k)`` selects the
-    factor that the next ``factorize`` writes and ``solve`` uses. One analysis (phase 11) serves all.
-
-    The parent passes its ``maxfct`` and ``mnum`` to MKL; everything else is the parent's."""
-
-    def __init__(self, maxfct: int):
-        super().__init__()
-        self.maxfct, self.mnum = int(maxfct), 1
-        self._values: dict[int, np.ndarray] = {}
-
-    def slot(self, k: int) -> None:
-        """Use factor k (0 <= k < maxfct) from now on (its matrix values too, for PARDISO's refinement)."""
-        self.mnum = int(k) + 1
-        if k in self._values:
-            self._a = self._values[k]
-
-    def _factorize(self, A: sp.csr_matrix) -> None:
-        super()._factorize(A)
-        self._values[self.mnum - 1] = self._a
-
-    def free(self) -> None:
-        self._values.clear()
-        super().free()
-
-
-class _AmgBackend:
-    """The name of the amg mode where a backend is reported."""
-
-    name = "amg"
-
-
 def _canonical(A: sp.spmatrix) -> sp.csr_matrix:
     A = sp.csr_matrix(A, dtype=float, copy=True)
     A.sum_duplicates()
@@ -111,10 +78,12 @@ class NewtonMatrix:
 
     def __init__(self, K: sp.spmatrix, B: sp.spmatrix, factor: str | Backend | None = None, keep: int = 4,
                  modes: np.ndarray | None = None, rtol: float | None = None):
-        #: "amg": AMG-preconditioned CG per coefficient vector instead of a factorization (module docstring)
-        self.amg = isinstance(factor, str) and factor == "amg"
+        #: a non-direct backend (``amg``): AMG-preconditioned CG per coefficient vector instead of a
+        #: factorization (module docstring)
+        self.amg = isinstance(factor, str) and factor.strip().lower() in registered(direct=False)
         self.modes, self.rtol = modes, rtol
-        self.backend = _AmgBackend() if self.amg else choose_backend(factor)
+        kb: Any = backend_class(str(factor)) if self.amg else None
+        self.backend: Any = kb(modes, rtol) if self.amg else choose_backend(factor)
         ensure_threads()
         t0 = time.perf_counter()
         K, B = _canonical(K), _canonical(B)
@@ -150,8 +119,9 @@ class NewtonMatrix:
                                shape=(P.nnz, m))
         #: coefficient vector (bytes) -> slot of its kept numeric factor, least recently used first
         self._slots: OrderedDict[bytes, int] = OrderedDict()
-        #: PARDISO: one analysis, ``keep`` numeric factors in one object; other backends: one object per slot
-        self._shared = _PardisoSlots(self.keep) if self.backend.name == "pardiso" else None
+        #: one analysis, ``keep`` numeric factors in one object where the backend has it (PARDISO:
+        #: :meth:`~dualfem.numerics.factor.base.Backend.multi_factor`); other backends: one object per slot
+        self._shared = None if self.amg else self.backend.multi_factor(self.keep)
         self._facts: list = []
         self.counters = NewtonCounters()
         self.counters.time_s["pattern"] = time.perf_counter() - t0
@@ -227,7 +197,7 @@ class NewtonMatrix:
     def _select(self, slot: int) -> Factorization:
         """The factorization object of ``slot``, made current (PARDISO: one object, factor ``slot``)."""
         if self._shared is not None:
-            self._shared.slot(slot)
+            self._shared.slot(slot)  # type: ignore[union-attr]
             return self._shared
         while len(self._facts) <= slot:
             self._facts.append(self.backend.make())

@@ -167,7 +167,7 @@ class SparseSpace:
     def __init__(self, qp, op, factor: str | None = None, keep: int = 4):
         self.qp, self.op = qp, op
         self.Q, self.q, self.B = qp.K.tocsr(), np.asarray(qp.F, float), op.B
-        self.nm = op.newton_matrix(keep) if getattr(op, "ksolve", "factor") == "amg" \
+        self.nm = op.newton_matrix(keep) if not getattr(op, "exact", True) \
             else NewtonMatrix(qp.K, qp.B, factor, keep=keep)
 
     @property

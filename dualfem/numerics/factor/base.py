@@ -189,11 +189,67 @@ class Backend(ABC):
     name: str = "?"
     #: pip requirement that installs it (shown in error messages)
     install_hint: str = ""
+    #: True: a direct factorization (exact to rounding, Schur complements; what ``factor=`` names). False: an
+    #: inexact K-solve (AMG-preconditioned CG) that the dual operator and the certificate use where no
+    #: factorization fits, its residuals recorded (:mod:`dualfem.numerics.amg`)
+    direct: bool = True
+    #: the entry of :data:`dualfem.numerics.memory.CALIBRATION` whose fit models this backend's factor
+    #: (default: its own name; CHOLMOD, not measured, is modelled as PARDISO)
+    memory_model: str = ""
 
     @classmethod
     @abstractmethod
     def available(cls) -> bool:
         """True if the library imports here."""
+
+    @classmethod
+    def missing(cls) -> str | None:
+        """None when the backend can run here, else why not and how to install it (one sentence)."""
+        if cls.available():
+            return None
+        return f"{cls.name} is not installed here; install it with: {cls.install_hint}"
+
+    def multi_factor(self, keep: int) -> Factorization | None:
+        """A factorization object that keeps ``keep`` numeric factors of one analyzed pattern (one analysis
+        for all; ``slot(k)`` selects the factor the next ``factorize`` writes and ``solve`` uses), or None
+        where the library has none (the caller then keeps one object per factor)."""
+        return None
+
+    # ---------------------------------------------------- the non-direct (iterative) K-solves (direct = False)
+    @classmethod
+    def default_rtol(cls) -> float:
+        """The relative residual of an iterative backend's K-solves when nobody asks for another."""
+        raise NotImplementedError(f"{cls.name} is a direct factorization")
+
+    @classmethod
+    def inner_rtol(cls, outer_tol: float) -> float:
+        """The K-solve's relative residual for a dual solver that declares the relative tolerance ``outer_tol``."""
+        raise NotImplementedError(f"{cls.name} is a direct factorization")
+
+    @classmethod
+    def for_qp(cls, qp, store=None):
+        """The iterative K-solver of ``qp.K`` (made once per :class:`~dualfem.numerics.linalg.FactorStore`):
+        ``solve(b, x0=None, rtol=None)``, ``last_abs`` (true residuals of the last solve), ``lambda_min()``,
+        ``counters``, ``info``."""
+        raise NotImplementedError(f"{cls.name} is a direct factorization")
+
+    @classmethod
+    def require(cls) -> None:
+        """MissingDependency (its install hint) unless the backend can run here."""
+        missing = cls.missing()
+        if missing is not None:
+            from dualfem.core.errors import MissingDependency
+
+            raise MissingDependency(missing)
+
+    @classmethod
+    def peak_bytes(cls, n_unknowns: int, dim: int = 2, analysis: dict | None = None) -> int:
+        """Extra peak RSS (bytes) of factorizing K with ``n_unknowns`` unknowns in ``dim`` dimensions in a
+        process that already holds the QP (the backend's memory model; ``analysis``: a factorization's
+        ``info`` after its analysis, whose ``peak_bytes`` replaces the model where the library reports it)."""
+        from dualfem.numerics.memory import direct_factor_bytes
+
+        return direct_factor_bytes(n_unknowns, cls.memory_model or cls.name, analysis, dim)
 
     @abstractmethod
     def make(self, local: np.ndarray | None = None, order: OrderHint = None) -> Factorization: ...

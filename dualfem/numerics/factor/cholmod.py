@@ -68,6 +68,7 @@ class CholmodFactorization(Factorization):
 class CholmodBackend(Backend):
     name = "cholmod"
     install_hint = "pip install 'dualfem[cholmod]'  (scikit-sparse; needs SuiteSparse headers)"
+    memory_model = "pardiso"          # not measured here: a supernodal Cholesky of PARDISO's size
 
     @classmethod
     def available(cls) -> bool:

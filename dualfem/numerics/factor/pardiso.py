@@ -236,6 +236,33 @@ class PardisoFactorization(Factorization):
             pass
 
 
+class PardisoSlots(PardisoFactorization):
+    """PARDISO keeping ``maxfct`` numeric factors of one analyzed pattern (MKL's ``maxfct`` / ``mnum``:
+    "several factorizations with the same nonzero structure at the same time"): ``slot(k)`` selects the
+    factor that the next ``factorize`` writes and ``solve`` uses. One analysis (phase 11) serves all.
+
+    The parent passes its ``maxfct`` and ``mnum`` to MKL; everything else is the parent's."""
+
+    def __init__(self, maxfct: int):
+        super().__init__()
+        self.maxfct, self.mnum = int(maxfct), 1
+        self._values: dict[int, np.ndarray] = {}
+
+    def slot(self, k: int) -> None:
+        """Use factor k (0 <= k < maxfct) from now on (its matrix values too, for PARDISO's refinement)."""
+        self.mnum = int(k) + 1
+        if k in self._values:
+            self._a = self._values[k]
+
+    def _factorize(self, A: sp.csr_matrix) -> None:
+        super()._factorize(A)
+        self._values[self.mnum - 1] = self._a
+
+    def free(self) -> None:
+        self._values.clear()
+        super().free()
+
+
 class PardisoBackend(Backend):
     name = "pardiso"
     install_hint = "pip install 'dualfem[pardiso]'  (pypardiso, MKL)"
@@ -250,3 +277,7 @@ class PardisoBackend(Backend):
 
     def make(self, local: np.ndarray | None = None, order: OrderHint = None) -> Factorization:
         return PardisoFactorization(local, order)
+
+    def multi_factor(self, keep: int) -> Factorization:
+        """MKL's ``maxfct`` factors of one analyzed pattern (:class:`PardisoSlots`)."""
+        return PardisoSlots(keep)
