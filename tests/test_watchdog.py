@@ -39,11 +39,12 @@ def forkable(monkeypatch):
     """These tests fork workers from the test process, which earlier tests may have let run MKL PARDISO
     (then the watchdog would run the command in-process: see the last test): the workers factorize
     with SuperLU, and the process counts as fork-safe."""
-    from dualfem.numerics import factor
+    from dualfem.numerics import la
     from dualfem.numerics.factor import pardiso
 
     monkeypatch.setattr(pardiso, "STARTED", False)
-    monkeypatch.setattr(factor, "_DEFAULT", "superlu")
+    monkeypatch.setenv("DUALFEM_FACTOR", "superlu")      # the default linear-algebra context's backend
+    monkeypatch.setattr(la, "_CURRENT", None)
 
 
 @pytest.fixture
