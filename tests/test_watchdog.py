@@ -207,7 +207,13 @@ class _Unreadable(Exception):
         super().__init__(f"{a} {b}")
 
 
-def test_an_answer_the_parent_cannot_read_is_crashed_not_a_traceback():
+def test_an_answer_the_parent_cannot_read_is_crashed_not_a_traceback(monkeypatch):
+    import copyreg
+
+    # tblib's pickling support (which dask.distributed installs when an earlier test imports it) registers
+    # reducers that rebuild any exception: take ours out so that it stays unreadable
+    monkeypatch.delitem(copyreg.dispatch_table, _Unreadable, raising=False)
+
     def raise_unreadable(guard):
         raise _Unreadable(1, 2)
 
