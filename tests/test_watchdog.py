@@ -252,6 +252,7 @@ def test_a_process_that_ran_pardiso_does_not_fork_a_worker_that_hangs(tmp_path):
               "from dualfem.cli import main\nqp = load_scene('f2', {'N': 8}).build()\n"
               "assert str(run('pdas', qp, {'factor': 'pardiso'}).status) == 'solved'\n"
               "raise SystemExit(main(['solve', 'f2', '--set', 'N=8', '-s', 'pdas[factor=pardiso]', '--json']))\n")
-    res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    res = subprocess.run([sys.executable, "-W", "always", "-c", script], capture_output=True, text=True,
+                         timeout=120, cwd=tmp_path)
     assert res.returncode == 0, res.stderr[-2000:]
-    assert "time limit is not enforced" in res.stderr
+    assert "RuntimeWarning" in res.stderr and "time limit is not enforced" in res.stderr

@@ -252,10 +252,12 @@ def _inline_call(fn: Callable, args: tuple, phase: str, seconds: float,
                  on_part: Callable[[Any], None] | None) -> Outcome:
     """``fn`` in this process, its phases recorded but not enforced (a fork would hang: see
     :func:`fork_is_unsafe`); said once per process on stderr."""
-    if not _WARNED_INLINE[0]:
+    if not _WARNED_INLINE[0]:      # a warning, not a line on stderr: a command's errors stay one line
         _WARNED_INLINE[0] = True
-        print("dualfem: note: this process has run MKL PARDISO, which a forked worker cannot use: plugin code "
-              "runs in this process and its time limit is not enforced by the watchdog", file=sys.stderr)
+        import warnings
+
+        warnings.warn("this process has run MKL PARDISO, which a forked worker cannot use: plugin code runs in "
+                      "this process and its time limit is not enforced by the watchdog", RuntimeWarning, stacklevel=3)
     t0 = time.monotonic()
     out = Outcome(status="running", phase=phase, budget=float(seconds))
     try:
