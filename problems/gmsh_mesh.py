@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from dualfem.core.errors import InputError, MissingDependency, check_positive
+from dualfem.errors import InputError, MissingDependency, check_positive
 
 from ._segments import closest, near_segment_pairs, segment_distances  # noqa: F401  (public here too)
 

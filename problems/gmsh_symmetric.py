@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dualfem.core.errors import InputError
+from dualfem.errors import InputError
 
 from .gmsh_mesh import (
     _TOL_REL,

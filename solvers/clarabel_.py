@@ -27,13 +27,13 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.core.constraints import conic_rows
-from dualfem.core.errors import InputError
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver
+from dualfem.errors import InputError
+from dualfem.laws import conic_rows
 from dualfem.numerics.polish import polish_if_better
 from dualfem.numerics.scaling import scale
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver
 
 _STATUS = {
     "Solved": Status.SOLVED,

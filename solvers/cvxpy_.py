@@ -31,14 +31,14 @@ import warnings
 
 import numpy as np
 
-from dualfem.core.constraints import conic_rows
-from dualfem.core.errors import InputError
 from dualfem.core.quiet import c_stdout_to_stderr
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver
+from dualfem.errors import InputError
+from dualfem.laws import conic_rows
 from dualfem.numerics.polish import active_set_polish
 from dualfem.numerics.scaling import scale
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver
 
 #: accuracy promised per backend at default settings (relative energy-norm error of x)
 BACKEND_TOLERANCE = {"CLARABEL": 1e-5, "ECOS": 1e-5, "MOSEK": 1e-5, "GUROBI": 1e-5,

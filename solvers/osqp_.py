@@ -20,12 +20,12 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.core.constraints import upper_bounds
 from dualfem.core.quiet import c_stdout_to_stderr
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver
+from dualfem.laws import upper_bounds
 from dualfem.numerics.scaling import scale
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver
 
 _STATUS = {
     "solved": Status.SOLVED,

@@ -65,12 +65,12 @@ import time
 import numpy as np
 import scipy.linalg as sla
 
-from dualfem.core.evaluator import load_energy, load_length
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
-from dualfem.numerics.dual_solver import OPERATORS, DualOperatorSolver
+from dualfem.dual_solver import OPERATORS, DualOperatorSolver
+from dualfem.evaluator import load_energy, load_length
 from dualfem.numerics.factor import from_param
 from dualfem.numerics.newton_matrix import NewtonMatrix
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
 
 #: most refinement steps of the matrix-free polish (each one K-solve and one Newton-matrix solve)
 POLISH_STEPS = 8
