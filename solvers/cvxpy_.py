@@ -82,6 +82,11 @@ def _iter_options(backend: str, max_iter: int) -> dict:
     return {}
 
 
+#: cvxpy backends that are first-order methods (ADMM): an instance or a variant naming one is of the
+#: ``first-order`` family (:meth:`CvxpySolver.variant_family`), the others ``interior point``
+FIRST_ORDER_BACKENDS = ("OSQP", "SCS", "PIQP_ADMM")
+
+
 @register_solver
 class CvxpySolver(Solver):
     """cvxpy modelling layer over a chosen backend (default CLARABEL)."""
@@ -109,6 +114,13 @@ class CvxpySolver(Solver):
     renamed = {"eps": "tol"}
     ranges = {"solver": None, "scale": bool, "polish": bool}   # solver: an installed backend (validate)
 
+    @classmethod
+    def variant_family(cls, variant: str) -> str:
+        """``first-order`` for a variant naming a first-order backend (:data:`FIRST_ORDER_BACKENDS`, in any
+        case: ``cvxpy:OSQP``, ``cvxpy[solver=scs]``), else :attr:`family` (``interior point``)."""
+        up = variant.upper()
+        return "first-order" if any(b in up for b in FIRST_ORDER_BACKENDS) else cls.family
+
     def validate(self) -> None:
         backend = str(self.params["solver"]).upper()
         self.params["solver"] = backend
@@ -122,6 +134,7 @@ class CvxpySolver(Solver):
         # an instance promises what its backend (and the polish) can deliver
         self.tolerance = 1e-8 if self.params["polish"] else BACKEND_TOLERANCE.get(backend, _DEFAULT_TOLERANCE)
         self.accepts = type(self).accepts if backend == "CLARABEL" else ("signorini",)
+        self.family = type(self).variant_family(backend)      # an instance declares its backend's family
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
