@@ -56,15 +56,9 @@ _OPTIONS = {                   # fixed gmsh options (reproducible, silent, first
 }
 
 #: gmsh options per 2D algorithm (over _OPTIONS). "frontal": Frontal-Delaunay with one smoothing pass (the
-#: meshes of the scene files and tests). "delaunay": gmsh's Delaunay without smoothing. Measured on the
-#: 400-crack scene (unit square, mesh_size 0.003, 2 cores shared with other jobs, generate only):
-#: frontal 5.2-7.2 s (262 k triangles, gamma >= 0.65), frontal without smoothing 4.8-5.2 s, delaunay
-#: 3.3-4.2 s (295 k triangles: it refines until every circumradius <= h / sqrt 2; gamma >= 0.47, mean
-#: 0.91), "frontal-quad" (8) 6.3 s, BAMG (7) 23 s with slivers (gamma 0). Meshing at 2 h and splitting
-#: every triangle in four (mesh_with_defects's refine=1, what the fractured problem does; the split by
-#: refine_uniformly takes 0.02-0.04 s, gmsh's own refine 0.5-1.0 s): frontal 1.1-1.9 s (275 k triangles,
-#: gamma >= 0.62, mean 0.98), frontal_unsmoothed 0.7 s (gamma >= 0.44, mean 0.976), delaunay 0.55 s
-#: (302 k triangles); refine=2: frontal 0.25 s but 328 k triangles (the cracks force small elements at 4 h)
+#: meshes of the scene files and tests). "frontal_unsmoothed": the same without smoothing (the fractured
+#: problem's, at 2 h then refined). "delaunay": gmsh's Delaunay without smoothing (it refines until every
+#: circumradius <= h / sqrt 2). Their times and element qualities: docs/measurements.md
 ALGORITHMS: dict[str, dict[str, float]] = {
     "frontal": {"Mesh.Algorithm": 6, "Mesh.Smoothing": 1},
     "frontal_unsmoothed": {"Mesh.Algorithm": 6, "Mesh.Smoothing": 0},
