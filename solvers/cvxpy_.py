@@ -138,9 +138,8 @@ class CvxpySolver(Solver):
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
-        """The backend to ``min(tol, 1e-8)``, then the polish (default on): CLARABEL stopped at 1e-3 or 1e-6
-        hands the polish a wrong contact set at f2, N = 64, delta = 1e-9 (x error 1.6e-3, 9.5e-5, demoted);
-        at 1e-8 and below the polished answer is at rounding on every scene measured."""
+        """The backend to ``min(tol, 1e-8)``, then the polish (default on): a looser backend can hand the
+        polish a wrong contact set (measured: docs/measurements.md)."""
         return {"tol": min(float(tol), 1e-8)}
 
     @classmethod
