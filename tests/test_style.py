@@ -157,3 +157,18 @@ def test_a_variant_family_is_the_plugins_declaration():
     assert cvxpy.variant_family("[solver=scs]") == "first-order" == S.family("cvxpy[solver=SCS]")
     src = Path(S.__file__).read_text()
     assert "SCS" not in src and "PIQP" not in src          # no backend knowledge left in post/
+
+
+def test_post_names_no_plugin():
+    """No plugin knowledge in post/: no registered solver or problem name appears there as a string
+    literal (every family, colour and marker comes from the plugins' declarations)."""
+    import ast
+
+    names = set(solvers())
+    from dualfem.core.registry import problems
+
+    names |= set(problems())
+    root = Path(S.__file__).parent
+    bad = [f"{f.name}:{n.lineno}: {n.value!r}" for f in sorted(root.rglob("*.py"))
+           for n in ast.walk(ast.parse(f.read_text())) if isinstance(n, ast.Constant) and n.value in names]
+    assert not bad, "\n".join(bad)
