@@ -38,7 +38,7 @@ from itertools import combinations
 import numpy as np
 import scipy.linalg
 
-from dualfem.core.errors import InputError
+from dualfem.errors import InputError
 
 from ._load_spec import (  # noqa: F401  (the API of this module: parsing and the sides)
     KEYS,

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.core.parts import InterfacePart
 from dualfem.numerics.linalg import freeze
+from dualfem.qp import InterfacePart
 
 
 @dataclass

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from dualfem.core.errors import InputError
 from dualfem.core.expressions import Expression, compile_expression
+from dualfem.errors import InputError
 
 SIDES: dict[int, tuple[str, ...]] = {2: ("left", "right", "bottom", "top"),
                                      3: ("left", "right", "front", "back", "bottom", "top")}

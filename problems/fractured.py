@@ -64,8 +64,8 @@ from typing import Any
 
 import numpy as np
 
-from dualfem.core.errors import InputError, check_int, check_positive
-from dualfem.core.registry import register_problem
+from dualfem.errors import InputError, check_int, check_positive
+from dualfem.registry import register_problem
 
 from ._boundary import parse_scalar
 from ._segments import near_segment_pairs

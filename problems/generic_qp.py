@@ -71,13 +71,12 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-from dualfem.core.errors import InputError, check_positive
 from dualfem.core.io import check_input_path
-from dualfem.core.parts import ShiftPart
-from dualfem.core.problem import Problem
-from dualfem.core.qp import QP
 from dualfem.core.qpfile import check_dims, convention, coo_from_arrays, csc_from_arrays, declared_arrays, read_arrays
-from dualfem.core.registry import register_problem
+from dualfem.errors import InputError, check_positive
+from dualfem.problem import Problem
+from dualfem.qp import QP, ShiftPart
+from dualfem.registry import register_problem
 
 STORAGE = ("full", "upper", "lower")
 
@@ -446,7 +445,7 @@ def original_x(qp: QP, x: np.ndarray) -> np.ndarray:
 def original_objective(qp: QP, x: np.ndarray) -> float:
     """``1/2 x'Px + q'x`` of the file's QP at ``original_x(qp, x)``, computed from the file's unknowns
     (not ``qp.energy(x) + shift.objective``, which cancels catastrophically when the shift is large)."""
-    from dualfem.core.evaluator import user_frame
+    from dualfem.evaluator import user_frame
 
     uf = user_frame(qp, np.asarray(x, dtype=float))
     if uf is None:

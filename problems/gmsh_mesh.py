@@ -11,11 +11,11 @@ refinement toward the tips: element size ``tip_size`` within ``tip_size`` of a t
 linearly (slope ``_GRADE``) to ``mesh_size``; a ``tip_size >= mesh_size`` asks for nothing finer
 than the uniform mesh (no refinement: ``tip_size`` follows ``mesh_size``, :func:`effective_tip_size`).
 
-Before meshing the geometry is checked in numpy (splines on 64 samples per span): every
-defect strictly inside the body, no self-intersection, no two defects crossing or touching
-(distance > ``_TOL_REL * max(width, height)``), and the estimated triangle count below
-``MAX_TRIANGLES``. Problems raise :class:`dualfem.errors.InputError` naming the defects as
-``defects[i]`` (counted from 0, as in the ``[[defects]]`` list of a scene file).
+Before meshing the geometry is checked in numpy (:func:`validate`, in
+:mod:`dualfem.problems._defect_geometry` with the curves and the size estimate, re-exported here): every
+defect strictly inside the body, no self-intersection, no two defects crossing or touching, and the
+estimated triangle count below ``MAX_TRIANGLES``. Problems raise :class:`dualfem.errors.InputError`
+naming the defects as ``defects[i]`` (counted from 0, as in the ``[[defects]]`` list of a scene file).
 
 gmsh is optional (``pip install 'dualfem[gmsh]'``) and imported only when meshing. It runs
 single-threaded with fixed options and prints nothing, so the same input gives identical
@@ -23,29 +23,30 @@ arrays.
 """
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
-from dualfem.core.errors import InputError, MissingDependency, check_positive
+from dualfem.errors import InputError, MissingDependency
 
+from ._defect_geometry import (  # noqa: F401  (the checks before meshing; public here too)
+    CURVES,
+    MAX_SAMPLES,
+    MAX_TRIANGLES,
+    SAMPLES_PER_SPAN,
+    _tip_distances,
+    check_size,
+    effective_tip_size,
+    estimate_triangles,
+    rotate,
+    sample_defect,
+    validate,
+)
 from ._segments import closest, near_segment_pairs, segment_distances  # noqa: F401  (public here too)
 
-CURVES = ("polyline", "spline")
 SIDES = ("bottom", "top", "left", "right")
-MAX_TRIANGLES = 5_000_000
-#: defect points checked for crossings and self-intersection (a polyline counts its points, a spline
-#: SAMPLES_PER_SPAN per span); the default of ``max_samples`` in :func:`validate`. Crossings between
-#: defects are found on a spatial grid (near-linear cost), a self-intersection of one defect pairwise
-MAX_SAMPLES = 2048
-SAMPLES_PER_SPAN = 64          # spline samples per span between two given points (validation only)
-_TOL_REL = 1e-9                # "touching" tolerance, relative to max(width, height)
-_GRADE = 0.3                   # growth of the element size per unit distance away from a tip
-_TRI_PER_AREA = 4 / math.sqrt(3)   # triangles per h^2 of area for equilateral triangles of side h
 _OPTIONS = {                   # fixed gmsh options (reproducible, silent, first order, one thread)
     "General.Terminal": 0, "General.Verbosity": 0, "General.NumThreads": 1,
     "Mesh.MaxNumThreads1D": 1, "Mesh.MaxNumThreads2D": 1, "Mesh.RandomSeed": 1,
@@ -55,15 +56,9 @@ _OPTIONS = {                   # fixed gmsh options (reproducible, silent, first
 }
 
 #: gmsh options per 2D algorithm (over _OPTIONS). "frontal": Frontal-Delaunay with one smoothing pass (the
-#: meshes of the scene files and tests). "delaunay": gmsh's Delaunay without smoothing. Measured on the
-#: 400-crack scene (unit square, mesh_size 0.003, 2 cores shared with other jobs, generate only):
-#: frontal 5.2-7.2 s (262 k triangles, gamma >= 0.65), frontal without smoothing 4.8-5.2 s, delaunay
-#: 3.3-4.2 s (295 k triangles: it refines until every circumradius <= h / sqrt 2; gamma >= 0.47, mean
-#: 0.91), "frontal-quad" (8) 6.3 s, BAMG (7) 23 s with slivers (gamma 0). Meshing at 2 h and splitting
-#: every triangle in four (mesh_with_defects's refine=1, what the fractured problem does; the split by
-#: refine_uniformly takes 0.02-0.04 s, gmsh's own refine 0.5-1.0 s): frontal 1.1-1.9 s (275 k triangles,
-#: gamma >= 0.62, mean 0.98), frontal_unsmoothed 0.7 s (gamma >= 0.44, mean 0.976), delaunay 0.55 s
-#: (302 k triangles); refine=2: frontal 0.25 s but 328 k triangles (the cracks force small elements at 4 h)
+#: meshes of the scene files and tests). "frontal_unsmoothed": the same without smoothing (the fractured
+#: problem's, at 2 h then refined). "delaunay": gmsh's Delaunay without smoothing (it refines until every
+#: circumradius <= h / sqrt 2). Their times and element qualities: docs/measurements.md
 ALGORITHMS: dict[str, dict[str, float]] = {
     "frontal": {"Mesh.Algorithm": 6, "Mesh.Smoothing": 1},
     "frontal_unsmoothed": {"Mesh.Algorithm": 6, "Mesh.Smoothing": 0},
@@ -88,198 +83,6 @@ class DefectMesh:
     defect_nodes: list[np.ndarray]
     boundary: dict[str, np.ndarray] = field(default_factory=dict)
     mirror: np.ndarray | None = None
-
-
-# --------------------------------------------------------------------------- geometry helpers
-def rotate(points: np.ndarray, angle_deg: float, center) -> np.ndarray:
-    """Rotate coordinates ``points`` of shape (2, n) by ``angle_deg`` degrees (counter-clockwise
-    positive) about ``center`` = (cx, cy). Pass defect points of shape (k, 2) as ``pts.T``."""
-    p = np.asarray(points, dtype=float)
-    if p.ndim != 2 or p.shape[0] != 2:
-        raise InputError(f"rotate expects coordinates of shape (2, n), got shape {p.shape}")
-    a = math.radians(float(angle_deg))
-    R = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-    c = np.asarray(center, dtype=float).reshape(2, 1)
-    return R @ (p - c) + c
-
-
-def sample_defect(points: np.ndarray, curve: str, per_span: int = SAMPLES_PER_SPAN) -> np.ndarray:
-    """Points (m, 2) along a defect: the given points for a polyline; for a spline
-    ``per_span`` samples per span of gmsh's uniform Catmull-Rom curve (ends included)."""
-    P = np.asarray(points, dtype=float)
-    if curve == "polyline" or len(P) == 2:
-        return P.copy()
-    n = len(P) - 1
-    ext = np.vstack([2 * P[0] - P[1], P, 2 * P[-1] - P[-2]])
-    s = np.linspace(0.0, n, n * per_span + 1)
-    i = np.minimum(s.astype(int), n - 1)
-    t = (s - i)[:, None]
-    p0, p1, p2, p3 = ext[i], ext[i + 1], ext[i + 2], ext[i + 3]
-    return 0.5 * (2 * p1 + (p2 - p0) * t + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t ** 2
-                  + (3 * p1 - p0 - 3 * p2 + p3) * t ** 3)
-
-
-def _fmt(p) -> str:
-    return f"({float(p[0]):.6g}, {float(p[1]):.6g})"
-
-
-# --------------------------------------------------------------------------- validation
-def _check_defect(i: int, d: Any) -> tuple[np.ndarray, str]:
-    """One defect's points (k, 2) and curve type; InputError naming ``defects[i]`` otherwise."""
-    if not isinstance(d, dict) or "points" not in d:
-        raise InputError(f"defects[{i}] must be a table with 'points' (k >= 2 points [x, y]) and "
-                         f"'curve' ({' or '.join(CURVES)}), got {d!r}")
-    curve = d.get("curve", "polyline")
-    if curve not in CURVES:
-        raise InputError(f"defects[{i}]: curve must be {' or '.join(repr(c) for c in CURVES)}, got {curve!r}")
-    try:
-        P = np.array(d["points"], dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"defects[{i}]: points must be a list of [x, y] numbers, got {d['points']!r}") from None
-    if P.ndim != 2 or P.shape[1] != 2 or P.shape[0] < 2:
-        raise InputError(f"defects[{i}]: points must be k >= 2 points [x, y], got shape {P.shape}")
-    if not np.all(np.isfinite(P)):
-        raise InputError(f"defects[{i}]: points must be finite numbers, got {d['points']!r}")
-    return P, curve
-
-
-def _check_one(i: int, P: np.ndarray, S: np.ndarray, width: float, height: float, tol: float) -> None:
-    """Distinct points, inside the body, no self-intersection (S: the sampled curve)."""
-    gaps = np.linalg.norm(P[:, None, :] - P[None, :, :], axis=-1)
-    np.fill_diagonal(gaps, np.inf)
-    if gaps.min() <= tol:
-        a, b = sorted(np.unravel_index(np.argmin(gaps), gaps.shape))
-        raise InputError(f"defects[{i}]: points {a} and {b} coincide at {_fmt(P[a])}; the points must be distinct")
-    margin = np.minimum.reduce([S[:, 0], width - S[:, 0], S[:, 1], height - S[:, 1]])
-    if margin.min() <= tol:
-        j = int(np.argmin(margin))
-        what = "point" if len(S) == len(P) else "curve point"
-        raise InputError(f"defects[{i}]: {what} {_fmt(S[j])} is not strictly inside the body "
-                         f"(0, {width:g}) x (0, {height:g})")
-    seg = np.diff(S, axis=0)
-    if len(seg) >= 2:       # adjacent segments folding back onto each other
-        c = seg[:-1, 0] * seg[1:, 1] - seg[:-1, 1] * seg[1:, 0]
-        dot = (seg[:-1] * seg[1:]).sum(-1)
-        norms = np.linalg.norm(seg[:-1], axis=1) * np.linalg.norm(seg[1:], axis=1)
-        fold = np.flatnonzero((np.abs(c) <= 1e-12 * norms) & (dot < 0))
-        if len(fold):
-            raise InputError(f"defects[{i}] intersects itself: it folds back on itself at {_fmt(S[fold[0] + 1])}")
-    if len(seg) >= 3:
-        idx = np.arange(len(seg))
-        mask = idx[None, :] >= idx[:, None] + 2          # non-adjacent pairs only
-        dist, _, where = closest(S, S, mask)
-        if dist <= tol:
-            raise InputError(f"defects[{i}] intersects itself near {_fmt(where)}")
-
-
-def estimate_triangles(width: float, height: float, mesh_size: float, tip_size: float | None, n_tips: int) -> int:
-    """Rough triangle count: equilateral triangles of the local size, tips' discs added.
-
-    Overflow-safe: a tiny size gives a huge count (capped at 1e30), never an exception."""
-    with np.errstate(all="ignore"):
-        count = _TRI_PER_AREA * (float(width) / mesh_size) * (float(height) / mesh_size)
-        if tip_size is not None and tip_size < mesh_size:
-            d_min, d_max = _tip_distances(mesh_size, tip_size)
-            r = np.linspace(d_min, d_max, 401)
-            size = tip_size + (mesh_size - tip_size) * (r - d_min) / (d_max - d_min)
-            f = 2 * np.pi * r * (1 / size ** 2 - 1 / mesh_size ** 2)
-            ring = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(r)))
-            disc = float(np.pi * d_min ** 2 * (1 / np.float64(tip_size) ** 2 - 1 / np.float64(mesh_size) ** 2))
-            count += n_tips * _TRI_PER_AREA * (ring + disc)
-    if not count < 1e30:          # inf or NaN from an overflow: as large as we count
-        count = 1e30
-    return int(math.ceil(count))
-
-
-def check_size(width: float, height: float, mesh_size: float, tip_size: float | None, n_tips: int,
-               label: str = "") -> int:
-    """The estimated triangle count; InputError naming mesh_size (or tip_size) and its allowed range
-    when it exceeds :data:`MAX_TRIANGLES`, before anything is meshed. ``label`` says where mesh_size
-    comes from (e.g. "mesh_size = 0: min(width, height)/N = 0.0156")."""
-    est = estimate_triangles(width, height, mesh_size, tip_size, n_tips)
-    if est <= MAX_TRIANGLES:
-        return est
-    top = min(width, height)
-    lo = math.sqrt(_TRI_PER_AREA * width * height / MAX_TRIANGLES)      # mesh_size alone
-    what = label or f"mesh_size={mesh_size:g}"
-    body = f"the {width:g} x {height:g} body"
-    n = f"{est:,}" if est < 1e15 else f"{est:.3g}"
-    if lo > top:
-        raise InputError(f"width={width:g}, height={height:g}: {body} needs about {n} triangles with {what} "
-                         f"and at least {_TRI_PER_AREA * width * height / top ** 2:.3g} with any mesh_size <= "
-                         f"min(width, height) (limit {MAX_TRIANGLES:,}): its aspect ratio max/min must be <= "
-                         f"{MAX_TRIANGLES / _TRI_PER_AREA:.3g}")
-    if estimate_triangles(width, height, mesh_size, None, 0) > MAX_TRIANGLES:
-        raise InputError(f"{what} gives about {n} triangles (limit {MAX_TRIANGLES:,}) on {body}: "
-                         f"mesh_size must be in [{lo:.3g}, {top:g}]")
-    # the tips' refinement is what makes it too big: the smallest tip_size that fits (count falls with it)
-    a, b = math.log(tip_size or mesh_size), math.log(mesh_size)
-    for _ in range(60):
-        mid = 0.5 * (a + b)
-        if estimate_triangles(width, height, mesh_size, math.exp(mid), n_tips) > MAX_TRIANGLES:
-            a = mid
-        else:
-            b = mid
-    raise InputError(f"{what}, tip_size={tip_size:g} gives about {n} triangles (limit {MAX_TRIANGLES:,}) on "
-                     f"{body}: tip_size must be in [{math.exp(b):.3g}, {mesh_size:g}]")
-
-
-def _tip_distances(mesh_size: float, tip_size: float) -> tuple[float, float]:
-    """Threshold distances: size tip_size up to DistMin, linear growth to mesh_size at DistMax."""
-    d_min = tip_size
-    return d_min, d_min + (mesh_size - tip_size) / _GRADE
-
-
-def effective_tip_size(mesh_size: float, tip_size: float | None) -> float | None:
-    """The element size near the tips: ``tip_size`` when it is below ``mesh_size``; else None (no
-    refinement: the uniform ``mesh_size`` already meets the bound ``tip_size``, so a default
-    ``tip_size`` follows a smaller ``mesh_size``)."""
-    return tip_size if tip_size is not None and tip_size < mesh_size else None
-
-
-def validate(width: float, height: float, defects: list[dict], mesh_size: float,
-             tip_size: float | None = None, max_samples: int = MAX_SAMPLES) -> list[tuple[np.ndarray, str]]:
-    """Check all inputs of :func:`mesh_with_defects` (no gmsh needed); return [(points, curve)].
-
-    ``max_samples``: the most curve points accepted (see :data:`MAX_SAMPLES`)."""
-    width, height = check_positive("width", width), check_positive("height", height)
-    mesh_size = check_positive("mesh_size", mesh_size)
-    if mesh_size > min(width, height):
-        raise InputError(f"mesh_size must be in (0, min(width, height)] = (0, {min(width, height):g}], "
-                         f"got {mesh_size:g}")
-    if tip_size is not None:
-        tip_size = effective_tip_size(mesh_size, check_positive("tip_size", tip_size))
-    if not isinstance(defects, (list, tuple)):
-        raise InputError(f"defects must be a list of tables {{points, curve}}, got {type(defects).__name__}")
-    check_size(width, height, mesh_size, tip_size, 2 * len(defects))
-    tol = _TOL_REL * max(width, height)
-    parsed = [_check_defect(i, d) for i, d in enumerate(defects)]
-    counts = [len(P) if c == "polyline" or len(P) == 2 else (len(P) - 1) * SAMPLES_PER_SPAN + 1 for P, c in parsed]
-    if sum(counts) > max_samples:
-        raise InputError(f"defects: {len(parsed)} defects with {sum(len(P) for P, _ in parsed)} points give "
-                         f"{sum(counts):,} curve points to check for crossings (a spline counts {SAMPLES_PER_SPAN} "
-                         f"per span); the limit is {max_samples:,}: use fewer points (a spline needs few)")
-    samples = [sample_defect(P, c) for P, c in parsed]
-    for i, (P, _) in enumerate(parsed):
-        _check_one(i, P, samples[i], width, height, tol)
-    if len(samples) > 1:
-        # segments of different defects closer than tol (a spatial grid: no all-pairs loop); the first pair
-        # of defects (i, j) in order that crosses or touches is reported
-        seg = np.concatenate([np.stack([S[:-1], S[1:]], axis=1) for S in samples])
-        owner = np.repeat(np.arange(len(samples)), [len(S) - 1 for S in samples])
-        a, b, _ = near_segment_pairs(seg, None, tol)
-        da, db = owner[a], owner[b]
-        other = da != db
-        if other.any():
-            lo_, hi_ = np.minimum(da, db)[other], np.maximum(da, db)[other]
-            k = np.lexsort((hi_, lo_))[0]
-            i, j = int(lo_[k]), int(hi_[k])
-            dist, crossing, where = closest(samples[i], samples[j])
-            if crossing:
-                raise InputError(f"defects[{i}] and defects[{j}] cross near {_fmt(where)}")
-            raise InputError(f"defects[{i}] and defects[{j}] touch near {_fmt(where)} "
-                             f"(distance {dist:.3g}); defects must be disjoint")
-    return parsed
 
 
 # --------------------------------------------------------------------------- gmsh

@@ -15,18 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from dualfem.core.errors import InputError
+from dualfem.errors import InputError
 
-from .gmsh_mesh import (
-    _TOL_REL,
-    DefectMesh,
-    _build,
-    _extract,
-    _import_gmsh,
-    _session,
-    _size_fields,
-    validate,
-)
+from ._defect_geometry import _TOL_REL, validate
+from .gmsh_mesh import DefectMesh, _build, _extract, _import_gmsh, _session, _size_fields
 
 
 def _mirror(P: np.ndarray, width: float) -> np.ndarray:

@@ -43,13 +43,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from dualfem.core.elasticity import PLANES, lame
-from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
 from dualfem.core.expressions import compile_expression
-from dualfem.core.parts import GeometryPart, MaterialPart, ShiftPart, UnitsPart
-from dualfem.core.problem import Problem
-from dualfem.core.qp import QP
-from dualfem.core.registry import register_problem
-from dualfem.core.units import UnitMap
+from dualfem.errors import InputError, check_int, check_open_interval, check_positive
+from dualfem.problem import Problem, UnitMap
+from dualfem.qp import QP, GeometryPart, MaterialPart, ShiftPart, UnitsPart
+from dualfem.registry import register_problem
 
 #: the most grid squares a scene may have (N = 4096 on a square body; the N range's top): checked in validate,
 #: before anything is allocated, since height / width multiplies the rows of the grid

@@ -1,21 +1,18 @@
 """Clarabel (interior point) on ``min 1/2 x'Kx - F'x s.t. -Bx + s = 0, s >= 0``.
 
 **What it takes to meet a tolerance** (docs/solvers_tolerances.md): Clarabel's own tolerances
-(``tol`` = tol_gap_abs = tol_gap_rel = tol_feas) do not bound the certified error at small delta: at
-delta = 1e-9 its 'Solved' answer is 3e-6..9e-6 off in x (energy norm) and 1.3e-3..3.5e-3 in the
-multipliers at tol = 1e-10, and tighter settings end 'AlmostSolved'. The active-set ``polish`` removes
-that error (to rounding, ~1e-13) once the interior point stops at ``tol <= 1e-8``; stopped at 1e-4 or
-1e-6 the contact set it hands over is wrong at f2, N = 64, delta = 1e-9 and the polish is refused.
-Hence ``polish`` is on by default and :meth:`ClarabelSolver.tolerance_params` asks for ``tol = 1e-8``
-with the polish at every tier.
+(``tol`` = tol_gap_abs = tol_gap_rel = tol_feas) do not bound the certified error at small delta; the
+active-set ``polish`` removes that error once the interior point stops at ``tol <= 1e-8`` (looser, the
+contact set it hands over can be wrong and the polish is refused; measured: docs/measurements.md,
+``solvers/clarabel_.py``). Hence ``polish`` is on by default and :meth:`ClarabelSolver.tolerance_params`
+asks for ``tol = 1e-8`` with the polish at every tier.
 
 Clarabel's KKT condition is ``Px + q + A'z = 0`` with ``z >= 0``; with ``A = -B`` and
 ``q = -F`` this is ``Kx - F = B'z``, so our nodal contact force is ``mu = z``. Only the upper
 triangle of K is passed. Clarabel's own residuals are not trusted (Clarabel.cpp issue 36): the
 evaluator recomputes them.
 
-With ``scale=True`` (default) the QP is normalised first (:mod:`dualfem.numerics.scaling`); unscaled,
-Clarabel stops 'AlmostSolved' with a wrong contact set on these badly scaled matrices. The declared
+With ``scale=True`` (default) the QP is normalised first (:mod:`dualfem.numerics.scaling`). The declared
 tolerance 1e-5 is what an unpolished answer is worth (its accuracy limit: docs/measurements.md).
 ``polish=True`` (the default; it is dualfem's, not part of Clarabel: ``polish=false`` gives Clarabel's
 own answer, as the reference solve does) re-solves the KKT system exactly on Clarabel's contact set and
@@ -27,13 +24,13 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.core.constraints import conic_rows
-from dualfem.core.errors import InputError
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver
+from dualfem.errors import InputError
+from dualfem.laws import conic_rows
 from dualfem.numerics.polish import polish_if_better
 from dualfem.numerics.scaling import scale
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver
 
 _STATUS = {
     "Solved": Status.SOLVED,
@@ -59,11 +56,10 @@ class ClarabelSolver(Solver):
     accepts = ("signorini", "bilateral")
     description = "Clarabel (interior point, Rust) via its Python interface"
     requires = ("clarabel",)
-    # measured: at delta = 1e-9 Clarabel stops 'Solved' with x off by ~5e-6 (energy norm) from the
-    # certified solution; tighter tol_* settings end 'AlmostSolved'. polish=True removes that error.
+    #: relative energy-norm error of an unpolished 'Solved' answer (docs/measurements.md)
     tolerance = 1e-5
-    #: the second reference solver (an independent method), at dualfem's default tolerances: asking
-    #: it for 1e-12 made it stop 'inaccurate' at delta <= 1e-6 on the stress grid
+    #: the second reference solver (an independent method), at dualfem's default tolerances (why not
+    #: tighter: docs/measurements.md)
     reference = True
     reference_rank = 10
     reference_params = {"max_iter": 500, "polish": False}   # the reference stays Clarabel's own answer
@@ -98,7 +94,7 @@ class ClarabelSolver(Solver):
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
-        """Any tier: the interior point to 1e-8, then the polish (measured, see the module docstring)."""
+        """Any tier: the interior point to 1e-8, then the polish (measured: docs/measurements.md)."""
         return {"tol": 1e-8, "polish": True}
 
     def setup(self, qp) -> None:

@@ -31,14 +31,14 @@ import warnings
 
 import numpy as np
 
-from dualfem.core.constraints import conic_rows
-from dualfem.core.errors import InputError
 from dualfem.core.quiet import c_stdout_to_stderr
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver
+from dualfem.errors import InputError
+from dualfem.laws import conic_rows
 from dualfem.numerics.polish import active_set_polish
 from dualfem.numerics.scaling import scale
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver
 
 #: accuracy promised per backend at default settings (relative energy-norm error of x)
 BACKEND_TOLERANCE = {"CLARABEL": 1e-5, "ECOS": 1e-5, "MOSEK": 1e-5, "GUROBI": 1e-5,
@@ -82,6 +82,11 @@ def _iter_options(backend: str, max_iter: int) -> dict:
     return {}
 
 
+#: cvxpy backends that are first-order methods (ADMM): an instance or a variant naming one is of the
+#: ``first-order`` family (:meth:`CvxpySolver.variant_family`), the others ``interior point``
+FIRST_ORDER_BACKENDS = ("OSQP", "SCS", "PIQP_ADMM")
+
+
 @register_solver
 class CvxpySolver(Solver):
     """cvxpy modelling layer over a chosen backend (default CLARABEL)."""
@@ -109,6 +114,13 @@ class CvxpySolver(Solver):
     renamed = {"eps": "tol"}
     ranges = {"solver": None, "scale": bool, "polish": bool}   # solver: an installed backend (validate)
 
+    @classmethod
+    def variant_family(cls, variant: str) -> str:
+        """``first-order`` for a variant naming a first-order backend (:data:`FIRST_ORDER_BACKENDS`, in any
+        case: ``cvxpy:OSQP``, ``cvxpy[solver=scs]``), else :attr:`family` (``interior point``)."""
+        up = variant.upper()
+        return "first-order" if any(b in up for b in FIRST_ORDER_BACKENDS) else cls.family
+
     def validate(self) -> None:
         backend = str(self.params["solver"]).upper()
         self.params["solver"] = backend
@@ -122,12 +134,12 @@ class CvxpySolver(Solver):
         # an instance promises what its backend (and the polish) can deliver
         self.tolerance = 1e-8 if self.params["polish"] else BACKEND_TOLERANCE.get(backend, _DEFAULT_TOLERANCE)
         self.accepts = type(self).accepts if backend == "CLARABEL" else ("signorini",)
+        self.family = type(self).variant_family(backend)      # an instance declares its backend's family
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
-        """The backend to ``min(tol, 1e-8)``, then the polish (default on): CLARABEL stopped at 1e-3 or 1e-6
-        hands the polish a wrong contact set at f2, N = 64, delta = 1e-9 (x error 1.6e-3, 9.5e-5, demoted);
-        at 1e-8 and below the polished answer is at rounding on every scene measured."""
+        """The backend to ``min(tol, 1e-8)``, then the polish (default on): a looser backend can hand the
+        polish a wrong contact set (measured: docs/measurements.md)."""
         return {"tol": min(float(tol), 1e-8)}
 
     @classmethod

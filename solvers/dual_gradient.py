@@ -33,12 +33,12 @@ import time
 import numpy as np
 import scipy.sparse.linalg as sla
 
-from dualfem.core.evaluator import load_length
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver
+from dualfem.evaluator import load_length
 from dualfem.numerics.factor import from_param
 from dualfem.numerics.linalg import sparse_factor
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver
 
 
 @register_solver

@@ -13,9 +13,9 @@ import time
 
 import numpy as np
 
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver
 
 
 @register_solver

@@ -2,30 +2,26 @@
 
 OSQP's multiplier y of ``l <= Ax <= u`` is <= 0 at an active lower bound, so our nodal contact
 force is ``mu = -y``. Only the upper triangle of K is passed. With ``scale=True`` (default) the QP is
-normalised first (:mod:`dualfem.numerics.scaling`): this turns 7000+ ADMM iterations into ~50 at small
-delta. ADMM is accurate to about
-``eps_rel`` in the residuals, not in x: on the stiff delta -> 0 scenes its error in x can be much
-larger (see notes/ecosystem.md, osqp issue 364); the evaluator reports it either way.
+normalised first (:mod:`dualfem.numerics.scaling`). ADMM is accurate to about ``eps_rel`` in the
+residuals, not in x (osqp issue 364); the evaluator reports it either way.
 
-**What it takes to meet a tolerance** (docs/solvers_tolerances.md): OSQP's polishing with its default 3
-refinement steps leaves a KKT error of 5e-9..1.3e-8 (f2, N = 16..64, delta = 1e-9), above the tier
-1e-9; with ``polish_refine_iter = 20`` the polished answer is at rounding (KKT 1.4e-14, certified x
-error <= 2e-12) on every scene measured, at eps = the tier (1e-3 included). Hence
-:meth:`OSQPSolver.tolerance_params` = ``{"tol": tier, "polish_refine_iter": 20}``; the default stays OSQP's
-3 (enough for the declared tolerance 1e-3). Without a successful polish, ADMM's answer is
-only as good as eps; the certificate says so.
+**What it takes to meet a tolerance** (docs/solvers_tolerances.md): :meth:`OSQPSolver.tolerance_params`
+= ``{"tol": tier, "polish_refine_iter": 20}``: OSQP's polishing with its default 3 refinement steps does
+not reach the tier 1e-9, with 20 it does (measured: docs/measurements.md, ``solvers/osqp_.py``);
+the default stays OSQP's 3 (enough for the declared tolerance 1e-3). Without a successful polish,
+ADMM's answer is only as good as eps; the certificate says so.
 """
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.core.constraints import upper_bounds
 from dualfem.core.quiet import c_stdout_to_stderr
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver
+from dualfem.laws import upper_bounds
 from dualfem.numerics.scaling import scale
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver
 
 _STATUS = {
     "solved": Status.SOLVED,
@@ -68,7 +64,7 @@ class OSQPSolver(Solver):
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
-        """eps = the tier, and 20 refinement steps of the polish (measured, see the module docstring)."""
+        """eps = the tier, and 20 refinement steps of the polish (measured: docs/measurements.md)."""
         return {"tol": tol, "polish_refine_iter": 20}
 
     @classmethod

@@ -50,12 +50,12 @@ import time
 import numpy as np
 import scipy.linalg as sla
 
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
+from dualfem.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics.dual_operator import FACE_METHODS
 from dualfem.numerics.dual_precond import dirichlet_by_default, dirichlet_inverse
-from dualfem.numerics.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics.polish import refine_on_active_set
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
 
 #: relative accuracy of the matrix-free operator's CG on the Newton systems D_AA mu_A = -b0_A
 FACE_RTOL = 1e-14

@@ -34,12 +34,12 @@ Linear algebra (``operator``: ``dense`` | ``matrix_free`` | ``auto``, by size an
   later than the dense path's, and the polish makes the answers equal (tested to 1e-10).
 
 Line search: exact, on the convex piecewise-quadratic restriction t -> P_rho(x + t d) (walk the
-breakpoints where a node enters or leaves contact); Armijo backtracking, the textbook choice,
-stalled with steps of 1e-12 when a node sat at the kink gap = 0 (f2, N = 128, delta = 1e-9) and
-is only a fallback. Stop: when the Newton decrement -grad'd <= 1e-20 x'Sx (about 1e-10 relative
-in the energy norm), when the step is at rounding level, or when a full step keeps the active
-set (exact on a quadratic piece). At large rho the gradient itself stalls far above rounding in
-the stiff directions, so it is not the stopping test (``newton_tol`` is only a shortcut).
+breakpoints where a node enters or leaves contact); Armijo backtracking, the textbook choice, can
+stall at the kink gap = 0 (docs/measurements.md) and is only a fallback. Stop: when the Newton
+decrement -grad'd <= 1e-20 x'Sx (about 1e-10 relative in the energy norm), when the step is at
+rounding level, or when a full step keeps the active set (exact on a quadratic piece). At large rho
+the gradient itself stalls far above rounding in the stiff directions, so it is not the stopping test
+(``newton_tol`` is only a shortcut).
 After each Newton solve the minimiser on the final active set is recomputed stably,
 ``(D_AA + (rho W_A)^-1) mu_A = -b0_A`` then ``xI = S^-1 (g + BI_A' mu_A)``, so the penalty
 force and the penetration ``mu_A / (rho w_A)`` are not differences of rounded displacements.
@@ -65,12 +65,12 @@ import time
 import numpy as np
 import scipy.linalg as sla
 
-from dualfem.core.evaluator import load_energy, load_length
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
-from dualfem.numerics.dual_solver import OPERATORS, DualOperatorSolver
+from dualfem.dual_solver import OPERATORS, DualOperatorSolver
+from dualfem.evaluator import load_energy, load_length
 from dualfem.numerics.factor import from_param
 from dualfem.numerics.newton_matrix import NewtonMatrix
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
 
 #: most refinement steps of the matrix-free polish (each one K-solve and one Newton-matrix solve)
 POLISH_STEPS = 8
@@ -209,8 +209,8 @@ class PenaltySolver(DualOperatorSolver):
     family = "dual"
     description = "quadratic penalty, semismooth Newton + line search, continuation in rho (inexact)"
     exact = False
-    # the x error follows the relative penetration (<= penetration_tol = 1e-10): measured
-    # <= 2.5e-10 (energy norm, vs pdas) on f1/f2, delta 1e-9..1e-1, N = 16..128
+    #: relative energy-norm error of x against the QP's own solution x*, the modelling error included: it
+    #: follows the relative penetration (<= ``tol``; measured: docs/measurements.md)
     tolerance = 1e-8
     defaults = {
         "tol": 1e-10,             # relative penetration max(-Bx) / |x| accepted

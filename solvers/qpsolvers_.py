@@ -44,13 +44,13 @@ from typing import Any
 
 import numpy as np
 
-from dualfem.core.constraints import conic_rows
 from dualfem.core.quiet import c_stdout_to_stderr
-from dualfem.core.registry import register_solver
-from dualfem.core.solution import Solution, Status
-from dualfem.core.solver import Solver
+from dualfem.laws import conic_rows
 from dualfem.numerics.polish import polish_if_better
 from dualfem.numerics.scaling import scale
+from dualfem.registry import register_solver
+from dualfem.solution import Solution, Status
+from dualfem.solver import Solver
 
 #: default size above which dense backends are skipped (a dense n x n Hessian: 8 n^2 bytes and
 #: O(n^3) factorizations; at n = 3000 that is 72 MB and seconds per factorization)

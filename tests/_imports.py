@@ -94,8 +94,9 @@ def edges(files: dict[str, Path] | None = None) -> list[Edge]:
 #: the stable paths of docs/plugins.md that re-export only core and numerics: the built-in plugins import
 #: them as third-party plugins do (:func:`plugin_path`); the other facade modules (runner, workspace,
 #: results) re-export experiments and stay out of a plugin's reach
-PLUGIN_PATHS = frozenset({"dualfem.errors", "dualfem.evaluator", "dualfem.problem", "dualfem.qp", "dualfem.registry",
-                          "dualfem.scene", "dualfem.solution", "dualfem.solver", "dualfem.dual_solver"})
+PLUGIN_PATHS = frozenset({"dualfem.errors", "dualfem.evaluator", "dualfem.laws", "dualfem.problem", "dualfem.qp",
+                          "dualfem.registry", "dualfem.scene", "dualfem.solution", "dualfem.solver",
+                          "dualfem.dual_solver"})
 
 
 def plugin_path(e: Edge) -> bool:

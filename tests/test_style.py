@@ -1,6 +1,8 @@
 """dualfem.post.style: deterministic, distinct, colour-blind-safe series styles and solver families."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from dualfem.core.registry import _SOLVERS as REGISTRY
@@ -119,3 +121,54 @@ def test_a_family_beyond_its_slots_stays_distinct():
     finally:
         for cls in extra:
             REGISTRY.pop(cls.name, None)
+
+
+def test_a_variant_family_is_the_plugins_declaration():
+    """post/ knows no solver: a plugin whose parameter changes its method declares its variants' family
+    (``Solver.variant_family``), as cvxpy does for its first-order backends; a failing or out-of-list
+    declaration falls back to the class's family or ``other``."""
+    solvers()
+
+    class Modes(Solver):
+        name, family, description = "zz_modes_plugin", "interior point", "third-party test solver"
+
+        @classmethod
+        def variant_family(cls, variant):
+            return "first-order" if "admm" in variant else ("bogus" if "bad" in variant else cls.family)
+
+    class Broken(Solver):
+        name, family, description = "zz_broken_plugin", "dual", "third-party test solver"
+
+        @classmethod
+        def variant_family(cls, variant):
+            raise RuntimeError("broken declaration")
+
+    for cls in (Modes, Broken):
+        register_solver(cls)
+    try:
+        assert S.family("zz_modes_plugin[mode=admm]") == "first-order"
+        assert S.family("zz_modes_plugin[mode=ipm]") == S.family("zz_modes_plugin") == "interior point"
+        assert S.family("zz_modes_plugin:bad") == "other"
+        assert S.family("zz_broken_plugin[x=1]") == "dual"
+    finally:
+        for cls in (Modes, Broken):
+            REGISTRY.pop(cls.name, None)
+    cvxpy = solvers()["cvxpy"]
+    assert cvxpy.variant_family("[solver=scs]") == "first-order" == S.family("cvxpy[solver=SCS]")
+    src = Path(S.__file__).read_text()
+    assert "SCS" not in src and "PIQP" not in src          # no backend knowledge left in post/
+
+
+def test_post_names_no_plugin():
+    """No plugin knowledge in post/: no registered solver or problem name appears there as a string
+    literal (every family, colour and marker comes from the plugins' declarations)."""
+    import ast
+
+    names = set(solvers())
+    from dualfem.core.registry import problems
+
+    names |= set(problems())
+    root = Path(S.__file__).parent
+    bad = [f"{f.name}:{n.lineno}: {n.value!r}" for f in sorted(root.rglob("*.py"))
+           for n in ast.walk(ast.parse(f.read_text())) if isinstance(n, ast.Constant) and n.value in names]
+    assert not bad, "\n".join(bad)

@@ -119,6 +119,14 @@ class Solver:
         self.qp: QP | None = None
 
     @classmethod
+    def variant_family(cls, variant: str) -> str:
+        """The family (one of :data:`SOLVER_FAMILIES`) of a variant of this solver, ``variant`` being the
+        text after the solver's name in a series label (``"[r=10]"``, ``":OSQP"``; ``""`` for the solver
+        itself): :attr:`family`, unless a parameter changes the method (cvxpy's backend), in which case
+        the solver overrides this. Figures read it (:func:`dualfem.post.style.family`)."""
+        return cls.family
+
+    @classmethod
     def param_ranges(cls) -> dict[str, Any]:
         """The declared allowed values of every parameter: ``ranges``, plus the shared vocabulary's
         (:data:`COMMON_RANGES`) for a parameter whose default lies in it (a third-party plugin whose

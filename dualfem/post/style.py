@@ -5,8 +5,9 @@
   yellow last: it is drawn with a darker marker edge, see :meth:`Style.kwargs`).
 * :func:`family`: the solver family of a registered solver name (or of a variant of one): what its
   class declares (``Solver.family``, one of :data:`FAMILIES`: ``dual``, ``interior point``,
-  ``first-order``, ``active set``, ``other``); ``other`` for a name that is not registered or a
-  declaration outside the list.
+  ``first-order``, ``active set``, ``other``; a variant's family is ``Solver.variant_family``, which a
+  solver whose parameter changes its method overrides); ``other`` for a name that is not registered or a
+  declaration outside the list. No solver is named here: every family is a plugin's declaration.
 * :func:`style` / :func:`styles`: a deterministic (colour, marker, line style) per solver. Each family
   owns its markers (dual: circles, interior point: squares, first-order: triangles, active set:
   diamonds, other: stars) and line style (solid, dashed, dash-dot, dotted). The registered solvers of
@@ -60,8 +61,6 @@ FAMILY_LINESTYLE: dict[str, str] = {"dual": "-", "interior point": "--", "first-
 #: where each family starts in the first seven colours (so that the first solvers of different
 #: families differ in colour too)
 FAMILY_OFFSET: dict[str, int] = {"dual": 0, "interior point": 6, "first-order": 5, "active set": 2, "other": 3}
-#: cvxpy backends that are first-order methods (a cvxpy variant naming one is of that family)
-_CVXPY_FIRST_ORDER = ("OSQP", "SCS", "PIQP_ADMM")
 _SEPARATORS = "[(:_-@ ,"
 
 
@@ -94,6 +93,12 @@ _PLOTLY_DASH = {"-": "solid", "--": "dash", "-.": "dashdot", ":": "dot"}
 def _declared(cls) -> str:
     fam = getattr(cls, "family", "other")
     return fam if isinstance(fam, str) and fam in FAMILIES else "other"
+
+
+def _registered() -> dict:
+    from dualfem.core.registry import solvers
+
+    return solvers()
 
 
 def registered_order() -> dict[str, list[str]]:
@@ -156,15 +161,21 @@ def base_solver(name: str) -> str | None:
 
 
 def family(name: str) -> str:
-    """Family of a solver or variant name (one of :data:`FAMILIES`, as its solver class declares;
-    ``other`` when not registered).
-    A cvxpy variant naming a first-order backend (OSQP, SCS) is ``first-order``."""
+    """Family of a solver or variant name (one of :data:`FAMILIES`), as its solver class declares:
+    ``Solver.variant_family(rest of the name)`` (a variant of cvxpy naming a first-order backend,
+    ``cvxpy:OSQP``, is ``first-order``); ``other`` when not registered, when the declaration is outside
+    :data:`FAMILIES` or when the plugin's ``variant_family`` fails."""
     base = base_solver(name)
     if base is None:
         return "other"
-    if base == "cvxpy" and any(b in name[len(base):].upper() for b in _CVXPY_FIRST_ORDER):
-        return "first-order"
-    return _known()[base]
+    cls = _registered()[base]
+    if name == base:
+        return _declared(cls)
+    try:
+        fam = cls.variant_family(name[len(base):])
+    except Exception:                 # a third-party declaration that fails: the class's own family
+        return _declared(cls)
+    return fam if isinstance(fam, str) and fam in FAMILIES else "other"
 
 
 def _slot(fam: str, i: int) -> Style:

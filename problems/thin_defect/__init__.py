@@ -48,13 +48,11 @@ from __future__ import annotations
 import numpy as np
 
 from dualfem.core.elasticity import PLANES, lame  # noqa: F401  (re-exported)
-from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
-from dualfem.core.parts import GeometryPart, MaterialPart, UnitsPart
-from dualfem.core.problem import Problem
-from dualfem.core.qp import QP
-from dualfem.core.registry import register_problem
-from dualfem.core.units import UnitMap
+from dualfem.errors import InputError, check_int, check_open_interval, check_positive
 from dualfem.numerics.linalg import freeze
+from dualfem.problem import Problem, UnitMap
+from dualfem.qp import QP, GeometryPart, MaterialPart, UnitsPart
+from dualfem.registry import register_problem
 
 from .. import _boundary as bd
 from .._interface import delta_free_part, interface, local_unknowns, with_delta

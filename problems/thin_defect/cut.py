@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dualfem.core.errors import InputError
+from dualfem.errors import InputError
 
 from .._interface import DoubledNodes, double_nodes
 

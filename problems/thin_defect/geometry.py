@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dualfem.core.errors import InputError, check_positive
+from dualfem.errors import InputError, check_positive
 
 from .._boundary import parse_scalar
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dualfem.core.errors import InputError
+from dualfem.errors import InputError
 
 
 def structured_mesh(N: int, width: float, height: float) -> tuple[np.ndarray, np.ndarray]:

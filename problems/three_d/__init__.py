@@ -42,12 +42,11 @@ import math
 import numpy as np
 
 from dualfem.core.elasticity import lame
-from dualfem.core.errors import InputError, check_int, check_open_interval, check_positive
-from dualfem.core.parts import GeometryPart, MaterialPart, UnitsPart
-from dualfem.core.problem import Problem
-from dualfem.core.qp import QP
-from dualfem.core.registry import register_problem
+from dualfem.errors import InputError, check_int, check_open_interval, check_positive
 from dualfem.numerics.linalg import freeze
+from dualfem.problem import Problem
+from dualfem.qp import QP, GeometryPart, MaterialPart, UnitsPart
+from dualfem.registry import register_problem
 
 from .. import _boundary as bd
 from .._interface import delta_free_part, interface, local_unknowns, with_delta

@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from dualfem.core.errors import InputError
+from dualfem.errors import InputError
 
 from .._interface import DoubledNodes, double_nodes
 from .geometry import Surface

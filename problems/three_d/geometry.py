@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dualfem.core.errors import InputError
+from dualfem.errors import InputError
 
 SHAPES = ("disk", "ellipse", "polygon", "cap")
 #: defects of one scene and vertices of one polygon (sampling and pairwise checks are bounded by them)

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dualfem.core.errors import InputError, MissingDependency
+from dualfem.errors import InputError, MissingDependency
 
 from .geometry import Surface
 

@@ -17,8 +17,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from dualfem.core.errors import InputError
 from dualfem.core.expressions import compile_expression
+from dualfem.errors import InputError
 
 Traction = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
