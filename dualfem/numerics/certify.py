@@ -63,6 +63,8 @@ K_fixed through :meth:`dualfem.numerics.linalg.LocalReduction.k_solve`.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.linalg as sla
 
@@ -270,51 +272,17 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
 
         return blocks_active_set_check(qp, x, mu, ksolve, margin, _Kx)
     mu = np.asarray(mu, float)
-    if isinstance(ksolve, KSolver) and _quad is None:
-        ksolve.reset_k_error()
-    op = getattr(ksolve, "op", None)
-    D = ksolve.delassus() if qp.m else np.zeros((0, 0))
-    gap = qp.B @ x
-    if D is None and op is None:   # no Delassus matrix (large m, no reduction): only mu = 0 can be checked
-        if np.any(mu != 0):
-            return nan
-        D, A = np.zeros((0, 0)), np.zeros(mu.size, bool)
-    else:
-        A = guess_active_set(D, mu, gap, None if D is not None else op.diagonal(), qp.constraints)
-    mu_A = np.where(A, mu, 0.0)
-    same = np.array_equal(mu_A, constraints.project(qp.constraints, mu))
-    rKr, Bz = (_quad if (_quad is not None and same) else None) or _residual_solve(qp, x, mu_A, ksolve, _Kx)
-    dmu = np.zeros_like(mu)
-    face = None
-    if A.any():
-        try:
-            face = _Face(D, op, A, CG_RTOL)
-            dmu[A] = face.solve(-(gap[A] - Bz[A]))
-        except (np.linalg.LinAlgError, ValueError):
-            return nan
-    Ddmu = face.apply(dmu, ksolve) if face is not None else np.zeros_like(dmu)
-    Bdx = -Bz + Ddmu
-    gap1 = gap + Bdx
-    mu1 = mu_A + dmu
-    step_mu = max(np.abs(dmu).max(initial=0.0), np.abs(mu - mu_A).max(initial=0.0))
-    # AMG K-solves (no factorization): the two solves of the step (z, K^-1 B'dmu) are off by at most e_K each
-    # in the energy norm and move the gaps by at most max_j |b_j| e_2 each (module docstring: an estimate)
-    e_K, e_2 = ksolve.k_error() if isinstance(ksolve, KSolver) else (0.0, 0.0)
-    bmax = float(np.sqrt(np.max(np.asarray(qp.B.multiply(qp.B).sum(axis=1)), initial=0.0))) if e_2 else 0.0
-    step_gap = np.abs(Bdx).max(initial=0.0) + 2.0 * bmax * e_2
-    # duplicated rows (one constraint, several rows: the split of its force is not unique) are judged as one:
-    # the force of the group (each row's multiplier times its row's size), and no gap test for a row whose
-    # constraint is active through another row of its group
-    labels = parallel_rows(qp.B) if qp.m else None
-    size = np.sqrt(np.asarray(qp.B.multiply(qp.B).sum(axis=1)).ravel()) if labels is not None else np.ones(qp.m)
-    in_A = _group_sum(labels, A.astype(float), np.ones(qp.m)) > 0
-    mu1_g = _group_sum(labels, mu1, size) / size if labels is not None else mu1
-    err_mu = float(np.abs(_group_sum(labels, mu - mu1, size) / size).max(initial=0.0)) / force_scale(qp, mu1)
-    open_ = ~in_A
-    if D is not None and face is not None and open_.any():
-        near = open_ & (gap1 <= margin * step_gap)       # only rows that would fail the margin are looked at
-        if near.any():
-            open_ &= ~_implied_rows(D, A, near, face)
+    st = _exact_step(qp, x, mu, ksolve, _quad, _Kx)
+    if st is None:
+        return nan
+    A, face = st.A, st.face
+    Bdx = -st.Bz + st.Ddmu
+    gap1 = st.gap + Bdx
+    mu1 = st.mu_A + st.dmu
+    step_mu = max(np.abs(st.dmu).max(initial=0.0), np.abs(mu - st.mu_A).max(initial=0.0))
+    e_K, step_gap = _step_gap(qp, ksolve, Bdx)
+    labels, in_A, mu1_g, err_mu = _group_forces(qp, A, mu, mu1)
+    open_ = _open_rows(st, ~in_A, gap1, margin * step_gap)
     extra = 0.0
     if face is not None and face.pinv is not None and not _groups_explain(labels, A, face):
         # dependent rows beyond duplicates: the forces on A are not unique and the minimum-norm step may
@@ -326,20 +294,116 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
             return nan
         mu1_g = np.where(A, np.inf, mu1_g)
         err_mu = float("nan")
-    if (A.any() and mu1_g[A].min() <= margin * step_mu) or (open_.any() and gap1[open_].min() <= margin * step_gap):
+    if _fails(A, mu1_g, open_, gap1, margin * step_mu, margin * step_gap):
         # not verified to first order (x's error is not |dx|); the multipliers of the set are still the
         # exact ones if the exact point keeps the KKT signs beyond the rounding of the step itself
         # (far-off multipliers with a right set: a large step, signs kept), then mu* = mu1; with CG the
         # step is known to its tolerance times the condition CG saw, not to rounding
         kappa, rtol = (face.kappa, face.rtol) if face is not None else (1.0, 0.0)
         rnd = MU_ROUNDING * max(EPS, rtol) * max(kappa, 1.0)
-        if (A.any() and mu1_g[A].min() <= rnd * step_mu) or (open_.any() and gap1[open_].min() <= rnd * step_gap):
+        if _fails(A, mu1_g, open_, gap1, rnd * step_mu, rnd * step_gap):
             return nan
         return float("nan"), err_mu
     nx = size_energy(qp, x, _Kx)
     if nx == 0.0:
         return float("nan"), err_mu
-    return (step_size(rKr, Bz, dmu, Ddmu) + 2.0 * e_K + extra) / nx, err_mu
+    return (step_size(st.rKr, st.Bz, st.dmu, st.Ddmu) + 2.0 * e_K + extra) / nx, err_mu
+
+
+@dataclass
+class _Step:
+    """The exact step of :func:`active_set_check` on the guessed set A (its notation): the gaps B x, mu_A (mu
+    set to 0 off A), r'K^-1 r and B z (z = K^-1 r, r = K x - F - B'mu_A), dmu, D dmu and the face solver of
+    D_AA (None when A is empty); D the Delassus matrix (None when matrix-free)."""
+
+    A: np.ndarray
+    gap: np.ndarray
+    mu_A: np.ndarray
+    rKr: float
+    Bz: np.ndarray
+    dmu: np.ndarray
+    face: _Face | None
+    Ddmu: np.ndarray
+    D: np.ndarray | None
+
+
+def _guess_set(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, _quad) -> tuple | None:
+    """(D, op, gaps B x, the guessed active set A) of :func:`active_set_check`; None when the answer cannot
+    be checked (no Delassus matrix and no operator, and mu not 0). Resets the K-solves' error record."""
+    if isinstance(ksolve, KSolver) and _quad is None:
+        ksolve.reset_k_error()
+    op = getattr(ksolve, "op", None)
+    D = ksolve.delassus() if qp.m else np.zeros((0, 0))
+    gap = qp.B @ x
+    if D is None and op is None:   # no Delassus matrix (large m, no reduction): only mu = 0 can be checked
+        if np.any(mu != 0):
+            return None
+        D, A = np.zeros((0, 0)), np.zeros(mu.size, bool)
+    else:
+        A = guess_active_set(D, mu, gap, None if D is not None else op.diagonal(), qp.constraints)
+    return D, op, gap, A
+
+
+def _exact_step(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, _quad, _Kx) -> _Step | None:
+    """The guessed set and one exact step on it (:func:`refinement_step` without forming dx; one K-solve,
+    shared with ``_quad`` when mu is already 0 off A); None when it cannot be taken (D_AA not positive
+    definite, or not checkable: :func:`_guess_set`)."""
+    guess = _guess_set(qp, x, mu, ksolve, _quad)
+    if guess is None:
+        return None
+    D, op, gap, A = guess
+    mu_A = np.where(A, mu, 0.0)
+    same = np.array_equal(mu_A, constraints.project(qp.constraints, mu))
+    rKr, Bz = (_quad if (_quad is not None and same) else None) or _residual_solve(qp, x, mu_A, ksolve, _Kx)
+    dmu = np.zeros_like(mu)
+    face = None
+    if A.any():
+        try:
+            face = _Face(D, op, A, CG_RTOL)
+            dmu[A] = face.solve(-(gap[A] - Bz[A]))
+        except (np.linalg.LinAlgError, ValueError):
+            return None
+    Ddmu = face.apply(dmu, ksolve) if face is not None else np.zeros_like(dmu)
+    return _Step(A, gap, mu_A, rKr, Bz, dmu, face, Ddmu, D)
+
+
+def _step_gap(qp: QP, ksolve, Bdx: np.ndarray) -> tuple[float, float]:
+    """(e_K, the step's largest change of a gap): with AMG K-solves (no factorization) the two solves of the
+    step (z, K^-1 B'dmu) are off by at most e_K each in the energy norm and move the gaps by at most
+    max_j |b_j| e_2 each (module docstring: an estimate); both 0 with a factorization."""
+    e_K, e_2 = ksolve.k_error() if isinstance(ksolve, KSolver) else (0.0, 0.0)
+    bmax = float(np.sqrt(np.max(np.asarray(qp.B.multiply(qp.B).sum(axis=1)), initial=0.0))) if e_2 else 0.0
+    return e_K, np.abs(Bdx).max(initial=0.0) + 2.0 * bmax * e_2
+
+
+def _group_forces(qp: QP, A: np.ndarray, mu: np.ndarray, mu1: np.ndarray) -> tuple:
+    """(labels, in_A, mu1_g, err_mu): duplicated rows (one constraint, several rows: the split of its force is
+    not unique) are judged as one: the force of the group (each row's multiplier times its row's size), and
+    no gap test for a row whose constraint is active through another row of its group (``in_A``); err_mu the
+    multipliers' error against mu1, relative to the force scale."""
+    labels = parallel_rows(qp.B) if qp.m else None
+    size = np.sqrt(np.asarray(qp.B.multiply(qp.B).sum(axis=1)).ravel()) if labels is not None else np.ones(qp.m)
+    in_A = _group_sum(labels, A.astype(float), np.ones(qp.m)) > 0
+    mu1_g = _group_sum(labels, mu1, size) / size if labels is not None else mu1
+    err_mu = float(np.abs(_group_sum(labels, mu - mu1, size) / size).max(initial=0.0)) / force_scale(qp, mu1)
+    return labels, in_A, mu1_g, err_mu
+
+
+def _open_rows(st: _Step, open_: np.ndarray, gap1: np.ndarray, gap_margin: float) -> np.ndarray:
+    """The rows off A whose gaps are tested: ``open_`` less the rows implied by A (:func:`_implied_rows`; dense
+    D only), looked for only among those that would fail ``gap_margin``."""
+    if st.D is not None and st.face is not None and open_.any():
+        near = open_ & (gap1 <= gap_margin)       # only rows that would fail the margin are looked at
+        if near.any():
+            open_ &= ~_implied_rows(st.D, st.A, near, st.face)
+    return open_
+
+
+def _fails(A: np.ndarray, mu1_g: np.ndarray, open_: np.ndarray, gap1: np.ndarray, mu_margin: float,
+           gap_margin: float) -> bool:
+    """True when the exact point of A is not verified at these margins: a force on A at most ``mu_margin``,
+    or a tested gap off A at most ``gap_margin``."""
+    return bool((A.any() and mu1_g[A].min() <= mu_margin) or (open_.any() and gap1[open_].min() <= gap_margin))
 
 
 #: a row off A is implied by A (its normal in the span of A's, so B_A x = 0 makes its gap 0) when the part of
