@@ -13,7 +13,7 @@ and for a feasible x, ``Pi(x) - Pi(x*) >= 1/2 |x - x*|_K^2`` and ``Pi(x*) >= D(m
 (For an infeasible x the bound does not hold; :func:`error_bound` then returns nan.)
 
 The term ``2 mu'Bx`` makes this bound only about sqrt(rounding) tight when there is contact
-(gaps of 1e-19 against forces of 0.2 give ~1e-8 relative). :func:`active_set_error` is the
+(docs/measurements.md). :func:`active_set_error` is the
 sharp companion: with A = {mu > 0}, one exact refinement step of the equality-constrained KKT
 system on A (``K dx - B_A' dmu_A = -r``, ``B_A dx = -B_A x``, via the reduced Delassus block)
 measures the distance of (x, mu) to the solution of that linear system; if the refined point
@@ -33,9 +33,7 @@ another, :func:`parallel_rows`) are one constraint, judged by the force of the g
 normal is a combination of A's (:func:`_implied_rows`) has gap 0 at the exact point by construction and
 no margin is asked of it; a singular D_AA is solved on its range (minimum norm), and where duplicates do
 not explain the dependence the step's forces are accepted if nonnegative forces reproduce B_A'mu1
-(:func:`_nonnegative_forces`; no multiplier error is then claimed). Measured on f2 with every row twice
-and with three sum rows: every exact solver's certificate 1.2e-14 to 5.3e-10 (was nan, leaving the
-duality-gap bound 1.2e-9 to 3.8e-6 against true errors 3e-14 to 5e-10).
+(:func:`_nonnegative_forces`; no multiplier error is then claimed).
 
 :func:`error_bound` returns that bound relative to |x|_K (with mu clipped at 0 and mu'Bx at
 0: the tiny infeasibility of an exact-to-rounding x is not counted, and is reported separately
@@ -55,11 +53,10 @@ K_fixed through :meth:`dualfem.numerics.linalg.LocalReduction.k_solve`.
   each <= |s|_2 / sqrt(lambda_min), and the gap margin of the verification their effect on the gaps,
   max_j |b_j|_2 |s|_2 / lambda_min each;
 * lambda_min(K) is *estimated*: LOBPCG's smallest Ritz value preconditioned by the AMG hierarchy (an
-  upper bound of lambda_min, in practice equal to it to 1e-4: 0.0884 against ARPACK's 0.0884 on 14 k
-  unknowns) divided by :data:`dualfem.numerics.amg.LAMBDA_SAFETY` = 2. So the widened certificate is
+  upper bound of lambda_min) divided by :data:`dualfem.numerics.amg.LAMBDA_SAFETY` = 2. So the widened certificate is
   an estimate, rigorous if LOBPCG found the smallest eigenvalue within that factor. The K-solves of
-  the certificate run to :data:`CERT_K_RTOL`: the widening is then far below the certified values
-  (the residual r of a good answer is itself tiny, and s is 1e-12 of it).
+  the certificate run to :data:`CERT_K_RTOL`, so that the widening is far below the certified values
+  (docs/measurements.md).
 """
 from __future__ import annotations
 
@@ -451,9 +448,8 @@ def multiplier_floor(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     """The rounding floor of the exact multipliers mu* of :func:`active_set_check`, relative like its error:
     the stationarity residual's rounding floor ``c eps (|K||x| + |F| + |B'||mu|)`` (and ``eps |B||x|`` of
     the gaps) carried through the exact step, ``D_AA^-1 (|B_A K^-1 floor| + eps |B_A||x|)``. mu* is
-    known no better than this from the data in double precision (measured on the paper's scenes, N = 16:
-    5-10 times the difference of pdas's refined multipliers to mu*: 3.6e-9 for 7.0e-10 on f2 at delta =
-    1e-12, 2.5e-4 for 1.7e-5 with E = 1). One more solve with K; nan when there is no Delassus matrix."""
+    known no better than this from the data in double precision (docs/measurements.md). One more solve
+    with K; nan when there is no Delassus matrix."""
     from dualfem.core.evaluator import ROUNDING_C, abs_product
 
     ksolve = ksolve or solver_for(qp)
