@@ -30,10 +30,10 @@ block's (nan with further blocks).
 
 **Dependent rows** (non-unique multipliers are normal): duplicated rows (positive multiples of one
 another, :func:`parallel_rows`) are one constraint, judged by the force of the group; a row off A whose
-normal is a combination of A's (:func:`_implied_rows`) has gap 0 at the exact point by construction and
+normal is a combination of A's (:func:`implied_rows`) has gap 0 at the exact point by construction and
 no margin is asked of it; a singular D_AA is solved on its range (minimum norm), and where duplicates do
 not explain the dependence the step's forces are accepted if nonnegative forces reproduce B_A'mu1
-(:func:`_nonnegative_forces`; no multiplier error is then claimed).
+(:func:`nonnegative_forces`; no multiplier error is then claimed): :mod:`dualfem.numerics.dependent_rows`.
 
 :func:`error_bound` returns that bound relative to |x|_K (with mu clipped at 0 and mu'Bx at
 0: the tiny infeasibility of an exact-to-rounding x is not counted, and is reported separately
@@ -69,6 +69,13 @@ from dualfem.core import constraints
 from dualfem.core.evaluator import force_scale, size_energy, size_max
 from dualfem.core.laws import SIGNORINI
 from dualfem.core.qp import QP
+from dualfem.numerics.dependent_rows import (  # noqa: F401 (parallel_rows: public here, as before)
+    group_forces,
+    groups_explain,
+    implied_rows,
+    nonnegative_forces,
+    parallel_rows,
+)
 from dualfem.numerics.ksolver import CERT_K_RTOL, KSolver, OperatorHints, solver_for  # noqa: F401 (public here)
 from dualfem.numerics.linalg import step_size
 
@@ -114,39 +121,6 @@ def guess_active_set(D: np.ndarray, mu: np.ndarray, gap: np.ndarray, diagonal: n
     if blocks is None:
         return SIGNORINI.face(mu, gap, c)
     return constraints.face(blocks, mu, gap, c)
-
-
-def parallel_rows(B) -> np.ndarray | None:
-    """Labels of the rows of B that are one constraint: ``labels[j] = labels[k]`` when row j is a positive
-    multiple of row k (duplicated rows, to 1e-12 of the row's size); None when every row is its own. Two
-    random projections of the normalised rows find the candidates (sorted), which are then compared."""
-    import scipy.sparse as sp
-
-    B = sp.csr_matrix(B)
-    m = B.shape[0]
-    if m < 2:
-        return None
-    norms = np.sqrt(np.asarray(B.multiply(B).sum(axis=1)).ravel())
-    scale = np.where(norms > 0, norms, 1.0)
-    h = (B @ np.random.default_rng(0).standard_normal((B.shape[1], 2))) / scale[:, None]
-    order = np.lexsort((h[:, 1], h[:, 0]))
-    close = np.all(np.abs(np.diff(h[order], axis=0)) <= 1e-10 * (1 + np.abs(h[order][1:])), axis=1)
-    if not close.any():
-        return None
-    labels = np.arange(m)
-    for i in np.flatnonzero(close):
-        j, k = order[i], order[i + 1]
-        d = B[j] / scale[j] - B[k] / scale[k]
-        if norms[j] > 0 and norms[k] > 0 and (d.nnz == 0 or np.abs(d.data).max() <= 1e-12):
-            labels[k] = labels[j]
-    return None if np.unique(labels).size == m else labels
-
-
-def _group_sum(labels: np.ndarray | None, v: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """sum_{j in group} w_j v_j for each row's group, per row (v itself without groups)."""
-    if labels is None:
-        return v
-    return np.bincount(labels, weights=w * v, minlength=labels.size)[labels]
 
 
 class _Face:
@@ -278,15 +252,15 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     mu1 = st.mu_A + st.dmu
     step_mu = max(np.abs(st.dmu).max(initial=0.0), np.abs(mu - st.mu_A).max(initial=0.0))
     e_K, step_gap = _step_gap(qp, ksolve, Bdx)
-    labels, in_A, mu1_g, err_mu = _group_forces(qp, A, mu, mu1)
+    labels, in_A, mu1_g, err_mu = group_forces(qp, A, mu, mu1)
     open_ = _open_rows(st, ~in_A, gap1, margin * step_gap)
     extra = 0.0
-    if face is not None and face.pinv is not None and not _groups_explain(labels, A, face):
+    if face is not None and face.pinv is not None and not groups_explain(labels, A, face):
         # dependent rows beyond duplicates: the forces on A are not unique and the minimum-norm step may
         # split them with a sign; x1 is the solution iff some nonnegative forces nu give the same B_A'nu
         # (nonnegative least squares in D_AA's energy norm; the mismatch |B_A'(nu - mu1)|_{K^-1} is added
         # to the error, and no multiplier error is claimed: they are not unique)
-        extra, ok = _nonnegative_forces(face, mu1[A])
+        extra, ok = nonnegative_forces(face, mu1[A])
         if not ok:
             return nan
         mu1_g = np.where(A, np.inf, mu1_g)
@@ -373,26 +347,13 @@ def _step_gap(qp: QP, ksolve, Bdx: np.ndarray) -> tuple[float, float]:
     return e_K, np.abs(Bdx).max(initial=0.0) + 2.0 * bmax * e_2
 
 
-def _group_forces(qp: QP, A: np.ndarray, mu: np.ndarray, mu1: np.ndarray) -> tuple:
-    """(labels, in_A, mu1_g, err_mu): duplicated rows (one constraint, several rows: the split of its force is
-    not unique) are judged as one: the force of the group (each row's multiplier times its row's size), and
-    no gap test for a row whose constraint is active through another row of its group (``in_A``); err_mu the
-    multipliers' error against mu1, relative to the force scale."""
-    labels = parallel_rows(qp.B) if qp.m else None
-    size = np.sqrt(np.asarray(qp.B.multiply(qp.B).sum(axis=1)).ravel()) if labels is not None else np.ones(qp.m)
-    in_A = _group_sum(labels, A.astype(float), np.ones(qp.m)) > 0
-    mu1_g = _group_sum(labels, mu1, size) / size if labels is not None else mu1
-    err_mu = float(np.abs(_group_sum(labels, mu - mu1, size) / size).max(initial=0.0)) / force_scale(qp, mu1)
-    return labels, in_A, mu1_g, err_mu
-
-
 def _open_rows(st: _Step, open_: np.ndarray, gap1: np.ndarray, gap_margin: float) -> np.ndarray:
-    """The rows off A whose gaps are tested: ``open_`` less the rows implied by A (:func:`_implied_rows`; dense
-    D only), looked for only among those that would fail ``gap_margin``."""
+    """The rows off A whose gaps are tested: ``open_`` less the rows implied by A (:func:`implied_rows`; dense D
+    only), looked for only among those that would fail ``gap_margin``."""
     if st.D is not None and st.face is not None and open_.any():
         near = open_ & (gap1 <= gap_margin)       # only rows that would fail the margin are looked at
         if near.any():
-            open_ &= ~_implied_rows(st.D, st.A, near, st.face)
+            open_ &= ~implied_rows(st.D, st.A, near, st.face)
     return open_
 
 
@@ -401,47 +362,6 @@ def _fails(A: np.ndarray, mu1_g: np.ndarray, open_: np.ndarray, gap1: np.ndarray
     """True when the exact point of A is not verified at these margins: a force on A at most ``mu_margin``,
     or a tested gap off A at most ``gap_margin``."""
     return bool((A.any() and mu1_g[A].min() <= mu_margin) or (open_.any() and gap1[open_].min() <= gap_margin))
-
-
-#: a row off A is implied by A (its normal in the span of A's, so B_A x = 0 makes its gap 0) when the part of
-#: it outside that span, in the K^-1 norm (a Schur complement of D), is below this fraction of its own
-IMPLIED_RTOL = 1e-10
-
-
-def _implied_rows(D: np.ndarray, A: np.ndarray, rows: np.ndarray, face: _Face) -> np.ndarray:
-    """Mask of the rows (of ``rows``) whose normals are combinations of A's (dependent rows): their gap at
-    the exact point of A is 0 by construction, no separate constraint, so no gap margin is asked of them.
-    ``D_jj - D_jA D_AA^+ D_Aj <= IMPLIED_RTOL D_jj`` (dense D only)."""
-    idx = np.flatnonzero(rows)
-    DAo = D[np.ix_(A, idx)]
-    schur = np.diag(D)[idx] - np.einsum("ij,ij->j", DAo, face.solve(DAo))
-    out = np.zeros(rows.size, bool)
-    out[idx] = schur <= IMPLIED_RTOL * np.diag(D)[idx]
-    return out
-
-
-def _groups_explain(labels: np.ndarray | None, A: np.ndarray, face: _Face) -> bool:
-    """True when the rank of a singular D_AA is the number of constraints (groups of duplicated rows) in A:
-    the duplicates are the whole dependence, and the group forces are unique."""
-    return labels is not None and face.pinv is not None and face.pinv[1].size == np.unique(labels[A]).size
-
-
-#: the nonnegative forces of a dependent face must reproduce B_A'mu1 to this fraction of its size
-#: (energy norm |.|_{K^-1}); a larger mismatch means a force of the wrong sign: the set is not verified
-NNLS_RTOL = 1e-6
-
-
-def _nonnegative_forces(face: _Face, mu1_A: np.ndarray) -> tuple[float, bool]:
-    """(|B_A'(nu - mu1_A)|_{K^-1} for the nonnegative nu closest in that norm, whether it is within
-    :data:`NNLS_RTOL` of |B_A'mu1_A|_{K^-1}): nonnegative least squares with D_AA^1/2 from the face's
-    eigendecomposition (|B_A'v|_{K^-1}^2 = v'D_AA v)."""
-    from scipy.optimize import nnls
-
-    V, w = face.pinv
-    M = (V * np.sqrt(w)).T
-    d = M @ mu1_A
-    _, res = nnls(M, d)
-    return float(res), bool(res <= NNLS_RTOL * float(np.linalg.norm(d)))
 
 
 def multiplier_floor(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None) -> float:
