@@ -140,8 +140,8 @@ def study(deltas, Ns, ref_N, solver: str, scene: str = DEFAULT_SCENE, progress=p
 
     Memory-lean: one delta at a time, the reference QP is dropped after its delta, and the
     solvers' factorizations are freed (``store_of(qp).clear()``, :mod:`dualfem.numerics.linalg`) after
-    every reference solve, so the peak is one fine QP plus one fine factorization (a reference at
-    N = 1024 holding three of them was killed for lack of memory on a 24 GB machine).
+    every reference solve, so the peak is one fine QP plus one fine factorization (why:
+    docs/measurements.md).
     """
 
     res = {"scene": scene, "solver": solver, "ref_N": ref_N, "Ns": list(Ns), "deltas": {},

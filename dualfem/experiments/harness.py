@@ -86,8 +86,7 @@ def watch_parent(parent: int, interval: float = 0.1) -> None:
 
     PR_SET_PDEATHSIG alone does not make a tree die with its root: it fires when the *thread*
     that forked a process exits, and a loky worker blocked in a task (waiting on its guarded
-    child) never notices that the sweep was killed (measured: 6 processes of a ``--jobs 2`` bench
-    alive 5 s after ``kill -9`` or SIGTERM of the sweep). A daemon thread polls ``os.getppid()``
+    child) never notices that the sweep was killed (docs/measurements.md). A daemon thread polls ``os.getppid()``
     (which changes when the parent process dies, whatever killed it), kills this worker's guarded
     children and exits; the children die with it in any case (their own PDEATHSIG and watch).
     Started once per process (later calls with the same parent are no-ops), at the worker's start

@@ -143,7 +143,7 @@ def plugin_packages() -> list[str]:
 @functools.cache
 def _packages_distributions() -> dict[str, list[str]]:
     """``importlib.metadata.packages_distributions()`` once per process (it reads every installed
-    distribution's file list: ~0.1-0.4 s)."""
+    distribution's file list: slow, docs/measurements.md)."""
     from importlib.metadata import packages_distributions
 
     return packages_distributions()

@@ -381,7 +381,7 @@ def _view_intact(view: QP, qp: QP) -> bool:
 
 def fingerprint(qp: QP) -> dict[str, int]:
     """A cheap checksum (CRC-32 of the bytes, shapes and dtypes) of each part of ``qp`` a solver reads:
-    K, F, B, weights, local (K_fixed, dofs), shift. About 40 ms at N = 512 (172 MB); :func:`run` compares
+    K, F, B, weights, local (K_fixed, dofs), shift (its cost: docs/measurements.md); :func:`run` compares
     it before and after every run (compare and bench run every solver through it)."""
     def crc(*arrays: Any) -> int:
         c = 0

@@ -118,7 +118,7 @@ class AmgKSolve:
         from dualfem.numerics.threads import ensure_threads
 
         pyamg = require_pyamg()
-        ensure_threads()       # OpenBLAS on one thread: CG's vector operations with two spinning threads lost 100x
+        ensure_threads()       # OpenBLAS on one thread: two spinning threads slow CG's vector operations down
         t0 = time.perf_counter()
         self.K = sp.csr_matrix(K, dtype=float)
         self.n = self.K.shape[0]

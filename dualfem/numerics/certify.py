@@ -13,7 +13,7 @@ and for a feasible x, ``Pi(x) - Pi(x*) >= 1/2 |x - x*|_K^2`` and ``Pi(x*) >= D(m
 (For an infeasible x the bound does not hold; :func:`error_bound` then returns nan.)
 
 The term ``2 mu'Bx`` makes this bound only about sqrt(rounding) tight when there is contact
-(gaps of 1e-19 against forces of 0.2 give ~1e-8 relative). :func:`active_set_error` is the
+(docs/measurements.md). :func:`active_set_error` is the
 sharp companion: with A = {mu > 0}, one exact refinement step of the equality-constrained KKT
 system on A (``K dx - B_A' dmu_A = -r``, ``B_A dx = -B_A x``, via the reduced Delassus block)
 measures the distance of (x, mu) to the solution of that linear system; if the refined point
@@ -30,12 +30,10 @@ block's (nan with further blocks).
 
 **Dependent rows** (non-unique multipliers are normal): duplicated rows (positive multiples of one
 another, :func:`parallel_rows`) are one constraint, judged by the force of the group; a row off A whose
-normal is a combination of A's (:func:`_implied_rows`) has gap 0 at the exact point by construction and
+normal is a combination of A's (:func:`implied_rows`) has gap 0 at the exact point by construction and
 no margin is asked of it; a singular D_AA is solved on its range (minimum norm), and where duplicates do
 not explain the dependence the step's forces are accepted if nonnegative forces reproduce B_A'mu1
-(:func:`_nonnegative_forces`; no multiplier error is then claimed). Measured on f2 with every row twice
-and with three sum rows: every exact solver's certificate 1.2e-14 to 5.3e-10 (was nan, leaving the
-duality-gap bound 1.2e-9 to 3.8e-6 against true errors 3e-14 to 5e-10).
+(:func:`nonnegative_forces`; no multiplier error is then claimed): :mod:`dualfem.numerics.dependent_rows`.
 
 :func:`error_bound` returns that bound relative to |x|_K (with mu clipped at 0 and mu'Bx at
 0: the tiny infeasibility of an exact-to-rounding x is not counted, and is reported separately
@@ -55,13 +53,14 @@ K_fixed through :meth:`dualfem.numerics.linalg.LocalReduction.k_solve`.
   each <= |s|_2 / sqrt(lambda_min), and the gap margin of the verification their effect on the gaps,
   max_j |b_j|_2 |s|_2 / lambda_min each;
 * lambda_min(K) is *estimated*: LOBPCG's smallest Ritz value preconditioned by the AMG hierarchy (an
-  upper bound of lambda_min, in practice equal to it to 1e-4: 0.0884 against ARPACK's 0.0884 on 14 k
-  unknowns) divided by :data:`dualfem.numerics.amg.LAMBDA_SAFETY` = 2. So the widened certificate is
+  upper bound of lambda_min) divided by :data:`dualfem.numerics.amg.LAMBDA_SAFETY` = 2. So the widened certificate is
   an estimate, rigorous if LOBPCG found the smallest eigenvalue within that factor. The K-solves of
-  the certificate run to :data:`CERT_K_RTOL`: the widening is then far below the certified values
-  (the residual r of a good answer is itself tiny, and s is 1e-12 of it).
+  the certificate run to :data:`CERT_K_RTOL`, so that the widening is far below the certified values
+  (docs/measurements.md).
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
@@ -70,6 +69,13 @@ from dualfem.core import constraints
 from dualfem.core.evaluator import force_scale, size_energy, size_max
 from dualfem.core.laws import SIGNORINI
 from dualfem.core.qp import QP
+from dualfem.numerics.dependent_rows import (  # noqa: F401 (parallel_rows: public here, as before)
+    group_forces,
+    groups_explain,
+    implied_rows,
+    nonnegative_forces,
+    parallel_rows,
+)
 from dualfem.numerics.ksolver import CERT_K_RTOL, KSolver, OperatorHints, solver_for  # noqa: F401 (public here)
 from dualfem.numerics.linalg import step_size
 
@@ -115,39 +121,6 @@ def guess_active_set(D: np.ndarray, mu: np.ndarray, gap: np.ndarray, diagonal: n
     if blocks is None:
         return SIGNORINI.face(mu, gap, c)
     return constraints.face(blocks, mu, gap, c)
-
-
-def parallel_rows(B) -> np.ndarray | None:
-    """Labels of the rows of B that are one constraint: ``labels[j] = labels[k]`` when row j is a positive
-    multiple of row k (duplicated rows, to 1e-12 of the row's size); None when every row is its own. Two
-    random projections of the normalised rows find the candidates (sorted), which are then compared."""
-    import scipy.sparse as sp
-
-    B = sp.csr_matrix(B)
-    m = B.shape[0]
-    if m < 2:
-        return None
-    norms = np.sqrt(np.asarray(B.multiply(B).sum(axis=1)).ravel())
-    scale = np.where(norms > 0, norms, 1.0)
-    h = (B @ np.random.default_rng(0).standard_normal((B.shape[1], 2))) / scale[:, None]
-    order = np.lexsort((h[:, 1], h[:, 0]))
-    close = np.all(np.abs(np.diff(h[order], axis=0)) <= 1e-10 * (1 + np.abs(h[order][1:])), axis=1)
-    if not close.any():
-        return None
-    labels = np.arange(m)
-    for i in np.flatnonzero(close):
-        j, k = order[i], order[i + 1]
-        d = B[j] / scale[j] - B[k] / scale[k]
-        if norms[j] > 0 and norms[k] > 0 and (d.nnz == 0 or np.abs(d.data).max() <= 1e-12):
-            labels[k] = labels[j]
-    return None if np.unique(labels).size == m else labels
-
-
-def _group_sum(labels: np.ndarray | None, v: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """sum_{j in group} w_j v_j for each row's group, per row (v itself without groups)."""
-    if labels is None:
-        return v
-    return np.bincount(labels, weights=w * v, minlength=labels.size)[labels]
 
 
 class _Face:
@@ -270,6 +243,64 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
 
         return blocks_active_set_check(qp, x, mu, ksolve, margin, _Kx)
     mu = np.asarray(mu, float)
+    st = _exact_step(qp, x, mu, ksolve, _quad, _Kx)
+    if st is None:
+        return nan
+    A, face = st.A, st.face
+    Bdx = -st.Bz + st.Ddmu
+    gap1 = st.gap + Bdx
+    mu1 = st.mu_A + st.dmu
+    step_mu = max(np.abs(st.dmu).max(initial=0.0), np.abs(mu - st.mu_A).max(initial=0.0))
+    e_K, step_gap = _step_gap(qp, ksolve, Bdx)
+    labels, in_A, mu1_g, err_mu = group_forces(qp, A, mu, mu1)
+    open_ = _open_rows(st, ~in_A, gap1, margin * step_gap)
+    extra = 0.0
+    if face is not None and face.pinv is not None and not groups_explain(labels, A, face):
+        # dependent rows beyond duplicates: the forces on A are not unique and the minimum-norm step may
+        # split them with a sign; x1 is the solution iff some nonnegative forces nu give the same B_A'nu
+        # (nonnegative least squares in D_AA's energy norm; the mismatch |B_A'(nu - mu1)|_{K^-1} is added
+        # to the error, and no multiplier error is claimed: they are not unique)
+        extra, ok = nonnegative_forces(face, mu1[A])
+        if not ok:
+            return nan
+        mu1_g = np.where(A, np.inf, mu1_g)
+        err_mu = float("nan")
+    if _fails(A, mu1_g, open_, gap1, margin * step_mu, margin * step_gap):
+        # not verified to first order (x's error is not |dx|); the multipliers of the set are still the
+        # exact ones if the exact point keeps the KKT signs beyond the rounding of the step itself
+        # (far-off multipliers with a right set: a large step, signs kept), then mu* = mu1; with CG the
+        # step is known to its tolerance times the condition CG saw, not to rounding
+        kappa, rtol = (face.kappa, face.rtol) if face is not None else (1.0, 0.0)
+        rnd = MU_ROUNDING * max(EPS, rtol) * max(kappa, 1.0)
+        if _fails(A, mu1_g, open_, gap1, rnd * step_mu, rnd * step_gap):
+            return nan
+        return float("nan"), err_mu
+    nx = size_energy(qp, x, _Kx)
+    if nx == 0.0:
+        return float("nan"), err_mu
+    return (step_size(st.rKr, st.Bz, st.dmu, st.Ddmu) + 2.0 * e_K + extra) / nx, err_mu
+
+
+@dataclass
+class _Step:
+    """The exact step of :func:`active_set_check` on the guessed set A (its notation): the gaps B x, mu_A (mu
+    set to 0 off A), r'K^-1 r and B z (z = K^-1 r, r = K x - F - B'mu_A), dmu, D dmu and the face solver of
+    D_AA (None when A is empty); D the Delassus matrix (None when matrix-free)."""
+
+    A: np.ndarray
+    gap: np.ndarray
+    mu_A: np.ndarray
+    rKr: float
+    Bz: np.ndarray
+    dmu: np.ndarray
+    face: _Face | None
+    Ddmu: np.ndarray
+    D: np.ndarray | None
+
+
+def _guess_set(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, _quad) -> tuple | None:
+    """(D, op, gaps B x, the guessed active set A) of :func:`active_set_check`; None when the answer cannot
+    be checked (no Delassus matrix and no operator, and mu not 0). Resets the K-solves' error record."""
     if isinstance(ksolve, KSolver) and _quad is None:
         ksolve.reset_k_error()
     op = getattr(ksolve, "op", None)
@@ -277,10 +308,21 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     gap = qp.B @ x
     if D is None and op is None:   # no Delassus matrix (large m, no reduction): only mu = 0 can be checked
         if np.any(mu != 0):
-            return nan
+            return None
         D, A = np.zeros((0, 0)), np.zeros(mu.size, bool)
     else:
         A = guess_active_set(D, mu, gap, None if D is not None else op.diagonal(), qp.constraints)
+    return D, op, gap, A
+
+
+def _exact_step(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, _quad, _Kx) -> _Step | None:
+    """The guessed set and one exact step on it (:func:`refinement_step` without forming dx; one K-solve,
+    shared with ``_quad`` when mu is already 0 off A); None when it cannot be taken (D_AA not positive
+    definite, or not checkable: :func:`_guess_set`)."""
+    guess = _guess_set(qp, x, mu, ksolve, _quad)
+    if guess is None:
+        return None
+    D, op, gap, A = guess
     mu_A = np.where(A, mu, 0.0)
     same = np.array_equal(mu_A, constraints.project(qp.constraints, mu))
     rKr, Bz = (_quad if (_quad is not None and same) else None) or _residual_solve(qp, x, mu_A, ksolve, _Kx)
@@ -291,105 +333,43 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
             face = _Face(D, op, A, CG_RTOL)
             dmu[A] = face.solve(-(gap[A] - Bz[A]))
         except (np.linalg.LinAlgError, ValueError):
-            return nan
+            return None
     Ddmu = face.apply(dmu, ksolve) if face is not None else np.zeros_like(dmu)
-    Bdx = -Bz + Ddmu
-    gap1 = gap + Bdx
-    mu1 = mu_A + dmu
-    step_mu = max(np.abs(dmu).max(initial=0.0), np.abs(mu - mu_A).max(initial=0.0))
-    # AMG K-solves (no factorization): the two solves of the step (z, K^-1 B'dmu) are off by at most e_K each
-    # in the energy norm and move the gaps by at most max_j |b_j| e_2 each (module docstring: an estimate)
+    return _Step(A, gap, mu_A, rKr, Bz, dmu, face, Ddmu, D)
+
+
+def _step_gap(qp: QP, ksolve, Bdx: np.ndarray) -> tuple[float, float]:
+    """(e_K, the step's largest change of a gap): with AMG K-solves (no factorization) the two solves of the
+    step (z, K^-1 B'dmu) are off by at most e_K each in the energy norm and move the gaps by at most
+    max_j |b_j| e_2 each (module docstring: an estimate); both 0 with a factorization."""
     e_K, e_2 = ksolve.k_error() if isinstance(ksolve, KSolver) else (0.0, 0.0)
     bmax = float(np.sqrt(np.max(np.asarray(qp.B.multiply(qp.B).sum(axis=1)), initial=0.0))) if e_2 else 0.0
-    step_gap = np.abs(Bdx).max(initial=0.0) + 2.0 * bmax * e_2
-    # duplicated rows (one constraint, several rows: the split of its force is not unique) are judged as one:
-    # the force of the group (each row's multiplier times its row's size), and no gap test for a row whose
-    # constraint is active through another row of its group
-    labels = parallel_rows(qp.B) if qp.m else None
-    size = np.sqrt(np.asarray(qp.B.multiply(qp.B).sum(axis=1)).ravel()) if labels is not None else np.ones(qp.m)
-    in_A = _group_sum(labels, A.astype(float), np.ones(qp.m)) > 0
-    mu1_g = _group_sum(labels, mu1, size) / size if labels is not None else mu1
-    err_mu = float(np.abs(_group_sum(labels, mu - mu1, size) / size).max(initial=0.0)) / force_scale(qp, mu1)
-    open_ = ~in_A
-    if D is not None and face is not None and open_.any():
-        near = open_ & (gap1 <= margin * step_gap)       # only rows that would fail the margin are looked at
+    return e_K, np.abs(Bdx).max(initial=0.0) + 2.0 * bmax * e_2
+
+
+def _open_rows(st: _Step, open_: np.ndarray, gap1: np.ndarray, gap_margin: float) -> np.ndarray:
+    """The rows off A whose gaps are tested: ``open_`` less the rows implied by A (:func:`implied_rows`; dense D
+    only), looked for only among those that would fail ``gap_margin``."""
+    if st.D is not None and st.face is not None and open_.any():
+        near = open_ & (gap1 <= gap_margin)       # only rows that would fail the margin are looked at
         if near.any():
-            open_ &= ~_implied_rows(D, A, near, face)
-    extra = 0.0
-    if face is not None and face.pinv is not None and not _groups_explain(labels, A, face):
-        # dependent rows beyond duplicates: the forces on A are not unique and the minimum-norm step may
-        # split them with a sign; x1 is the solution iff some nonnegative forces nu give the same B_A'nu
-        # (nonnegative least squares in D_AA's energy norm; the mismatch |B_A'(nu - mu1)|_{K^-1} is added
-        # to the error, and no multiplier error is claimed: they are not unique)
-        extra, ok = _nonnegative_forces(face, mu1[A])
-        if not ok:
-            return nan
-        mu1_g = np.where(A, np.inf, mu1_g)
-        err_mu = float("nan")
-    if (A.any() and mu1_g[A].min() <= margin * step_mu) or (open_.any() and gap1[open_].min() <= margin * step_gap):
-        # not verified to first order (x's error is not |dx|); the multipliers of the set are still the
-        # exact ones if the exact point keeps the KKT signs beyond the rounding of the step itself
-        # (far-off multipliers with a right set: a large step, signs kept), then mu* = mu1; with CG the
-        # step is known to its tolerance times the condition CG saw, not to rounding
-        kappa, rtol = (face.kappa, face.rtol) if face is not None else (1.0, 0.0)
-        rnd = MU_ROUNDING * max(EPS, rtol) * max(kappa, 1.0)
-        if (A.any() and mu1_g[A].min() <= rnd * step_mu) or (open_.any() and gap1[open_].min() <= rnd * step_gap):
-            return nan
-        return float("nan"), err_mu
-    nx = size_energy(qp, x, _Kx)
-    if nx == 0.0:
-        return float("nan"), err_mu
-    return (step_size(rKr, Bz, dmu, Ddmu) + 2.0 * e_K + extra) / nx, err_mu
+            open_ &= ~implied_rows(st.D, st.A, near, st.face)
+    return open_
 
 
-#: a row off A is implied by A (its normal in the span of A's, so B_A x = 0 makes its gap 0) when the part of
-#: it outside that span, in the K^-1 norm (a Schur complement of D), is below this fraction of its own
-IMPLIED_RTOL = 1e-10
-
-
-def _implied_rows(D: np.ndarray, A: np.ndarray, rows: np.ndarray, face: _Face) -> np.ndarray:
-    """Mask of the rows (of ``rows``) whose normals are combinations of A's (dependent rows): their gap at
-    the exact point of A is 0 by construction, no separate constraint, so no gap margin is asked of them.
-    ``D_jj - D_jA D_AA^+ D_Aj <= IMPLIED_RTOL D_jj`` (dense D only)."""
-    idx = np.flatnonzero(rows)
-    DAo = D[np.ix_(A, idx)]
-    schur = np.diag(D)[idx] - np.einsum("ij,ij->j", DAo, face.solve(DAo))
-    out = np.zeros(rows.size, bool)
-    out[idx] = schur <= IMPLIED_RTOL * np.diag(D)[idx]
-    return out
-
-
-def _groups_explain(labels: np.ndarray | None, A: np.ndarray, face: _Face) -> bool:
-    """True when the rank of a singular D_AA is the number of constraints (groups of duplicated rows) in A:
-    the duplicates are the whole dependence, and the group forces are unique."""
-    return labels is not None and face.pinv is not None and face.pinv[1].size == np.unique(labels[A]).size
-
-
-#: the nonnegative forces of a dependent face must reproduce B_A'mu1 to this fraction of its size
-#: (energy norm |.|_{K^-1}); a larger mismatch means a force of the wrong sign: the set is not verified
-NNLS_RTOL = 1e-6
-
-
-def _nonnegative_forces(face: _Face, mu1_A: np.ndarray) -> tuple[float, bool]:
-    """(|B_A'(nu - mu1_A)|_{K^-1} for the nonnegative nu closest in that norm, whether it is within
-    :data:`NNLS_RTOL` of |B_A'mu1_A|_{K^-1}): nonnegative least squares with D_AA^1/2 from the face's
-    eigendecomposition (|B_A'v|_{K^-1}^2 = v'D_AA v)."""
-    from scipy.optimize import nnls
-
-    V, w = face.pinv
-    M = (V * np.sqrt(w)).T
-    d = M @ mu1_A
-    _, res = nnls(M, d)
-    return float(res), bool(res <= NNLS_RTOL * float(np.linalg.norm(d)))
+def _fails(A: np.ndarray, mu1_g: np.ndarray, open_: np.ndarray, gap1: np.ndarray, mu_margin: float,
+           gap_margin: float) -> bool:
+    """True when the exact point of A is not verified at these margins: a force on A at most ``mu_margin``,
+    or a tested gap off A at most ``gap_margin``."""
+    return bool((A.any() and mu1_g[A].min() <= mu_margin) or (open_.any() and gap1[open_].min() <= gap_margin))
 
 
 def multiplier_floor(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None) -> float:
     """The rounding floor of the exact multipliers mu* of :func:`active_set_check`, relative like its error:
     the stationarity residual's rounding floor ``c eps (|K||x| + |F| + |B'||mu|)`` (and ``eps |B||x|`` of
     the gaps) carried through the exact step, ``D_AA^-1 (|B_A K^-1 floor| + eps |B_A||x|)``. mu* is
-    known no better than this from the data in double precision (measured on the paper's scenes, N = 16:
-    5-10 times the difference of pdas's refined multipliers to mu*: 3.6e-9 for 7.0e-10 on f2 at delta =
-    1e-12, 2.5e-4 for 1.7e-5 with E = 1). One more solve with K; nan when there is no Delassus matrix."""
+    known no better than this from the data in double precision (docs/measurements.md). One more solve
+    with K; nan when there is no Delassus matrix."""
     from dualfem.core.evaluator import ROUNDING_C, abs_product
 
     ksolve = ksolve or solver_for(qp)

@@ -71,8 +71,8 @@ KSOLVES = ("factor", *registered(direct=False))
 #: how the matrix-free operator applies D_AA^-1 (MatrixFreeDualOperator.face)
 FACE_METHODS = ("cg", "factor")
 #: the factorized face solve's penalty C = AL_SCALE / diag(D): each step divides the error by ~ 1 + AL_SCALE
-#: lambda_min (lambda_min of the Jacobi-scaled D_AA, ~0.1 on fractured scenes), at a conditioning of
-#: K + B_A'C B_A ~ AL_SCALE times K's; the steps are residual-based, so only the rate depends on it
+#: lambda_min (lambda_min of the Jacobi-scaled D_AA), at a conditioning of K + B_A'C B_A ~ AL_SCALE times
+#: K's; the steps are residual-based, so only the rate depends on it
 AL_SCALE = 1e4
 AL_MAX_STEPS = 30
 #: rows whose exact D_jj calibrates the matrix-free diagonal estimate (one block solve with this many columns)

@@ -96,8 +96,8 @@ class KSolver:
                 self.op.face_preconditioner = hints.face_preconditioner
             if not self.op.exact:
                 # no factorization: D_AA^-1 by the augmented Lagrangian on K + B_A'C B_A (one AMG hierarchy, a
-                # few CG solves: 13 K-solves against 31 by CG on D_AA, 14 k unknowns), and the lumped diagonal
-                # of D (no sampled solves) unless the solver's operator knew a better one
+                # few CG solves; docs/measurements.md), and the lumped diagonal of D (no sampled solves) unless
+                # the solver's operator knew a better one
                 from dualfem.numerics.amg import lumped_delassus_diagonal
 
                 self.op.face = "factor"

@@ -1,31 +1,25 @@
 """Peak memory of a solve from the number of unknowns and the factorization backend.
 
-A model calibrated on measured runs of the f2 scene (plane strain, delta = 1e-5; peak RSS of
-one process that builds the QP, factorizes K_fixed with the Schur complement onto the defect
-unknowns and solves once: benchmarks/factor_backends.py, results in
-benchmarks/results/factor/):
+A model fitted to the calibration points below (peak RSS, MB, of one process that builds the QP, factorizes
+K_fixed with the Schur complement onto the defect unknowns and solves once; their sources and what they
+showed: docs/measurements.md, section ``dualfem/numerics/memory.py``):
 
-    peak(n) = max( build_peak(n),  held(n) + factor_peak(n) )
+    peak(n) = max( build_peak(n),  held(n) + factor_peak(n) )        (bytes; n unknowns)
 
 * ``build_peak(n) = a + b n``: peak RSS of the scene -> QP assembly (the import baseline included);
 * ``held(n) = a + b n``: RSS the QP keeps afterwards;
-* ``factor_peak(n) = c n log2(n)`` per backend: the measured RSS increase of the factorization
-  with the Schur block (superlu: the LU, the permuted matrix, the trailing blocks read for the
-  Schur block; pardiso: its factor, its copy of the upper triangle, the dense Schur block). Given
-  PARDISO's own analysis report (max(iparm[14], iparm[15] + iparm[16]) KiB, ``analysis=``),
-  :func:`estimate_peak_bytes` uses it, scaled by the measured RSS/report ratio, instead.
+* ``factor_peak(n) = c n log2(n)`` per backend: the RSS increase of the factorization with the Schur block.
+  Given PARDISO's own analysis report (max(iparm[14], iparm[15] + iparm[16]) KiB, ``analysis=``),
+  :func:`estimate_peak_bytes` uses it, scaled by the largest RSS/report ratio of PARDISO_REPORT, instead.
 
-In 3D (``dim=3``) a factorization grows faster: nnz(L) ~ c n^1.42 (nested dissection of a 3D mesh;
-the points of CALIBRATION_3D, PARDISO/METIS on the unit cube, clamped base, P1 tetrahedra), so
-``factor_peak_3d(n) = BYTES_PER_NNZ_L x nnz_L(n)``; the build is modelled as the 2D build with
-:data:`BUILD_3D_FACTOR` times the per-unknown slope (a P1 tetrahedral K has ~81 entries per row
-against 18 in 2D). Where no factorization fits, the AMG K-solve (:mod:`dualfem.numerics.amg`) needs
-about :data:`AMG_BYTES_PER_UNKNOWN` per unknown (:func:`amg_bytes`).
+In 3D (``dim=3``) ``factor_peak_3d(n) = BYTES_PER_NNZ_L x nnz_L(n)`` with nnz(L) ~ c n^e fitted to
+CALIBRATION_3D (nested dissection of a 3D mesh); the build is the 2D build with :data:`BUILD_3D_FACTOR`
+times the per-unknown slope. Where no factorization fits, the AMG K-solve (:mod:`dualfem.numerics.amg`)
+needs :data:`AMG_BYTES_PER_UNKNOWN` per unknown (:func:`amg_bytes`).
 
-Least-squares fits of the points in CALIBRATION (so adding a measured point refines the model).
-The iterations and the certification of the exact solvers work on m x m dense blocks and add
-little; they are not in the model. :func:`fits` applies a SAFETY margin. CHOLMOD, not measured
-here, is modelled as PARDISO (a supernodal Cholesky of the same size).
+Least-squares fits of the points in CALIBRATION (so adding a point refines the model). The iterations and
+the certification of the exact solvers work on m x m dense blocks and are not in the model. :func:`fits`
+applies a SAFETY margin. CHOLMOD is modelled as PARDISO (a supernodal Cholesky of the same size).
 """
 from __future__ import annotations
 
@@ -38,11 +32,8 @@ from dualfem.core.errors import InputError
 from dualfem.numerics.factor import get_default
 
 MB = 2**20
-#: measured (n unknowns, peak RSS of the build, RSS held by the QP; factor's extra peak) in MB.
-#: build and pardiso: benchmarks/results/factor/memory_calibration.md (f2, N = 64 ... 2048, one
-#: worker process per N; pardiso = RSS after the Schur factorization + solve minus the RSS held by
-#: the QP: PARDISO's factor, its copy of the upper triangle and the dense Schur block);
-#: superlu: RSS increase of factor_fixed + solve (benchmarks/results/factor/factor_backends.md)
+#: (n unknowns, peak RSS of the build, RSS held by the QP) and per backend (n, factor's extra peak), in MB, of f2
+#: at delta = 1e-5: benchmarks/results/factor/memory_calibration.md and factor_backends.md
 CALIBRATION = {
     "build": [(8382, 87, 81), (33150, 121, 90), (131838, 252, 130), (525822, 775, 288),
               (2100222, 2885, 864), (8394750, 11142, 2945)],
@@ -50,32 +41,21 @@ CALIBRATION = {
     "pardiso": [(8382, 100 - 81), (33150, 154 - 90), (131838, 366 - 130), (525822, 1199 - 288),
                 (2100222, 4458 - 864), (8394750, 18021 - 2945)],
 }
-#: PARDISO's own analysis report (max(iparm[14], iparm[15] + iparm[16]), MB) against the measured
-#: RSS increase above (same runs): the report is scaled by the largest ratio of the runs with
-#: n >= 1e5 (1.42 at N = 256; 1.20 at N = 2048) when it refines the estimate
+#: (n, PARDISO's analysis report, the RSS increase of CALIBRATION's same run) in MB; the report is scaled by the
+#: largest ratio of the runs with n >= 1e5 (source: benchmarks/results/factor/memory_calibration.md)
 PARDISO_REPORT = [(131838, 166, 236), (525822, 671, 911), (2100222, 2927, 3594), (8394750, 12597, 15076)]
-#: 3D, P1 tetrahedra (unit cube, clamped base): (n unknowns, nnz(L) of PARDISO with METIS): 14 k, 45 k and
-#: 148 k measured by iparm[17] here (tests/_three_d_qp.py, N = 16, 24, 36), 346 k from
-#: /work/shared/notes/performance.md; the fit is ~6.6 n^1.42 (670 k: ~1.2e9 predicted)
+#: 3D, P1 tetrahedra on the unit cube, clamped base: (n unknowns, nnz(L) of PARDISO with METIS), from
+#: PARDISO's iparm[17] (tests/_three_d_qp.py) and /work/shared/notes/performance.md (docs/measurements.md)
 CALIBRATION_3D = [(13872, 5.04e6), (45000, 2.69e7), (147852, 1.456e8), (346000, 4.8e8)]
-#: bytes of peak RSS per entry of L: PARDISO's own peak report is 9-11 bytes per nnz(L) in 3D (N = 16, 24,
-#: 36: 56 MB for 5.0e6, 271 MB for 2.7e7, 1.35 GB for 1.46e8), 8 bytes per value plus indices and its copy of
-#: the matrix; the measured RSS increase of factor + solve at 148 k was 1.39 GB (10.0 bytes per entry), and
-#: 5.7 GB at 346 k for the whole process (scikit-fem's assembly included) is below 12 x 4.8e8: 12 keeps ~20 %
+#: bytes of peak RSS per entry of L in 3D (values, indices and PARDISO's copy of the matrix, with a margin)
 BYTES_PER_NNZ_L = 12.0
 #: the 3D build's per-unknown slope relative to the 2D fit (nnz per row of K: 81 against 18)
 BUILD_3D_FACTOR = 4.5
-#: extra peak of the AMG K-solve per unknown: the pyamg hierarchy (operator complexity ~1.5 with 6 rigid
-#: modes: the tentative and smoothed prolongators hold 6 columns per aggregate) and CG's vectors. Measured
-#: here (RSS increase of setup + one solve): 87 MB at 86 k unknowns, 333 MB at 148 k (2.25 kB per unknown);
-#: /work/shared/notes/performance.md: 4.2 GB at 346 k and 8 GB at 670 k for the whole process (scikit-fem's
-#: assembly included); 3 kB keeps a margin
+#: extra peak of the AMG K-solve per unknown, bytes: the pyamg hierarchy with 6 rigid-body modes and CG's
+#: vectors, with a margin
 AMG_BYTES_PER_UNKNOWN = 3072
-#: multiply the estimate by this before comparing with the available memory (the least-squares
-#: fit follows the large runs: 18.1 GB estimated for 18.0 GB measured at N = 2048; it
-#: under-estimates N = 512 by 12 % and N = 256 (a 0.37 GB peak) by 13 %)
+#: multiply the estimate by this before comparing with the available memory
 SAFETY = 1.15
-
 
 @functools.cache
 def _coefficients() -> dict:

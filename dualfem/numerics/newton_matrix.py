@@ -28,8 +28,8 @@ same slots, and H(c)^-1 rhs is AMG-preconditioned CG to the relative residual ``
 (:class:`dualfem.numerics.amg.AmgKSolve`); ``counters.factorizations`` then counts hierarchies.
 
 Memory: one factor of K + B'B per slot, about the size of K's (B couples only the unknowns of the two
-faces of a defect node, which K's interface term couples already: nnz(K + B'B) = nnz(K) + 1,536 of
-343,288 on a 25 k-unknown scene with 64 cracks) plus the pattern and M.
+faces of a defect node, which K's interface term couples already; docs/measurements.md) plus the pattern
+and M.
 """
 from __future__ import annotations
 

@@ -17,10 +17,7 @@ from dualfem.numerics.factor import registered
 OPERATORS = ("auto", "dense", "matrix_free", *registered(direct=False))
 #: ``auto`` takes the dense reduction while |I|^2 <= CROSSOVER_RATIO * n (n unknowns, |I| local unknowns):
 #: the dense phases cost ~|I|^3 flops and a 2D sparse factorization ~n^1.5, so the crossover is a ratio
-#: of |I|^2 to n. Measured (benchmarks/results/operator_crossover.md, pdas setup + solve, medians of 3,
-#: fractured scenes of 260-277 k unknowns, 2 cores): |I|^2 / n = 3.1: dense 1.1x the floor, matrix-free
-#: 1.1x; 12: 0.9x / 1.3x; 28: 1.8x / 2.0x; 49: 3.3x / 2.7x; 191: 10.7x / 3.6x; 421: 34.6x / 4.5x
-#: (the one-crack structured scenes have |I|^2 / n ~ 2: dense up to N = 2048)
+#: of |I|^2 to n (the crossover measured: benchmarks/results/operator_crossover.md, docs/measurements.md)
 CROSSOVER_RATIO = 32.0
 #: and never more local unknowns than this on the dense path (tests lower it to force matrix-free)
 CROSSOVER_LOCAL = 12000

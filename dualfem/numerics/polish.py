@@ -1,8 +1,8 @@
 """Active-set polishing of an approximate solution (as OSQP's ``polishing``, for any backend).
 
 Interior-point and ADMM backends stop at a tolerance on their own residuals; at small delta the
-QP is nearly degenerate (open defect nodes with gaps of 1e-9 and tiny forces), and Clarabel's
-"Solved" answer was 2.8e-6 off in the energy norm at f2, N = 64, delta = 1e-9. Polishing guesses
+QP is nearly degenerate (open defect nodes with gaps of 1e-9 and tiny forces), and a "Solved" answer
+can be far off in the energy norm (docs/measurements.md). Polishing guesses
 the active set from the approximate (x, mu) with the primal-dual active-set rule
 ``A = {mu_j - c gap_j > 0}`` (c = 1 / mean diag of the Delassus matrix D = B K^-1 B'), solves
 the equality-constrained problem on A exactly (reduced space of
@@ -58,8 +58,7 @@ def refine_on_active_set(qp: QP, red, x: np.ndarray, mu: np.ndarray, steps: int,
                          skip_below: float = 0.0) -> tuple[np.ndarray, np.ndarray, int]:
     """Iterative refinement of (x, mu) on the active set {mu > 0} with full-space residuals.
 
-    The reduced solve loses accuracy as 1/delta and N grow (at N = 256, delta = 1e-9 the
-    full-space stationarity residual was 7e-10, 250x the rounding floor |K||x| eps). Each step
+    The reduced solve loses accuracy as 1/delta and N grow (docs/measurements.md). Each step
     (:meth:`dualfem.numerics.linalg.LocalReduction.refine`, two solves) is kept only if it lowers
     the residual ``max(|Kx - F - B'mu|_inf, |B_A x|_inf |K|)`` and keeps mu_A >= 0; none is taken
     when that residual is already <= 1e-13 of the load, and a step whose exact size |dx|_K is

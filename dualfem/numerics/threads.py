@@ -8,21 +8,9 @@ once (called by :func:`dualfem.numerics.linalg.factor_fixed`). ``threads(n)`` se
 temporarily (context manager). If numpy itself were linked to MKL the dense phases would follow n.
 
 The dense m x m phases (Cholesky of the Schur block S, D = B_I S^-1 B_I', S @ v in every
-iteration) use DENSE_THREADS = 1, measured on this 2-core machine while shared with other
-jobs (load average ~3.9), median of 5 (benchmarks/factor_backends.py --dense):
-
-| |I| x m | cho_factor(S) 1 / 2 threads | D = B_I S^-1 B_I' 1 / 2 threads | S @ v 1 / 2 threads |
-|---|---|---|---|
-| 1020 x 255 | 25 ms / 983 ms | 38 ms / 136 ms | 0.31 ms / 15.6 ms |
-| 2044 x 511 | 143 ms / 1726 ms | 229 ms / 380 ms | 2.2 ms / 15.8 ms |
-
-A second run (load average 6): 1020: 9.6 / 532, 15 / 76, 0.11 / 8.2 ms; 2044: 73 / 1096, 113 / 212,
-1.1 / 11.7 ms. PARDISO itself (N = 256, Schur + solve, medians of 3, two alternations) showed no
-consistent difference between 1 and 2 threads under that load (1.16/1.02 s vs 1.21/0.81 s), so it
-keeps all cores, the issue's default.
-
-(Two OpenBLAS threads that compete with other busy threads spin and lose 4-40x; one thread
-never does.) :func:`set_threads` loads pypardiso's MKL first so that threadpoolctl sees it.
+iteration) use DENSE_THREADS = 1 (two OpenBLAS threads that compete with other busy threads spin; one
+thread never does); PARDISO keeps every core. The measurements behind both: docs/measurements.md.
+:func:`set_threads` loads pypardiso's MKL first so that threadpoolctl sees it.
 """
 from __future__ import annotations
 
@@ -32,7 +20,7 @@ from collections.abc import Iterator
 
 from dualfem.core.errors import InputError
 
-#: threads for the dense m x m phases (see the module docstring for the measurement)
+#: threads for the dense m x m phases (the measurement: docs/measurements.md)
 DENSE_THREADS = 1
 _LIMITER = None
 _CURRENT: int | None = None

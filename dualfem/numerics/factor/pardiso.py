@@ -11,16 +11,16 @@ phases 331 and 333: with the Schur unknowns I eliminated last and A = L L', phas
 y = L^-1 b whose R part gives ``q = |y_R|^2 = b_R' A_RR^-1 b_R`` and whose I part is the reduced
 right-hand side ``g = b_I - A_IR A_RR^-1 b_R`` (PARDISO leaves the Schur block to the caller);
 phase 333 on y with y_I replaced by x_I returns x_R = A_RR^-1 (b_R - A_RI x_I) and x_I unchanged.
-Each is half of phase 33 (N = 512 f2, 2 threads: 0.023 + 0.024 s against 0.045 s); checked
-against dense solves in tests/test_factor.py.
+Each is half of phase 33 in time (docs/measurements.md); checked against dense solves in
+tests/test_factor.py.
 
 Schur complement: with ``iparm[35] = 2`` and the local unknowns marked 1 in ``perm`` (set before
 phase 11), phase 22 writes the dense Schur block (unknowns in increasing index order) into the
 solution buffer; in this mode phase 33 still solves with the whole matrix (checked against dense
 solves in tests/test_factor.py). Mode 1 needs the forward/backward phases 331/333 around a dense
-Schur solve; mode 2 measured as fast (N = 256 f2: analysis 0.9 s + factorization 0.36 s vs
-0.8 + 0.49 s). With a Schur set, the classic factorization (``iparm[23] = 0``) makes phase 33 run
-on one thread; the two-level one (``iparm[23] = 1``) keeps it parallel, so it is used always.
+Schur solve; mode 2 is as fast (docs/measurements.md). With a Schur set, the classic factorization
+(``iparm[23] = 0``) makes phase 33 run on one thread; the two-level one (``iparm[23] = 1``) keeps it
+parallel, so it is used always.
 """
 from __future__ import annotations
 
@@ -62,9 +62,9 @@ def _mkl_rt_candidates() -> list[str]:
 
 def _load_pardiso():
     """MKL's ``pardiso`` with pypardiso's argument types. pypardiso's own search (import + one solver object)
-    globs the whole environment recursively, twice (0.3 s of a 0.8 s ``dualfem solve`` start-up at
-    N = 4): the usual places are tried first, pypardiso's search only when they hold no loadable
-    ``mkl_rt``. pypardiso must be installed either way (it is what ``dualfem[pardiso]`` installs)."""
+    globs the whole environment recursively, twice (slow: docs/measurements.md): the usual places are tried
+    first, pypardiso's search only when they hold no loadable ``mkl_rt``. pypardiso must be installed either
+    way (it is what ``dualfem[pardiso]`` installs)."""
     import ctypes
     import importlib.util
 
@@ -127,8 +127,7 @@ class PardisoFactorization(Factorization):
     def _set_values(self, A: sp.csr_matrix) -> None:
         """The upper triangle of A (canonical CSR, as :meth:`analyze` passes it) in PARDISO's arrays; the mask
         of its entries is kept for :meth:`_factorize` (same pattern). One mask over A's entries instead of
-        scipy's ``triu`` (through COO and back: N = 512, 7.3 M entries, 0.21 s against 0.05 s, and again
-        at every factorization, 0.01 s now)."""
+        scipy's ``triu`` (through COO and back, and again at every factorization; docs/measurements.md)."""
         rows = np.repeat(np.arange(A.shape[0], dtype=A.indices.dtype), np.diff(A.indptr))
         keep = A.indices >= rows
         del rows
@@ -152,8 +151,7 @@ class PardisoFactorization(Factorization):
         ip[9] = 8          # pivot perturbation 1e-8 (unused for SPD)
         ip[17] = -1        # report the factor's nonzeros
         ip[23] = 1         # two-level parallel factorization: with a Schur set the classic one runs the
-        #                    solve phase on one thread (N = 512 f2, 2 threads: solve 0.080 -> 0.045 s,
-        #                    N = 1024: 0.33 -> 0.19 s; factorization 5-10 % faster; same Schur to 1e-14)
+        #                    solve phase on one thread (docs/measurements.md)
         ip[34] = 1         # zero-based indices
         # Schur by PARDISO only when something is eliminated; onto all unknowns S = A (no
         # Schur mode: an empty eliminated block is an edge case of MKL best not entered)
