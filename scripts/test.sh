@@ -26,7 +26,8 @@ if ! command -v chromium >/dev/null 2>&1 && ! command -v chromium-browser >/dev/
 fi
 "$PY" -m ruff check . || { echo "ruff found problems (see above)" >&2; exit 1; }
 "$PY" -m mypy || { echo "mypy found problems in dualfem/core (see above)" >&2; exit 1; }
-"$PY" -m pytest -q "$@"
+# one test process per core (pytest-xdist): the suite is CPU-bound and its tests are independent
+"$PY" -m pytest -q -n auto "$@"
 rc=$?
 if [ "$rc" -eq 5 ]; then
   echo "pytest collected no tests: failing on purpose" >&2
