@@ -170,7 +170,7 @@ def test_choice_env_and_bad_names(monkeypatch):
     monkeypatch.setenv(fb.ENV, "superlu")
     assert fb.choose().name == "superlu"
     monkeypatch.setenv(fb.ENV, "mumps")
-    with pytest.raises(InputError, match="DUALFEM_FACTOR.*pardiso, cholmod, superlu"):
+    with pytest.raises(InputError, match="DUALFEM_FACTOR.*cudss, pardiso, cholmod, superlu"):
         fb.choose()
     monkeypatch.delenv(fb.ENV)
     with pytest.raises(InputError, match="must be one of"):

@@ -15,10 +15,10 @@ def _spd(n=60):
 
 
 def test_registry_lists_every_backend_and_keeps_factor_names_direct():
-    assert fb.registered() == ["pardiso", "cholmod", "superlu", "amg"]
-    assert fb.names() == ["pardiso", "cholmod", "superlu"] and "amg" not in fb.available()
+    assert fb.registered() == ["cudss", "pardiso", "cholmod", "superlu", "amg"]
+    assert fb.names() == ["cudss", "pardiso", "cholmod", "superlu"] and "amg" not in fb.available()
     assert fb.registered(direct=False) == ["amg"]
-    with pytest.raises(InputError, match="must be one of pardiso, cholmod, superlu"):
+    with pytest.raises(InputError, match="must be one of cudss, pardiso, cholmod, superlu"):
         fb.choose("amg")                     # factor= names a direct factorization only
     with pytest.raises(InputError, match="must be one of"):
         fb.backend_class("mumps")
@@ -69,3 +69,34 @@ def test_memory_model_is_the_backends_own():
                                                        memory.build_bytes(n)[1] + memory.amg_bytes(n))
     with pytest.raises(InputError, match="backend"):
         memory.factor_bytes(n, "mumps")
+
+
+def test_the_gpu_backend_is_registered_and_says_why_it_cannot_run(monkeypatch):
+    """cuDSS (issue 39): registered and detected everywhere, never chosen while its device path is not
+    written; its reason names what is missing here (modules, device, or the path) and the install line."""
+    from dualfem.numerics.factor import cudss
+
+    cls = fb.backend_class("cudss")
+    assert cls is cudss.CudssBackend and cls.direct and not cls.available()
+    assert "cudss" not in fb.available() and fb.get_default_unset() != "cudss"
+    monkeypatch.setattr(cudss.importlib.util, "find_spec", lambda name: None)
+    assert "nvmath-python and CuPy not installed" in cls.missing() and "dualfem[gpu]" in cls.missing()
+    monkeypatch.setattr(cudss.importlib.util, "find_spec", lambda name: object())
+    monkeypatch.setattr(cudss, "_device_count", lambda: 0)
+    assert "no CUDA device" in cls.missing()
+    monkeypatch.setattr(cudss, "_device_count", lambda: 1)
+    assert "not written yet" in cls.missing()
+    with pytest.raises(InputError, match=r"factor = 'cudss': cudss cannot run here: .*not written yet"):
+        fb.choose("cudss")
+    from dualfem.core.errors import MissingDependency
+
+    with pytest.raises(MissingDependency, match="cudss cannot run here"):
+        cls().make()
+
+
+def test_factor_cudss_on_the_command_line_is_one_line(capsys):
+    from dualfem.cli.main import main
+
+    assert main(["solve", "f2", "--set", "N=8", "--factor", "cudss"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "cudss cannot run here" in err[0] and "dualfem[gpu]" in err[0], err

@@ -33,7 +33,7 @@ def test_default_reads_the_environment_and_use_sets_the_process_context(monkeypa
     assert la._CURRENT is None
     with pytest.raises(InputError, match="operator must be one of"):
         LinearAlgebra("superlu", operator="fast")
-    with pytest.raises(InputError, match="must be one of pardiso, cholmod, superlu"):
+    with pytest.raises(InputError, match="must be one of cudss, pardiso, cholmod, superlu"):
         LinearAlgebra("amg")                       # not a direct factorization
     with pytest.raises(InputError, match="max_memory"):
         LinearAlgebra("superlu", max_memory=-1)

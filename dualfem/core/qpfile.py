@@ -107,6 +107,22 @@ def read_arrays(path: Path, where: str) -> dict:
     return d
 
 
+def _sparse_arrays(d: dict, name: str, where: str, index_parts: tuple[str, str]
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[int, int]]:
+    """``name_data``, the two integer index arrays ``name_<part>`` and the declared ``name_shape`` of a
+    sparse matrix stored as arrays, flattened; InputError naming the array for a non-integer index or
+    shape, non-numeric data or a shape that is not two sizes >= 0."""
+    data, a, b, shape = (np.asarray(d[f"{name}_{s}"]).ravel() for s in ("data", *index_parts, "shape"))
+    for s, arr in ((index_parts[0], a), (index_parts[1], b), ("shape", shape)):
+        if arr.dtype.kind not in "iu":
+            raise InputError(f"array {name}_{s} in {where} must hold integers, got dtype {arr.dtype}")
+    if data.dtype.kind not in "iuf":
+        raise InputError(f"array {name}_data in {where} must be numeric, got dtype {data.dtype}")
+    if shape.size != 2 or shape.min() < 0:
+        raise InputError(f"array {name}_shape in {where} must hold 2 sizes >= 0, got {shape.tolist()}")
+    return data, a, b, (int(shape[0]), int(shape[1]))
+
+
 def coo_from_arrays(d: dict, name: str, where: str, rows: int | None = None,
                     cols: int | None = None, against: str = "the length of F") -> sp.coo_matrix:
     """A sparse matrix from the COO arrays ``name_data``, ``name_row``, ``name_col``, ``name_shape`` of a file.
@@ -117,15 +133,7 @@ def coo_from_arrays(d: dict, name: str, where: str, rows: int | None = None,
     memory (:func:`check_dims`: a 1 KB file may declare a 1e10 x 1e10 matrix). ``against`` names
     what fixes ``rows``/``cols`` in the message.
     """
-    data, row, col, shape = (np.asarray(d[f"{name}_{s}"]).ravel() for s in ("data", "row", "col", "shape"))
-    for s, a in (("row", row), ("col", col), ("shape", shape)):
-        if a.dtype.kind not in "iu":
-            raise InputError(f"array {name}_{s} in {where} must hold integers, got dtype {a.dtype}")
-    if data.dtype.kind not in "iuf":
-        raise InputError(f"array {name}_data in {where} must be numeric, got dtype {data.dtype}")
-    if shape.size != 2 or shape.min() < 0:
-        raise InputError(f"array {name}_shape in {where} must hold 2 sizes >= 0, got {shape.tolist()}")
-    nr, nc = int(shape[0]), int(shape[1])
+    data, row, col, (nr, nc) = _sparse_arrays(d, name, where, ("row", "col"))
     if rows is not None and rows == cols and nr != nc:
         raise InputError(f"{name} must be square, but {name}_shape in {where} declares ({nr}, {nc})")
     for want, got, what in ((rows, nr, "rows"), (cols, nc, "columns")):
@@ -149,15 +157,7 @@ def csc_from_arrays(d: dict, name: str, where: str, rows: int | None = None,
     that disagrees with ``rows``/``cols`` or does not fit in memory, an ``indptr`` that is not
     ``cols + 1`` non-decreasing offsets from 0 to the number of entries, row indices outside the shape,
     non-finite data."""
-    data, ind, ptr, shape = (np.asarray(d[f"{name}_{s}"]).ravel() for s in ("data", "indices", "indptr", "shape"))
-    for s, a in (("indices", ind), ("indptr", ptr), ("shape", shape)):
-        if a.dtype.kind not in "iu":
-            raise InputError(f"array {name}_{s} in {where} must hold integers, got dtype {a.dtype}")
-    if data.dtype.kind not in "iuf":
-        raise InputError(f"array {name}_data in {where} must be numeric, got dtype {data.dtype}")
-    if shape.size != 2 or shape.min() < 0:
-        raise InputError(f"array {name}_shape in {where} must hold 2 sizes >= 0, got {shape.tolist()}")
-    nr, nc = int(shape[0]), int(shape[1])
+    data, ind, ptr, (nr, nc) = _sparse_arrays(d, name, where, ("indices", "indptr"))
     for want, got, what in ((rows, nr, "rows"), (cols, nc, "columns")):
         if want is not None and got != want:
             raise InputError(f"{name} must have {want} {what} (the length of q), but {name}_shape in {where} "

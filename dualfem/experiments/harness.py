@@ -23,7 +23,6 @@ import importlib
 import os
 import pickle
 import select
-import signal
 import struct
 import subprocess
 import sys
@@ -33,7 +32,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from dualfem.core.errors import describe_exception
-from dualfem.experiments.watchdog import die_with_parent, pid_alive, volunteer_for_oom_killer
+from dualfem.experiments.watchdog import die_with_parent, kill_group, pid_alive, volunteer_for_oom_killer
 
 #: task kind -> "module:function" of the handler ``(task, tick) -> (row dict, payload)``
 HANDLERS = {
@@ -118,17 +117,6 @@ def watch_parent(parent: int, interval: float = 0.1) -> None:
     threading.Thread(target=loop, name="dualfem-watch-parent", daemon=True).start()
 
 
-def kill_group(proc: subprocess.Popen) -> None:
-    """SIGKILL a guarded child's process group (the child leads it) and the child itself."""
-    if hasattr(os, "killpg"):
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except OSError:
-            pass
-    try:
-        proc.kill()
-    except OSError:
-        pass
 
 
 def run_in_worker(task: dict, parent: int) -> tuple[dict, Any]:

@@ -234,8 +234,9 @@ def _child(conn: Any, fn: Callable, args: tuple, parent: int) -> None:  # pragma
     conn.close()
 
 
-def _kill(proc: Any) -> None:
-    """Kill the worker and its process group; reap it."""
+def kill_group(proc: Any) -> None:
+    """SIGKILL a worker's process group (the worker leads it: a plugin's own subprocesses go too) and the
+    worker itself; ``proc``: a ``subprocess.Popen`` or a ``multiprocessing`` process (not started: a no-op)."""
     if proc.pid is not None and hasattr(os, "killpg"):
         try:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -245,6 +246,11 @@ def _kill(proc: Any) -> None:
         proc.kill()
     except (OSError, AttributeError, ValueError):
         pass
+
+
+def _kill(proc: Any) -> None:
+    """Kill the worker and its process group; reap it."""
+    kill_group(proc)
     proc.join(5.0)
 
 

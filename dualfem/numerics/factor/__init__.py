@@ -1,6 +1,7 @@
 """The K-solve backends behind one interface (:mod:`.base`), in one registry.
 
-Registered: the direct factorizations ``pardiso``, ``cholmod``, ``superlu`` (fastest first) and the AMG
+Registered: the direct factorizations ``cudss`` (a GPU's; detection only so far: :mod:`.cudss`), ``pardiso``,
+``cholmod``, ``superlu`` (fastest first) and the AMG
 K-solve ``amg`` (``direct = False``: :mod:`.amg`). A new backend (a GPU or a distributed one) is one module
 with a :class:`Backend` subclass (``available``, ``missing``, ``make`` -> a :class:`Factorization` with
 ``analyze``/``factorize``/``solve`` of one right-hand side or a block, ``peak_bytes``: its memory model) and
@@ -22,6 +23,7 @@ from dualfem.core.errors import InputError
 from .amg import AmgBackend
 from .base import Backend, Factorization, Forward, schur_by_solves
 from .cholmod import CholmodBackend
+from .cudss import CudssBackend
 from .pardiso import PardisoBackend
 from .superlu import SuperLUBackend
 
@@ -51,7 +53,7 @@ def register(cls: type[Backend]) -> type[Backend]:
     return cls
 
 
-for _cls in (PardisoBackend, CholmodBackend, SuperLUBackend, AmgBackend):
+for _cls in (CudssBackend, PardisoBackend, CholmodBackend, SuperLUBackend, AmgBackend):
     register(_cls)
 
 
@@ -93,8 +95,7 @@ def _check(name: str, source: str) -> str:
         raise InputError(f"{source} must be one of {', '.join(names())} (installed here: "
                          f"{', '.join(available())}), got {name!r}")
     if key not in available():
-        raise InputError(f"{source} = {key!r} is not installed here (installed: {', '.join(available())}); "
-                         f"install it with: {_REGISTRY[key].install_hint}")
+        raise InputError(f"{source} = {key!r}: {_REGISTRY[key].missing()} (installed here: {', '.join(available())})")
     return key
 
 
