@@ -18,21 +18,6 @@ from dualfem.experiments.stress_grid import applicable_axes, scene_in_units
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture
-def register():
-    """Register third-party problem classes for one test (the built-ins are loaded first)."""
-    registry.problems()
-    added: list[str] = []
-
-    def reg(cls):
-        registry.register_problem(cls)
-        added.append(cls.name)
-        return cls
-
-    yield reg
-    for name in added:
-        registry._PROBLEMS.pop(name, None)
-
 
 class Slab(Problem):
     """A toy third-party 2D problem: only its declarations matter here."""
@@ -48,7 +33,7 @@ class Slab(Problem):
 def test_the_dimension_picks_the_declaring_problem(register, tmp_path):
     assert (registry.problem_for_dim(2), registry.problem_for_dim(3)) == ("thin_defect", "three_d")
     assert registry.problem_dims() == [2, 3]
-    register(Slab)
+    register(Slab, kind="problem")
     assert registry.problem_for_dim(2) == "thin_defect"     # a third-party plugin cannot take it over
     f = tmp_path / "s.toml"
     f.write_text("N = 8\n")
@@ -58,7 +43,7 @@ def test_the_dimension_picks_the_declaring_problem(register, tmp_path):
 
 
 def test_the_unit_map_is_the_problems_declaration(register):
-    register(Slab)
+    register(Slab, kind="problem")
     s = scene_in_units({"thickness": 2.0}, 1e6, 1e-3, "toy_slab")
     assert s == {"E": 2e6, "thickness": 2e-3, "gap": "0.001 * (0.1 * (x / 0.001))", "pull": "x / 0.001 + y / 0.001"}
     assert scene_in_units({"h": 0.25}, 1.0, 4.0, "toy_slab")["h"] == 1.0

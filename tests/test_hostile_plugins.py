@@ -35,22 +35,6 @@ def qp():
     return load_scene("f1", {"N": 8}).build()
 
 
-@pytest.fixture
-def register():
-    """Register third-party plugin classes for one test (the built-ins are loaded first)."""
-    registry.solvers()
-    added: list[tuple[dict, str]] = []
-
-    def reg(cls, kind="solver"):
-        table = registry._SOLVERS if kind == "solver" else registry._PROBLEMS
-        (registry.register_solver if kind == "solver" else registry.register_problem)(cls)
-        added.append((table, cls.name))
-        return cls
-
-    yield reg
-    for table, name in added:
-        table.pop(name, None)
-
 
 def exact_answer(qp):
     return run("pdas", qp)

@@ -59,6 +59,44 @@ def session_processes(sid: int) -> list[tuple[int, str]]:
     return out
 
 
+def _left_after(proc: subprocess.Popen, sig: signal.Signals) -> list[tuple[int, str]]:
+    """Send ``sig`` to ``proc`` alone (not its session), wait for it, and return the processes of its
+    session still alive 5 s later (a tree that is gone cannot come back)."""
+    os.kill(proc.pid, sig)
+    proc.wait(timeout=30)
+    gone = time.monotonic() + 5.0
+    while session_processes(proc.pid) and time.monotonic() < gone:
+        time.sleep(0.1)
+    return session_processes(proc.pid)
+
+
+def _reap(proc: subprocess.Popen) -> None:
+    """SIGKILL whatever is left of ``proc``'s session and ``proc`` itself (a test's cleanup)."""
+    for pid, _ in session_processes(proc.pid):
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+
+
+def _plugin_env(tmp_path: Path, module: str, source: str, **extra: str) -> dict[str, str]:
+    """An environment in which ``source`` is an installed solver plugin ``module`` (a distribution with a
+    ``dualfem.solvers`` entry point on PYTHONPATH), as a third party would ship it."""
+    src, site = tmp_path / "src", tmp_path / "site" / f"{module}-0.1.dist-info"
+    src.mkdir()
+    site.mkdir(parents=True)
+    (src / f"{module}.py").write_text(source)
+    dist = module.replace("_", "-")
+    (site / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: 0.1\n")
+    (site / "entry_points.txt").write_text(f"[dualfem.solvers]\n{module} = {module}\n")
+    env = dict(os.environ, MPLBACKEND="Agg", **extra)
+    env["PYTHONPATH"] = os.pathsep.join([str(site.parent), str(src), env.get("PYTHONPATH", "")])
+    return env
+
+
 def _ready(moment: str, procs: list[tuple[int, str]]) -> bool:
     if moment == "starting":
         return sum("popen_loky_posix" in c for _, c in procs) == 2
@@ -86,22 +124,10 @@ def test_no_process_outlives_a_killed_parallel_sweep(tmp_path, sig, moment):
         if moment == "running":
             assert sum("harness --child" in c for _, c in running) == 2, running   # two guarded children
         assert sum("loky" in c.lower() for _, c in running) >= 2, running         # under two loky workers
-        os.kill(proc.pid, sig)                               # the sweep alone, not its group
-        proc.wait(timeout=30)
-        gone = time.monotonic() + 5.0                        # within 5 s; a tree that is gone cannot come back
-        while session_processes(proc.pid) and time.monotonic() < gone:
-            time.sleep(0.1)
-        left = session_processes(proc.pid)
+        left = _left_after(proc, sig)                        # the sweep alone, not its group
         assert left == [], f"{len(left)} process(es) alive 5 s after {sig.name} of the sweep: {left}"
     finally:
-        for pid, _ in session_processes(proc.pid):
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except OSError:
-                pass
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        _reap(proc)
 
 
 SPIN_SRC = '''
@@ -125,14 +151,7 @@ class Spin(Solver):
 def test_the_watchdogs_worker_dies_with_a_killed_solve(tmp_path, sig):
     """``dualfem solve`` runs the plugin in a worker process (issue 37, item 4): killing the command
     while its plugin runs leaves no worker behind (PR_SET_PDEATHSIG and a watch of the parent's pid)."""
-    src, site = tmp_path / "src", tmp_path / "site" / "hostile_spin-0.1.dist-info"
-    src.mkdir()
-    site.mkdir(parents=True)
-    (src / "hostile_spin.py").write_text(SPIN_SRC)
-    (site / "METADATA").write_text("Metadata-Version: 2.1\nName: hostile-spin\nVersion: 0.1\n")
-    (site / "entry_points.txt").write_text("[dualfem.solvers]\nhostile_spin = hostile_spin\n")
-    env = dict(os.environ, MPLBACKEND="Agg")
-    env["PYTHONPATH"] = os.pathsep.join([str(site.parent), str(src), env.get("PYTHONPATH", "")])
+    env = _plugin_env(tmp_path, "hostile_spin", SPIN_SRC)
     cmd = [sys.executable, "-m", "dualfem", "solve", "f1", "--set", "N=8", "--solver", "hostile_spin"]
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
@@ -141,22 +160,10 @@ def test_the_watchdogs_worker_dies_with_a_killed_solve(tmp_path, sig):
             if "ready" in line:
                 break
         assert len(session_processes(proc.pid)) == 2, session_processes(proc.pid)   # the command and its worker
-        os.kill(proc.pid, sig)
-        proc.wait(timeout=30)
-        gone = time.monotonic() + 5.0
-        while session_processes(proc.pid) and time.monotonic() < gone:
-            time.sleep(0.1)
-        left = session_processes(proc.pid)
+        left = _left_after(proc, sig)
         assert left == [], f"{len(left)} process(es) alive 5 s after {sig.name} of solve: {left}"
     finally:
-        for pid, _ in session_processes(proc.pid):
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except OSError:
-                pass
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        _reap(proc)
 
 
 def _alive(pid: int) -> bool:
@@ -206,16 +213,9 @@ name = "hostile_spawner"
 def test_a_killed_bench_run_takes_the_processes_its_plugin_started_with_it(tmp_path):
     """bench's guard kills the guarded child's whole process group (issue 37, item 7): a plugin's own
     subprocess dies with the run killed at its time limit (before: it was left running)."""
-    src, site = tmp_path / "src", tmp_path / "site" / "hostile_spawner-0.1.dist-info"
-    src.mkdir()
-    site.mkdir(parents=True)
-    (src / "hostile_spawner.py").write_text(SPAWNER_SRC)
-    (site / "METADATA").write_text("Metadata-Version: 2.1\nName: hostile-spawner\nVersion: 0.1\n")
-    (site / "entry_points.txt").write_text("[dualfem.solvers]\nhostile_spawner = hostile_spawner\n")
     (tmp_path / "spec.toml").write_text(SPAWNER_SPEC)
     pidfile = tmp_path / "pid"
-    env = dict(os.environ, MPLBACKEND="Agg", SPAWNER_PIDFILE=str(pidfile))
-    env["PYTHONPATH"] = os.pathsep.join([str(site.parent), str(src), env.get("PYTHONPATH", "")])
+    env = _plugin_env(tmp_path, "hostile_spawner", SPAWNER_SRC, SPAWNER_PIDFILE=str(pidfile))
     r = subprocess.run([sys.executable, "-m", "dualfem", "bench", str(tmp_path / "spec.toml"), "--out",
                         str(tmp_path / "out"), "--no-progress-bar"], env=env, capture_output=True, text=True,
                        timeout=120, start_new_session=True)

@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 
 from dualfem.cli.main import main
-from dualfem.core import registry
 from dualfem.core.problem import Problem
 from dualfem.core.scene import load_scene
 from dualfem.core.solution import Solution, Status
@@ -46,21 +45,6 @@ def forkable(monkeypatch):
     monkeypatch.setenv("DUALFEM_FACTOR", "superlu")      # the default linear-algebra context's backend
     monkeypatch.setattr(la, "_CURRENT", None)
 
-
-@pytest.fixture
-def register():
-    registry.solvers()
-    added: list[tuple[dict, str]] = []
-
-    def reg(cls, kind="solver"):
-        table = registry._SOLVERS if kind == "solver" else registry._PROBLEMS
-        (registry.register_solver if kind == "solver" else registry.register_problem)(cls)
-        added.append((table, cls.name))
-        return cls
-
-    yield reg
-    for table, name in added:
-        table.pop(name, None)
 
 
 class Runaway(Solver):
