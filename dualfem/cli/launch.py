@@ -158,7 +158,7 @@ def compare_guarded(args: Any, names: list[str], params: dict[str, dict],
         if nm not in limits or nm in done:
             why = limit_text(out.phase, out.budget, longest) if out.status == "time_limit" else out.message
             return None, why
-        done[nm] = _killed_run(nm, out, limits[nm], meta, params.get(nm))
+        done[nm] = _killed_run(nm, out, limits[nm], meta, params.get(nm), tol)
         if progress:
             progress(f"{nm}: {out.status} after {out.elapsed:.2f} s (killed in phase '{out.phase}')")
 
@@ -200,8 +200,10 @@ def _sendable(sol: Any) -> Any:
     return out
 
 
-def _killed_run(nm: str, out: Outcome, limit: float, meta: dict, params: dict | None) -> tuple[Any, Any]:
-    """(row, solution) of a compare run whose worker was killed at its budget (or died)."""
+def _killed_run(nm: str, out: Outcome, limit: float, meta: dict, params: dict | None,
+                tol: float | None = None) -> tuple[Any, Any]:
+    """(row, solution) of a compare run whose worker was killed at its budget (or died); ``tol``: the
+    certified tolerance of ``--tol`` (None: the solver's declared one), as for the runs that finished."""
     from dualfem.core.registry import get_solver
     from dualfem.core.solution import Solution, Status
     from dualfem.experiments.row import Row
@@ -211,8 +213,8 @@ def _killed_run(nm: str, out: Outcome, limit: float, meta: dict, params: dict | 
     status = Status.TIME_LIMIT if out.status == "time_limit" else Status.ERROR
     row = Row(kind="compare", run_id=f"compare:{nm}", scene=meta.get("scene"), n_unknowns=meta.get("n_unknowns"),
               n_constraints=meta.get("n_constraints"), solver=nm, variant=nm, solver_params=dict(params or {}),
-              tol=float(cls.tolerance), status=out.status, claimed_status=None, message=msg, iterations={},
-              total_s=None, exact=bool(cls.exact), third_party=bool(cls.requires))
+              tol=float(cls.tolerance if tol is None else tol), status=out.status, claimed_status=None, message=msg,
+              iterations={}, total_s=None, exact=bool(cls.exact), third_party=bool(cls.requires))
     row.set_residuals(None, row.tol)
     row.update(energy=None, time_s={"killed_after": out.elapsed}, error_bound=None, certificate=None, diff=None,
                n_contact=None)

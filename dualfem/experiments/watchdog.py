@@ -126,8 +126,6 @@ def fork_is_unsafe() -> bool:
     return bool(getattr(mod, "STARTED", False))
 
 
-_WARNED_INLINE = [False]
-
 
 class _Forward(io.TextIOBase):
     """``sys.stdout``/``sys.stderr`` of the worker: text goes to the parent's stream of the same name;
@@ -257,13 +255,11 @@ def _kill(proc: Any) -> None:
 def _inline_call(fn: Callable, args: tuple, phase: str, seconds: float,
                  on_part: Callable[[Any], None] | None) -> Outcome:
     """``fn`` in this process, its phases recorded but not enforced (a fork would hang: see
-    :func:`fork_is_unsafe`); said once per process on stderr."""
-    if not _WARNED_INLINE[0]:      # a warning, not a line on stderr: a command's errors stay one line
-        _WARNED_INLINE[0] = True
-        import warnings
-
-        warnings.warn("this process has run MKL PARDISO, which a forked worker cannot use: plugin code runs in "
-                      "this process and its time limit is not enforced by the watchdog", RuntimeWarning, stacklevel=3)
+    :func:`fork_is_unsafe`); said by a RuntimeWarning."""
+    import warnings                # a warning (shown once per process by Python's default filter), not a
+                                   # line on stderr: a command's errors stay one line
+    warnings.warn("this process has run MKL PARDISO, which a forked worker cannot use: plugin code runs in "
+                  "this process and its time limit is not enforced by the watchdog", RuntimeWarning, stacklevel=3)
     t0 = time.monotonic()
     out = Outcome(status="running", phase=phase, budget=float(seconds))
     try:
