@@ -256,8 +256,10 @@ def _inline_call(fn: Callable, args: tuple, phase: str, seconds: float,
                  on_part: Callable[[Any], None] | None) -> Outcome:
     """``fn`` in this process, its phases recorded but not enforced (a fork would hang: see
     :func:`fork_is_unsafe`); said by a RuntimeWarning."""
-    import warnings                # a warning (shown once per process by Python's default filter), not a
-                                   # line on stderr: a command's errors stay one line
+    import warnings
+
+    # a warning (shown once per process by Python's default filter), not a line on stderr: a command's errors
+    # stay one line
     warnings.warn("this process has run MKL PARDISO, which a forked worker cannot use: plugin code runs in "
                   "this process and its time limit is not enforced by the watchdog", RuntimeWarning, stacklevel=3)
     t0 = time.monotonic()
