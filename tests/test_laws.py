@@ -10,7 +10,7 @@ import scipy.sparse as sp
 
 from dualfem.core import constraints
 from dualfem.core.errors import InputError
-from dualfem.core.laws import SIGNORINI, Law, Signorini
+from dualfem.core.laws import SIGNORINI, Coulomb, Law, Signorini, Tresca
 from dualfem.core.qp import QP
 from dualfem.core.solver import Solver, unhandled_law
 from dualfem.experiments.runner import fingerprint, guarded_view
@@ -134,68 +134,74 @@ def test_accepts_defaults_to_signorini_and_names_the_law():
     assert unhandled_law(Both, glued) is None
 
 
-class Tresca(Law):
-    """Tresca friction in 2D (a box per node, |mu_j| <= g w_j), written against the Law interface only."""
-
-    name = "tresca"
-
-    def __init__(self, g: float, normal: int | None = None):
-        self.g, self.normal = g, normal
-
-    def bound(self, weights, mus):     # Coulomb (normal set): the radius is the normal multiplier times g
-        return self.g * (weights if self.normal is None else np.maximum(mus[self.normal], 0.0))
-
-    def project(self, mu, weights=None, mus=()):
-        b = self.bound(weights, mus)
-        return np.clip(mu, -b, b)
-
-    def primal(self, gap):
-        return 0.0
-
-    def dual(self, mu, weights=None, mus=()):
-        return float(np.maximum(np.abs(mu) - self.bound(weights, mus), 0.0).max(initial=0.0))
-
-    def complementarity(self, mu_s, gap_s, weights=None, fs=1.0, mus=()):
-        return np.abs(self.bound(weights, mus) / fs * np.abs(gap_s) + mu_s * gap_s)
-
-    def energy(self, gap, weights=None):
-        return float(self.g * weights @ np.abs(gap)) if self.normal is None else 0.0
-
-    def support(self, mu, gap, weights=None, mus=()):
-        return float(self.bound(weights, mus) @ np.abs(gap) + mu @ gap)
-
-    def face(self, mu, gap, c):        # stick: the trial force inside the box
-        return np.abs(mu - c * gap) < self.g * np.ones_like(mu) if self.normal is None else np.zeros(mu.shape, bool)
-
-    def complementary(self, mu, gap, weights=None, mus=()):
-        return -np.sign(gap) * self.bound(weights, mus)
-
-    def face_holds(self, mu1, gap1, face, mu_margin, gap_margin):
-        return bool(np.all(-np.sign(mu1[~face]) * gap1[~face] > gap_margin))
-
-
-def _friction_qp(law: Tresca, f: float = 3.0, p: float = 2.0) -> QP:
+def _friction_qp(law, f: float = 3.0, p: float = 2.0) -> QP:
     """x = (x_n, x_t), K = I, F = (-p, f): pushed into contact (mu_n = p), pulled tangentially by f."""
     return QP(K=sp.identity(2, format="csc"), F=np.array([-p, f]), B=sp.csr_matrix([[1.0, 0.0]]), weights=[1.0],
               blocks=(Constraint.make(sp.csr_matrix([[0.0, 1.0]]), [1.0], law),))
 
 
-@pytest.mark.parametrize("law", [Tresca(0.5), Tresca(0.5, normal=0)], ids=["tresca", "coulomb"])
+@pytest.mark.parametrize("law", [Tresca(0.5), Coulomb(0.5)], ids=["tresca", "coulomb"])
 def test_friction_laws_fit_the_interface_without_a_core_change(law):
     from dualfem.core import evaluator
     from dualfem.numerics.certify import certified_error
 
     qp = _friction_qp(law)          # sliding: |f| = 3 > bound (0.5 or 0.5 mu_n = 1): mu_t = -bound, x_t = f - bound
-    bound = 0.5 if law.normal is None else 1.0
+    bound = 0.5 if law.name == "tresca" else 1.0
     x, mu = np.array([0.0, 3.0 - bound]), np.array([2.0, -bound])
     assert evaluator.kkt_error(evaluator.residuals(qp, x, mu)) < 1e-15
     frictionless = evaluator.residuals(qp, np.array([0.0, 3.0]), np.array([2.0, 0.0]))
     assert frictionless["complementarity"] > 0.1 and frictionless["stationarity"] == 0.0
     assert evaluator.residuals(qp, x, np.array([2.0, -2 * bound]))["dual"] > 0.1
-    if law.normal is None:
+    if law.name == "tresca":
         assert evaluator.residuals(qp, x, mu)["energy"] == pytest.approx(0.5 * x @ x - qp.F @ x + 0.5 * x[1])
         xp = x + np.array([0.0, 1e-3])
         cert = certified_error(qp, xp, mu)            # the face step measures the error |xp - x|_K = 1e-3
         assert cert["active_set"] == pytest.approx(1e-3 / evaluator.size_energy(qp, xp), rel=1e-6)
         assert cert["bound"] >= cert["active_set"]
-    assert "does not handle the 'tresca' law" in unhandled_law(Solver, qp)
+    assert f"does not handle the '{law.name}' law" in unhandled_law(Solver, qp)
+
+
+def _disc_qp(law, f=(3.0, 4.0), p: float = 2.0) -> QP:
+    """3D: x = (x_n, x_t1, x_t2), K = I, F = (-p, f1, f2): the tangential pull f is a vector of norm 5."""
+    return QP(K=sp.identity(3, format="csc"), F=np.array([-p, *f]), B=sp.csr_matrix([[1.0, 0.0, 0.0]]), weights=[1.0],
+              blocks=(Constraint.make(sp.csr_matrix([[0, 1.0, 0], [0, 0, 1.0]]), [1.0, 1.0], law),))
+
+
+@pytest.mark.parametrize("law,radius", [(Tresca(0.5, components=2), 0.5), (Coulomb(0.5, components=2), 1.0),
+                                        (Tresca(3.0, components=2), 3.0)], ids=["tresca", "coulomb", "tresca-big"])
+def test_a_3d_friction_block_is_a_disc_not_a_box(law, radius):
+    from dualfem.core import evaluator
+
+    qp = _disc_qp(law)
+    f = np.array([3.0, 4.0])
+    slip = max(0.0, 5.0 - radius)                     # slides along f by |f| - r (r < 5); mu_t = -r f/|f|
+    x = np.array([0.0, *(f / 5.0 * slip)])
+    mu = np.array([2.0, *(-radius * f / 5.0)])
+    assert evaluator.kkt_error(evaluator.residuals(qp, x, mu)) < 1e-14
+    box = np.array([2.0, -radius, -radius])          # the box corner: inside the box, outside the disc
+    assert evaluator.residuals(qp, x, box)["dual"] > 0.1 * radius / 5
+    assert np.allclose(law.project(box[1:], np.ones(2), (np.array([2.0]), box[1:])),
+                       -radius * np.ones(2) / np.sqrt(2))
+
+
+def test_stick_inside_the_disc_and_slip_directions_are_checked():
+    from dualfem.core import evaluator
+
+    law = Tresca(6.0, components=2)                   # r = 6 > |f| = 5: stick, mu_t = -f, x_t = 0
+    qp = _disc_qp(law)
+    good = evaluator.residuals(qp, np.zeros(3), np.array([2.0, -3.0, -4.0]))
+    assert evaluator.kkt_error(good) < 1e-14
+    law = Tresca(0.5, components=2)
+    qp = _disc_qp(law)
+    wrong_way = np.array([0.0, 4.5 * 0.8, -4.5 * 0.6])    # slip of the right size, in a wrong direction
+    r = evaluator.residuals(qp, wrong_way, np.array([2.0, -0.3, -0.4]))
+    assert r["complementarity"] > 0.01 or r["stationarity"] > 0.01
+
+
+def test_friction_law_parameters_enter_the_qp_key_and_are_validated():
+    a, b = _disc_qp(Tresca(np.array([0.5]), components=2)), _disc_qp(Tresca(np.array([0.6]), components=2))
+    assert a.key() != b.key() and a.key() == _disc_qp(Tresca(np.array([0.5]), components=2)).key()
+    with pytest.raises(ValueError, match="bound"):
+        Tresca(-1.0)
+    with pytest.raises(ValueError, match="components"):
+        Coulomb(0.3, components=3)

@@ -8,6 +8,7 @@ when there is one block). See :mod:`dualfem.core.laws` for the laws and their si
 """
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,9 +90,20 @@ def support(blocks: tuple[Constraint, ...], mu: np.ndarray, gap: np.ndarray) -> 
     return sum((b.law.support(mk, gk, b.weights, mus) for b, mk, gk in zip(blocks, mus, gaps)), 0.0)
 
 
+def call_law(method, *args, weights=None, mus=()):
+    """``method(*args)`` of a law, with ``weights=`` and ``mus=`` when the method takes them (a law written
+    before they were passed to :meth:`~dualfem.core.laws.Law.face` / ``face_holds`` keeps working)."""
+    params = inspect.signature(method).parameters
+    if "weights" in params and "mus" in params:
+        return method(*args, weights=weights, mus=mus)
+    return method(*args)
+
+
 def face(blocks: tuple[Constraint, ...], mu: np.ndarray, gap: np.ndarray, c: float) -> np.ndarray:
     """The stacked mask of every block's active face (:meth:`dualfem.core.laws.Law.face`)."""
-    parts = [b.law.face(mk, gk, c) for b, mk, gk in zip(blocks, split(blocks, mu), split(blocks, gap))]
+    mus = tuple(split(blocks, mu))
+    parts = [call_law(b.law.face, mk, gk, c, weights=b.weights, mus=mus)
+             for b, mk, gk in zip(blocks, mus, split(blocks, gap))]
     return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
 

@@ -57,8 +57,10 @@ def blocks_active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, margi
     gap1, mu1 = gap - Gz + Ddmu, mu_A + dmu
     step_mu = max(np.abs(dmu).max(initial=0.0), np.abs(mu - mu_A).max(initial=0.0))
     step_gap = np.abs(Ddmu - Gz).max(initial=0.0)
-    parts = zip(blocks, constraints.split(blocks, mu1), constraints.split(blocks, gap1), constraints.split(blocks, A))
-    if not all(b.law.face_holds(m1, g1, a, margin * step_mu, margin * step_gap) for b, m1, g1, a in parts):
+    mus1 = tuple(constraints.split(blocks, mu1))
+    parts = zip(blocks, mus1, constraints.split(blocks, gap1), constraints.split(blocks, A))
+    if not all(constraints.call_law(b.law.face_holds, m1, g1, a, margin * step_mu, margin * step_gap,
+                                    weights=b.weights, mus=mus1) for b, m1, g1, a in parts):
         return nan
     nx = size_energy(qp, x, Kx)
     err_mu = float(np.abs(mu - mu1).max(initial=0.0)) / force_scale(qp, mu1)
