@@ -194,3 +194,31 @@ def test_inverted_elements_and_too_large_files_are_refused(tmp_path, monkeypatch
     monkeypatch.setattr(rd, "MAX_FILE_BYTES", 100)
     with pytest.raises(InputError, match="the largest mesh file read"):
         get_problem("file_body")(mesh_file=str(path), boundary=[{"group": "base", "support": "clamp"}])
+
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "bodies"
+
+
+def test_remote_stress_loads_the_outer_boundary_only():
+    """Kirsch's plate: remote_stress pulls the plate's outer sides; the hole stays traction-free."""
+    p = load_scene(str(EXAMPLES / "plate_hole.toml"))
+    qp = p.build()
+    c, _ = p.cut()
+    F = p.nodal_load()
+    hole = np.abs(np.hypot(*c.points) - 1.0) < 1e-9
+    assert hole.sum() > 10 and np.abs(F[:, hole]).max() == 0.0
+    right = np.abs(c.points[0] - 20.0) < 1e-9
+    assert np.isclose(F[0, right].sum(), 40.0) and np.isclose(F[1].sum(), 0.0)
+    assert qp.m == 0
+
+
+def test_3d_body_from_a_geo_file():
+    """The cylinder with an inclined penny (OpenCASCADE fragment): a 3D body, its crack doubled inside, its
+    front single, normals along the disk's (the file's orientation)."""
+    qp = load_scene(str(EXAMPLES / "cylinder_penny.toml")).build()
+    it = qp.interface
+    assert qp.geometry.dim == 3 and it.m > 10 and it.front.size > 10
+    n0 = np.array([np.sin(np.pi / 6), 0.0, np.cos(np.pi / 6)])
+    assert np.abs(np.abs(it.normals @ n0) - 1).max() < 1e-6
+    r = np.linalg.norm(qp.geometry.nodes[:, it.front], axis=0)
+    assert np.allclose(r, 1.0, atol=1e-6)
