@@ -222,3 +222,9 @@ def test_3d_body_from_a_geo_file():
     assert np.abs(np.abs(it.normals @ n0) - 1).max() < 1e-6
     r = np.linalg.norm(qp.geometry.nodes[:, it.front], axis=0)
     assert np.allclose(r, 1.0, atol=1e-6)
+
+
+def test_sizes_are_bounded_before_meshing(tmp_path):
+    _refused(tmp_path, r"gives about .* triangles \(limit", scene=SCENE.replace("mesh_size = 0.1", "mesh_size = 1e-5"))
+    _refused(tmp_path, r"tip_size must be 0 or in \[0\.0001, 0\.1\]", scene=SCENE.replace("tip_size = 0.03",
+                                                                                          "tip_size = 1e-7"))

@@ -46,6 +46,8 @@ from .read import read_mesh
 #: smallest delta * E / (body size) accepted (as the box scenes)
 MIN_DELTA_E_OVER_L = 1e-12
 DEFECT_KEYS = ("group", "delta", "face_pressure")
+#: the smallest tip_size, relative to the body's largest extent (the refinement around 3D fronts grows like 1/tip)
+MIN_TIP_SIZE = 1e-4
 _CACHE: dict[tuple, BodyMesh] = {}          # the last bodies read or meshed (a sweep re-validates its scene)
 
 
@@ -112,6 +114,10 @@ class FileBody(Problem):
             self._geo = geo.inspect(self._path)
             self._dim, groups, self._box = self._geo.dim, self._geo.groups, self._geo.box
             self._check_count()
+            tip, top = p["tip_size"], p["mesh_size"] or max(self._box)
+            if tip and not MIN_TIP_SIZE * max(self._box) <= tip <= top:
+                raise InputError(f"tip_size must be 0 or in [{MIN_TIP_SIZE * max(self._box):.3g}, {top:g}] "
+                                 f"({MIN_TIP_SIZE:g} x the body's size, up to mesh_size), got {tip:g}")
         if p["dim"] not in (0, self._dim):
             raise InputError(f"dim = {p['dim']} but {self._kind} {self._path.name!r} holds a {self._dim}D body")
         self._check_groups(groups)

@@ -9,7 +9,7 @@ Surface{..}``, ``Surface{..} In Volume{..}`` or ``BooleanFragments``), so that t
 Sizes: ``mesh_size`` > 0 caps the element size everywhere (0: the file's own sizes); ``tip_size`` > 0
 refines to that size at the tips (2D: the end points of every defect curve) or fronts (3D: the boundary
 curves of every defect surface), growing at slope :data:`GROWTH` up to ``mesh_size``. The element count
-is estimated from the bounding box and the smallest size before meshing (:func:`inspect`), and a count
+is estimated from the bounding box and the size before meshing (:func:`element_estimate`), and a count
 beyond the box scenes' limits is refused then. Options: first order, no recombination, one thread,
 seed 1 (reproducible).
 """
@@ -37,7 +37,7 @@ _GMSH_TYPES = {1: (1, 2), 2: (2, 3), 4: (3, 4), 15: (0, 1)}          # gmsh elem
 
 @dataclass(frozen=True)
 class GeometryInfo:
-    """What a geometry file says before meshing: ``dim``, bounding box lengths ``box``, the smallest size its
+    """What a geometry file says before meshing: ``dim``, bounding box lengths ``box``, the largest size its
     points ask for (0: none), its physical groups (name -> dimension)."""
 
     dim: int
@@ -91,7 +91,7 @@ def _info(gmsh, path: Path) -> GeometryInfo:
     sizes = [s for s in gmsh.model.mesh.getSizes(gmsh.model.getEntities(0)) if 0 < s < 1e21] \
         if gmsh.model.getEntities(0) else []
     groups = {gmsh.model.getPhysicalName(d, t) or str(t): d for d, t in gmsh.model.getPhysicalGroups()}
-    return GeometryInfo(dim, box, float(min(sizes)) if sizes else 0.0, groups)
+    return GeometryInfo(dim, box, float(max(sizes)) if sizes else 0.0, groups)
 
 
 def inspect(path: Path) -> GeometryInfo:
@@ -182,9 +182,9 @@ def _extract(gmsh, dim: int, source: str) -> BodyMesh:
 
 
 def element_estimate(info: GeometryInfo, mesh_size: float) -> tuple[float, float]:
-    """(about how many cells, the size used): the bounding box over the smallest of mesh_size and the points'
-    sizes (an upper estimate for a body that fills part of its box)."""
-    sizes = [s for s in (mesh_size, info.point_size) if s > 0]
-    h = min(sizes) if sizes else max(info.box) / 10
+    """(about how many cells, the size used): the bounding box over ``mesh_size`` cubed (squared in 2D); with
+    ``mesh_size = 0`` (the file's own sizes) over the largest size its points ask for: a lower estimate for a
+    file that grades its sizes (what a file asks for is its author's to judge; the keys are bounded here)."""
+    h = mesh_size if mesh_size > 0 else (info.point_size or max(info.box) / 10)
     per = 2 / math.sqrt(3) * 2 if info.dim == 2 else 6 * math.sqrt(2)
     return per * float(np.prod(info.box)) / h ** info.dim, h
