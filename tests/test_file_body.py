@@ -134,7 +134,8 @@ def test_edge_crack_doubles_its_mouth(tmp_path):
     qp = load_scene(str(_plate(tmp_path, x0=0))).build()
     it = qp.interface
     nodes = qp.geometry.nodes
-    assert it.front.size == 1 and np.allclose(nodes[:, it.front[0]], [0.6, 0.5])
+    assert it.front.size == 2 and np.allclose(nodes[:, it.front].T, [[0.0, 0.5], [0.6, 0.5]])
+    assert it.front[0] in it.lower and it.front[1] not in it.lower      # the mouth doubled, the tip single
     mouth = int(np.argmin(nodes[0, it.lower]))
     assert np.allclose(nodes[:, it.lower[mouth]], [0.0, 0.5])  # the mouth is a doubled node
     last = np.linalg.norm(nodes[:, it.lower[np.argmax(nodes[0, it.lower])]] - [0.6, 0.5])
@@ -228,3 +229,15 @@ def test_sizes_are_bounded_before_meshing(tmp_path):
     _refused(tmp_path, r"gives about .* triangles \(limit", scene=SCENE.replace("mesh_size = 0.1", "mesh_size = 1e-5"))
     _refused(tmp_path, r"tip_size must be 0 or in \[0\.0001, 0\.1\]", scene=SCENE.replace("tip_size = 0.03",
                                                                                           "tip_size = 1e-7"))
+
+
+def test_edge_crack_post_processing(tmp_path):
+    """The defect fields of an edge crack: the mouth is a row of B (its jump the CMOD), the tip a single node."""
+    from dualfem.post.fields import defect_fields
+    from dualfem.runner import run
+
+    qp = load_scene(str(_plate(tmp_path, x0=0))).build()
+    sol = run("pdas", qp)
+    d = defect_fields(qp, sol.x, sol.multipliers)
+    assert d["row"][0] >= 0 and d["row"][-1] == -1 and d["s"][0] == 0.0
+    assert d["jump_normal"][0] == pytest.approx((qp.B @ sol.x)[d["row"][0]]) and d["jump_normal"][-1] == 0.0

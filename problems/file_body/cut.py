@@ -37,8 +37,9 @@ from .orient import chain, orient_surface
 class FileCut(DoubledNodes):
     """The doubled mesh: ``cells`` (dim + 1, nc) renumbered; per doubled node j the fields of
     :class:`~dualfem.problems._interface.DoubledNodes`; ``tangents`` (2, m) and ``s`` (m,) the unit tangent
-    and arc length from the chain's first node (2D; None in 3D); ``front`` / ``front_id`` the single nodes
-    of each defect (2D: its tips, first then last; 3D: its front); ``faces`` (3, nf) the defect triangles
+    and arc length from the chain's first node (2D; None in 3D); ``front`` / ``front_id``: in 2D the two ends
+    of each defect's chain, first then last (its tips; at an edge crack's mouth the mouth's "-" copy, a doubled
+    node), in 3D the single nodes of each defect (its front); ``faces`` (3, nf) the defect triangles
     (3D, node ids of the "-" side; None in 2D)."""
 
     cells: np.ndarray
@@ -147,9 +148,11 @@ def cut(body: BodyMesh, defects: list[np.ndarray], names: list[str]) -> FileCut:
     c = FileCut(points=doubled, lower=lower, upper=upper, defect_id=ids[two], normals=normals[:, two],
                 weights=np.concatenate([g[3] if dim == 2 else g[2] for g in geo])[two], cells=out,
                 front=nodes[fr], front_id=ids[fr])
-    if dim == 2:
+    if dim == 2:              # the box scenes' convention: two ends per defect, first and last of its chain
         c.tangents = np.hstack([g[2] for g in geo])[:, two]
         c.s = np.concatenate([g[4] for g in geo])[two]
+        c.front = np.concatenate([g[0][[0, -1]] for g in geo])
+        c.front_id = np.repeat(np.arange(len(geo)), 2)
     else:
         c.faces = facets.astype(np.int64)
     _check(c, names)
