@@ -24,7 +24,7 @@ Cases, each solved by ``pdas`` through dualfem's runner (every answer certified 
    sigma_zz = 1 on their ends: the opening over r <= 0.8 a against Sneddon's w = 8 (1 - nu^2) sigma_n / (pi E)
    sqrt(a^2 - r^2), sigma_n = sigma cos^2(30 deg), and against each other;
 5. pictures: the edge-cracked strip's mesh with its groups and its von Mises stress on the deformed body; the
-   Kirsch plate near the hole.
+   Kirsch plate near the hole; the cylinder's section through the penny and the penny's opening and slip.
 """
 from __future__ import annotations
 
@@ -298,6 +298,22 @@ def pictures(tmp: Path, figdir: Path) -> list[str]:
     fig.tight_layout()
     names.append("kirsch.png")
     fig.savefig(figdir / names[1], dpi=110)
+    plt.close(fig)
+    from dualfem.post.figures3d import plot_cut, plot_defect_maps
+
+    ends = [{"group": "top", "traction": [0.0, 0.0, 1.0]}, {"group": "bottom", "traction": [0.0, 0.0, -1.0]}]
+    p = _file_body(geometry_file=str(EXAMPLES / "cylinder_penny.geo"), mesh_size=1.0, tip_size=0.08, E=E, nu=NU,
+                   delta=1e3, defects=[{"group": "crack"}], boundary=ends)
+    qp, sol, _, _ = _solve(p)
+    fig, ax = plt.subplots(figsize=(6.5, 5.5))
+    plot_cut(qp, sol, ax=ax)
+    fig.tight_layout()
+    names.append("cylinder_cut.png")
+    fig.savefig(figdir / names[-1], dpi=110)
+    plt.close(fig)
+    fig = plot_defect_maps(qp, sol, quantities=("opening", "slip"))
+    names.append("cylinder_penny.png")
+    fig.savefig(figdir / names[-1], dpi=110)
     plt.close(fig)
     return names
 
