@@ -241,3 +241,21 @@ def test_edge_crack_post_processing(tmp_path):
     d = defect_fields(qp, sol.x, sol.multipliers)
     assert d["row"][0] >= 0 and d["row"][-1] == -1 and d["s"][0] == 0.0
     assert d["jump_normal"][0] == pytest.approx((qp.B @ sol.x)[d["row"][0]]) and d["jump_normal"][-1] == 0.0
+
+
+def test_face_pressure_opens_a_crack_and_delta_sweeps_reuse_the_assembly(tmp_path):
+    """A pressurized crack in a plate clamped at its base (no other load) opens; a new delta reuses the mesh and
+    the delta-free stiffness (one assembly)."""
+    from dualfem.runner import run
+
+    scene = SCENE.replace('group = "crack"', 'group = "crack"\nface_pressure = 5.0')
+    scene = scene.split('[[boundary]]\ngroup = "lid"')[0]
+    p = load_scene(str(_plate(tmp_path, scene=scene)))
+    qp = p.build()
+    F = p.nodal_load()
+    assert np.allclose(F.sum(axis=1), 0.0, atol=1e-12) and np.abs(F).max() > 0
+    sol = run("pdas", qp)
+    assert (qp.B @ sol.x).min() > 0
+    q = p.with_params(delta=1e-3)
+    q.build()
+    assert q.shared is p.shared and p.shared.assemblies == 1
