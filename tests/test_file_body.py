@@ -10,6 +10,8 @@ import pytest
 pytest.importorskip("meshio")
 pytest.importorskip("gmsh")
 
+import meshio  # noqa: E402
+
 from dualfem.errors import InputError  # noqa: E402
 from dualfem.problems.file_body.write import write_msh  # noqa: E402
 from dualfem.registry import get_problem  # noqa: E402
@@ -259,3 +261,20 @@ def test_face_pressure_opens_a_crack_and_delta_sweeps_reuse_the_assembly(tmp_pat
     q = p.with_params(delta=1e-3)
     q.build()
     assert q.shared is p.shared and p.shared.assemblies == 1
+
+
+def test_vtu_body_under_remote_stress_carries_it_uniformly(tmp_path):
+    """A body in another format meshio reads (VTU, no groups), uncracked, under remote_stress alone: the stress is
+    the remote stress in every triangle (rigid motions removed, no reactions)."""
+    from dualfem.post.fields import stresses
+    from dualfem.runner import run
+
+    box = get_problem("thin_defect")(mesh="gmsh", mesh_size=0.2, defects=[], width=2.0,
+                                     remote_stress=[[1.0, 0.5], [0.5, -2.0]])
+    pts, tri, _ = box._reference_mesh()
+    meshio.write(tmp_path / "body.vtu", meshio.Mesh(np.vstack([pts, np.zeros(pts.shape[1])]).T, [("triangle", tri.T)]))
+    p = get_problem("file_body")(mesh_file=str(tmp_path / "body.vtu"), remote_stress=[[1.0, 0.5], [0.5, -2.0]])
+    qp = p.build()
+    s = stresses(qp, run("pdas", qp).x)
+    for k, want in (("s11", 1.0), ("s22", -2.0), ("s12", 0.5)):
+        assert np.allclose(s[k], want, atol=1e-9)
