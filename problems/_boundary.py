@@ -28,7 +28,8 @@ the rigid-mode matrix restricted to them is well conditioned; the loads must the
 API: :func:`parse_loads` (the keys -> a frozen :class:`LoadSpec`, or None when none is given),
 :func:`box_sides` (boundary facets per side), :func:`fixed_mask`, :func:`nodal_forces`,
 :func:`check_balance`, :func:`dof_numbering` (the mask as ``node_dofs``), :func:`face_pressure_forces`,
-:func:`parse_scalar` (a per-defect ``face_pressure``).
+:func:`parse_scalar` (a per-defect ``face_pressure``); for bodies of any shape (``problems/file_body``):
+:func:`complete_supports`, :func:`free_modes_of`, :func:`check_balance_of`, :func:`integrate`.
 """
 from __future__ import annotations
 
@@ -133,8 +134,12 @@ def _frame(nodes: np.ndarray) -> tuple[np.ndarray, float]:
 def free_modes(spec: LoadSpec, nodes: np.ndarray, sides: dict[str, np.ndarray]) -> np.ndarray:
     """The rigid-body motions the supports leave free: an orthonormal basis (nm, k) of mode coefficients
     (see :func:`_modes`; k = 0 when the supports hold the body)."""
-    mask = _support_mask(spec, nodes.shape[1], sides)
-    nm = 3 if spec.dim == 2 else 6
+    return free_modes_of(_support_mask(spec, nodes.shape[1], sides), nodes)
+
+
+def free_modes_of(mask: np.ndarray, nodes: np.ndarray) -> np.ndarray:
+    """:func:`free_modes` for a mask (dim, n) of fixed components (any body, not only a box)."""
+    nm = 3 if mask.shape[0] == 2 else 6
     comp, idx = np.nonzero(mask)
     if idx.size == 0:
         return np.eye(nm)
@@ -144,13 +149,16 @@ def free_modes(spec: LoadSpec, nodes: np.ndarray, sides: dict[str, np.ndarray]) 
     return V[:, w <= 1e-10 * w.max()]
 
 
-def _candidates(nodes: np.ndarray) -> np.ndarray:
+def _candidates(nodes: np.ndarray, exclude: np.ndarray | None = None) -> np.ndarray:
     """Extreme nodes: the maximisers of s . x for s in {-1, 0, 1}^dim \\ {0} (vertices of the hull), distinct."""
     dim = nodes.shape[0]
     dirs = [np.array(s, float) for s in np.ndindex(*(3,) * dim)]
     dirs = [d - 1 for d in dirs if np.any(d != 1)]
     dirs.sort(key=lambda d: (-int(np.count_nonzero(d)), tuple(d)))     # corners first
-    ids = [int(np.argmax(d @ nodes)) for d in dirs]
+    if exclude is None:
+        ids = [int(np.argmax(d @ nodes)) for d in dirs]
+    else:
+        ids = [int(np.argmax(np.where(exclude, -np.inf, d @ nodes))) for d in dirs]
     return np.array(list(dict.fromkeys(ids)), dtype=np.int64)
 
 
@@ -164,13 +172,20 @@ def fixed_mask(spec: LoadSpec, nodes: np.ndarray, sides: dict[str, np.ndarray]) 
     ``nodes`` (dim, n): the coordinates of the body as it is solved (rotated, when the problem rotates it),
     ``sides`` from :func:`box_sides` (reference frame: the side of a node does not change by rotation).
     """
-    mask = _support_mask(spec, nodes.shape[1], sides)
-    N = free_modes(spec, nodes, sides)
+    return complete_supports(_support_mask(spec, nodes.shape[1], sides), nodes)
+
+
+def complete_supports(mask: np.ndarray, nodes: np.ndarray, exclude: np.ndarray | None = None) -> np.ndarray:
+    """The fixed components ``mask`` (dim, n) plus single components at extreme nodes that remove the rigid-body
+    motions ``mask`` leaves free (see :func:`fixed_mask`; any body, not only a box); nodes where ``exclude``
+    (n,) is True are never chosen (e.g. the doubled nodes of a defect)."""
+    mask = mask.copy()
+    N = free_modes_of(mask, nodes)
     k = N.shape[1]
     if k == 0:
         return mask
-    dim = spec.dim
-    cand = _candidates(nodes)
+    dim = mask.shape[0]
+    cand = _candidates(nodes, exclude)
     ci, cc = np.repeat(cand, dim), np.tile(np.arange(dim), cand.size)
     keep = ~mask[cc, ci]
     ci, cc = ci[keep], cc[keep]
@@ -202,7 +217,11 @@ def _condition(A: np.ndarray) -> float:
 def check_balance(spec: LoadSpec, nodes: np.ndarray, sides: dict[str, np.ndarray], forces: np.ndarray) -> None:
     """InputError when the supports leave rigid-body motions free and the nodal ``forces`` (dim, n) (in the
     frame of ``nodes``) have a net force or moment along them beyond :data:`BALANCE_RTOL` of their size."""
-    N = free_modes(spec, nodes, sides)
+    check_balance_of(free_modes(spec, nodes, sides), nodes, forces)
+
+
+def check_balance_of(N: np.ndarray, nodes: np.ndarray, forces: np.ndarray) -> None:
+    """:func:`check_balance` for the free rigid-body modes ``N`` of :func:`free_modes_of` (any body)."""
     if N.shape[1] == 0:
         return
     dim, n = forces.shape
@@ -253,7 +272,7 @@ def _measure(V: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(np.linalg.det(G), 0.0)) / math.factorial(k)
 
 
-def _integrate(out: np.ndarray, nodes: np.ndarray, simplices: np.ndarray, f: Field | np.ndarray, scale: float,
+def integrate(out: np.ndarray, nodes: np.ndarray, simplices: np.ndarray, f: Field | np.ndarray, scale: float,
                what: str) -> None:
     """Add the consistent P1 nodal forces of the field f (a Field, or a constant vector) over the simplices
     (k + 1, ns) into ``out`` (dim, n)."""
@@ -298,11 +317,11 @@ def nodal_forces(spec: LoadSpec, nodes: np.ndarray, cells: np.ndarray, sides: di
         for side in SIDES[dim]:
             s = spec.side(side)
             if s.traction is not None:
-                _integrate(F, nodes, sides[side], s.traction, scale, f"on the {side} side")
+                integrate(F, nodes, sides[side], s.traction, scale, f"on the {side} side")
             if stress is not None and s.support == "free":
-                _integrate(F, nodes, sides[side], stress @ outward_normal(side, dim), scale, f"on the {side} side")
+                integrate(F, nodes, sides[side], stress @ outward_normal(side, dim), scale, f"on the {side} side")
         if spec.body_force is not None:
-            _integrate(F, nodes, np.asarray(cells), spec.body_force, scale, "in the body")
+            integrate(F, nodes, np.asarray(cells), spec.body_force, scale, "in the body")
     return F
 
 

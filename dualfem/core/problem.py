@@ -50,6 +50,11 @@ class Problem:
     #: ``scene``): the framework finds it by :func:`dualfem.core.registry.problem_for_dim`. Declare it on
     #: the class that means it: a subclass of such a problem sets it back to False.
     scene_default: ClassVar[bool] = False
+    #: scene keys that pick this problem for a scene file naming no ``problem`` (nor a base ``scene``), before
+    #: its ``dim`` does (e.g. ``mesh_file``: a body read from a file); :func:`dualfem.core.registry.problem_for_keys`
+    claim_keys: ClassVar[tuple[str, ...]] = ()
+    #: scene keys holding file paths: a relative path given in a scene file is read from the scene file's folder
+    path_keys: ClassVar[tuple[str, ...]] = ()
     #: how the scene's parameters change with the unit system (the stress grid's ``units`` axis), or
     #: None: the units axis does not apply to this problem (:class:`dualfem.core.units.UnitMap`)
     unit_map: ClassVar[UnitMap | None] = None

@@ -161,6 +161,17 @@ def problem_for_dim(dim: int) -> str:
     return found[0]
 
 
+def problem_for_keys(keys) -> str | None:
+    """The problem whose ``claim_keys`` meet ``keys`` (the keys of a scene file naming no problem), a built-in
+    one first, then by name; None when no problem claims any of them."""
+    reg = problems()
+    builtin = builtin_names("problem")
+    keys = set(keys)
+    found = sorted((n for n, cls in reg.items() if keys & set(getattr(cls, "claim_keys", ()) or ())),
+                   key=lambda n: (n not in builtin, n))
+    return found[0] if found else None
+
+
 def problem_dims() -> list[int]:
     """The dimensions a scene file may have: those of the registered problems with ``scene_default``."""
     return sorted({cls.dim for cls in problems().values() if cls.scene_default})

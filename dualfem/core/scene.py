@@ -9,7 +9,7 @@ from typing import Any
 from dualfem.core.errors import InputError
 from dualfem.core.problem import Problem
 from dualfem.core.qp import QP
-from dualfem.core.registry import builtin_names, get_problem, problem_dims, problem_for_dim, problems
+from dualfem.core.registry import builtin_names, get_problem, problem_dims, problem_for_dim, problem_for_keys, problems
 
 #: the scene the framework uses when it needs one and none is given (probes, crafted test files,
 #: the default of a study): a preset of the thin_defect problem plugin (the paper's f2 load). The
@@ -155,10 +155,12 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
                                  f"built-in scenes: {', '.join(sorted(pre))}")
             pname, params = pre[base]
         else:
-            # the dimension picks the problem (--set dim=3 over the file's dim)
-            pname, params = _dim_problem(overrides.get("dim", data.get("dim", 2)), spec), {}
+            # a key claimed by a problem (mesh_file, ...) picks it; else the dimension (--set dim=3 over the file's)
+            claimed = problem_for_keys(set(data) | set(overrides)) if "problem" not in data else None
+            pname, params = claimed or _dim_problem(overrides.get("dim", data.get("dim", 2)), spec), {}
         pname = data.pop("problem", pname)
         _check_toml_types(spec, get_problem(pname).defaults, data)
+        _resolve_paths(data, get_problem(pname), path.parent)
         params.update(data)
     else:
         raise InputError(f"unknown scene {spec!r}; use a built-in scene ({', '.join(sorted(pre))}), a scene of the "
@@ -182,6 +184,15 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
                 raise
             raise InputError(f"problem plugin {pname!r} ({cls.__module__}.{cls.__qualname__}) failed to "
                              f"create the scene: {type(exc).__name__}: {exc}") from None
+
+
+def _resolve_paths(data: dict[str, Any], cls: type[Problem], folder: Path) -> None:
+    """The problem's ``path_keys`` given in a scene file as relative paths: read from the scene file's folder
+    (``--set`` values stay relative to the working directory)."""
+    for key in getattr(cls, "path_keys", ()) or ():
+        value = data.get(key)
+        if isinstance(value, str) and value.strip() and not Path(value).expanduser().is_absolute():
+            data[key] = str(folder / value)
 
 
 def _dim(dim: Any, where: str) -> int:

@@ -169,14 +169,15 @@ def defect_fields(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> d
     nrm_j, tau_j = it.normals, it.tangents[:, 0, :]
     parts: dict[str, list] = {k: [] for k in ("s", "upper", "lower", "row", "id", "nrm", "tau")}
     for k, rows, t0, t1, L in _defect_pieces(it, nodes):
-        if t0 is None:
-            row, near = rows, rows
-            parts["s"].append(s_in[rows])
-        else:                           # the tips: no row of B, the normal of their neighbour
-            row, near = np.r_[-1, rows, -1], np.r_[rows[0], rows, rows[-1]]
-            parts["s"].append(np.r_[0.0, s_in[rows], L])
-        parts["upper"].append(up[rows] if t0 is None else np.r_[t0, up[rows], t1])
-        parts["lower"].append(lo[rows] if t0 is None else np.r_[t0, lo[rows], t1])
+        # the tips: no row of B, the normal of their neighbour; an end that is a doubled node (an edge
+        # crack's mouth, given as its "-" copy) is a row already
+        head = [t0] if t0 is not None and t0 not in lo[rows] else []
+        tail = [t1] if t1 is not None and t1 not in lo[rows] else []
+        row = np.r_[[-1] * len(head), rows, [-1] * len(tail)].astype(np.int64)
+        near = np.r_[rows[:1].repeat(len(head)), rows, rows[-1:].repeat(len(tail))]
+        parts["s"].append(np.r_[[0.0] * len(head), s_in[rows], [L] * len(tail)])
+        parts["upper"].append(np.r_[head, up[rows], tail].astype(np.int64))
+        parts["lower"].append(np.r_[head, lo[rows], tail].astype(np.int64))
         parts["row"].append(row)
         parts["id"].append(np.full(row.size, k, dtype=np.int64))
         parts["nrm"].append(nrm_j[near])
