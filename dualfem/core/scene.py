@@ -159,6 +159,7 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
             pname, params = _dim_problem(overrides.get("dim", data.get("dim", 2)), spec), {}
         pname = data.pop("problem", pname)
         _check_toml_types(spec, get_problem(pname).defaults, data)
+        _resolve_paths(data, get_problem(pname).path_keys, path.parent)
         params.update(data)
     else:
         raise InputError(f"unknown scene {spec!r}; use a built-in scene ({', '.join(sorted(pre))}), a scene of the "
@@ -182,6 +183,15 @@ def load_scene(spec: str, overrides: dict[str, Any] | None = None) -> Problem:
                 raise
             raise InputError(f"problem plugin {pname!r} ({cls.__module__}.{cls.__qualname__}) failed to "
                              f"create the scene: {type(exc).__name__}: {exc}") from None
+
+
+def _resolve_paths(data: dict[str, Any], keys: tuple[str, ...], folder: Path) -> None:
+    """The file keys (``Problem.path_keys``) of a scene file: a relative path made relative to the scene
+    file's folder (so a scene and its data files move together)."""
+    for k in keys:
+        v = data.get(k)
+        if isinstance(v, str) and v.strip() and not Path(v).is_absolute():
+            data[k] = str(folder / v)
 
 
 def _dim(dim: Any, where: str) -> int:
