@@ -15,7 +15,8 @@ Stages (each appends JSON lines to OUT/runs.jsonl; ``--render-only`` re-renders 
   ``gmsh_mesh.validate``) and 2,000 disks (3D, ``check_apart``), median of 3, in this process;
 * ``refine``: a Griffith crack (half-length a = 1, body 100 a x 100 a: a finite-width effect of ~3e-4,
   E = 1000, nu = 0.3, plane strain, remote tension 1 normal to it, delta = 1e3: open, no contact) meshed
-  with ``mesh_size`` 5 a and ``tip_size`` halved from 0.1 a to 0.00625 a, for ``size_growth`` 0.3 (the earlier fixed slope), 0.1 and 0.03:
+  with ``mesh_size`` 5 a and ``tip_size`` halved from 0.1 a to 0.00625 a, for ``size_growth`` 0.3 (the
+  earlier fixed slope), 0.1 and 0.03:
   the opening's relative L2 error over |x| <= 0.8 a against 4 (1 - nu^2) sigma / E sqrt(a^2 - x^2),
   solved by pdas and certified.
 """

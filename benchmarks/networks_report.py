@@ -28,7 +28,8 @@ def _solve_table(rows: list[dict]) -> list[str]:
         first = ok[0] if ok else {}
         out.append(f"| {n:,} | {'CSV file (fractured, defects_file)' if src == 'file' else 'generated (fractured)'} "
                    f"| {len(rs)} | {first.get('ndof') or 0:,} | {first.get('n_defect_nodes') or 0:,} | {status} | "
-                   f"{_median([r['wall'] for r in rs]):.1f} | {_median([d.get('assembly', math.nan) for d in t]):.2f} | "
+                   f"{_median([r['wall'] for r in rs]):.1f} | "
+                   f"{_median([d.get('assembly', math.nan) for d in t]):.2f} | "
                    f"{_median(setup_solve):.2f} | {rss:.2f} |")
     return out
 
@@ -101,8 +102,9 @@ def render(rows: list[dict], meta: dict, report_dir: Path) -> Path:
         lines += ["## A network from a CSV file against the generated scene", "",
                   "The cracks of the `fractured` scenes of benchmarks/fractured.toml (seed 1, load f1; 400 cracks of "
                   "length 0.025 at mesh_size 0.003, 2,000 of length 0.012 at 0.0014) written by "
-                  "`write_defects(path, random_cracks(...), 2)` and read back by a scene file `problem = \"fractured\"`, "
-                  "`defects_file = \"network400.csv\"`. Each run is the whole `dualfem solve ... --solver mprgp --json` "
+                  "`write_defects(path, random_cracks(...), 2)` and read back by a scene file "
+                  "`problem = \"fractured\"`, `defects_file = \"network400.csv\"`. Each run is the whole "
+                  "`dualfem solve ... --solver mprgp --json` "
                   "in its own process (import, reading, checks, meshing, assembly, solve, certification); runs of the "
                   "two sources alternate. `scene to QP` is the command's own `assembly` time (reading the file, the "
                   "checks, gmsh, the node doubling, the stiffness).", "",
