@@ -91,12 +91,14 @@ def _solve_cmd(n: int, source: str, out: Path) -> list[str]:
     return [sys.executable, "-c", CLI, "solve", *scene, "--solver", SOLVER, "--json", "--quiet"]
 
 
-def solve(out: Path, runs: Path, repeat: int) -> None:
+def solve(out: Path, runs: Path, repeat: int, only: list[int] | None = None) -> None:
     plan = [(400, src) for _ in range(repeat) for src in ("generated", "file")]
     plan += [(2000, "file"), (2000, "generated"), (2000, "file")]
     for n, src in plan:
+        if only and n not in only:
+            continue
         wall, res = _run(_solve_cmd(n, src, out))
-        row = {"stage": "solve", "cracks": n, "source": src, "wall": wall,
+        row = {"stage": "solve", "cracks": n, "source": src, "wall": wall, "load1": os.getloadavg()[0],
                "result": {k: res.get(k) for k in ("status", "ndof", "n_defect_nodes", "time_s", "peak_rss_mb",
                                                   "iterations", "error", "threads")}}
         _append(runs, row)
@@ -166,6 +168,7 @@ def main() -> int:
     ap.add_argument("--out", default="dualfem-results/networks")
     ap.add_argument("--stages", nargs="*", default=["files", "solve", "checks", "refine"])
     ap.add_argument("--repeat", type=int, default=3, help="runs of each 400-crack scene (median)")
+    ap.add_argument("--cracks", nargs="*", type=int, default=None, help="solve only these scenes (400, 2000)")
     ap.add_argument("--render-only", action="store_true")
     ap.add_argument("--report", default=None, metavar="DIR", help="write DIR/networks.md and its figure")
     a = ap.parse_args()
@@ -180,7 +183,7 @@ def main() -> int:
         if "files" in a.stages or "solve" in a.stages:
             files(out)
         if "solve" in a.stages:
-            solve(out, runs, a.repeat)
+            solve(out, runs, a.repeat, a.cracks)
         if "checks" in a.stages:
             checks(runs)
         if "refine" in a.stages:

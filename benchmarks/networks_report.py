@@ -14,7 +14,8 @@ def _median(xs: list[float]) -> float:
 
 def _solve_table(rows: list[dict]) -> list[str]:
     out = ["| cracks | source | runs | unknowns | defect nodes | status | wall (s), median | scene to QP (s) | "
-           "setup + solve (s) | peak RSS (GB), max |", "|---|---|---|---|---|---|---|---|---|---|"]
+           "setup + solve (s) | peak RSS (GB), max | machine load after the run (1 min, 2 cores) |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
     groups: dict[tuple[int, str], list[dict]] = {}
     for r in rows:
         groups.setdefault((r["cracks"], r["source"]), []).append(r)
@@ -30,8 +31,13 @@ def _solve_table(rows: list[dict]) -> list[str]:
                    f"| {len(rs)} | {first.get('ndof') or 0:,} | {first.get('n_defect_nodes') or 0:,} | {status} | "
                    f"{_median([r['wall'] for r in rs]):.1f} | "
                    f"{_median([d.get('assembly', math.nan) for d in t]):.2f} | "
-                   f"{_median(setup_solve):.2f} | {rss:.2f} |")
+                   f"{_median(setup_solve):.2f} | {rss:.2f} | "
+                   f"{_loads(rs)} |")
     return out
+
+
+def _loads(rs: list[dict]) -> str:
+    return ", ".join(f"{r['load1']:.1f}" for r in rs if "load1" in r) or "not recorded"
 
 
 def _ratio(rows: list[dict], n: int) -> str:
