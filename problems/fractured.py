@@ -30,6 +30,12 @@ more nodes. Keys:
   ends), inside the body: 0 <= x0 < x1 <= width, 0 <= y0 < y1 <= height.
 * ``mesh_size`` = ``tip_size`` = 0.01 by default (``tip_size`` < ``mesh_size`` refines around the
   2 x ``cracks`` tips).
+* ``defects_file`` (default none): the cracks of a CSV or JSON file (:mod:`dualfem.problems.defects_file`,
+  relative to the scene file) instead of the generator's, polylines only; then ``cracks``,
+  ``crack_length``, ``crack_angle``, ``min_gap``, ``seed`` and ``region`` must not be given. The
+  generator's cracks written by ``write_defects(path, random_cracks(...), 2)`` read back to the very
+  same QP (with ``min_gap`` = the scene's).
+* ``size_growth`` (default 0.3): the element size's slope away from a tip (thin_defect's key).
 * ``face_pressure`` (default none): a pressure on both faces of every crack, a number or an expression
   in x, y (stress units; > 0 pushes the faces apart: docs/loads.md). The supports and loads keys of
   ``thin_defect`` (``[[boundary]]``, ``body_force``, ``remote_stress``) apply as they do there.
