@@ -9,7 +9,10 @@ Body: the rectangle (0, width) x (0, height), lengths in the scene's units. Each
 spline through the points, end tangents from the reflected neighbour ``2 P0 - P1``), checked on
 :data:`SAMPLES_PER_SPAN` samples per span: every defect strictly inside the body, no self-intersection, no
 two defects crossing or touching (distance > ``_TOL_REL * max(width, height)``), and the estimated triangle
-count below :data:`MAX_TRIANGLES`. Problems raise :class:`dualfem.errors.InputError` naming the defects as
+count below :data:`MAX_TRIANGLES` (that estimate is the guard on the number of defects: each adds two
+refined tips). Every pair check is near-linear (a spatial grid of the segments, a k-d tree of the points),
+so thousands of defects validate in a fraction of a second. Problems raise
+:class:`dualfem.errors.InputError` naming the defects as
 ``defects[i]`` (counted from 0, as in the ``[[defects]]`` list of a scene file).
 """
 from __future__ import annotations
@@ -27,12 +30,16 @@ CURVES = ("polyline", "spline")
 #: the most triangles a mesh may have (estimated before meshing, :func:`check_size`)
 MAX_TRIANGLES = 5_000_000
 #: defect points checked for crossings and self-intersection (a polyline counts its points, a spline
-#: SAMPLES_PER_SPAN per span); the default of ``max_samples`` in :func:`validate`. Crossings between
-#: defects are found on a spatial grid (near-linear cost), a self-intersection of one defect pairwise
-MAX_SAMPLES = 2048
+#: SAMPLES_PER_SPAN per span); the default of ``max_samples`` in :func:`validate`. Crossings and
+#: self-intersections are found on a spatial grid (near-linear cost): the bound is on memory (about
+#: 100 bytes per point), far above what a mesh within MAX_TRIANGLES can resolve
+MAX_SAMPLES = 400_000
 SAMPLES_PER_SPAN = 64          # spline samples per span between two given points (validation only)
 _TOL_REL = 1e-9                # "touching" tolerance, relative to max(width, height)
-_GRADE = 0.3                   # growth of the element size per unit distance away from a tip
+#: the default slope of the element size away from a tip (size per unit distance; the scene key
+#: ``size_growth``) and its allowed range
+GRADE = 0.3
+GRADE_RANGE = (0.01, 1.0)
 _TRI_PER_AREA = 4 / math.sqrt(3)   # triangles per h^2 of area for equilateral triangles of side h
 
 
@@ -90,11 +97,13 @@ def _check_defect(i: int, d: Any) -> tuple[np.ndarray, str]:
 
 
 def _check_one(i: int, P: np.ndarray, S: np.ndarray, width: float, height: float, tol: float) -> None:
-    """Distinct points, inside the body, no self-intersection (S: the sampled curve)."""
-    gaps = np.linalg.norm(P[:, None, :] - P[None, :, :], axis=-1)
-    np.fill_diagonal(gaps, np.inf)
-    if gaps.min() <= tol:
-        a, b = sorted(np.unravel_index(np.argmin(gaps), gaps.shape))
+    """Distinct points, inside the body, no self-intersection (S: the sampled curve); near-linear cost
+    (a k-d tree of the points, a grid of the segments)."""
+    from scipy.spatial import cKDTree
+
+    same = cKDTree(P).query_pairs(tol, output_type="ndarray")
+    if len(same):
+        a, b = (int(v) for v in same[np.lexsort((same[:, 1], same[:, 0]))[0]])
         raise InputError(f"defects[{i}]: points {a} and {b} coincide at {_fmt(P[a])}; the points must be distinct")
     margin = np.minimum.reduce([S[:, 0], width - S[:, 0], S[:, 1], height - S[:, 1]])
     if margin.min() <= tol:
@@ -110,22 +119,25 @@ def _check_one(i: int, P: np.ndarray, S: np.ndarray, width: float, height: float
         fold = np.flatnonzero((np.abs(c) <= 1e-12 * norms) & (dot < 0))
         if len(fold):
             raise InputError(f"defects[{i}] intersects itself: it folds back on itself at {_fmt(S[fold[0] + 1])}")
-    if len(seg) >= 3:
-        idx = np.arange(len(seg))
-        mask = idx[None, :] >= idx[:, None] + 2          # non-adjacent pairs only
-        dist, _, where = closest(S, S, mask)
-        if dist <= tol:
-            raise InputError(f"defects[{i}] intersects itself near {_fmt(where)}")
+    if len(seg) >= 3:       # non-adjacent segments within tol (a grid: no all-pairs loop)
+        a, b, _ = near_segment_pairs(np.stack([S[:-1], S[1:]], axis=1), None, tol)
+        far = np.abs(a - b) >= 2
+        if far.any():
+            k = np.lexsort((b[far], a[far]))[0]
+            p, q = int(a[far][k]), int(b[far][k])
+            raise InputError(f"defects[{i}] intersects itself near {_fmt(0.25 * (S[p] + S[p + 1] + S[q] + S[q + 1]))}")
 
 
-def estimate_triangles(width: float, height: float, mesh_size: float, tip_size: float | None, n_tips: int) -> int:
-    """Rough triangle count: equilateral triangles of the local size, tips' discs added.
+def estimate_triangles(width: float, height: float, mesh_size: float, tip_size: float | None, n_tips: int,
+                       grade: float = GRADE) -> int:
+    """Rough triangle count: equilateral triangles of the local size, tips' discs added (the size grows
+    from ``tip_size`` with slope ``grade`` away from each tip).
 
     Overflow-safe: a tiny size gives a huge count (capped at 1e30), never an exception."""
     with np.errstate(all="ignore"):
         count = _TRI_PER_AREA * (float(width) / mesh_size) * (float(height) / mesh_size)
         if tip_size is not None and tip_size < mesh_size:
-            d_min, d_max = _tip_distances(mesh_size, tip_size)
+            d_min, d_max = _tip_distances(mesh_size, tip_size, grade)
             r = np.linspace(d_min, d_max, 401)
             size = tip_size + (mesh_size - tip_size) * (r - d_min) / (d_max - d_min)
             f = 2 * np.pi * r * (1 / size ** 2 - 1 / mesh_size ** 2)
@@ -138,11 +150,12 @@ def estimate_triangles(width: float, height: float, mesh_size: float, tip_size: 
 
 
 def check_size(width: float, height: float, mesh_size: float, tip_size: float | None, n_tips: int,
-               label: str = "") -> int:
+               label: str = "", grade: float = GRADE) -> int:
     """The estimated triangle count; InputError naming mesh_size (or tip_size) and its allowed range
     when it exceeds :data:`MAX_TRIANGLES`, before anything is meshed. ``label`` says where mesh_size
-    comes from (e.g. "mesh_size = 0: min(width, height)/N = 0.0156")."""
-    est = estimate_triangles(width, height, mesh_size, tip_size, n_tips)
+    comes from (e.g. "mesh_size = 0: min(width, height)/N = 0.0156"); ``n_tips``: 2 per defect, so this
+    is also the guard on the number of defects (the message names it)."""
+    est = estimate_triangles(width, height, mesh_size, tip_size, n_tips, grade)
     if est <= MAX_TRIANGLES:
         return est
     top = min(width, height)
@@ -162,18 +175,30 @@ def check_size(width: float, height: float, mesh_size: float, tip_size: float | 
     a, b = math.log(tip_size or mesh_size), math.log(mesh_size)
     for _ in range(60):
         mid = 0.5 * (a + b)
-        if estimate_triangles(width, height, mesh_size, math.exp(mid), n_tips) > MAX_TRIANGLES:
+        if estimate_triangles(width, height, mesh_size, math.exp(mid), n_tips, grade) > MAX_TRIANGLES:
             a = mid
         else:
             b = mid
-    raise InputError(f"{what}, tip_size={tip_size:g} gives about {n} triangles (limit {MAX_TRIANGLES:,}) on "
-                     f"{body}: tip_size must be in [{math.exp(b):.3g}, {mesh_size:g}]")
+    raise InputError(f"{what}, tip_size={tip_size:g} gives about {n} triangles (limit {MAX_TRIANGLES:,}) on {body} "
+                     f"with {n_tips // 2:,} defects ({n_tips:,} tips, size_growth={grade:g}): tip_size must be in "
+                     f"[{math.exp(b):.3g}, {mesh_size:g}], or use fewer defects or a larger size_growth")
 
 
-def _tip_distances(mesh_size: float, tip_size: float) -> tuple[float, float]:
-    """Threshold distances: size tip_size up to DistMin, linear growth to mesh_size at DistMax."""
+def _tip_distances(mesh_size: float, tip_size: float, grade: float = GRADE) -> tuple[float, float]:
+    """Threshold distances: size tip_size up to DistMin, linear growth (slope ``grade``) to mesh_size at DistMax."""
     d_min = tip_size
-    return d_min, d_min + (mesh_size - tip_size) / _GRADE
+    return d_min, d_min + (mesh_size - tip_size) / grade
+
+
+def check_growth(value, key: str = "size_growth") -> float:
+    """``size_growth`` (the slope of the element size away from a tip or front: size per unit distance,
+    dimensionless) as a float in :data:`GRADE_RANGE`; InputError naming ``key`` and the range otherwise."""
+    lo, hi = GRADE_RANGE
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not lo <= float(value) <= hi:
+        raise InputError(f"{key} must be a number in [{lo:g}, {hi:g}] (the element size's growth per unit "
+                         f"distance away from a defect tip; default {GRADE:g}), got {value!r}")
+    return float(value)
 
 
 def effective_tip_size(mesh_size: float, tip_size: float | None) -> float | None:
@@ -184,10 +209,13 @@ def effective_tip_size(mesh_size: float, tip_size: float | None) -> float | None
 
 
 def validate(width: float, height: float, defects: list[dict], mesh_size: float,
-             tip_size: float | None = None, max_samples: int = MAX_SAMPLES) -> list[tuple[np.ndarray, str]]:
+             tip_size: float | None = None, max_samples: int = MAX_SAMPLES,
+             grade: float = GRADE) -> list[tuple[np.ndarray, str]]:
     """Check all inputs of :func:`mesh_with_defects` (no gmsh needed); return [(points, curve)].
 
-    ``max_samples``: the most curve points accepted (see :data:`MAX_SAMPLES`)."""
+    ``max_samples``: the most curve points accepted (see :data:`MAX_SAMPLES`); ``grade``: the size
+    field's slope (``size_growth``, :func:`check_growth`)."""
+    grade = check_growth(grade)
     width, height = check_positive("width", width), check_positive("height", height)
     mesh_size = check_positive("mesh_size", mesh_size)
     if mesh_size > min(width, height):
@@ -197,7 +225,7 @@ def validate(width: float, height: float, defects: list[dict], mesh_size: float,
         tip_size = effective_tip_size(mesh_size, check_positive("tip_size", tip_size))
     if not isinstance(defects, (list, tuple)):
         raise InputError(f"defects must be a list of tables {{points, curve}}, got {type(defects).__name__}")
-    check_size(width, height, mesh_size, tip_size, 2 * len(defects))
+    check_size(width, height, mesh_size, tip_size, 2 * len(defects), grade=grade)
     tol = _TOL_REL * max(width, height)
     parsed = [_check_defect(i, d) for i, d in enumerate(defects)]
     counts = [len(P) if c == "polyline" or len(P) == 2 else (len(P) - 1) * SAMPLES_PER_SPAN + 1 for P, c in parsed]

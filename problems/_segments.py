@@ -42,12 +42,25 @@ def near_segment_pairs(A: np.ndarray, B: np.ndarray | None, gap: float,
 
     A uniform grid (cells of side the longest segment + ``gap``) hashes the segments' midpoints, so
     only segments in neighbouring cells are compared (O(n) for segments of similar lengths, instead of
-    all n m pairs); exact distances (:func:`segment_distances`) in chunks of ``chunk`` pairs."""
+    all n m pairs; segments much longer than the median are hashed as pieces, :func:`_split`); exact
+    distances (:func:`segment_distances`) in chunks of ``chunk`` pairs."""
     same = B is None
     B = A if B is None else B
     empty = np.zeros(0, dtype=np.int64)
     if len(A) == 0 or len(B) == 0:
         return empty, empty, np.zeros(0)
+    target = _piece_length(A, B, gap)
+    if target is not None:      # a few long segments among short ones: hashed as pieces (same distances)
+        (PA, ia), (PB, ib) = _split(A, target), (_split(B, target) if not same else (None, None))
+        i, j, d = near_segment_pairs(PA, PB, gap, chunk)
+        i, j = ia[i], (ia if same else ib)[j]
+        keep = i != j if same else np.ones(len(i), dtype=bool)
+        i, j, d = i[keep], j[keep], d[keep]
+        order = np.lexsort((d, j, i))
+        i, j, d = i[order], j[order], d[order]
+        first = np.ones(len(i), dtype=bool)
+        first[1:] = (i[1:] != i[:-1]) | (j[1:] != j[:-1])
+        return i[first], j[first], d[first]
     ma, mb = A.mean(axis=1), B.mean(axis=1)
     la, lb = (np.hypot(*(X[:, 1] - X[:, 0]).T) for X in (A, B))
     reach = 0.5 * (la.max() + lb.max()) + gap         # midpoints of two segments within gap are this close
@@ -88,6 +101,29 @@ def near_segment_pairs(A: np.ndarray, B: np.ndarray | None, gap: float,
         out_j.append(jc[near])
         out_d.append(d[near])
     return np.concatenate(out_i), np.concatenate(out_j), np.concatenate(out_d)
+
+
+def _piece_length(A: np.ndarray, B: np.ndarray, gap: float) -> float | None:
+    """The length to split segments into before hashing, when the longest segment is more than 4 times
+    the median (the grid's cells are as wide as the longest segment: a few long ones would put every
+    segment in a handful of cells); None when no split is needed."""
+    lengths = np.concatenate([np.hypot(*(X[:, 1] - X[:, 0]).T) for X in (A, B)])
+    pts = np.concatenate([A.reshape(-1, 2), B.reshape(-1, 2)])
+    extent = float(np.max(pts.max(axis=0) - pts.min(axis=0)))
+    target = max(2.0 * float(np.median(lengths)), gap, extent / 1024)
+    return target if lengths.max() > 2.0 * target else None
+
+
+def _split(S: np.ndarray, target: float) -> tuple[np.ndarray, np.ndarray]:
+    """Segments (n, 2, 2) cut into equal pieces no longer than ``target``, and each piece's segment index."""
+    k = np.maximum(1, np.ceil(np.hypot(*(S[:, 1] - S[:, 0]).T) / target)).astype(np.int64)
+    owner = np.repeat(np.arange(len(S)), k)
+    step = np.arange(owner.size) - np.repeat(np.cumsum(k) - k, k)
+    t0, t1 = (step / k[owner])[:, None], ((step + 1) / k[owner])[:, None]
+    a, d = S[owner, 0], S[owner, 1] - S[owner, 0]
+    pieces = np.stack([a + t0 * d, a + t1 * d], axis=1)
+    pieces[:, 1][step == k[owner] - 1] = S[owner[step == k[owner] - 1], 1]      # the end exactly
+    return pieces, owner
 
 
 def closest(A: np.ndarray, B: np.ndarray, mask=None) -> tuple[float, bool, np.ndarray]:

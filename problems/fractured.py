@@ -30,6 +30,12 @@ more nodes. Keys:
   ends), inside the body: 0 <= x0 < x1 <= width, 0 <= y0 < y1 <= height.
 * ``mesh_size`` = ``tip_size`` = 0.01 by default (``tip_size`` < ``mesh_size`` refines around the
   2 x ``cracks`` tips).
+* ``defects_file`` (default none): the cracks of a CSV or JSON file (:mod:`dualfem.problems.defects_file`,
+  relative to the scene file) instead of the generator's, polylines only; then ``cracks``,
+  ``crack_length``, ``crack_angle``, ``min_gap``, ``seed`` and ``region`` must not be given. The
+  generator's cracks written by ``write_defects(path, random_cracks(...), 2)`` read back to the very
+  same QP (with ``min_gap`` = the scene's).
+* ``size_growth`` (default 0.3): the element size's slope away from a tip (thin_defect's key).
 * ``face_pressure`` (default none): a pressure on both faces of every crack, a number or an expression
   in x, y (stress units; > 0 pushes the faces apart: docs/loads.md). The supports and loads keys of
   ``thin_defect`` (``[[boundary]]``, ``body_force``, ``remote_stress``) apply as they do there.
@@ -70,6 +76,7 @@ from dualfem.registry import register_problem
 from ._boundary import parse_scalar
 from ._segments import near_segment_pairs
 from .thin_defect import ThinDefect
+from .thin_defect.geometry import parse_defects, read_file_tables
 
 #: largest crack count accepted
 MAX_CRACKS = 100_000
@@ -302,7 +309,12 @@ class Fractured(ThinDefect):
 
     def validate(self) -> None:
         p = self.params
-        self._user = dict(p)                     # what with_params starts from (the keys of this problem)
+        # what with_params starts from: the keys the scene gave (the defaults follow; a given generator key
+        # is refused beside defects_file)
+        self._user = {k: p[k] for k in getattr(self, "given", p)}
+        if p["defects_file"]:
+            self._validate_file()
+            return
         p.update(mesh="gmsh", defects=(), defect=ThinDefect.defaults["defect"])    # thin_defect's own keys
         n = check_int("cracks", p["cracks"], 1, MAX_CRACKS)
         self._check_keys(n)                      # the thin_defect keys and the mesh size, before placing
@@ -332,6 +344,39 @@ class Fractured(ThinDefect):
                          for s in seg]
         self._check_defects_and_load()
 
+    def _validate_file(self) -> None:
+        """The cracks of ``defects_file`` (:mod:`dualfem.problems.defects_file`) instead of the generator's: the
+        same mesher, the file's defects checked as ``[[defects]]`` tables (polylines only: the mesh is refined
+        uniformly); the generator's keys must not be given."""
+        p = self.params
+        own = sorted(set(self.given) & set(_OWN))
+        if own:
+            raise InputError(f"defects_file gives the cracks; the generator's key {own[0]!r} does not apply with it "
+                             f"(drop it, or drop defects_file)")
+        tables, where = read_file_tables(p["defects_file"], None)
+        p.update(mesh="gmsh", defects=None, defect=ThinDefect.defaults["defect"])
+        self._check_keys(len(tables))
+        fp = p["face_pressure"]
+        if isinstance(fp, str) and not fp.strip():
+            fp = None
+        try:
+            self._defects = parse_defects(tables, p["defect"], p["delta"], p["width"], p["height"], "gmsh")
+        except InputError as exc:
+            raise InputError(f"{where}: {exc}") from None
+        splines = [k for k, d in enumerate(self._defects) if d["curve"] == "spline" and len(d["points"]) > 2]
+        if splines:
+            raise InputError(f"{where}: defects[{splines[0]}] is a spline; the fractured problem's mesh (refined "
+                             f"uniformly) needs polylines: use the thin_defect problem (mesh = 'gmsh') for splines")
+        pressure = None if fp is None else parse_scalar(fp, "face_pressure", 2, (p["width"], p["height"]))
+        for d in self._defects:                   # the scene's face_pressure on every crack without its own
+            if d["face_pressure"] is None:
+                d["face_pressure"] = pressure
+        p["cracks"] = len(self._defects)
+        for k in ("crack_length", "crack_angle", "min_gap", "seed", "region"):
+            p[k] = None
+        self.crack_points = [d["points"] for d in self._defects]
+        self._check_defects_and_load()
+
     def _gmsh_options(self) -> dict:
         # meshed at twice the sizes, then every triangle split in four (see gmsh_mesh.ALGORITHMS); the
         # generator placed the cracks min_gap apart, the mesher checks it again (on a grid), for every tip
@@ -347,6 +392,9 @@ class Fractured(ThinDefect):
         qp = super().build()
         for k in _HIDDEN:                        # provenance: this problem's keys (cracks, seed, ...), not the list
             qp.params.pop(k, None)
+        if self.params["defects_file"]:          # the cracks of a file: its name and count, no generator keys
+            for k in ("crack_length", "crack_angle", "min_gap", "seed", "region"):
+                qp.params.pop(k, None)
         if self.params["face_pressure"] is None:
             qp.params.pop("face_pressure", None)
         qp.name = qp.name.replace("thin_defect", "fractured", 1)

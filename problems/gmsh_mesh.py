@@ -8,7 +8,8 @@ in the 2D mesh (``gmsh.model.mesh.embed``), so the mesh conforms to them: consec
 nodes are joined by a triangle edge. All defect points of a polyline are mesh nodes; for a
 spline only its two ends are (the interior points are control points of the curve). Optional
 refinement toward the tips: element size ``tip_size`` within ``tip_size`` of a tip, growing
-linearly (slope ``_GRADE``) to ``mesh_size``; a ``tip_size >= mesh_size`` asks for nothing finer
+linearly (slope ``size_growth``, default ``GRADE`` = 0.3) to ``mesh_size``; a ``tip_size >= mesh_size``
+asks for nothing finer
 than the uniform mesh (no refinement: ``tip_size`` follows ``mesh_size``, :func:`effective_tip_size`).
 
 Before meshing the geometry is checked in numpy (:func:`validate`, in
@@ -33,10 +34,13 @@ from dualfem.errors import InputError, MissingDependency
 
 from ._defect_geometry import (  # noqa: F401  (the checks before meshing; public here too)
     CURVES,
+    GRADE,
+    GRADE_RANGE,
     MAX_SAMPLES,
     MAX_TRIANGLES,
     SAMPLES_PER_SPAN,
     _tip_distances,
+    check_growth,
     check_size,
     effective_tip_size,
     estimate_triangles,
@@ -156,13 +160,15 @@ def _build(gmsh, width: float, height: float, parsed, right_split: tuple[float, 
     return sides, surface, curves, tips
 
 
-def _size_fields(gmsh, mesh_size: float, tip_size: float | None, tips: list[int], coarsen: float = 1.0) -> None:
-    """Element size mesh_size, tip_size near the tips; every size times ``coarsen`` (a mesh to be refined
-    uniformly afterwards), the distances of the tips' refinement those of the final sizes."""
+def _size_fields(gmsh, mesh_size: float, tip_size: float | None, tips: list[int], coarsen: float = 1.0,
+                 grade: float = GRADE) -> None:
+    """Element size mesh_size, tip_size near the tips growing with slope ``grade``; every size times
+    ``coarsen`` (a mesh to be refined uniformly afterwards), the distances of the tips' refinement those of
+    the final sizes."""
     gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size * coarsen)
     if tip_size is None or tip_size >= mesh_size or not tips:
         return
-    d_min, d_max = _tip_distances(mesh_size, tip_size)
+    d_min, d_max = _tip_distances(mesh_size, tip_size, grade)
     fld = gmsh.model.mesh.field
     dist = fld.add("Distance")
     fld.setNumbers(dist, "PointsList", tips)
@@ -266,7 +272,7 @@ def refine_uniformly(dm: DefectMesh) -> DefectMesh:
 
 def mesh_with_defects(width: float, height: float, defects: list[dict], mesh_size: float,
                       tip_size: float | None = None, algorithm: str = "frontal", refine: int = 0,
-                      max_samples: int = MAX_SAMPLES) -> DefectMesh:
+                      max_samples: int = MAX_SAMPLES, size_growth: float = GRADE) -> DefectMesh:
     """Mesh (0, width) x (0, height) with first-order triangles of size about ``mesh_size``
     (``tip_size`` near the defect tips), the defects embedded as internal edges.
 
@@ -276,7 +282,8 @@ def mesh_with_defects(width: float, height: float, defects: list[dict], mesh_siz
     then split every triangle into four r times (:func:`refine_uniformly`: the defect and boundary
     edges in two): elements of about the same size, of the coarse mesh's shapes, in a fraction of the
     time (:data:`ALGORITHMS`); polyline defects only (a spline's new nodes would be chord midpoints).
-    ``max_samples``: see :func:`validate`.
+    ``max_samples``: see :func:`validate`. ``size_growth``: the slope of the element size away from a
+    tip (size per unit distance, in :data:`GRADE_RANGE`; :func:`check_growth`).
     Raises InputError on bad input (see :func:`validate`), MissingDependency without gmsh.
     """
     if algorithm not in ALGORITHMS:
@@ -284,7 +291,7 @@ def mesh_with_defects(width: float, height: float, defects: list[dict], mesh_siz
     if refine not in (0, 1, 2, 3) or (refine and any(d.get("curve", "polyline") == "spline"
                                                      and len(d.get("points", ())) > 2 for d in defects)):
         raise InputError(f"refine must be 0, 1, 2 or 3 (and 0 with spline defects), got {refine!r}")
-    parsed = validate(width, height, defects, mesh_size, tip_size, max_samples)
+    parsed = validate(width, height, defects, mesh_size, tip_size, max_samples, size_growth)
     gmsh = _import_gmsh()
     # gmsh meshes the body scaled to max(width, height) = 1 (its tolerances are absolute), so a
     # scene in other length units gets the same mesh, scaled; a unit-size body is meshed as given
@@ -293,7 +300,7 @@ def mesh_with_defects(width: float, height: float, defects: list[dict], mesh_siz
     with _session(gmsh, ALGORITHMS[algorithm]):
         sides, surface, curves, tips = _build(gmsh, float(width) / L, float(height) / L, parsed)
         _size_fields(gmsh, float(mesh_size) / L, None if tip_size is None else float(tip_size) / L, tips,
-                     2.0 ** refine)
+                     2.0 ** refine, size_growth)
         try:
             gmsh.model.mesh.generate(2)
         except Exception as exc:  # gmsh raises a bare Exception with its last error message

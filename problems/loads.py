@@ -54,3 +54,22 @@ def resolve_load(load, width: float) -> Traction:
         return paper_load(load.strip(), width)
     except KeyError:
         return expression_load(load.strip())
+
+
+def check_load_model(problem, pressured: list[bool]) -> None:
+    """The load-model trap: a scene without supports and loads of its own (``boundary``, ``body_force``,
+    ``remote_stress``) gets the paper's model (bottom clamped, ``load`` on the top side) only when it
+    says nothing about loads at all, or names ``load`` itself (a preset such as f2 names it). A scene
+    whose defects carry a ``face_pressure`` (``pressured[i]``: defect i has one) and which names no
+    ``load`` is refused: it meant the pressure to be its load, not the legacy one on top of it.
+    ``problem.given``: the keys the scene gave (:class:`dualfem.problem.Problem`)."""
+    if not any(pressured) or "load" in getattr(problem, "given", {"load"}):
+        return
+    first = pressured.index(True)
+    where = "face_pressure" if "face_pressure" in problem.params else f"defects[{first}].face_pressure"
+    default = type(problem).defaults.get("load")
+    raise InputError(f"{where} is a load of the defects, and the scene names no load model of its body: give "
+                     f"its supports and loads ([[boundary]], body_force, remote_stress; e.g. one [[boundary]] table "
+                     f"side = 'bottom', support = 'clamp' for the pressure alone: docs/loads.md), or ask for the "
+                     f"legacy model explicitly with load = {default!r} (the bottom side clamped, that traction on "
+                     f"the top side, and the pressure)")

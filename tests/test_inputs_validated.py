@@ -317,16 +317,20 @@ def test_bench_tasks_that_would_not_fit_are_skipped_with_the_reason(monkeypatch)
 
 
 def test_defect_geometry_checks_are_bounded():
-    """The crossing checks are pairwise: many points, splines or defects are refused before they run."""
-    x = np.linspace(0.1, 0.9, 300)
-    wavy = np.c_[x, 0.5 + 0.01 * np.sin(50 * x)].tolist()
-    with pytest.raises(InputError, match=r"defects: 1 defects with 300 points give 19,137 curve points .* 2,048"):
-        load_scene("f2", {"mesh": "gmsh", "defects": [{"points": wavy, "curve": "spline"}]}).build()
+    """The crossing checks are near-linear: the curve points they take are bounded by memory, the defects by
+    the mesh they need (the triangle estimate, naming the count), both before anything is meshed."""
+    x = np.linspace(0.1, 0.9, 100)
+    wavy = [{"points": np.c_[x, 0.1 + 0.008 * k + 0.001 * np.sin(50 * x)].tolist(), "curve": "spline"}
+            for k in range(100)]
+    with pytest.raises(InputError, match=r"defects: 100 defects with 10000 points give 633,700 curve points .* "
+                                         r"400,000"):
+        load_scene("f2", {"mesh": "gmsh", "defects": wavy}).build()
     with pytest.raises(InputError, match=r"defects\[0\]\.points has 5000 points; the limit is 4096"):
         load_scene("f2", {"defects": [{"points": [[0.5, 0.5]] * 5000}]})
-    many = [{"points": [[0.1 + 0.8 * i / 100, 0.2], [0.1 + 0.8 * i / 100, 0.8]]} for i in range(100)]
-    with pytest.raises(InputError, match=r"defects: 100 \[\[defects\]\] tables; the limit is 64"):
-        load_scene("f2", {"mesh": "gmsh", "defects": many})
+    many = [{"points": [[0.01 + 0.98 * i / 3000, 0.2], [0.01 + 0.98 * i / 3000, 0.8]]} for i in range(3000)]
+    with pytest.raises(InputError, match=r"tip_size=1e-05 gives about [\d,]+ triangles \(limit 5,000,000\) on the "
+                                         r"1 x 1 body with 3,000 defects \(6,000 tips, size_growth=0.3\)"):
+        load_scene("f2", {"mesh": "gmsh", "defects": many, "mesh_size": 0.01, "tip_size": 1e-5})
 
 
 def test_exported_qp_beside_qpsolvers_letters_is_ambiguous(tmp_path, capsys):

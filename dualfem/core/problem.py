@@ -53,11 +53,13 @@ class Problem:
     #: scene keys that pick this problem for a scene file naming no ``problem`` (nor a base ``scene``), before
     #: its ``dim`` does (e.g. ``mesh_file``: a body read from a file); :func:`dualfem.core.registry.problem_for_keys`
     claim_keys: ClassVar[tuple[str, ...]] = ()
-    #: scene keys holding file paths: a relative path given in a scene file is read from the scene file's folder
-    path_keys: ClassVar[tuple[str, ...]] = ()
     #: how the scene's parameters change with the unit system (the stress grid's ``units`` axis), or
     #: None: the units axis does not apply to this problem (:class:`dualfem.core.units.UnitMap`)
     unit_map: ClassVar[UnitMap | None] = None
+    #: scene keys naming files (e.g. ``defects_file``): in a scene file a relative path is relative to the
+    #: scene file's folder (:func:`dualfem.core.scene.load_scene` resolves it); from ``--set``, to the
+    #: working directory
+    path_keys: ClassVar[tuple[str, ...]] = ()
 
     @classmethod
     def missing(cls) -> str | None:
@@ -72,6 +74,8 @@ class Problem:
         if unknown:
             raise InputError(f"unknown scene key {unknown[0]!r} for problem {self.name!r}; "
                              f"allowed: {', '.join(sorted(self.defaults))}")
+        #: the keys the scene gave (a preset's, a scene file's, ``--set``'s), beside the defaults
+        self.given: frozenset[str] = frozenset(params)
         merged = dict(self.defaults)
         for k, v in params.items():
             d = self.defaults[k]

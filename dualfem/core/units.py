@@ -24,7 +24,9 @@ A change of units multiplies stresses by ``stress`` (new stress units per old on
   unscaled coordinates (a traction is a stress, carried by the load scale);
 * ``"stress_field"``: an expression in x, y of a stress, evaluated at the unscaled coordinates,
   unless it is one of :attr:`UnitMap.scaling_names` (named loads that scale with the body's width);
-* ``"length_field"``: an expression in x of a length: ``length * g(x / length)``.
+* ``"length_field"``: an expression in x of a length: ``length * g(x / length)``;
+* ``"file"``: a file of lengths (e.g. ``defects_file``) that cannot be converted: a scene that sets
+  it has no units axis (InputError).
 
 Under such a change the solution maps exactly: x by ``length``, the nodal forces mu by
 ``stress * length``. A field given as a Python function cannot be converted (InputError).
@@ -42,7 +44,7 @@ from dualfem.core.errors import InputError
 
 #: the kinds of quantity a unit map knows (module docstring)
 KINDS = ("stress", "length", "length_if_set", "length/stress", "points", "defect_tables", "body_force",
-         "traction_tables", "stress_field", "length_field")
+         "traction_tables", "stress_field", "length_field", "file")
 
 
 @dataclass(frozen=True)
@@ -93,6 +95,10 @@ class UnitMap:
                 v = _not_callable(k, d[k])
                 if isinstance(v, str) and v.strip() not in self.scaling_names and length != 1:
                     out[k] = scaled_expression(v.strip(), length)
+            elif kind == "file":
+                if base.get(k):
+                    raise InputError(f"scene_in_units: {k} = {base[k]!r} holds lengths in a file that cannot be "
+                                     f"converted to other units; write its defects as [[defects]] tables")
             else:   # "length_field"
                 g = _not_callable(k, d[k])
                 out[k] = f"{float(length)!r} * ({scaled_expression(str(g).strip(), length)})" if length != 1 else g

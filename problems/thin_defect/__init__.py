@@ -29,9 +29,18 @@ at the defect tips; 0 = mesh_size), ``rotate_deg`` (rigid counter-clockwise rota
 scene about the body's centre: body, defects, loads and supports; the mesh is generated once in
 the reference frame and rotated; the supported and loaded sides are those of the reference frame;
 a roller on a rotated body is refused),
+``size_growth`` (gmsh: the element size's slope away from a tip, in [0.01, 1], default 0.3: a refinement
+study that shrinks ``tip_size`` should shrink it too, docs/fractured.md),
 and ``defects`` (TOML ``[[defects]]`` tables: ``points`` = [[x, y], ...] in the reference frame,
-``curve`` = "polyline" | "spline", optional ``delta`` and ``face_pressure``). Without ``defects`` the single segment
-``defect = [[x1, y1], [x2, y2]]`` is used; ``defects = []`` is an uncracked body (a QP without constraints).
+``curve`` = "polyline" | "spline", optional ``delta`` and ``face_pressure``) or ``defects_file`` (the same
+defects in a CSV or JSON file, relative to the scene file: :mod:`dualfem.problems.defects_file`). Without
+either the single segment ``defect = [[x1, y1], [x2, y2]]`` is used; ``defects = []`` is an uncracked body
+(a QP without constraints). How many defects a scene holds is bounded by the mesh they need (the gmsh
+triangle estimate, checked before meshing), not by a count.
+
+Load model: a scene without ``boundary``, ``body_force`` and ``remote_stress`` is the paper's (bottom
+clamped, ``load`` on top); one whose only load is a defect's ``face_pressure`` must say so: give those
+keys, or ``load`` explicitly for the paper's model (docs/loads.md). Otherwise it is refused.
 
 P1 elements; nodes strictly inside a defect are doubled (tips not); the interface integral uses
 the trapezoid rule. Units are whatever the inputs use (paper: MPa and a unit length). The QP and
@@ -55,11 +64,12 @@ from dualfem.qp import QP, GeometryPart, MaterialPart, UnitsPart
 from dualfem.registry import register_problem
 
 from .. import _boundary as bd
+from .._defect_geometry import check_growth
 from .._interface import delta_free_part, interface, local_unknowns, with_delta
-from ..loads import resolve_load
+from ..loads import check_load_model, resolve_load
 from .assemble import boundary_edges_on, free_dofs, stiffness, traction_vector
 from .cut import Cut, cut
-from .geometry import defects_label, parse_defect, parse_defects
+from .geometry import defects_label, parse_defect, parse_defects, read_file_tables
 from .interface_sum import InterfaceSum
 from .mesh import rotate, rotation, structured_defect_nodes, structured_mesh
 
@@ -89,7 +99,7 @@ class ThinDefect(Problem):
     unit_map = UnitMap({"E": "stress", "width": "length", "height": "length", "load_scale": "stress",
                         "delta": "length/stress", "mesh_size": "length_if_set", "tip_size": "length_if_set",
                         "defect": "points", "defects": "defect_tables", "body_force": "body_force",
-                        "boundary": "traction_tables", "load": "stress_field"},
+                        "boundary": "traction_tables", "load": "stress_field", "defects_file": "file"},
                        scaling_names=("f1", "f2", "f3"))   # the paper's loads scale with width by themselves
     defaults = {
         "N": 64,
@@ -110,22 +120,29 @@ class ThinDefect(Problem):
         "boundary": (),
         "body_force": None,
         "remote_stress": None,
+        "defects_file": "",
+        "size_growth": 0.3,
     }
+    #: scene keys naming files, relative to the scene file (:attr:`dualfem.problem.Problem.path_keys`)
+    path_keys = ("defects_file",)
     presets = {"f1": {"load": "f1"}, "f2": {"load": "f2"}, "f3": {"load": "f3"}}
     #: keys that keep the mesh and K_el: ``with_params`` / a Workspace's ``update`` reuse the delta-free assembly
     #: (``boundary`` only while the supports stay the same: :meth:`with_params`)
     update_keys = ("delta", "load", "load_scale", "boundary", "body_force", "remote_stress")
 
     def validate(self) -> None:
-        tables = self.params["defects"]        # the size is the first thing to know: before the defects are parsed
-        self._check_keys(len(tables) if isinstance(tables, (list, tuple)) and len(tables) else 1)
         p = self.params
+        tables, where = read_file_tables(p["defects_file"], p["defects"])   # a file's size and rows, then its tables
+        # the size is the first thing to know: before the defects are parsed
+        self._check_keys(len(tables) if isinstance(tables, (list, tuple)) and len(tables) else 1)
         p["defect"] = parse_defect(p["defect"])
         default_defect = np.asarray(self.defaults["defect"], dtype=float)
-        tables = p["defects"]
         if tables is not None and not np.array_equal(p["defect"], default_defect):
-            raise InputError("give either defect = [[x1, y1], [x2, y2]] or [[defects]] tables, not both")
-        self._defects = parse_defects(p["defects"], p["defect"], p["delta"], p["width"], p["height"], p["mesh"])
+            raise InputError(f"give either defect = [[x1, y1], [x2, y2]] or {where}, not both")
+        try:
+            self._defects = parse_defects(tables, p["defect"], p["delta"], p["width"], p["height"], p["mesh"])
+        except InputError as exc:
+            raise InputError(f"{where}: {exc}" if p["defects_file"] else str(exc)) from None
         self._check_defects_and_load()
 
     def _check_keys(self, n_defects: int) -> None:
@@ -147,6 +164,7 @@ class ThinDefect(Problem):
             raise InputError(f"mesh must be one of {', '.join(MESHES)}, got {p['mesh']!r}")
         p["mesh_size"] = check_positive("mesh_size", p["mesh_size"], allow_zero=True)
         p["tip_size"] = check_positive("tip_size", p["tip_size"], allow_zero=True)
+        p["size_growth"] = check_growth(p["size_growth"])
         rot = p["rotate_deg"]
         if not isinstance(rot, (int, float)) or not np.isfinite(rot):
             raise InputError(f"rotate_deg must be a finite number (degrees), got {rot!r}")
@@ -157,7 +175,7 @@ class ThinDefect(Problem):
             label = f"mesh_size={h:g}" if p["mesh_size"] else \
                 f"mesh_size=0 (min(width, height)/N = {h:g} with N={p['N']})"
             tip = p["tip_size"] if 0 < p["tip_size"] < h else None
-            check_size(p["width"], p["height"], h, tip, 2 * n_defects, label)
+            check_size(p["width"], p["height"], h, tip, 2 * n_defects, label, p["size_growth"])
 
     def _check_defects_and_load(self) -> None:
         """Each defect's delta against E and the body size; the loads: ``[[boundary]]``, ``body_force``,
@@ -176,6 +194,7 @@ class ThinDefect(Problem):
         self._loads: bd.LoadSpec | None = bd.parse_loads(p, 2)
         self._traction = None
         if self._loads is None:
+            check_load_model(self, [d.get("face_pressure") is not None for d in self._defects])
             with np.errstate(all="ignore"):  # a NaN-producing expression is refused below, without warnings
                 self._traction = resolve_load(p["load"], p["width"])
             return
@@ -216,7 +235,8 @@ class ThinDefect(Problem):
 
         h = p["mesh_size"] or min(p["width"], p["height"]) / p["N"]
         tip = p["tip_size"] if 0 < p["tip_size"] < h else None
-        tri = estimate_triangles(p["width"], p["height"], h, tip, 2 * len(getattr(self, "_defects", ())))
+        tri = estimate_triangles(p["width"], p["height"], h, tip, 2 * len(getattr(self, "_defects", ())),
+                                 p["size_growth"])
         nodes = 1.2 * tri / 2 + 1          # about 2 triangles per node, 20 % margin (doubled defect nodes)
         return int(2 * nodes), f"mesh_size={h:g}" + (f", tip_size={tip:g}" if tip else "")
 
@@ -237,7 +257,7 @@ class ThinDefect(Problem):
 
         h = p["mesh_size"] or min(W, H) / N
         dm = mesh_with_defects(W, H, [{"points": d["points"], "curve": d["curve"]} for d in self._defects],
-                               h, p["tip_size"] or None, **self._gmsh_options())
+                               h, p["tip_size"] or None, size_growth=p["size_growth"], **self._gmsh_options())
         pts, tri = np.asarray(dm.points, dtype=float), np.asarray(dm.triangles, dtype=np.int32)
         if np.bincount(tri.ravel(), minlength=pts.shape[1]).min() == 0:
             raise RuntimeError("the gmsh mesh has nodes in no triangle (problems/gmsh_mesh.py must drop them)")
@@ -453,6 +473,9 @@ class ThinDefect(Problem):
             params["defects"] = defects_label(self._defects)
         if self._loads is not None:
             params["loads"] = self._loads.label()
+        for k in ("defects_file", "size_growth"):          # the QP's parameters as before these keys, at their defaults
+            if p[k] == ThinDefect.defaults[k]:
+                params.pop(k, None)
         self.jump_operators = J
         geometry = GeometryPart(2, maps.pop("nodes"), maps.pop("triangles"), maps.pop("node_dofs"))
         return QP(K=K, F=self._load_vector(a), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],

@@ -6,10 +6,12 @@ import numpy as np
 from dualfem.errors import InputError, check_positive
 
 from .._boundary import parse_scalar
+from ..defects_file import MAX_DEFECTS, read_defects
 
 CURVES = ("polyline", "spline")
-#: defects of one scene, and points of one defect (the geometric checks are pairwise)
-MAX_DEFECTS = 64
+#: points of one defect. The number of defects is bounded by the mesh they need (the gmsh triangle
+#: estimate, :func:`dualfem.problems.gmsh_mesh.check_size`; the checks are near-linear) and, as in a
+#: defects file, by :data:`dualfem.problems.defects_file.MAX_DEFECTS` tables read at all
 MAX_POINTS = 4096
 
 
@@ -103,7 +105,7 @@ def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height
         raise InputError("defects must be a list of tables ([[defects]] in TOML) with points = [[x, y], ...], "
                          f"optional curve and delta; got {tables!r}")
     if len(tables) > MAX_DEFECTS:
-        raise InputError(f"defects: {len(tables)} [[defects]] tables; the limit is {MAX_DEFECTS}")
+        raise InputError(f"defects: {len(tables):,} [[defects]] tables; the limit is {MAX_DEFECTS:,}")
     out = []
     for k, tab in enumerate(tables):
         key = f"defects[{k}]"
@@ -129,6 +131,19 @@ def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height
         pressure = None if fp is None else parse_scalar(fp, f"{key}.face_pressure", 2, (width, height))
         out.append({"points": pts, "curve": curve, "delta": d, "face_pressure": pressure})
     return out
+
+
+def read_file_tables(defects_file, tables) -> tuple[list | None, str]:
+    """The defect tables of a scene and what to call them in messages: those of ``defects_file`` (a CSV
+    or JSON file, :func:`dualfem.problems.defects_file.read_defects`) when it is set, else ``tables``
+    (the ``[[defects]]`` key as given, None when not given). Both set: InputError."""
+    if defects_file is None or (isinstance(defects_file, str) and not defects_file.strip()):
+        return tables, "[[defects]] tables"
+    if not isinstance(defects_file, str):
+        raise InputError(f"defects_file must be a path to a .csv or .json file, got {defects_file!r}")
+    if tables is not None:
+        raise InputError("give either [[defects]] tables or defects_file, not both")
+    return read_defects(defects_file, 2), f"defects_file {defects_file!r}"
 
 
 def defects_label(defects: list[dict]) -> str:

@@ -7,7 +7,11 @@ mesh_size; ``surface_size`` on the defect surfaces, 0 = no refinement there) wit
 surface embedded (:mod:`.mesh`). Defects: ``[[defects]]`` tables with ``shape`` = ``disk``,
 ``ellipse``, ``polygon`` or ``cap`` and an optional per-defect ``delta`` (keys and normals:
 :mod:`.geometry`); without tables the disk of radius 0.25 x min(width, depth) at the centre,
-normal +z; ``defects = []``: no defect at all, an uncracked box (a QP without constraints).
+normal +z; ``defects = []``: no defect at all, an uncracked box (a QP without constraints);
+``defects_file``: the defects in a CSV (disks, ellipses) or JSON file, relative to the scene file
+(:mod:`dualfem.problems.defects_file`). How many defects a scene holds is bounded by the mesh they need
+(the tetrahedron estimate, checked before meshing), not by a count. ``size_growth`` (in [0.01, 1],
+default 0.3): the slope of the element size away from the fronts and surfaces.
 Nodes strictly inside a defect are doubled, its front is not (:mod:`.cut`). Energy, one term per defect d:
 
     Pi(v) = 1/2 a(v, v) - (f, v) + sum_d 1/(2 delta_d) int_gamma_d |[v]|^2,   [v_nu] >= 0 on every gamma_d,
@@ -21,8 +25,10 @@ z = 0 is clamped and the traction ``load`` x ``load_scale`` acts on the top face
 ``[[boundary]]`` tables with ``side`` = left, right, front, back, bottom, top, ``support`` and/or
 ``traction``; ``body_force``; ``remote_stress`` (3 x 3): sigma.n on every side without a support, and
 without any support only the rigid-body motions are removed at six components of extreme nodes), all
-times ``load_scale``, and ``load`` must keep its default. A defect's ``face_pressure`` (a number or an
-expression in x, y, z) pushes both of its faces apart. ``rotate_deg`` / ``rotate_axis``: a rigid rotation of the
+times ``load_scale``, and ``load`` must keep its default. A scene whose only load is a defect's
+``face_pressure`` must name its model: those keys, or ``load`` for the legacy one (docs/loads.md).
+A defect's ``face_pressure`` (a number or an expression in x, y, z) pushes both of its faces apart.
+``rotate_deg`` / ``rotate_axis``: a rigid rotation of the
 whole scene (body, defects, loads, supports) about the box's centre, counter-clockwise about the
 axis (right-hand rule); the mesh is made in the reference frame and rotated.
 
@@ -49,7 +55,10 @@ from dualfem.qp import QP, GeometryPart, MaterialPart, UnitsPart
 from dualfem.registry import register_problem
 
 from .. import _boundary as bd
+from .._defect_geometry import check_growth
 from .._interface import delta_free_part, interface, local_unknowns, with_delta
+from ..defects_file import read_defects
+from ..loads import check_load_model
 from .assemble import free_dofs, stiffness
 from .cut import Cut3, cut
 from .geometry import Surface, check_apart, parse_defects
@@ -78,6 +87,18 @@ def _vector3(key: str, value) -> np.ndarray:
     if not np.all(np.isfinite(v)) or not np.linalg.norm(v) > 0:
         raise InputError(f"{key} must be a finite non-zero vector [x, y, z], got {value!r}")
     return v
+
+
+def _file_tables(defects_file, tables) -> tuple[list | None, str]:
+    """The tables of ``defects_file`` (a CSV or JSON file of disks and ellipses) when set, with the words
+    naming it in messages; else ``tables`` as given and ''. Both set: InputError."""
+    if defects_file is None or (isinstance(defects_file, str) and not defects_file.strip()):
+        return tables, ""
+    if not isinstance(defects_file, str):
+        raise InputError(f"defects_file must be a path to a .csv or .json file, got {defects_file!r}")
+    if tables is not None:
+        raise InputError("give either [[defects]] tables or defects_file, not both")
+    return read_defects(defects_file, 3), f"defects_file {defects_file!r}"
 
 
 @register_problem
@@ -111,7 +132,11 @@ class ThreeD(Problem):
         "boundary": (),
         "body_force": "",
         "remote_stress": "",
+        "defects_file": "",
+        "size_growth": 0.3,
     }
+    #: scene keys naming files, relative to the scene file (:attr:`dualfem.problem.Problem.path_keys`)
+    path_keys = ("defects_file",)
     presets = {"three_d": {}}
     #: keys a sweep changes without re-meshing (Workspace.update, with_params): the loads change F only, the
     #: supports (``boundary``'s fixed sides) the elastic stiffness too (:meth:`with_params`)
@@ -154,6 +179,7 @@ class ThreeD(Problem):
         p["mesh_size"] = check_positive("mesh_size", p["mesh_size"], allow_zero=True)
         p["tip_size"] = check_positive("tip_size", p["tip_size"], allow_zero=True)
         p["surface_size"] = check_positive("surface_size", p["surface_size"], allow_zero=True)
+        p["size_growth"] = check_growth(p["size_growth"])
         self._axis = _vector3("rotate_axis", p["rotate_axis"])
         p["rotate_axis"] = tuple(float(c) for c in self._axis)
         box = self.box
@@ -169,14 +195,18 @@ class ThreeD(Problem):
                 tables = json.loads(tables)
             except ValueError:
                 raise InputError(f"defects must be a list of tables (from --set: JSON), got {tables!r}") from None
+        tables, where = _file_tables(p["defects_file"], tables)
         if tables is None:          # not given: the default disk; an empty list is an uncracked body
             tables = [{"shape": "disk", "center": [w / 2 for w in box], "normal": [0.0, 0.0, 1.0],
                        "radius": 0.25 * min(box[0], box[1])}]
-        self._surfaces: list[Surface] = parse_defects(tables, p["delta"], box) \
-            if not (isinstance(tables, (list, tuple)) and len(tables) == 0) else []
-        check_size(box, h, self.tip_size, sum(s.front_length() for s in self._surfaces), self._size_label(),
-                   self.surface_size, sum(s.area() for s in self._surfaces))
-        check_apart(self._surfaces, min(self.tip_size or h, self.surface_size or h))
+        try:
+            self._surfaces: list[Surface] = parse_defects(tables, p["delta"], box) \
+                if not (isinstance(tables, (list, tuple)) and len(tables) == 0) else []
+            check_size(box, h, self.tip_size, sum(s.front_length() for s in self._surfaces), self._size_label(),
+                       self.surface_size, sum(s.area() for s in self._surfaces), p["size_growth"])
+            check_apart(self._surfaces, min(self.tip_size or h, self.surface_size or h))
+        except InputError as exc:
+            raise InputError(f"{where}: {exc}" if where else str(exc)) from None
         for i, s in enumerate(self._surfaces):
             ratio = s.delta * p["E"] / max(box)
             if ratio < MIN_DELTA_E_OVER_L:
@@ -185,6 +215,7 @@ class ThreeD(Problem):
                                  f">= {MIN_DELTA_E_OVER_L:g}")
         self._loads = bd.parse_loads(p, 3)
         if self._loads is None:
+            check_load_model(self, [s.face_pressure is not None for s in self._surfaces])
             with np.errstate(all="ignore"):
                 self._traction = resolve_load(p["load"], p["width"])
         elif p["load"] != self.defaults["load"]:
@@ -225,7 +256,7 @@ class ThreeD(Problem):
         """Unknowns before meshing: 3 per node, about 5.5 tetrahedra per node (20 % margin for the doubling)."""
         tets = estimate_tetrahedra(self.box, self.mesh_size, self.tip_size,
                                    sum(s.front_length() for s in self._surfaces), self.surface_size,
-                                   sum(s.area() for s in self._surfaces))
+                                   sum(s.area() for s in self._surfaces), self.params["size_growth"])
         return int(3 * 1.2 * tets / 5.5) + 3, self._size_label()
 
     # ------------------------------------------------------------------ mesh
@@ -237,7 +268,8 @@ class ThreeD(Problem):
         triangles); computed once per :class:`~dualfem.core.problem.Shared`."""
         shared = self.shared.data
         if shared.get("cut") is None:
-            m = mesh_box(self.box, self._surfaces, self.mesh_size, self.tip_size, self.surface_size)
+            m = mesh_box(self.box, self._surfaces, self.mesh_size, self.tip_size, self.surface_size,
+                         self.params["size_growth"])
             c = cut(m.points, m.tets, m.faces, self._surfaces)
             from .assemble import boundary_faces
 
@@ -332,6 +364,9 @@ class ThreeD(Problem):
         params = {k: (v if isinstance(v, (int, float, str)) else str(np.asarray(v).tolist()))
                   for k, v in p.items() if not callable(v) and k != "defects"}
         params["defects"] = "; ".join(_label(s) for s in self._surfaces)
+        for k in ("defects_file", "size_growth"):          # the QP's parameters as before these keys, at their defaults
+            if p[k] == self.defaults[k]:
+                params.pop(k, None)
         geometry = GeometryPart(3, a["points"], c.tets, nd)
         iface = dataclasses.replace(iface, weights=c.weights.copy())       # each QP its own weights
         return QP(K=K, F=F, B=B, weights=iface.weights, K_fixed=a["K_el"], local_dofs=a["local"],

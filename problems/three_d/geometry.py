@@ -32,9 +32,12 @@ import numpy as np
 
 from dualfem.errors import InputError
 
+from ..defects_file import MAX_DEFECTS
+
 SHAPES = ("disk", "ellipse", "polygon", "cap")
-#: defects of one scene and vertices of one polygon (sampling and pairwise checks are bounded by them)
-MAX_DEFECTS = 32
+#: vertices of one polygon (its sampling and edge checks are bounded by it). The number of defects is
+#: bounded by the mesh they need (the tetrahedron estimate of :mod:`.mesh`, checked before meshing: their
+#: fronts' refined tubes) and, as in a defects file, by MAX_DEFECTS tables read at all
 MAX_POINTS = 256
 _KEYS = {"disk": ("center", "normal", "radius"), "ellipse": ("center", "normal", "axes", "direction"),
          "polygon": ("points",), "cap": ("center", "axis", "curvature_radius", "radius")}
@@ -304,7 +307,7 @@ def parse_defects(tables, default_delta: float, box: tuple[float, float, float])
     if not isinstance(tables, (list, tuple)) or not tables:
         raise InputError(f"defects must be [[defects]] tables (shape = disk, ellipse, polygon or cap), got {tables!r}")
     if len(tables) > MAX_DEFECTS:
-        raise InputError(f"defects: at most {MAX_DEFECTS} defects in a 3D scene, got {len(tables)}")
+        raise InputError(f"defects: at most {MAX_DEFECTS:,} defects in a 3D scene, got {len(tables):,}")
     surfaces = [parse_surface(i, t, default_delta) for i, t in enumerate(tables)]
     L = np.asarray(box, dtype=float)
     tol = 1e-9 * float(L.max())
@@ -316,23 +319,67 @@ def parse_defects(tables, default_delta: float, box: tuple[float, float, float])
     return surfaces
 
 
+def _plane_clear(s: Surface, t: Surface, limit: float) -> bool:
+    """Whether the planar surface ``t`` lies wholly at distance >= ``limit`` from the plane of the planar
+    surface ``s`` (then the two are at least ``limit`` apart). False for a cap (not planar)."""
+    if "cap" in (s.shape, t.shape):
+        return False
+    if t.shape == "polygon":
+        h = (t.points - s.center) @ s.normal
+        lo, hi = float(h.min()), float(h.max())
+    else:
+        mid = float((t.center - s.center) @ s.normal)
+        half = math.hypot(t.a * float(t.e1 @ s.normal), t.b * float(t.e2 @ s.normal))
+        lo, hi = mid - half, mid + half
+    return lo >= limit or hi <= -limit
+
+
+def candidate_pairs(surfaces: list[Surface], limit: float) -> np.ndarray:
+    """Index pairs (i, j), i < j, of surfaces whose exact bounding boxes come closer than ``limit``
+    (a k-d tree of the boxes' centres: near-linear in the number of surfaces), in lexicographic order."""
+    from scipy.spatial import cKDTree
+
+    ext = np.array([np.concatenate(s.extent()) for s in surfaces])      # (n, 6): lo, hi
+    lo, hi = ext[:, :3], ext[:, 3:]
+    centre, half = 0.5 * (lo + hi), 0.5 * np.linalg.norm(hi - lo, axis=1)
+    pairs = cKDTree(centre).query_pairs(2 * float(half.max()) + limit, output_type="ndarray")
+    if not len(pairs):
+        return pairs.reshape(0, 2)
+    i, j = pairs[:, 0], pairs[:, 1]
+    gap = np.maximum(0.0, np.maximum(lo[j] - hi[i], lo[i] - hi[j]))
+    near = np.linalg.norm(gap, axis=1) < limit
+    keep = pairs[near]
+    return keep[np.lexsort((keep[:, 1], keep[:, 0]))]
+
+
 def check_apart(surfaces: list[Surface], gap: float) -> None:
     """No two defects intersecting or closer than max(``gap``, 2 x the sampling step): each surface is
     sampled with a step of max(gap / 2, its size / 64) (rim included) and the nearest samples of every
-    pair compared (a k-d tree). ``gap``: the element size at the defect fronts."""
+    pair compared (a k-d tree). ``gap``: the element size at the defect fronts.
+
+    Only pairs that can fail are sampled: those whose bounding boxes come closer than the limit
+    (:func:`candidate_pairs`) and, for two planar surfaces, neither lies wholly beyond the limit from the
+    other's plane (the true distance is then at least the limit, and the sampled distance never smaller:
+    the outcome is that of comparing every pair, at a near-linear cost)."""
     if len(surfaces) < 2:
         return
     from scipy.spatial import cKDTree
 
     spacing = max(0.5 * gap, max(s.size() for s in surfaces) / 64)      # bounded sample counts
     limit = max(gap, 2 * spacing)
-    clouds = [s.sample(spacing) for s in surfaces]
-    for i in range(len(surfaces)):
-        tree = cKDTree(clouds[i])
-        for j in range(i + 1, len(surfaces)):
-            d, _ = tree.query(clouds[j])
-            if d.min() < limit:
-                where = clouds[j][int(np.argmin(d))]
-                raise InputError(f"defects[{i}] and defects[{j}] intersect or come closer than {limit:.3g} (the "
-                                 f"element size at the defect front, or the check's sampling step x 2) near "
-                                 f"{np.round(where, 6).tolist()}: move them apart")
+    clouds: dict[int, np.ndarray] = {}
+    trees: dict[int, cKDTree] = {}
+    for i, j in candidate_pairs(surfaces, limit).tolist():
+        if _plane_clear(surfaces[i], surfaces[j], limit) or _plane_clear(surfaces[j], surfaces[i], limit):
+            continue
+        for k in (i, j):
+            if k not in clouds:
+                clouds[k] = surfaces[k].sample(spacing)
+        if i not in trees:
+            trees[i] = cKDTree(clouds[i])
+        d, _ = trees[i].query(clouds[j])
+        if d.min() < limit:
+            where = clouds[j][int(np.argmin(d))]
+            raise InputError(f"defects[{i}] and defects[{j}] intersect or come closer than {limit:.3g} (the "
+                             f"element size at the defect front, or the check's sampling step x 2) near "
+                             f"{np.round(where, 6).tolist()}: move them apart")

@@ -6,7 +6,8 @@ vertices; a cap cut from ``addSphere``), then ``occ.fragment`` makes the surface
 of the volume, so the tetrahedral mesh conforms to them: every defect is a set of mesh
 triangles. Element size ``mesh_size``, and ``tip_size`` near the defect fronts (their rim curves):
 a Distance/Threshold field, ``tip_size`` within ``tip_size`` of a front, growing linearly with
-slope ``GRADE`` to ``mesh_size``; optionally ``surface_size`` near the defect surfaces themselves
+slope ``grade`` (the scene key ``size_growth``, default ``GRADE``) to ``mesh_size``; optionally
+``surface_size`` near the defect surfaces themselves
 (the same kind of field on their distance; where both apply, the smaller size).
 
 Size control before anything is meshed: :func:`estimate_tetrahedra` (regular tetrahedra of the
@@ -49,14 +50,14 @@ class BoxMesh:
     faces: list[np.ndarray]
 
 
-def _tube(mesh_size: float, tip_size: float) -> tuple[float, float]:
-    return tip_size, tip_size + (mesh_size - tip_size) / GRADE
+def _tube(mesh_size: float, tip_size: float, grade: float = GRADE) -> tuple[float, float]:
+    return tip_size, tip_size + (mesh_size - tip_size) / grade
 
 
-def _refined(mesh_size: float, size: float, shape: str) -> float:
+def _refined(mesh_size: float, size: float, shape: str, grade: float = GRADE) -> float:
     """Extra tetrahedra (over the count at mesh_size) per unit length of a front (``shape = "tube"``) or per
-    unit area of one side of a surface (``"slab"``), refined to ``size`` growing with slope GRADE."""
-    d0, d1 = _tube(mesh_size, size)
+    unit area of one side of a surface (``"slab"``), refined to ``size`` growing with slope ``grade``."""
+    d0, d1 = _tube(mesh_size, size, grade)
     r = np.linspace(d0, d1, 401)
     s = size + (mesh_size - size) * (r - d0) / (d1 - d0)
     f = (2 * np.pi * r if shape == "tube" else 1.0) * (1 / s ** 3 - 1 / mesh_size ** 3)
@@ -66,7 +67,7 @@ def _refined(mesh_size: float, size: float, shape: str) -> float:
 
 
 def estimate_tetrahedra(box, mesh_size: float, tip_size: float | None, front_length: float,
-                        surface_size: float | None = None, area: float = 0.0) -> int:
+                        surface_size: float | None = None, area: float = 0.0, grade: float = GRADE) -> int:
     """About how many tetrahedra: the volume over regular tetrahedra of size ``mesh_size``, plus a tube of
     refined elements (size ``tip_size`` growing to ``mesh_size``) around fronts of total length
     ``front_length`` and slabs (size ``surface_size``) on both sides of defects of total ``area``.
@@ -75,17 +76,18 @@ def estimate_tetrahedra(box, mesh_size: float, tip_size: float | None, front_len
         vol = float(np.prod(np.asarray(box, dtype=float)))
         count = _FILL * _TET_PER_VOLUME * vol / mesh_size ** 3
         if tip_size is not None and tip_size < mesh_size and front_length > 0:
-            count += front_length * _refined(mesh_size, tip_size, "tube")
+            count += front_length * _refined(mesh_size, tip_size, "tube", grade)
         if surface_size is not None and surface_size < mesh_size and area > 0:
-            count += 2 * area * _refined(mesh_size, surface_size, "slab")
+            count += 2 * area * _refined(mesh_size, surface_size, "slab", grade)
     return int(count) if count < 1e30 else int(1e30)
 
 
 def check_size(box, mesh_size: float, tip_size: float | None, front_length: float, label: str,
-               surface_size: float | None = None, area: float = 0.0) -> int:
+               surface_size: float | None = None, area: float = 0.0, grade: float = GRADE) -> int:
     """The estimated tetrahedron count, or InputError naming mesh_size, tip_size or surface_size and its
-    allowed range (the first of them, in this order, that makes the count exceed MAX_TETRAHEDRA)."""
-    est = estimate_tetrahedra(box, mesh_size, tip_size, front_length, surface_size, area)
+    allowed range (the first of them, in this order, that makes the count exceed MAX_TETRAHEDRA). The
+    fronts' total length is what many defects add: this is also the guard on their number."""
+    est = estimate_tetrahedra(box, mesh_size, tip_size, front_length, surface_size, area, grade)
     if est <= MAX_TETRAHEDRA:
         return est
     vol = float(np.prod(box))
@@ -94,12 +96,12 @@ def check_size(box, mesh_size: float, tip_size: float | None, front_length: floa
     if estimate_tetrahedra(box, mesh_size, None, 0.0) > MAX_TETRAHEDRA:
         raise InputError(f"{label} gives about {n} tetrahedra (limit {MAX_TETRAHEDRA:,}) on the "
                          f"{' x '.join(f'{b:g}' for b in box)} box: mesh_size must be >= {lo:.3g}")
-    tip_too = estimate_tetrahedra(box, mesh_size, tip_size, front_length) > MAX_TETRAHEDRA
+    tip_too = estimate_tetrahedra(box, mesh_size, tip_size, front_length, grade=grade) > MAX_TETRAHEDRA
     name, given = ("tip_size", tip_size) if tip_too else ("surface_size", surface_size)
 
     def count(size: float) -> int:
-        return estimate_tetrahedra(box, mesh_size, size, front_length) if tip_too else \
-            estimate_tetrahedra(box, mesh_size, tip_size, front_length, size, area)
+        return estimate_tetrahedra(box, mesh_size, size, front_length, grade=grade) if tip_too else \
+            estimate_tetrahedra(box, mesh_size, tip_size, front_length, size, area, grade)
 
     a, b = math.log(given or mesh_size), math.log(mesh_size)
     for _ in range(60):
@@ -108,8 +110,9 @@ def check_size(box, mesh_size: float, tip_size: float | None, front_length: floa
             a = mid
         else:
             b = mid
-    raise InputError(f"{label}, {name}={given:g} gives about {n} tetrahedra (limit {MAX_TETRAHEDRA:,}): "
-                     f"{name} must be in [{math.exp(b):.3g}, {mesh_size:g}]")
+    raise InputError(f"{label}, {name}={given:g} gives about {n} tetrahedra (limit {MAX_TETRAHEDRA:,}; defect "
+                     f"fronts {front_length:.4g} long, size_growth={grade:g}): {name} must be in "
+                     f"[{math.exp(b):.3g}, {mesh_size:g}], or use fewer or smaller defects or a larger size_growth")
 
 
 def _import_gmsh():
@@ -153,8 +156,9 @@ def _surface(gmsh, s: Surface) -> int:
 
 
 def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | None,
-             surface_size: float | None = None) -> BoxMesh:
-    """The tetrahedral mesh of the box with every surface embedded (see the module docstring)."""
+             surface_size: float | None = None, grade: float = GRADE) -> BoxMesh:
+    """The tetrahedral mesh of the box with every surface embedded (see the module docstring); ``grade``:
+    the size fields' slope."""
     gmsh = _import_gmsh()
     owner = not gmsh.isInitialized()
     if owner:
@@ -174,7 +178,7 @@ def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | N
             raise InputError("the defects must neither cut the box's sides nor each other (gmsh split a defect "
                              "surface or the volume)")
         front = sorted({abs(t) for p in pieces for _, t in gmsh.model.getBoundary([(2, p[0])], oriented=False)})
-        _fields(gmsh, mesh_size, tip_size, front, surface_size, [p[0] for p in pieces])
+        _fields(gmsh, mesh_size, tip_size, front, surface_size, [p[0] for p in pieces], grade)
         try:
             gmsh.model.mesh.generate(3)
         except Exception as exc:  # noqa: BLE001 - gmsh raises a bare Exception with its last error message
@@ -189,7 +193,7 @@ def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | N
 
 
 def _fields(gmsh, mesh_size: float, tip_size: float | None, front: list[int],
-            surface_size: float | None = None, surfaces: list[int] | None = None) -> None:
+            surface_size: float | None = None, surfaces: list[int] | None = None, grade: float = GRADE) -> None:
     """Size mesh_size; tip_size near the front curves and surface_size near the defect surfaces (each a
     Distance/Threshold pair; the smaller of them where both apply)."""
     gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
@@ -198,7 +202,7 @@ def _fields(gmsh, mesh_size: float, tip_size: float | None, front: list[int],
     for size, kind, tags in ((tip_size, "CurvesList", front), (surface_size, "SurfacesList", surfaces or [])):
         if size is None or size >= mesh_size or not tags:
             continue
-        d0, d1 = _tube(mesh_size, size)
+        d0, d1 = _tube(mesh_size, size, grade)
         dist = fld.add("Distance")
         fld.setNumbers(dist, kind, tags)
         fld.setNumber(dist, "Sampling", 200)
