@@ -50,9 +50,12 @@ import time
 import numpy as np
 import scipy.linalg as sla
 
-from dualfem.dual_solver import OPERATORS, DualOperatorSolver
+from dualfem.dual_solver import OPERATORS, DualOperatorSolver, make_operator
 from dualfem.numerics.dual_operator import FACE_METHODS
 from dualfem.numerics.dual_precond import dirichlet_by_default, dirichlet_inverse
+from dualfem.numerics.factor import from_param
+from dualfem.numerics.friction_dual import FrictionLayout, layout_refusal, stacked_qp
+from dualfem.numerics.friction_newton import semismooth_newton
 from dualfem.numerics.polish import refine_on_active_set
 from dualfem.registry import register_solver
 from dualfem.solution import Solution, Status
@@ -69,6 +72,8 @@ class PDASSolver(DualOperatorSolver):
 
     name = "pdas"
     family = "dual"
+    #: friction (Tresca, Coulomb): HSW's semismooth Newton on the stacked dual (dualfem.numerics.friction_newton)
+    accepts = ("signorini", "tresca", "coulomb")
     description = "semismooth Newton / primal-dual active set on the defect unknowns (exact)"
     tolerance = 1e-9
     exact = True
@@ -150,7 +155,20 @@ class PDASSolver(DualOperatorSolver):
         return refine_on_active_set(self.qp, self.op.reduction, x, mu, steps, float(self.params["refine_tol"]))
 
     # ------------------------------------------------------------------ solve
+    def skip(self, qp) -> str | None:
+        if qp.blocks:
+            refusal = layout_refusal(qp)
+            if refusal is not None:
+                return refusal
+        return super().skip(qp)
+
     def setup(self, qp) -> None:
+        if qp.blocks:                      # friction: the dual operator of all blocks stacked (same factorization)
+            self.qp = qp
+            self.op = make_operator(stacked_qp(qp), self.params["operator"], factor=from_param(self),
+                                    tol=self.tolerance)
+            self.reduction = None          # the stacked QP's reduction is not the QP's (its B differs)
+            return
         super().setup(qp)
         if self.op.kind == "matrix_free":
             self.op.face = self.params["newton"]
@@ -221,7 +239,28 @@ class PDASSolver(DualOperatorSolver):
             mu_p = None
         return np.maximum(mu, 0.0) if mu_p is None else mu_p
 
+    def _solve_friction(self) -> Solution:
+        """Tresca / Coulomb friction: HSW's semismooth Newton (:mod:`dualfem.numerics.friction_newton`)."""
+        p, op = self.params, self.op
+        layout = FrictionLayout.of(self.qp)
+        c = p["c"] if p["c"] > 0 else (1.0 / op.diagonal().mean() if op.b0.size else 1.0)
+        deadline = time.perf_counter() + p["time_limit"]
+        r = semismooth_newton(op, layout, c, self._tol(), int(p["max_iter"]), deadline=deadline)
+        if r.converged:
+            status = Status.SOLVED
+        else:
+            status = Status.TIME_LIMIT if time.perf_counter() > deadline else Status.MAX_ITER
+        x = op.x_of(r.mu)
+        self.report_iterate(r.steps, lambda: x, r.mu)
+        return Solution(solver=self.name, status=status, x=x, multipliers=r.mu,
+                        iterations={"newton": r.steps}, history=r.history, message=r.message,
+                        info={"c": c, "active_set_changes": r.changes, **{f"n_{k}": v for k, v in r.sets.items()},
+                              "gmres_iterations": r.gmres_iterations, "friction": "semismooth newton (HSW)",
+                              "n_local": int(self.qp.local_dofs.size), **op.info()})
+
     def solve(self) -> Solution:
+        if self.qp.blocks:
+            return self._solve_friction()
         p = self.params
         op, b0 = self.op, self.op.b0
         c = p["c"] if p["c"] > 0 else (1.0 / op.diagonal().mean() if b0.size else 1.0)
