@@ -1,9 +1,10 @@
-"""pdas on frictional cracks (HSW's semismooth Newton, dualfem.numerics.friction_newton): a closed 2D crack
+"""pdas and mprgp on frictional cracks (HSW's semismooth Newton, dualfem.numerics.friction_newton; MPGP,
+dualfem.numerics.friction_mpgp, with Coulomb by the fixed point dualfem.numerics.coulomb): a closed 2D crack
 under compression and shear and a coarse 3D penny crack with Tresca and Coulomb friction. Each answer has
 KKT residuals at rounding (the evaluator judges it by the laws), agrees with cvxpy+Clarabel's norm formulation,
 g = 0 / mu_f = 0 gives the frictionless answer, a large bound sticks every node exactly (the answer of the
 crack held closed and stuck: an equality-constrained solve), and Coulomb's answer is the Tresca answer at its
-own threshold mu_f lambda."""
+own threshold mu_f lambda; MPGP without its Newton polish agrees with pdas."""
 from __future__ import annotations
 
 import functools
@@ -66,34 +67,42 @@ def cvxpy_tresca(qp):
     return x.value
 
 
+SOLVERS = pytest.mark.parametrize("name", ["pdas", "mprgp"])
+
+
+@SOLVERS
 @pytest.mark.parametrize("scene", [crack2d, penny], ids=["2d", "3d"])
-def test_tresca_agrees_with_clarabel_and_is_kkt_exact(scene):
+def test_tresca_agrees_with_clarabel_and_is_kkt_exact(scene, name):
     qp = scene()
     qp = with_friction(qp, "tresca", mixed_bound(qp, 0.1, 0.6))
-    sol = solve(qp)
+    sol = solve(qp, name)
     assert sol.status == "solved" and kkt(qp, sol) < 1e-12
-    assert sol.info["n_stick"] > 0 and sol.info["n_slip"] > 0          # both sets present
+    c = qp.blocks[0].law.components
+    slips = np.linalg.norm((qp.blocks[0].G @ sol.x).reshape(-1, c), axis=1)
+    assert 0 < (slips > 1e-9 * slips.max()).sum() < slips.size          # both stick and slip nodes
     xr = cvxpy_tresca(qp)                                  # an interior-point answer: ~1e-4 of x here
     assert np.abs(sol.x - xr).max() < 1e-3 * np.abs(xr).max()
     energy = evaluator.residuals(qp, sol.x, sol.multipliers)["energy"]
     assert energy <= evaluator.residuals(qp, xr, sol.multipliers)["energy"] + 1e-12 * abs(energy)
 
 
+@SOLVERS
 @pytest.mark.parametrize("scene", [crack2d, penny], ids=["2d", "3d"])
 @pytest.mark.parametrize("kind", ["tresca", "coulomb"])
-def test_zero_friction_is_the_frictionless_answer(scene, kind):
+def test_zero_friction_is_the_frictionless_answer(scene, kind, name):
     qp0 = scene()
     x0 = solve(qp0).x
-    sol = solve(with_friction(qp0, kind, 0.0))
+    sol = solve(with_friction(qp0, kind, 0.0), name)
     assert sol.status == "solved"
     assert np.abs(sol.x - x0).max() <= 1e-12 * np.abs(x0).max()
 
 
+@SOLVERS
 @pytest.mark.parametrize("scene", [crack2d, penny], ids=["2d", "3d"])
-def test_a_large_bound_sticks_every_node_exactly(scene):
+def test_a_large_bound_sticks_every_node_exactly(scene, name):
     qp = with_friction(scene(), "tresca", 100.0)
-    sol = solve(qp)
-    assert sol.status == "solved" and sol.info["n_stick"] == qp.blocks[0].m // qp.blocks[0].law.components
+    sol = solve(qp, name)
+    assert sol.status == "solved"
     G = qp.G                                                      # stuck and closed: G x = 0, K x - F = G' mu
     KKT = sp.bmat([[qp.K, G.T], [G, None]], format="csc")
     xs = spla.spsolve(KKT, np.r_[qp.F, np.zeros(G.shape[0])])[:qp.n]
@@ -101,11 +110,12 @@ def test_a_large_bound_sticks_every_node_exactly(scene):
     assert np.abs(qp.blocks[0].G @ sol.x).max() <= 1e-13 * np.abs(xs).max()
 
 
+@SOLVERS
 @pytest.mark.parametrize("scene", [crack2d, penny], ids=["2d", "3d"])
-def test_coulomb_is_tresca_at_its_own_threshold(scene):
+def test_coulomb_is_tresca_at_its_own_threshold(scene, name):
     qp0 = scene()
     qp = with_friction(qp0, "coulomb", 0.15)
-    sol = solve(qp)
+    sol = solve(qp, name)
     assert sol.status == "solved" and kkt(qp, sol) < 1e-12
     b = qp.blocks[0]
     lam = sol.multipliers[:qp0.m]
@@ -136,3 +146,19 @@ def test_a_block_that_is_not_friction_is_skipped():
     extra = Constraint.make(qp0.B, qp0.weights, SIGNORINI)
     qp = dataclasses.replace(qp0, blocks=(extra,), store=None)
     assert "only friction blocks" in make_solver("pdas").skip(qp)
+
+
+@pytest.mark.parametrize("scene", [crack2d, penny], ids=["2d", "3d"])
+def test_mpgp_alone_agrees_with_pdas(scene):
+    qp = with_friction(scene(), "tresca", mixed_bound(scene(), 0.1, 0.6))
+    a, b = solve(qp), solve(qp, "mprgp", friction_polish=False)
+    assert b.status == "solved" and "polish_newton" not in b.iterations and b.iterations["proportioning"] > 0
+    assert np.abs(a.x - b.x).max() <= 1e-9 * np.abs(a.x).max()
+
+
+@SOLVERS
+def test_matrix_free_operator_gives_the_dense_answer(name):
+    qp = with_friction(crack2d(), "coulomb", 0.15)
+    a, b = solve(qp), solve(qp, name, operator="matrix_free")
+    assert b.status == "solved" and b.info["operator"] == "matrix_free"
+    assert np.abs(a.x - b.x).max() <= 1e-10 * np.abs(a.x).max()
