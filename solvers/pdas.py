@@ -51,6 +51,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from dualfem.dual_solver import OPERATORS, DualOperatorSolver, make_operator
+from dualfem.numerics.coulomb import coulomb_fixed_point
 from dualfem.numerics.dual_operator import FACE_METHODS
 from dualfem.numerics.dual_precond import dirichlet_by_default, dirichlet_inverse
 from dualfem.numerics.factor import from_param
@@ -104,13 +105,16 @@ class PDASSolver(DualOperatorSolver):
                                   # steps: cg 8.2 s (149 K-solves), factor 7.9 s (4 factorizations, 95 solves)
                                   # on a loaded machine: a tie; cg keeps no extra factor (memory)
         "time_limit": 600.0,      # seconds of solve time (checked once per Newton step)
+        "coulomb": "newton",      # Coulomb friction: "newton" (monolithic: the radius mu_f lambda inside the Newton
+                                  # system) or "fixed_point" (dualfem.numerics.coulomb over Tresca Newton solves)
         "verbose": False,         # print one line per Newton step to stderr
     }
 
     ranges = {"c": "[0, inf)", "globalize": ("armijo", "none"), "sigma": "(0, 0.5)", "max_backtracks": "[1, inf)",
               "refine": "[0, inf)", "refine_tol": "(0, inf)", "factor": None,
               "operator": OPERATORS, "newton": FACE_METHODS,
-              "precond": ("auto", "dirichlet", "jacobi"), "layers": "[1, inf)"}   # c = 0: automatic
+              "precond": ("auto", "dirichlet", "jacobi"), "layers": "[1, inf)",
+              "coulomb": ("newton", "fixed_point")}   # c = 0: automatic
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -245,6 +249,8 @@ class PDASSolver(DualOperatorSolver):
         layout = FrictionLayout.of(self.qp)
         c = p["c"] if p["c"] > 0 else (1.0 / op.diagonal().mean() if op.b0.size else 1.0)
         deadline = time.perf_counter() + p["time_limit"]
+        if layout.coulomb.any() and p["coulomb"] == "fixed_point":
+            return self._coulomb_fixed_point(c, deadline)
         r = semismooth_newton(op, layout, c, self._tol(), int(p["max_iter"]), deadline=deadline)
         if r.converged:
             status = Status.SOLVED
@@ -253,10 +259,35 @@ class PDASSolver(DualOperatorSolver):
         x = op.x_of(r.mu)
         self.report_iterate(r.steps, lambda: x, r.mu)
         return Solution(solver=self.name, status=status, x=x, multipliers=r.mu,
-                        iterations={"newton": r.steps}, history=r.history, message=r.message,
+                        iterations={"newton": r.steps, "active_set_changes": r.changes}, history=r.history,
+                        message=r.message,
                         info={"c": c, "active_set_changes": r.changes, **{f"n_{k}": v for k, v in r.sets.items()},
                               "gmres_iterations": r.gmres_iterations, "friction": "semismooth newton (HSW)",
                               "n_local": int(self.qp.local_dofs.size), **op.info()})
+
+    def _coulomb_fixed_point(self, c: float, deadline: float) -> Solution:
+        """Coulomb by the fixed point g <- mu_f lambda / w (:mod:`dualfem.numerics.coulomb`), each Tresca problem by
+        the semismooth Newton warm-started from the previous answer."""
+        op, p, failed = self.op, self.params, []
+        counts = {"newton": 0, "active_set_changes": 0}
+
+        def solve_tresca(qpt, warm):
+            r = semismooth_newton(op, FrictionLayout.of(qpt), c, self._tol(), int(p["max_iter"]), deadline=deadline,
+                                  mu0=None if warm is None else warm[1])
+            counts["newton"] += r.steps
+            counts["active_set_changes"] += r.changes
+            if not r.converged:
+                failed.append(r.message)
+            return op.x_of(r.mu), r.mu, {}
+
+        fp = coulomb_fixed_point(self.qp, solve_tresca, 1e-11, 50)
+        status = Status.SOLVED if fp.status == "solved" and not failed else Status.MAX_ITER
+        message = (f"Coulomb fixed point {fp.status} in {fp.iterations} Tresca solves by semismooth Newton"
+                   + (f"; an inner solve failed: {failed[-1]}" if failed else ""))
+        return Solution(solver=self.name, status=status, x=fp.x, multipliers=fp.mu,
+                        iterations={**counts, **fp.summary()}, message=message,
+                        info={"c": c, "friction": "coulomb fixed point over semismooth newton",
+                              "coulomb_changes": fp.changes, **op.info()})
 
     def solve(self) -> Solution:
         if self.qp.blocks:

@@ -162,3 +162,11 @@ def test_matrix_free_operator_gives_the_dense_answer(name):
     a, b = solve(qp), solve(qp, name, operator="matrix_free")
     assert b.status == "solved" and b.info["operator"] == "matrix_free"
     assert np.abs(a.x - b.x).max() <= 1e-10 * np.abs(a.x).max()
+
+
+@pytest.mark.parametrize("scene", [crack2d, penny], ids=["2d", "3d"])
+def test_pdas_coulomb_fixed_point_agrees_with_the_monolithic_newton(scene):
+    qp = with_friction(scene(), "coulomb", 0.15)
+    a, b = solve(qp), solve(qp, coulomb="fixed_point")
+    assert b.status == "solved" and b.iterations["coulomb_iterations"] > 1
+    assert np.abs(a.x - b.x).max() <= 1e-9 * np.abs(a.x).max()
