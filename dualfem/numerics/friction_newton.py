@@ -12,8 +12,10 @@ monolithic: the radius is differentiated inside the Newton system). Each step sp
 active sets: normal **contact** (lambda - c g > 0: the gap held at 0) or **open** (lambda = 0); friction
 **stick** (|z| < r: the slip held at 0), **slip** (|z| >= r: the linearization of ``|z| t - r z``, with HSW's
 modification: t replaced by its projection onto the disc in the term ``t z'/|z|``, which keeps the step a descent
-direction away from the solution) or **free** (r = 0: t = 0). In 2D (boxes) the slip rows give t = r sign(z):
-the method is the primal-dual active set method for boxes; in 3D (discs) it is a semismooth Newton method.
+direction away from the solution) or **free** (r = 0: t = 0). In 2D (boxes) a slip row is divided by |z| and
+linearized as ``t - r sign(z)`` (HSW's 2D form: the term ``(t sign z - r) dz / |z|`` that vanishes at a solution
+is dropped), so for Tresca each step lands on the exact point of its sets: the primal-dual active set method for
+boxes; in 3D (discs) it is a semismooth Newton method, superlinear near the solution.
 
 The Newton matrix is ``J = P + Q D`` (P, Q sparse, block diagonal per node; P couples a Coulomb node to its
 normal row): dense LU when the operator is dense (D an M x M matrix), else GMRES with products ``D v``
@@ -97,15 +99,21 @@ def newton_system(layout: FrictionLayout, mu: np.ndarray, gap: np.ndarray, c: fl
         nz = np.linalg.norm(z, axis=1)
         n = z / nz[:, None]
         nt = np.linalg.norm(t, axis=1)
-        tt = t * (r / np.maximum(r, nt))[:, None]              # HSW: t projected onto the disc in t z'/|z|
-        A = tt[:, :, None] * n[:, None, :] - r[:, None, None] * np.eye(cc)[None]
-        Pb = A + nz[:, None, None] * np.eye(cc)[None]
+        if cc == 1:         # 2D, a box: the row divided by |z| is t - r sign(z), linear (PDAS for boxes)
+            A = np.zeros((t.shape[0], 1, 1))
+            Pb = np.ones((t.shape[0], 1, 1))
+            F[R.ravel()] = (t - r[:, None] * n).ravel()
+            z = n
+        else:               # 3D, a disc: HSW, t projected onto the disc in the term t z'/|z|
+            tt = t * (r / np.maximum(r, nt))[:, None]
+            A = tt[:, :, None] * n[:, None, :] - r[:, None, None] * np.eye(cc)[None]
+            Pb = A + nz[:, None, None] * np.eye(cc)[None]
+            F[R.ravel()] = (nz[:, None] * t - r[:, None] * z).ravel()
         rr = np.repeat(R, cc, axis=1).ravel()
         cl = np.tile(R, (1, cc)).ravel()
         rows_p.append(rr)
         cols_p.append(cl)
         vals_p.append(Pb.ravel())
-        F[R.ravel()] = (nz[:, None] * t - r[:, None] * z).ravel()
         cou = layout.coulomb[slip] & (mu[np.maximum(layout.normal[slip], 0)] > 0)
         if cou.any():                                          # d r = mu_f d lambda: the term -z dr
             nr = layout.normal[slip][cou]
