@@ -64,6 +64,13 @@ Jacobi-PCG on D_AA warm-started from the MPRGP forces, one K-solve per CG iterat
 operator) ``refine`` iterative-refinement steps of the full KKT system
 (:func:`dualfem.numerics.polish.refine_on_active_set`) remove the rounding error of the reduction.
 Multipliers are nodal contact forces (mu >= 0, ``Kx - F = B'mu``).
+
+**Friction** (Tresca / Coulomb blocks): MPGP, Dostál's generalization to separable convex sets (half-lines and
+the friction discs, :mod:`dualfem.numerics.friction_mpgp`), on the dual operator of all blocks stacked
+(:func:`dualfem.numerics.friction_dual.stacked_qp`), without a preconditioner, then (``friction_polish``) HSW's
+semismooth Newton from its answer (:mod:`dualfem.numerics.friction_newton`: the exact point of its sets, kept if it
+converges). Coulomb: the fixed point g <- mu_f lambda / w over such Tresca solves, warm-started
+(:mod:`dualfem.numerics.coulomb`; ``coulomb_tol``, ``coulomb_max_iter``; stalled or not converged: ``max_iter``).
 """
 from __future__ import annotations
 

@@ -38,6 +38,14 @@ sparse factorization of the Newton matrix K + B_A'C B_A per active set (one anal
 PARDISO) with augmented-Lagrangian steps (``newton="factor"``; ``info["al_steps"]``,
 ``info["newton_factorizations"]``). The two tie in time (docs/measurements.md); cg keeps no extra factor.
 
+**Friction** (a QP with Tresca / Coulomb blocks, :mod:`dualfem.core.laws`): the dual operator is that of all blocks
+stacked (:func:`dualfem.numerics.friction_dual.stacked_qp`, the same factorization of K) and the solve is
+Hüeber-Stadler-Wohlmuth's semismooth Newton with contact / open and stick / slip sets
+(:mod:`dualfem.numerics.friction_newton`; 2D boxes, 3D discs); Coulomb monolithic (``coulomb="newton"``: the
+radius mu_f lambda inside the Newton system) or by the fixed point over Tresca solves (``coulomb="fixed_point"``,
+:mod:`dualfem.numerics.coulomb`). Counters: ``iterations`` (newton, active_set_changes; the fixed point's),
+``info`` (n_contact, n_stick, n_slip, gmres_iterations matrix-free). Not converged: ``max_iter``, never solved.
+
 Multipliers are the nodal contact forces mu >= 0 with ``K x - F = B' mu``; x is recovered as
 ``K^-1 (F + B'mu)`` (dense: ``xI = S^-1 (g + BI' mu)`` and one solve with the cached factor of K_fixed),
 then (dense operator) refined on the final active set.
