@@ -292,7 +292,7 @@ class MPRGPSolver(DualOperatorSolver):
         mu = res.mu
         if res.converged and p["friction_polish"]:
             c = 1.0 / op.diagonal().mean()
-            pol = semismooth_newton(op, layout, c, 1e-13 if op.kind == "dense" else 1e-11, 10, growth=1.0, mu0=mu)
+            pol = semismooth_newton(op, layout, c, 1e-13 if op.kind == "dense" else 1e-11, 10, mu0=mu)
             counts["polish_newton"] = counts.get("polish_newton", 0) + pol.steps
             if pol.converged:
                 mu = pol.mu

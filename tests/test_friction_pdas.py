@@ -99,8 +99,9 @@ def test_zero_friction_is_the_frictionless_answer(scene, kind, name):
 
 @SOLVERS
 @pytest.mark.parametrize("scene", [crack2d, penny], ids=["2d", "3d"])
-def test_a_large_bound_sticks_every_node_exactly(scene, name):
-    qp = with_friction(scene(), "tresca", 100.0)
+@pytest.mark.parametrize("kind, value", [("tresca", 100.0), ("coulomb", 1.0)])
+def test_a_large_bound_sticks_every_node_exactly(scene, name, kind, value):
+    qp = with_friction(scene(), kind, value)                     # |tau| = 0.3 < mu_f sigma_n = 1: stick
     sol = solve(qp, name)
     assert sol.status == "solved"
     G = qp.G                                                      # stuck and closed: G x = 0, K x - F = G' mu

@@ -19,8 +19,10 @@ boxes; in 3D (discs) it is a semismooth Newton method, superlinear near the solu
 
 The Newton matrix is ``J = P + Q D`` (P, Q sparse, block diagonal per node; P couples a Coulomb node to its
 normal row): dense LU when the operator is dense (D an M x M matrix), else GMRES with products ``D v``
-(one K-solve each). Steps are full semismooth Newton steps, backtracked on the merit ``|Phi|`` (Phi the
-projection residual ``mu - P(mu - c g)``) when the full step increases it by more than ``growth``; the
+(one K-solve each). Steps are semismooth Newton steps, backtracked (halved, at most ``max_backtracks`` times) on
+the merit ``|Phi|_inf`` (Phi the projection residual ``mu - P(mu - c g)``) until ``|Phi(mu + t d)| <= (1 - sigma
+t) |Phi(mu)|``; when no step passes, the full step is taken (a non-monotone safeguard: full steps alone cycle
+between slip directions on a stuck 2D crack at mu_f = 1, where the damped step converges in 3). The
 iteration stops at ``|Phi| <= tol`` (relative to the forces' scale) or after ``max_iter`` steps (then the status
 is MAX_ITER, never SOLVED).
 """
@@ -149,7 +151,8 @@ def _solve(op, P, Q, F, counters: dict) -> np.ndarray:
     return d
 
 
-def semismooth_newton(op, layout: FrictionLayout, c: float, tol: float, max_iter: int, growth: float = 10.0,
+def semismooth_newton(op, layout: FrictionLayout, c: float, tol: float, max_iter: int, sigma: float = 1e-4,
+                      max_backtracks: int = 20,
                       deadline: float = np.inf, mu0: np.ndarray | None = None) -> NewtonResult:
     """HSW's semismooth Newton on the stacked dual of ``op`` (a DualOperator of the stacked QP)."""
     b0 = op.b0
@@ -174,13 +177,18 @@ def semismooth_newton(op, layout: FrictionLayout, c: float, tol: float, max_iter
         last = key
         d = _solve(op, P, Q, F, counters)
         t = 1.0
-        for _ in range(30):
+        for _ in range(max_backtracks + 1):
             mt = mu + t * d
             gt = op.apply(mt) + b0
             rt = residual(mt, gt)
-            if rt <= growth * res or t < 1e-6:
+            if rt <= (1.0 - sigma * t) * res:
                 break
             t *= 0.5
+        else:                                                  # no decrease: the full step (non-monotone)
+            t = 1.0
+            mt = mu + d
+            gt = op.apply(mt) + b0
+            rt = residual(mt, gt)
         mu, gap, res = mt, gt, rt
         history.append({"iter": k, "contact": int(contact.sum()), "stick": int((state == 1).sum()),
                         "slip": int((state == 2).sum()), "step": t, "residual": res})
