@@ -171,3 +171,14 @@ def test_pdas_coulomb_fixed_point_agrees_with_the_monolithic_newton(scene):
     a, b = solve(qp), solve(qp, coulomb="fixed_point")
     assert b.status == "solved" and b.iterations["coulomb_iterations"] > 1
     assert np.abs(a.x - b.x).max() <= 1e-9 * np.abs(a.x).max()
+
+
+def test_dual_gradient_takes_tresca_not_coulomb():
+    from dualfem.core.solver import unhandled_law
+
+    qp = with_friction(crack2d(), "tresca", mixed_bound(crack2d(), 0.1, 0.6))
+    a, b = solve(qp), solve(qp, "dual_gradient")
+    assert b.status == "solved" and kkt(qp, b) < 1e-9
+    assert np.abs(a.x - b.x).max() <= 1e-8 * np.abs(a.x).max()
+    assert "does not handle the 'coulomb' law" in unhandled_law(make_solver("dual_gradient"),
+                                                                 with_friction(crack2d(), "coulomb", 0.1))
