@@ -182,3 +182,11 @@ def test_dual_gradient_takes_tresca_not_coulomb():
     assert np.abs(a.x - b.x).max() <= 1e-8 * np.abs(a.x).max()
     assert "does not handle the 'coulomb' law" in unhandled_law(make_solver("dual_gradient"),
                                                                  with_friction(crack2d(), "coulomb", 0.1))
+
+
+def test_the_runner_certifies_the_frictional_answer():
+    from dualfem.experiments.runner import run
+
+    qp = with_friction(crack2d(), "tresca", mixed_bound(crack2d(), 0.1, 0.6))
+    sol = run("pdas", qp)
+    assert sol.verdict.status == "solved" and sol.verdict.cert_x < 1e-9
