@@ -78,12 +78,12 @@ import time
 
 import numpy as np
 
-from dualfem.dual_solver import OPERATORS, DualOperatorSolver, make_operator
+from dualfem.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics import dual_precond as dp
 from dualfem.numerics.coulomb import coulomb_fixed_point
 from dualfem.numerics.dual_operator import power_norm
 from dualfem.numerics.factor import from_param
-from dualfem.numerics.friction_dual import FrictionLayout, layout_refusal, stacked_qp
+from dualfem.numerics.friction_dual import FrictionLayout, friction_operator, layout_refusal
 from dualfem.numerics.friction_mpgp import mpgp
 from dualfem.numerics.friction_newton import semismooth_newton
 from dualfem.numerics.polish import refine_on_active_set
@@ -250,8 +250,7 @@ class MPRGPSolver(DualOperatorSolver):
     def setup(self, qp) -> None:
         if qp.blocks:                  # friction: the dual operator of all blocks stacked, no preconditioner
             self.qp, self.precond_kind, self.scale, self.precond = qp, "none", None, None
-            self.op = make_operator(stacked_qp(qp), self.params["operator"], factor=from_param(self),
-                                    tol=self.tolerance)
+            self.op = friction_operator(qp, self.params["operator"], from_param(self), self.tolerance)
             self.reduction = None
             self.norm = self.op.norm_estimate(int(self.params["power_iter"])) if self.op.b0.size else 0.0
             return

@@ -58,12 +58,12 @@ import time
 import numpy as np
 import scipy.linalg as sla
 
-from dualfem.dual_solver import OPERATORS, DualOperatorSolver, make_operator
+from dualfem.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics.coulomb import coulomb_fixed_point
 from dualfem.numerics.dual_operator import FACE_METHODS
 from dualfem.numerics.dual_precond import dirichlet_by_default, dirichlet_inverse
 from dualfem.numerics.factor import from_param
-from dualfem.numerics.friction_dual import FrictionLayout, layout_refusal, stacked_qp
+from dualfem.numerics.friction_dual import FrictionLayout, friction_operator, layout_refusal
 from dualfem.numerics.friction_newton import semismooth_newton
 from dualfem.numerics.polish import refine_on_active_set
 from dualfem.registry import register_solver
@@ -177,8 +177,7 @@ class PDASSolver(DualOperatorSolver):
     def setup(self, qp) -> None:
         if qp.blocks:                      # friction: the dual operator of all blocks stacked (same factorization)
             self.qp = qp
-            self.op = make_operator(stacked_qp(qp), self.params["operator"], factor=from_param(self),
-                                    tol=self.tolerance)
+            self.op = friction_operator(qp, self.params["operator"], from_param(self), self.tolerance)
             self.reduction = None          # the stacked QP's reduction is not the QP's (its B differs)
             return
         super().setup(qp)

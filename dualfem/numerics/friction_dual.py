@@ -38,6 +38,27 @@ def layout_refusal(qp: QP) -> str | None:
     return None
 
 
+def friction_operator(qp: QP, operator: str, factor, tol: float):
+    """The dual operator of the stacked ``qp`` (:func:`stacked_qp`) for a friction solver: ``operator`` as asked;
+    ``auto`` (in an ``auto`` linear-algebra context) takes the dense reduction whenever it fits the memory budget,
+    else the context's choice. The frictionless crossover (dense below ~1,200 interface unknowns) weighs a dense
+    Cholesky against Jacobi-PCG on an SPD face; friction's Newton systems are nonsymmetric (3D slip rows), and
+    matrix-free they cost GMRES iterations of one K-solve each, so the dense reduction wins far beyond it."""
+    from dualfem.core.errors import InputError, MissingDependency
+    from dualfem.numerics.dual_operator import make_operator
+    from dualfem.numerics.la import current
+
+    st = stacked_qp(qp)
+    chosen = None
+    if operator == "auto" and current().operator in (None, "auto"):
+        try:
+            kind, why = current().choose_operator(st, "dense", factor=getattr(factor, "name", factor))
+            chosen = (kind, f"friction: dense fits ({why})")
+        except (InputError, MissingDependency):
+            chosen = None
+    return make_operator(st, operator, factor=factor, tol=tol, chosen=chosen)
+
+
 def stacked_qp(qp: QP) -> QP:
     """``qp`` with ``B`` = all blocks stacked (:attr:`QP.G`) and their weights, no blocks and no interface part
     (whose rows are the normal ones only); it shares ``qp``'s factorization store (one factorization of K)."""

@@ -19,7 +19,8 @@ boxes; in 3D (discs) it is a semismooth Newton method, superlinear near the solu
 
 The Newton matrix is ``J = P + Q D`` (P, Q sparse, block diagonal per node; P couples a Coulomb node to its
 normal row): dense LU when the operator is dense (D an M x M matrix), else GMRES with products ``D v``
-(one K-solve each). Steps are semismooth Newton steps, backtracked (halved, at most ``max_backtracks`` times) on
+(one K-solve each), preconditioned by J with D replaced by its diagonal (a sparse LU, block diagonal per node).
+Steps are semismooth Newton steps, backtracked (halved, at most ``max_backtracks`` times) on
 the merit ``|Phi|_inf`` (Phi the projection residual ``mu - P(mu - c g)``) until ``|Phi(mu + t d)| <= (1 - sigma
 t) |Phi(mu)|``; when no step passes, the full step is taken (a non-monotone safeguard: full steps alone cycle
 between slip directions on a stuck 2D crack at mu_f = 1, where the damped step converges in 3). The
@@ -145,8 +146,11 @@ def _solve(op, P, Q, F, counters: dict) -> np.ndarray:
     def cb(_):
         its[0] += 1
 
+    # preconditioner: J with D replaced by its diagonal (block diagonal per node: a sparse LU)
+    lu = spla.splu(sp.csc_matrix(P + Q @ sp.diags(op.diagonal())))
+    prec = spla.LinearOperator((M, M), matvec=lu.solve)
     d, info = spla.gmres(spla.LinearOperator((M, M), matvec=mv), -F, rtol=1e-13, atol=0.0, restart=min(M, 200),
-                         maxiter=20, callback=cb, callback_type="pr_norm")
+                         maxiter=20, M=prec, callback=cb, callback_type="pr_norm")
     counters["gmres"] += its[0]
     return d
 
