@@ -44,7 +44,9 @@ def solve(qp, name="pdas", **params):
     s = make_solver(name, params)
     assert s.skip(qp) is None
     s.setup(qp)
-    return s.solve()
+    sol = s.solve()
+    assert sol.multipliers.size == qp.m_total                 # every block's multipliers: friction was solved
+    return sol
 
 
 def kkt(qp, sol) -> float:
