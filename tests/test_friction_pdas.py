@@ -192,3 +192,11 @@ def test_the_runner_certifies_the_frictional_answer():
     qp = with_friction(crack2d(), "tresca", mixed_bound(crack2d(), 0.1, 0.6))
     sol = run("pdas", qp)
     assert sol.verdict.status == "solved" and sol.verdict.cert_x < 1e-9
+
+
+@pytest.mark.parametrize("name, params", [("pdas", {"max_iter": 1}), ("mprgp", {"coulomb_max_iter": 1}),
+                                          ("mprgp", {"max_iter": 3})])
+def test_an_unfinished_friction_solve_is_never_solved(name, params):
+    qp = with_friction(penny(), "coulomb", 0.15)                   # needs 6 Newton steps / 8 fixed-point solves
+    sol = solve(qp, name, **params)
+    assert sol.status == "max_iter"
