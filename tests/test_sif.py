@@ -139,20 +139,44 @@ def penny_shear():
     return qp, sol
 
 
-def test_penny_under_shear_signs_and_shapes(penny_shear):
-    """A penny (radius 1, centre (5, 5, 5)) opened by sigma_zz = 0.2 and sheared by tau = sigma_xz = 0.5:
-    K_I > 0 and nearly uniform, K_II ~ cos(theta) and K_III ~ +sin(theta) (Kassir and Sih, with e3 = e1 x e2)
-    in shape and sign; this coarse P1 mesh (3.4 k unknowns) gives them 30-50 % low (docs/sif.md)."""
+def test_penny_under_shear(penny_shear):
+    """A penny (radius 1, centre (5, 5, 5)) opened by sigma_zz = 0.2 and sheared by tau = sigma_xz = 0.5: K_I =
+    2 sigma sqrt(a/pi), K_II = A cos(theta), K_III = +A (1 - nu) sin(theta) (Kassir and Sih with e3 = e1 x e2),
+    A = 4 tau sqrt(a/pi)/(2 - nu). On this coarse P1 mesh (3.4 k unknowns) the interaction integral's
+    amplitudes are within 15 % (measured 5-9 % low), the displacement correlation's have the shapes and signs but
+    are 30-50 % low (docs/sif.md)."""
     qp, sol = penny_shear
-    k = stress_intensity(qp, sol.x)
-    assert k.method == "correlation-fit" and k.K_III is not None
-    th = np.arctan2(k.point[:, 1] - 5, k.point[:, 0] - 5)
+    th = np.arctan2(qp.geometry.nodes[1, qp.interface.front] - 5, qp.geometry.nodes[0, qp.interface.front] - 5)
     amp = 4 * 0.5 * np.sqrt(1 / np.pi) / (2 - NU)
-    assert np.all(k.K_I > 0) and k.K_I.std() < 0.1 * k.K_I.mean()
-    for K, shape in ((k.K_II, amp * np.cos(th)), (k.K_III, amp * (1 - NU) * np.sin(th))):
+    exact = {"K_I": np.full(th.size, 2 * 0.2 / np.sqrt(np.pi)), "K_II": amp * np.cos(th),
+             "K_III": amp * (1 - NU) * np.sin(th)}
+    k = stress_intensity(qp, sol.x)
+    assert k.method == "interaction" and k.K_III is not None
+    for mode, ex in exact.items():
+        K = getattr(k, mode)
+        assert (K @ ex) / (ex @ ex) == pytest.approx(1.0, abs=0.15), mode
+        assert np.abs(K - ex).max() < 0.3 * np.abs(ex).max(), mode
+    dc = stress_intensity(qp, sol.x, "fit")
+    assert np.all(dc.K_I > 0) and dc.K_I.std() < 0.1 * dc.K_I.mean()
+    for mode in ("K_II", "K_III"):
+        K, shape = getattr(dc, mode), exact[mode]
         assert np.corrcoef(K, shape)[0, 1] > 0.95
-        ratio = (K @ shape) / (shape @ shape)
-        assert 0.4 < ratio < 1.05
+        assert 0.4 < (K @ shape) / (shape @ shape) < 1.05
+
+
+def test_closed_penny_under_compression_and_shear():
+    """Closed by sigma_zz = -1 (the contact holds the faces): the face integral of the contact tractions brings the
+    interaction integral's K_I to 0 within 3 % of |sigma| 2 sqrt(a/pi) on average and 10 % at every front node
+    (measured 1 % and 8 %; without the face integral: about -55 %)."""
+    from dualfem.core.scene import load_scene
+
+    qp = load_scene("penny", {"mesh_size": 2.0, "tip_size": 0.25, "delta": 1e3,
+                              "remote_stress": [[0, 0, 0.5], [0, 0, 0], [0.5, 0, -1.0]]}).build()
+    sol = run("pdas", qp)
+    k = stress_intensity(qp, sol.x)
+    scale = 2 / np.sqrt(np.pi)
+    assert np.abs(k.K_I).mean() < 0.03 * scale and np.abs(k.K_I).max() < 0.1 * scale
+    assert np.abs(correlation(qp, sol.x).K_I).max() < 1e-10
 
 
 def test_outputs_json_and_vtu(penny_shear, tension, tmp_path):

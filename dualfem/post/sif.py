@@ -172,6 +172,20 @@ def _frame_3d(it, pts: np.ndarray, k: int, rows: np.ndarray, edges: np.ndarray, 
     return np.array([e1, n, np.cross(e1, n)])
 
 
+def front_frames_3d(it, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict[int, np.ndarray]]:
+    """3D: the frames (k, 3, 3) (rows e1, e2, e3) of the front nodes, their element sizes h (k,) (the distance to
+    the nearest defect node) and each defect's front edges (:func:`_front_edges`)."""
+    edges = {int(d): _front_edges(it, int(d)) for d in np.unique(it.front_id)}
+    frames, hs = [], []
+    for k, tip in enumerate(it.front):
+        d = int(it.front_id[k])
+        rows = np.flatnonzero(it.defect_id == d)
+        h = float(np.linalg.norm(pts[:, it.lower[rows]] - pts[:, tip][:, None], axis=0).min())
+        frames.append(_frame_3d(it, pts, k, rows, edges[d], h))
+        hs.append(h)
+    return np.array(frames).reshape(-1, 3, 3), np.array(hs), edges
+
+
 def correlation(qp, x, method: str = "fit", rings: float = 4.0) -> StressIntensity:
     """K_I, K_II (and K_III in 3D) by displacement correlation (module docstring): the defect nodes within
     ``rings`` element sizes (the distance from the tip to its nearest defect node) behind each tip or front node
@@ -188,25 +202,22 @@ def correlation(qp, x, method: str = "fit", rings: float = 4.0) -> StressIntensi
     kappa = kolosov(mat.nu, mat.plane, it.dim)
     coef = np.array([G / (kappa + 1), G / (kappa + 1), G / 4.0])[:it.dim] * np.sqrt(2 * np.pi)   # e1, e2, e3
     jump = x[it.plus_dofs] - x[it.minus_dofs]                      # (m, dim): [u] = u+ - u-
-    frames2, tip_rows = tip_frames_2d(it, pts) if it.dim == 2 else (np.zeros((0, 2, 2)), [])
-    frames: list[np.ndarray] = []
-    edges: dict[int, np.ndarray] = {}
+    if it.dim == 2:
+        frames, tip_rows = tip_frames_2d(it, pts)
+    else:
+        frames, hs, edges = front_frames_3d(it, pts)
     K, radius = np.zeros((it.front.size, it.dim)), np.zeros(it.front.size)
     for k, tip in enumerate(it.front):
         P = pts[:, tip]
         if it.dim == 2:
-            rows, F = tip_rows[k], frames2[k]
+            rows, F = tip_rows[k], frames[k]
             r = np.hypot(*(pts[:, it.lower[rows]] - P[:, None]))
             h = r.min()
         else:
-            d = int(it.front_id[k])
-            if d not in edges:
-                edges[d] = _front_edges(it, d)
+            d, F, h = int(it.front_id[k]), frames[k], hs[k]
             rows = np.flatnonzero(it.defect_id == d)
             X = pts[:, it.lower[rows]]
             dist = np.linalg.norm(X - P[:, None], axis=0)
-            h = float(dist.min())
-            F = _frame_3d(it, pts, k, rows, edges[d], h)
             cand = dist <= (rings + 2) * h
             rows, X = rows[cand], X[:, cand]
             e = edges[d]
@@ -216,7 +227,6 @@ def correlation(qp, x, method: str = "fit", rings: float = 4.0) -> StressIntensi
                 r, foot = np.linalg.norm(X - P[:, None], axis=0), np.repeat(P[:, None], X.shape[1], axis=1)
             keep = np.linalg.norm(foot - P[:, None], axis=0) <= h * (1 + 1e-9)
             rows, r = rows[keep], r[keep]
-        frames.append(F)
         use = r <= rings * h * (1 + 1e-9)
         if use.sum() < 2:
             use = np.argsort(r)[:2]
@@ -232,5 +242,5 @@ def correlation(qp, x, method: str = "fit", rings: float = 4.0) -> StressIntensi
             K[k] = coef * J.mean(axis=0) / np.sqrt(r.mean())
         radius[k] = r.max()
     return StressIntensity(it.dim, it.front.copy(), pts[:, it.front].T.copy(), it.front_id.copy(), K[:, 1].copy(),
-                           K[:, 0].copy(), K[:, 2].copy() if it.dim == 3 else None, np.asarray(frames),
+                           K[:, 0].copy(), K[:, 2].copy() if it.dim == 3 else None, frames,
                            f"correlation-{method}", radius)
