@@ -135,6 +135,14 @@ def _front_edges(it, d: int) -> np.ndarray:
     return np.unique(np.sort(e[keep], axis=1), axis=0)
 
 
+def node_cells(cells: np.ndarray, n_nodes: int) -> list[np.ndarray]:
+    """For every node, the cells (columns of ``cells``) that hold it."""
+    t = np.repeat(np.arange(cells.shape[1]), cells.shape[0])
+    n = cells.T.ravel()
+    order = np.argsort(n, kind="stable")
+    return np.split(t[order], np.cumsum(np.bincount(n, minlength=n_nodes))[:-1])
+
+
 def distance_to_front(X: np.ndarray, A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Distance of the points X (3, p) to the polyline of segments A -> B (3, s), and the nearest points (3, p)."""
     AB = B - A

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from dualfem.core.errors import InputError
-from dualfem.post.sif import StressIntensity, check_x, kolosov, parts, tip_frames_2d
+from dualfem.post.sif import StressIntensity, check_x, kolosov, node_cells, parts, tip_frames_2d
 
 
 def williams(r: np.ndarray, th: np.ndarray, mode: int, G: float, kappa: float):
@@ -101,14 +101,22 @@ def interaction(qp, x, r_out: float | None = None) -> StressIntensity:
     frames, tip_rows = tip_frames_2d(it, pts)
     outer = _outer_nodes(tri, np.r_[it.lower, it.upper, it.front])
     centroid = pts[:, tri].mean(axis=1)
+    node_tris = node_cells(tri, pts.shape[1])
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(pts.T)
+    q = np.zeros(pts.shape[1])                       # the weight q of the current tip (reset after it)
     K = np.zeros((it.front.size, 2))
     radius = np.zeros(it.front.size)
     for k, tip in enumerate(it.front):
         R = frames[k]
         r_in, ro = _radii(k, it, pts, outer, r_out)
-        q = np.clip((ro - np.hypot(*(pts - pts[:, tip][:, None]))) / (ro - r_in), 0.0, 1.0)
-        gq = np.einsum("ti,tid->td", q[tri.T], grad) @ R.T           # grad q in the tip frame
-        ring = np.flatnonzero(np.abs(gq).sum(axis=1) > 0)
+        near = np.asarray(tree.query_ball_point(pts[:, tip], ro), dtype=np.int64)
+        q[near] = np.clip((ro - np.hypot(*(pts[:, near] - pts[:, tip][:, None]))) / (ro - r_in), 0.0, 1.0)
+        T = np.unique(np.concatenate([node_tris[n] for n in near]))
+        gq = np.zeros((tri.shape[1], 2))
+        gq[T] = np.einsum("ti,tid->td", q[tri[:, T].T], grad[T]) @ R.T           # grad q in the tip frame
+        ring = T[np.abs(gq[T]).sum(axis=1) > 0]
         loc = R @ (centroid[:, ring] - pts[:, tip][:, None])
         rr, th = np.hypot(*loc), np.arctan2(loc[1], loc[0])
         S = np.einsum("ab,tbc,dc->tad", R, sig[ring], R)             # FE stress in the tip frame
@@ -126,6 +134,7 @@ def interaction(qp, x, r_out: float | None = None) -> StressIntensity:
             I -= _face_term(faces, mode, G, kappa)
             K[k, mode - 1] = Ep * I / 2
         radius[k] = ro
+        q[near] = 0.0
     return StressIntensity(2, it.front.copy(), pts[:, it.front].T.copy(), it.front_id.copy(), K[:, 0], K[:, 1],
                            None, frames, "interaction", radius)
 

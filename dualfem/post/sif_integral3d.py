@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from dualfem.core.errors import InputError
-from dualfem.post.sif import StressIntensity, check_x, distance_to_front, front_frames_3d, parts
+from dualfem.post.sif import StressIntensity, check_x, distance_to_front, front_frames_3d, node_cells, parts
 from dualfem.post.sif_integral import williams
 
 
@@ -66,7 +66,11 @@ def interaction3d(qp, x, r_out: float | None = None) -> StressIntensity:
     sig = lam * np.trace(eps, axis1=1, axis2=2)[:, None, None] * np.eye(3) + 2 * G * eps
     traction = _face_tractions3d(qp, x)
     frames, hs, edges = front_frames_3d(it, pts)
-    node_tets = _node_to_tets(tets, pts.shape[1])
+    node_tets = node_cells(tets, pts.shape[1])
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(pts.T)
+    q = np.zeros(pts.shape[1])                       # the weight q of the current front node (reset after it)
     K = np.zeros((it.front.size, 3))
     radius = np.zeros(it.front.size)
     for k, tip in enumerate(it.front):
@@ -80,9 +84,8 @@ def interaction3d(qp, x, r_out: float | None = None) -> StressIntensity:
         if ro < hs[k]:
             raise InputError(f"r_out = {ro:.3g} at front node {int(tip)} spans less than one element ({hs[k]:.3g})")
         e = e[np.minimum(*(np.linalg.norm(pts[:, e[:, j]] - P[:, None], axis=0) for j in (0, 1))) < 3 * ro]
-        near = np.flatnonzero(np.linalg.norm(pts - P[:, None], axis=0) < 1.5 * ro)
+        near = np.asarray(tree.query_ball_point(P, 1.5 * ro), dtype=np.int64)
         r_n, foot = distance_to_front(pts[:, near], pts[:, e[:, 0]], pts[:, e[:, 1]])
-        q = np.zeros(pts.shape[1])
         q[near] = np.clip(1 - r_n / ro, 0, 1) * np.clip(1 - np.abs(F[2] @ (foot - P[:, None])) / ro, 0, 1)
         fq = q[it.front[it.front_id == d]]
         qa, qb = q[e[:, 0]], q[e[:, 1]]
@@ -112,6 +115,7 @@ def interaction3d(qp, x, r_out: float | None = None) -> StressIntensity:
                 I -= float(np.sum(wq / np.sqrt(rq) * np.einsum("fpi,fi->fp", tq, cq)))
             K[k, mode - 1] = I / length * ((mat.E / (1 - nu ** 2)) / 2 if mode < 3 else G)
         radius[k] = ro
+        q[near] = 0.0
     return StressIntensity(3, it.front.copy(), pts[:, it.front].T.copy(), it.front_id.copy(), K[:, 0], K[:, 1],
                            K[:, 2], frames, "interaction", radius)
 
@@ -123,14 +127,6 @@ def _side(it, nodes: np.ndarray, e2: np.ndarray) -> np.ndarray:
     up[it.upper[keep_u]] = it.normals[keep_u] @ e2
     up[it.lower[keep_l]] = -(it.normals[keep_l] @ e2)
     return np.sign(up[nodes])
-
-
-def _node_to_tets(tets: np.ndarray, n_nodes: int) -> list[np.ndarray]:
-    """For every node, the tetrahedra that hold it."""
-    t = np.repeat(np.arange(tets.shape[1]), tets.shape[0])
-    n = tets.T.ravel()
-    order = np.argsort(n, kind="stable")
-    return np.split(t[order], np.cumsum(np.bincount(n, minlength=n_nodes))[:-1])
 
 
 def _face_tractions3d(qp, x: np.ndarray) -> np.ndarray | None:

@@ -38,13 +38,16 @@ def has_fronts(qp) -> bool:
 
 def sif_record(qp, sol) -> dict | None:
     """The ``sif`` field of ``dualfem solve --json``: :meth:`StressIntensity.to_json` per tip or front node, or
-    ``{"error": ...}`` when they cannot be computed; None when the QP has no front or there is no answer."""
+    ``{"error": ...}`` when they cannot be computed (the solve's answer stands: the record says why); None when the
+    QP has no front or there is no answer."""
     if sol.x is None or not has_fronts(qp):
         return None
     try:
         return stress_intensity(qp, sol.x).to_json()
     except InputError as e:
         return {"error": str(e)}
+    except (ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as e:     # a geometry it does not handle
+        return {"error": f"stress intensity factors failed on this geometry ({type(e).__name__}: {e})"}
 
 
 def front_point_data(qp, sif: StressIntensity, n_points: int) -> dict[str, np.ndarray]:
