@@ -198,3 +198,14 @@ def test_outputs_json_and_vtu(penny_shear, tension, tmp_path):
     K = back.point_data["K_III"]
     assert np.all(np.isfinite(K)) and np.count_nonzero(K) == qp3.interface.front.size
     assert np.allclose(K[qp3.interface.front], rec3["K_III"])
+
+
+def test_solve_json_and_summary_carry_the_factors(capsys):
+    """``dualfem solve --json`` carries ``sif`` (one entry per tip) and the human summary prints it."""
+    from dualfem.cli.main import human_summary, main
+
+    assert main(["solve", "inclined", "--set", "delta=1e3", "--json", "--quiet"]) == 0
+    rec = json.loads(capsys.readouterr().out)
+    sif = rec["sif"]
+    assert sif["method"] == "interaction" and len(sif["K_I"]) == len(sif["K_II"]) == 2 and sif["K_I"][1] > 0
+    assert "stress intensity factors (interaction): tip 0: K_I" in human_summary(rec)
