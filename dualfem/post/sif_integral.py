@@ -100,7 +100,6 @@ def interaction(qp, x, r_out: float | None = None) -> StressIntensity:
     force = _face_forces(qp, x)
     frames, tip_rows = tip_frames_2d(it, pts)
     outer = _outer_nodes(tri, np.r_[it.lower, it.upper, it.front])
-    centroid = pts[:, tri].mean(axis=1)
     node_tris = node_cells(tri, pts.shape[1])
     from scipy.spatial import cKDTree
 
@@ -117,14 +116,16 @@ def interaction(qp, x, r_out: float | None = None) -> StressIntensity:
         gq = np.zeros((tri.shape[1], 2))
         gq[T] = np.einsum("ti,tid->td", q[tri[:, T].T], grad[T]) @ R.T           # grad q in the tip frame
         ring = T[np.abs(gq[T]).sum(axis=1) > 0]
-        loc = R @ (centroid[:, ring] - pts[:, tip][:, None])
-        rr, th = np.hypot(*loc), np.arctan2(loc[1], loc[0])
+        V = pts[:, tri[:, ring]] - pts[:, tip][:, None, None]               # (2, 3 vertices, ring)
+        loc = np.einsum("ab,bvt,pv->apt", R, V, _TRI_X)                   # quadrature points in the tip frame
+        rr, th = np.hypot(*loc), np.arctan2(loc[1], loc[0])             # (points, ring)
         S = np.einsum("ab,tbc,dc->tad", R, sig[ring], R)             # FE stress in the tip frame
         D = np.einsum("ab,tbc,dc->tad", R, du[ring], R)              # FE displacement gradient in the frame
         E_ = np.einsum("ab,tbc,dc->tad", R, eps[ring], R)
         faces = _face_tractions(it, tip_rows[k], pts, tip, R, force, q)
         for mode in (1, 2):
-            (a11, a22, a12), (v1, v2) = williams(rr, th, mode, G, kappa)
+            (a11, a22, a12), (v1, v2) = (tuple(_TRI_W @ f for f in fields) for fields in williams(rr, th, mode, G,
+                                                                                                 kappa))
             Sa = np.stack([np.stack([a11, a12], 1), np.stack([a12, a22], 1)], 1)
             Ua1 = np.stack([v1, v2], 1)                              # u^a_i,1
             W = np.einsum("tij,tij->t", Sa, E_)
@@ -151,6 +152,11 @@ def _face_forces(qp, x: np.ndarray) -> np.ndarray:
         out[:, nodes] = fx[dofs].T
     return out
 
+
+#: a degree-4 rule on triangles (Dunavant's 6 points): barycentric coordinates (6, 3) and weights (6,), summing to 1
+_TRI_A, _TRI_B = 0.445948490915965, 0.091576213509771
+_TRI_X = np.concatenate([np.full((3, 3), c) + (1 - 3 * c) * np.eye(3) for c in (_TRI_A, _TRI_B)])
+_TRI_W = np.r_[np.full(3, 0.223381589678011), np.full(3, 0.109951743655322)]
 
 #: Gauss-Legendre points and weights on [0, 1] (exact for degree 5 in sqrt(r))
 _GL_X, _GL_W = (np.polynomial.legendre.leggauss(3)[0] + 1) / 2, np.polynomial.legendre.leggauss(3)[1] / 2
