@@ -143,14 +143,24 @@ def node_cells(cells: np.ndarray, n_nodes: int) -> list[np.ndarray]:
     return np.split(t[order], np.cumsum(np.bincount(n, minlength=n_nodes))[:-1])
 
 
-def distance_to_front(X: np.ndarray, A: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distance of the points X (3, p) to the polyline of segments A -> B (3, s), and the nearest points (3, p)."""
-    AB = B - A
-    t = np.einsum("kps,ks->ps", X[:, :, None] - A[:, None, :], AB) / np.maximum(np.einsum("ks,ks->s", AB, AB), 1e-300)
-    foot = A[:, None, :] + np.clip(t, 0.0, 1.0)[None] * AB[:, None, :]
+def distance_to_front(X: np.ndarray, A: np.ndarray, B: np.ndarray, k: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Distance of the points X (3, p) to the polyline of segments A -> B (3, s), and the nearest points (3, p):
+    each point's nearest among the k segments whose midpoints are nearest to it (all of them when s <= k; a
+    front's edges are of comparable lengths, so its nearest segment is among them)."""
+    s = A.shape[1]
+    if s > k:
+        from scipy.spatial import cKDTree
+
+        _, idx = cKDTree((0.5 * (A + B)).T).query(X.T, k=k)               # (p, k)
+    else:
+        idx = np.broadcast_to(np.arange(s), (X.shape[1], s))
+    a, ab = A[:, idx], (B - A)[:, idx]                                      # (3, p, k)
+    t = np.einsum("kpj,kpj->pj", X[:, :, None] - a, ab) / np.maximum(np.einsum("kpj,kpj->pj", ab, ab), 1e-300)
+    foot = a + np.clip(t, 0.0, 1.0)[None] * ab
     d = np.linalg.norm(X[:, :, None] - foot, axis=0)
     j = np.argmin(d, axis=1)
-    return d[np.arange(X.shape[1]), j], foot[:, np.arange(X.shape[1]), j]
+    p = np.arange(X.shape[1])
+    return d[p, j], foot[:, p, j]
 
 
 def _frame_3d(it, pts: np.ndarray, k: int, rows: np.ndarray, edges: np.ndarray, h: float) -> np.ndarray:
