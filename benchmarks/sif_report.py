@@ -22,7 +22,7 @@ def _pct(v, signed: bool = True) -> str:
 
 def _table_2d(rows: list[dict]) -> list[str]:
     out = ["| case | mesh_size:tip_size | unknowns | interaction K_I | interaction K_II | fit K_I | fit K_II "
-           "| extrapolate K_I | extrapolate K_II | solve + SIF wall |", "|---|---|---|---|---|---|---|---|---|---|"]
+           "| extrapolate K_I | extrapolate K_II | build + solve wall |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         m = r["methods"]
         cells = [_pct(m.get(k, {}).get(f"{mode}_err")) for k in ("interaction", "fit", "extrapolate")
@@ -34,7 +34,7 @@ def _table_2d(rows: list[dict]) -> list[str]:
 
 def _table_3d(rows: list[dict]) -> list[str]:
     out = ["| case | mode | mesh_size:tip_size | unknowns | interaction: amplitude | interaction: max | fit: amplitude "
-           "| fit: max | extrapolate: amplitude | extrapolate: max | interaction time | solve + SIF wall |",
+           "| fit: max | extrapolate: amplitude | extrapolate: max | interaction time | build + solve wall |",
            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         name, modes = CASES_3D[r["case"]]
