@@ -1,5 +1,6 @@
 """Stress intensity factors at 2D crack tips and along 3D crack fronts: the result type, the tip frames and the
-displacement-correlation estimate (the interaction integral, measured against it: :mod:`dualfem.post.sif_integral`).
+displacement-correlation estimate (the interaction integrals, measured against it: :mod:`dualfem.post.sif_integral`
+in 2D, :mod:`dualfem.post.sif_integral3d` in 3D; the choice and the outputs: :mod:`dualfem.post.sif_outputs`).
 
 Everything is computed from a solution's unknowns ``x`` and the QP's typed parts: the interface
 (:class:`~dualfem.core.parts.InterfacePart`: ``front``/``front_id``, ``normals``, ``tangents``, ``faces``,
