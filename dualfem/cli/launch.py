@@ -92,6 +92,11 @@ def _solve_work(guard: Guard, args: Any, solver: Any, limit: float, stages: Call
     rec = summary(qp, sol)
     rec["time_s"] = {**rec["time_s"], "assembly": t2 - t1, "total": time.perf_counter() - t0}
     rec["peak_rss_mb"] = peak_rss_mb()
+    from dualfem.post.sif_outputs import sif_record
+
+    sif = sif_record(qp, sol)        # stress intensity factors at the tips / fronts (dualfem.post.sif)
+    if sif is not None:
+        rec["sif"] = sif
     _outputs(args, problem, qp, sol, rec)
     return rec, sol.status == Status.SOLVED
 

@@ -318,7 +318,21 @@ def human_summary(rec: dict, scene: str | None = None) -> str:
         lines.append(f"energy {rec['energy']:.10g}  max jump {rec['max_jump']:.4g}  "
                      f"contact nodes {rec['n_contact']}/{rec['n_defect_nodes']}")
         lines.append("residuals (evaluator): " + "  ".join(f"{k} {v:.2e}" for k, v in r.items()))
+    if rec.get("sif"):
+        lines.append(_sif_line(rec["sif"]))
     return "\n".join(lines)
+
+
+def _sif_line(sif: dict) -> str:
+    """One line of stress intensity factors: each 2D tip's K_I, K_II; a 3D front's ranges."""
+    if "error" in sif:
+        return f"stress intensity factors: not computed ({sif['error']})"
+    modes = [k for k in ("K_I", "K_II", "K_III") if k in sif]
+    if "K_III" not in sif:
+        return f"stress intensity factors ({sif['method']}): " + "; ".join(
+            f"tip {i}: " + " ".join(f"{k} {sif[k][i]:.4g}" for k in modes) for i in range(len(sif["K_I"])))
+    return f"stress intensity factors ({sif['method']}, {len(sif['K_I'])} front nodes): " + "  ".join(
+        f"{k} in [{min(sif[k]):.4g}, {max(sif[k]):.4g}]" for k in modes)
 
 
 def _times(t: dict) -> str:

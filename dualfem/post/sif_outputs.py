@@ -1,0 +1,63 @@
+"""Stress intensity factors as outputs: the method choice, the ``sif`` record of ``dualfem solve --json`` and the
+VTU point fields of 3D fronts (the figure of K along a front: benchmarks/sif_report.py).
+
+``method="auto"`` (and ``"interaction"``): the interaction integral, at 2D tips (:mod:`dualfem.post.sif_integral`)
+and along 3D fronts (:mod:`dualfem.post.sif_integral3d`), the more accurate on P1 meshes; ``"fit"`` and
+``"extrapolate"``: the displacement correlation (:mod:`dualfem.post.sif`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from dualfem.core.errors import InputError
+from dualfem.post.sif import METHODS, StressIntensity, correlation
+from dualfem.post.sif_integral import interaction
+from dualfem.post.sif_integral3d import interaction3d
+
+#: every method :func:`stress_intensity` accepts
+ALL_METHODS = ("auto", "interaction", *METHODS)
+
+
+def stress_intensity(qp, x, method: str = "auto", **options) -> StressIntensity:
+    """K_I, K_II (, K_III) at every tip or front node of the QP's defects from the unknowns ``x`` (module
+    docstring; ``options``: ``r_out`` of the interaction integral, ``rings`` of the correlation)."""
+    if method not in ALL_METHODS:
+        raise InputError(f"method must be one of {', '.join(ALL_METHODS)}, got {method!r}")
+    if method in ("auto", "interaction"):
+        dim = getattr(getattr(qp, "interface", None), "dim", None)
+        return (interaction3d if dim == 3 else interaction)(qp, x, **options)
+    return correlation(qp, x, method, **options)
+
+
+def has_fronts(qp) -> bool:
+    """Whether the QP has what stress intensity factors need: interface with tips or fronts, mesh, material."""
+    it = getattr(qp, "interface", None)
+    return it is not None and it.front.size > 0 and getattr(qp, "geometry", None) is not None \
+        and getattr(qp, "material", None) is not None and qp.shift is None
+
+
+def sif_record(qp, sol) -> dict | None:
+    """The ``sif`` field of ``dualfem solve --json``: :meth:`StressIntensity.to_json` per tip or front node, or
+    ``{"error": ...}`` when they cannot be computed (the solve's answer stands: the record says why); None when the
+    QP has no front or there is no answer."""
+    if sol.x is None or not has_fronts(qp):
+        return None
+    try:
+        return stress_intensity(qp, sol.x).to_json()
+    except InputError as e:
+        return {"error": str(e)}
+    except (ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as e:     # a geometry it does not handle
+        return {"error": f"stress intensity factors failed on this geometry ({type(e).__name__}: {e})"}
+
+
+def front_point_data(qp, sif: StressIntensity, n_points: int) -> dict[str, np.ndarray]:
+    """VTU point fields ``K_I``, ``K_II``, ``K_III`` (3D): the values at the front nodes, 0 elsewhere (the VTU
+    holds no NaN point field)."""
+    out = {}
+    for k in ("K_I", "K_II", "K_III"):
+        v = getattr(sif, k)
+        if v is not None:
+            a = np.zeros(n_points)
+            a[sif.node] = v
+            out[k] = a
+    return out
