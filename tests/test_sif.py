@@ -189,9 +189,12 @@ def test_outputs_json_and_vtu(penny_shear, tension, tmp_path):
     rec = json.loads(json.dumps(sif_record(qp, sol)))
     assert rec["method"] == "interaction" and len(rec["K_I"]) == 2 and "K_III" not in rec
     qp3, sol3 = penny_shear
-    rec3 = sif_record(qp3, sol3)
+    from dualfem.post.sif_outputs import sif_result
+
+    sif3, rec3 = sif_result(qp3, sol3)
     assert len(rec3["K_III"]) == qp3.interface.front.size
-    m = to_meshio3d(qp3, sol3)
+    assert "K_III" not in to_meshio3d(qp3, sol3).point_data      # not computed unless asked (solve --sif)
+    m = to_meshio3d(qp3, sol3, sif=sif3)
     path = tmp_path / "p.vtu"
     meshio.write(path, m)
     back = meshio.read(path)
@@ -205,6 +208,8 @@ def test_solve_json_and_summary_carry_the_factors(capsys):
     from dualfem.cli.main import human_summary, main
 
     assert main(["solve", "inclined", "--set", "delta=1e3", "--json", "--quiet"]) == 0
+    assert "sif" not in json.loads(capsys.readouterr().out)      # only on request: the 3D integral costs a solve
+    assert main(["solve", "inclined", "--set", "delta=1e3", "--sif", "--json", "--quiet"]) == 0
     rec = json.loads(capsys.readouterr().out)
     sif = rec["sif"]
     assert sif["method"] == "interaction" and len(sif["K_I"]) == len(sif["K_II"]) == 2 and sif["K_I"][1] > 0

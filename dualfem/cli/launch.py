@@ -92,17 +92,21 @@ def _solve_work(guard: Guard, args: Any, solver: Any, limit: float, stages: Call
     rec = summary(qp, sol)
     rec["time_s"] = {**rec["time_s"], "assembly": t2 - t1, "total": time.perf_counter() - t0}
     rec["peak_rss_mb"] = peak_rss_mb()
-    from dualfem.post.sif_outputs import sif_record
+    sif = None
+    if getattr(args, "sif", False):   # stress intensity factors at the tips / fronts (dualfem.post.sif), on request
+        from dualfem.post.sif_outputs import sif_result
 
-    sif = sif_record(qp, sol)        # stress intensity factors at the tips / fronts (dualfem.post.sif)
-    if sif is not None:
-        rec["sif"] = sif
-    _outputs(args, problem, qp, sol, rec)
+        guard.phase("stress intensity factors", own_budget(limit))
+        sif, record = sif_result(qp, sol)
+        if record is not None:
+            rec["sif"] = record
+    _outputs(args, problem, qp, sol, rec, sif)
     return rec, sol.status == Status.SOLVED
 
 
-def _outputs(args: Any, problem: Any, qp: Any, sol: Any, rec: dict) -> None:  # pragma: no cover - in the worker
-    """The ``_post`` hook, ``--vtk``/``--xdmf`` and ``--figure`` of ``dualfem solve``."""
+def _outputs(args: Any, problem: Any, qp: Any, sol: Any, rec: dict, sif: Any = None) -> None:  # pragma: no cover
+    """The ``_post`` hook, ``--vtk``/``--xdmf`` (with ``sif``, the factors ``--sif`` computed) and ``--figure`` of
+    ``dualfem solve`` (in the worker)."""
     post = getattr(args, "_post", None)
     if post:
         post(problem, qp, sol, rec)
@@ -112,7 +116,7 @@ def _outputs(args: Any, problem: Any, qp: Any, sol: Any, rec: dict) -> None:  # 
         if sol.x is None:
             print(f"dualfem solve: no solution ({sol.status}): --vtk/--xdmf not written", file=sys.stderr)
         else:
-            for path in write_outputs(qp, sol, vtk=args.vtk, xdmf=args.xdmf):
+            for path in write_outputs(qp, sol, vtk=args.vtk, xdmf=args.xdmf, sif=sif):
                 print(f"wrote {path}", file=sys.stderr)
     if args.figure and sol.x is not None:
         from dualfem.post.solution_figure import write_solution_figure

@@ -214,6 +214,9 @@ def _cfg_solve(p):
     p.add_argument("--figure", metavar="FILE.png", default=None,
                    help="also draw the solution (.png/.pdf/.svg): 2D the deformed body and the jump; 3D the "
                         "opening, slip and pressure maps over each defect and a cut through the body (FILE_cut.png)")
+    p.add_argument("--sif", action="store_true",
+                   help="also compute the stress intensity factors at every tip / front node (the summary's last "
+                        "line, --json 'sif', 3D --vtk/--xdmf point fields K_I, K_II, K_III; docs/sif.md)")
     p.add_argument("--threads", type=int_in(1, max_threads()), default=None, metavar="N",
                    help="threads for the factorization (default: all cores; dense phases use what is fastest)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")

@@ -36,18 +36,24 @@ def has_fronts(qp) -> bool:
         and getattr(qp, "material", None) is not None and qp.shift is None
 
 
-def sif_record(qp, sol) -> dict | None:
-    """The ``sif`` field of ``dualfem solve --json``: :meth:`StressIntensity.to_json` per tip or front node, or
-    ``{"error": ...}`` when they cannot be computed (the solve's answer stands: the record says why); None when the
-    QP has no front or there is no answer."""
+def sif_result(qp, sol) -> tuple[StressIntensity | None, dict | None]:
+    """(the factors, the ``sif`` field of ``dualfem solve --sif --json``: :meth:`StressIntensity.to_json` per tip
+    or front node, or ``{"error": ...}`` when they cannot be computed: the solve's answer stands, the record says
+    why); (None, None) when the QP has no front or there is no answer."""
     if sol.x is None or not has_fronts(qp):
-        return None
+        return None, None
     try:
-        return stress_intensity(qp, sol.x).to_json()
+        sif = stress_intensity(qp, sol.x)
+        return sif, sif.to_json()
     except InputError as e:
-        return {"error": str(e)}
+        return None, {"error": str(e)}
     except (ValueError, IndexError, ArithmeticError, np.linalg.LinAlgError) as e:     # a geometry it does not handle
-        return {"error": f"stress intensity factors failed on this geometry ({type(e).__name__}: {e})"}
+        return None, {"error": f"stress intensity factors failed on this geometry ({type(e).__name__}: {e})"}
+
+
+def sif_record(qp, sol) -> dict | None:
+    """The ``sif`` field alone (:func:`sif_result`)."""
+    return sif_result(qp, sol)[1]
 
 
 def front_point_data(qp, sif: StressIntensity, n_points: int) -> dict[str, np.ndarray]:

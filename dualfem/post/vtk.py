@@ -81,15 +81,16 @@ def check_qp(qp) -> None:
         raise InputError("the defect maps of the QP need defect_upper, defect_lower and defect_s together")
 
 
-def to_meshio(qp, sol=None, *, post: Post | None = None):
-    """The meshio.Mesh described in the module docstring."""
+def to_meshio(qp, sol=None, *, post: Post | None = None, sif=None):
+    """The meshio.Mesh described in the module docstring (``sif``: a :class:`dualfem.post.sif.StressIntensity`
+    of a 3D solution, written as front point fields; None: none)."""
     import meshio
 
     check_qp(qp)
     if qp.geometry.dim == 3:
         from dualfem.post.vtk3d import to_meshio3d
 
-        return to_meshio3d(qp, sol)
+        return to_meshio3d(qp, sol, sif=sif)
     p = post if post is not None else Post(qp, sol)
     nodes = p.nodes
     npts = nodes.shape[1]
@@ -162,17 +163,17 @@ def finite_mean(a: np.ndarray) -> np.ndarray:
         return np.where(cnt > 0, np.nansum(a, axis=0) / np.maximum(cnt, 1), np.nan)
 
 
-def write_vtu(path: str | os.PathLike, qp, sol=None, *, post: Post | None = None) -> Path:
+def write_vtu(path: str | os.PathLike, qp, sol=None, *, post: Post | None = None, sif=None) -> Path:
     """Write the solution as a VTU file (binary, zlib-compressed), atomically."""
     import meshio
 
     path = check_path(path, "vtu")
-    mesh = to_meshio(qp, sol, post=post)
+    mesh = to_meshio(qp, sol, post=post, sif=sif)
     atomic_write(path, lambda tmp: meshio.write(tmp, mesh, file_format="vtu"))
     return path
 
 
-def write_xdmf(path: str | os.PathLike, qp, sol=None, *, post: Post | None = None) -> Path:
+def write_xdmf(path: str | os.PathLike, qp, sol=None, *, post: Post | None = None, sif=None) -> Path:
     """Write the solution as XDMF + HDF5 (``<name>.h5`` beside it).
 
     Both files are first written under their final names in a temporary directory next to
@@ -182,7 +183,7 @@ def write_xdmf(path: str | os.PathLike, qp, sol=None, *, post: Post | None = Non
     import meshio
 
     path = check_path(path, "xdmf")
-    mesh = to_meshio(qp, sol, post=post)
+    mesh = to_meshio(qp, sol, post=post, sif=sif)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmpdir = tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.")
     try:
@@ -199,8 +200,9 @@ def write_xdmf(path: str | os.PathLike, qp, sol=None, *, post: Post | None = Non
     return path
 
 
-def write_outputs(qp, sol, *, vtk: str | None = None, xdmf: str | None = None) -> list[Path]:
-    """Write the requested files (post-processing is computed once and shared)."""
+def write_outputs(qp, sol, *, vtk: str | None = None, xdmf: str | None = None, sif=None) -> list[Path]:
+    """Write the requested files (post-processing is computed once and shared; ``sif``: the stress intensity
+    factors of a 3D solution, written as front point fields, when ``dualfem solve --sif`` computed them)."""
     if not (vtk or xdmf):
         return []
     if sol.x is None:
@@ -209,7 +211,7 @@ def write_outputs(qp, sol, *, vtk: str | None = None, xdmf: str | None = None) -
     post = Post(qp, sol) if qp.geometry.dim == 2 else None
     out = []
     if vtk:
-        out.append(write_vtu(vtk, qp, sol, post=post))
+        out.append(write_vtu(vtk, qp, sol, post=post, sif=sif))
     if xdmf:
-        out.append(write_xdmf(xdmf, qp, sol, post=post))
+        out.append(write_xdmf(xdmf, qp, sol, post=post, sif=sif))
     return out

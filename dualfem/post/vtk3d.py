@@ -5,7 +5,8 @@ One unstructured grid holds the points (every node, both copies of a defect node
 with multipliers; 0 away from the defects and at front nodes, which carry no constraint; both copies of
 a defect node carry its value; no point field holds NaN), ``defect_id`` (-1 elsewhere) and
 ``normal`` (the unit normal pointing to the "+" face at defect nodes, 0 elsewhere), ``K_I``, ``K_II``,
-``K_III`` (stress intensity factors at the front nodes, 0 elsewhere: :mod:`dualfem.post.sif`); cell blocks: the
+``K_III`` (with `dualfem solve --sif`: stress intensity factors at the front nodes, 0 elsewhere:
+:mod:`dualfem.post.sif`); cell blocks: the
 tetrahedra, then, when the QP has its defect surface triangles (``qp.interface.faces``, (n_faces, 3)
 node ids of the "-" face, the front nodes single), the triangles of every "+" face followed by those
 of every "-" face. Cell data: the stress
@@ -22,7 +23,7 @@ from dualfem.post.fields3d import VOIGT, defect_fields3d, stresses3d
 NODAL = ("opening", "slip", "pressure")
 
 
-def to_meshio3d(qp, sol):
+def to_meshio3d(qp, sol, sif=None):
     """The meshio.Mesh described in the module docstring."""
     import meshio
 
@@ -75,19 +76,14 @@ def to_meshio3d(qp, sol):
             did = d["defect_id"][np.max(r, axis=0)].astype(np.int32)
             cell_data["defect_id"] = [np.full(ntet, -1, dtype=np.int32), np.concatenate([did, did])]
     cell_data["face"] = face
-    point_data.update(_front_fields(qp, sol, npts))
+    if sif is not None:
+        point_data.update(_front_fields(sif, npts))
     return meshio.Mesh(g.nodes.T.copy(), cells, point_data=point_data, cell_data=cell_data)
 
 
-def _front_fields(qp, sol, npts: int) -> dict:
-    """``K_I``, ``K_II``, ``K_III`` at the front nodes (NaN elsewhere; :mod:`dualfem.post.sif`), none when the
-    QP has no front or they cannot be computed."""
-    from dualfem.core.errors import InputError
-    from dualfem.post.sif_outputs import front_point_data, has_fronts, stress_intensity
+def _front_fields(sif, npts: int) -> dict:
+    """``K_I``, ``K_II``, ``K_III`` at the front nodes (0 elsewhere; :mod:`dualfem.post.sif`) of the factors
+    ``dualfem solve --sif`` computed."""
+    from dualfem.post.sif_outputs import front_point_data
 
-    if not has_fronts(qp):
-        return {}
-    try:
-        return front_point_data(qp, stress_intensity(qp, sol.x), npts)
-    except InputError:
-        return {}
+    return front_point_data(None, sif, npts)
