@@ -67,7 +67,10 @@ import scipy.linalg as sla
 
 from dualfem.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.evaluator import load_energy, load_length
+from dualfem.numerics.coulomb import coulomb_fixed_point
 from dualfem.numerics.factor import from_param
+from dualfem.numerics.friction_penalty import PenaltyRun, continuation
+from dualfem.numerics.friction_spaces import DenseFrictionSpace, Layout, SparseFrictionSpace
 from dualfem.numerics.newton_matrix import NewtonMatrix
 from dualfem.registry import register_solver
 from dualfem.solution import Solution, Status
@@ -207,6 +210,7 @@ class PenaltySolver(DualOperatorSolver):
 
     name = "penalty"
     family = "dual"
+    accepts = ("signorini", "tresca", "coulomb")
     description = "quadratic penalty, semismooth Newton + line search, continuation in rho (inexact)"
     exact = False
     #: relative energy-norm error of x against the QP's own solution x*, the modelling error included: it
@@ -227,11 +231,12 @@ class PenaltySolver(DualOperatorSolver):
         "keep_factors": 4,        # matrix_free: numeric factorizations of Newton matrices kept (by active set)
         "time_limit": 600.0,      # seconds of solve time (checked between Newton steps)
         "verbose": False,         # print one line per penalty stage to stderr
+        "coulomb_max_iter": 50,   # Coulomb friction (by the fixed point over Tresca solves): most Tresca solves
     }
     renamed = {"penetration_tol": "tol", "max_newton": "max_iter"}
     ranges = {"rho0_factor": "(0, inf)", "rho_growth": "(1, inf)", "rho_max_factor": "(0, inf)",
               "newton_tol": "(0, inf)", "sigma": "(0, 0.5)", "max_backtracks": "[1, inf)", "factor": None,
-              "operator": OPERATORS, "keep_factors": "[1, inf)"}
+              "operator": OPERATORS, "keep_factors": "[1, inf)", "coulomb_max_iter": "[1, inf)"}
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -240,7 +245,13 @@ class PenaltySolver(DualOperatorSolver):
 
     def setup(self, qp) -> None:
         super().setup(qp)                 # self.op: dense or matrix_free
-        self.space = _DenseSpace(self.op, qp) if self.op.kind == "dense" else \
+        self.friction = bool(qp.blocks)
+        if self.friction:                 # numerics/friction_penalty.py: regularized friction
+            self.lay = Layout(qp)
+            self.space = DenseFrictionSpace(qp, self.lay, reduction=self.op.reduction) if self.op.kind == "dense" \
+                else SparseFrictionSpace(qp, self.lay, from_param(self))
+        else:
+            self.space = _DenseSpace(self.op, qp) if self.op.kind == "dense" else \
             _SparseSpace(self.op, qp, from_param(self), keep=int(self.params["keep_factors"]))
         kd = qp.K.diagonal()[np.asarray(qp.local_dofs)]
         # no constraint (m = 0, an uncracked body): no penalty term, rho only labels the messages
@@ -375,7 +386,50 @@ class PenaltySolver(DualOperatorSolver):
         return xn, mu, pen
 
     # ------------------------------------------------------------------ solve
+    def _solve_friction(self) -> Solution:
+        """Regularized friction (numerics/friction_penalty.py); Coulomb by the fixed point over Tresca solves."""
+        p, qp, space, lay = self.params, self.qp, self.space, self.lay
+        runs: list[PenaltyRun] = []
+        local = None if space.kind == "dense" else np.asarray(qp.local_dofs)
+
+        def solve(lay_k, z0=None) -> PenaltyRun:
+            runs.append(continuation(space, lay_k, p, self.rho0, self._length, self._energy2, local, z0))
+            return runs[-1]
+
+        extra: dict = {}
+        details: dict = {}
+        if not lay.coulomb():
+            out = solve(lay)
+            status, x, mu, msg = out.status, space.full(out.z), out.mu, out.message
+        else:
+            def solve_tresca(qt, warm):
+                out = solve(Layout(qt), None if warm is None else runs[-1].z)
+                if out.status != "solved":
+                    raise _TrescaFailed(out)
+                return space.full(out.z), out.mu, {}
+
+            try:
+                res = coulomb_fixed_point(qp, solve_tresca, tol=max(100 * p["tol"], 1e-8),
+                                          max_iter=int(p["coulomb_max_iter"]))
+                status, x, mu, extra, details = res.status, res.x, res.mu, res.summary(), res.details()
+                msg = runs[-1].message if res.status == "solved" else \
+                    f"Coulomb fixed point {'stalled' if res.stalled else 'hit coulomb_max_iter'}"
+            except _TrescaFailed as exc:
+                out = exc.args[0]
+                status, x, mu = out.status, space.full(out.z), out.mu
+                msg = f"Tresca solve {len(runs)} of the Coulomb fixed point: {out.message}"
+        last = runs[-1]
+        return Solution(solver=self.name, status=Status(status), x=x, multipliers=mu, message=msg,
+                        iterations={"newton": sum(r.newton for r in runs), "continuation": sum(r.stages for r in runs),
+                                    **extra},
+                        history=[h for r in runs for h in r.history],
+                        info={**self.op.info(), "factorizations": space.factorizations, "space": space.kind,
+                              "rho": last.rho, "rho0": self.rho0, "penetration": last.error,
+                              "tresca_solves": len(runs), **details})
+
     def solve(self) -> Solution:
+        if self.friction:
+            return self._solve_friction()
         p, sp_, w = self.params, self.space, self.qp.weights
         xI = sp_.start()                                # unconstrained minimiser
         self._deadline = time.perf_counter() + p["time_limit"]
@@ -428,3 +482,7 @@ class PenaltySolver(DualOperatorSolver):
                   "rho": rho, "rho0": self.rho0, "penetration": pen,
                   "penetration_rel": pen / max(np.abs(x).max(initial=0.0), self._length, 1e-300)},
         )
+
+
+class _TrescaFailed(Exception):
+    """A Tresca solve inside the Coulomb fixed point ended without ``solved`` (its PenaltyRun in args[0])."""

@@ -441,6 +441,7 @@ class Uzawa(DualOperatorSolver):
                           f"Tresca solve {len(runs)} of the Coulomb fixed point: {out.status} {out.message}")
         msg = "" if res.status == "solved" else \
             f"Coulomb fixed point {'stalled' if res.stalled else 'hit coulomb_max_iter'} (change {res.changes[-1]:.3g})"
+        info.update(res.details())
         return result(res.status, res.x, res.mu, msg, res.summary())
 
 

@@ -31,6 +31,15 @@ def crack(dim: int):
     return load_scene("penny", {"mesh_size": 3.0, "tip_size": 0.5, "remote_stress": SHEAR_3D}).build()
 
 
+def raw(name: str, qp, **params):
+    """The solver's own answer, not certified (for comparisons whose other side is certified)."""
+    from dualfem.core import registry
+
+    solver = registry.solvers()[name](**params)
+    solver.setup(qp)
+    return solver.solve()
+
+
 def _rel(a, b):
     return np.abs(a - b).max() / np.abs(b).max()
 
@@ -52,20 +61,20 @@ def test_tresca_certified_and_equal_to_the_conic_solve(dim, solver, params):
 def test_coulomb_in_the_loop_equals_the_fixed_point(dim):
     qp = with_friction(crack(dim), "coulomb", 0.2)
     inner = run("uzawa_auto", qp)
-    fixed = run("uzawa_auto", qp, {"coulomb": "fixed_point"})
+    fixed = raw("uzawa_auto", qp, coulomb="fixed_point")
     assert inner.status == "solved" and fixed.status == "solved", (inner.message, fixed.message)
     assert _rel(inner.x, fixed.x) < 1e-6 and _rel(inner.multipliers, fixed.multipliers) < 1e-5
     assert 2 <= fixed.iterations["coulomb_iterations"] <= 20 and fixed.iterations["coulomb_stalled"] == 0
     assert "coulomb_iterations" not in inner.iterations
-    capped = run("uzawa_auto", qp, {"coulomb": "fixed_point", "coulomb_max_iter": 1})
-    assert capped.claim == "max_iter" and capped.status != "solved"
+    capped = raw("uzawa_auto", qp, coulomb="fixed_point", coulomb_max_iter=1)
+    assert capped.status == "max_iter"
 
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_zero_friction_is_the_frictionless_answer(dim):
     base = run("uzawa_auto", crack(dim))
     for kind in ("coulomb", "tresca"):
-        sol = run("uzawa_auto", with_friction(crack(dim), kind, 0.0))
+        sol = raw("uzawa_auto", with_friction(crack(dim), kind, 0.0))
         assert sol.status == "solved"
         assert _rel(sol.x, base.x) < 1e-9 and _rel(sol.multipliers[:crack(dim).m], base.multipliers) < 1e-8
         assert np.abs(sol.multipliers[crack(dim).m:]).max() == 0.0

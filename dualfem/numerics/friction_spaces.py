@@ -40,6 +40,8 @@ from dualfem.core.qp import QP
 from dualfem.numerics.linalg import LocalReduction, sparse_factor
 
 EPS = float(np.finfo(float).eps)
+#: the sparse space's polish forms D_AA by K-solves up to this many rows
+POLISH_MAX = 500
 
 
 class Layout:
@@ -221,6 +223,20 @@ class DenseFrictionSpace:
             h = h - VA @ la.cho_solve(fac, VA.T @ h, check_finite=False)
         return la.solve_triangular(self.L, h, lower=True, trans="T", check_finite=False)
 
+    def polish(self, A: np.ndarray, C: np.ndarray, mu_fixed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(z, mu) of the minimiser on one piece: rows ``A`` carry ``mu_A = -C_A (Gs z)_A`` (penalty springs), the
+        others the fixed forces ``mu_fixed``: ``(D_AA + C_A^-1) mu_A = -(Gs S^-1 (g + Gs' mu_fixed))_A``, then
+        ``z = S^-1 (g + Gs' mu)`` (well conditioned however large C: no difference of rounded gaps)."""
+        h = la.solve_triangular(self.L, self.red.g + self.G.T @ mu_fixed, lower=True, check_finite=False)
+        mu = mu_fixed.copy()
+        if A.any():
+            VA = self.V[:, A]
+            M = VA.T @ VA
+            M[np.diag_indices_from(M)] += 1.0 / C
+            mu[A] = la.solve(M, -(VA.T @ h), assume_a="pos")
+            self.factorizations += 1
+        return la.cho_solve(self.red.S_cho, self.red.g + self.G.T @ mu, check_finite=False), mu
+
     def mu_min(self, w: np.ndarray) -> float:
         """Smallest eigenvalue of W^1/2 (Gs K^-1 Gs') W^1/2 on its range (dense eigvalsh)."""
         sw = np.sqrt(w)
@@ -265,6 +281,21 @@ class SparseFrictionSpace:
         H = (self.Q + Gr.T @ sp.diags(coef) @ Gr).tocsr()
         self.factorizations += 1
         return sparse_factor(H, self.factor).solve(rhs)
+
+    def polish(self, A: np.ndarray, C: np.ndarray, mu_fixed: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """As :meth:`DenseFrictionSpace.polish`, with D_AA from |A| K-solves; None above ``POLISH_MAX`` rows."""
+        if np.count_nonzero(A) > POLISH_MAX:
+            return None
+        K, G = self._k(), self.G
+        mu = mu_fixed.copy()
+        if A.any():
+            GA = G[np.flatnonzero(A)]
+            X = np.column_stack([K.solve(np.asarray(GA[i].toarray()).ravel()) for i in range(GA.shape[0])])
+            M = GA @ X
+            M = 0.5 * (M + M.T)
+            M[np.diag_indices_from(M)] += 1.0 / C
+            mu[A] = la.solve(M, -(GA @ K.solve(self.q + G.T @ mu_fixed)), assume_a="pos")
+        return K.solve(self.q + G.T @ mu), mu
 
     def mu_min(self, w: np.ndarray, tol: float = 1e-2) -> float:
         """Lanczos estimate (ARPACK eigsh, smallest) of W^1/2 Gs K^-1 Gs' W^1/2 (one K-solve per product)."""
