@@ -392,8 +392,8 @@ class PenaltySolver(DualOperatorSolver):
         runs: list[PenaltyRun] = []
         local = None if space.kind == "dense" else np.asarray(qp.local_dofs)
 
-        def solve(lay_k, z0=None) -> PenaltyRun:
-            runs.append(continuation(space, lay_k, p, self.rho0, self._length, self._energy2, local, z0))
+        def solve(lay_k, z0=None, rho=None) -> PenaltyRun:
+            runs.append(continuation(space, lay_k, p, self.rho0, self._length, self._energy2, local, z0, rho))
             return runs[-1]
 
         extra: dict = {}
@@ -403,7 +403,7 @@ class PenaltySolver(DualOperatorSolver):
             status, x, mu, msg = out.status, space.full(out.z), out.mu, out.message
         else:
             def solve_tresca(qt, warm):
-                out = solve(Layout(qt), None if warm is None else runs[-1].z)
+                out = solve(Layout(qt), *((None, None) if warm is None else (runs[-1].z, runs[-1].rho)))
                 if out.status != "solved":
                     raise _TrescaFailed(out)
                 return space.full(out.z), out.mu, {}

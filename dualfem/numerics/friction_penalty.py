@@ -84,16 +84,17 @@ def polish(space, lay: Layout, z: np.ndarray, g: list[np.ndarray], rho: float):
 
 
 def continuation(space, lay: Layout, p: dict, rho0: float, length: float, floor2: float, local=None,
-                 z0=None) -> PenaltyRun:
+                 z0=None, rho_start: float | None = None) -> PenaltyRun:
     """The rho-continuation of the module docstring (``p``: the penalty plugin's parameters; ``local``: the
-    indices of the defect unknowns in the space's vector, None for all; ``z0``: a warm start)."""
+    indices of the defect unknowns in the space's vector, None for all; ``z0``: a warm start, ``rho_start`` the
+    rho to start from (a warm start's final rho: the Coulomb fixed point's next Tresca solve), default rho0)."""
     deadline = time.perf_counter() + p["time_limit"]
     q = {"max_inner": p["max_iter"], "max_backtracks": p["max_backtracks"], "armijo_c": p["sigma"],
          "step_factor": 2.0, "tol_inner": p["newton_tol"]}
     z = space.start() if z0 is None else np.array(z0, float)
     y0 = np.zeros(lay.m)
     g = lay.bounds(y0)
-    rho, rho_max = rho0, rho0 * p["rho_max_factor"]
+    rho, rho_max = (rho0 if rho_start is None else rho_start), rho0 * p["rho_max_factor"]
     newton, stage, history = 0, 0, []
     while True:
         stage += 1
