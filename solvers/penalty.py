@@ -248,8 +248,12 @@ class PenaltySolver(DualOperatorSolver):
         self.friction = bool(qp.blocks)
         if self.friction:                 # numerics/friction_penalty.py: regularized friction
             self.lay = Layout(qp)
-            self.space = DenseFrictionSpace(qp, self.lay, reduction=self.op.reduction) if self.op.kind == "dense" \
-                else SparseFrictionSpace(qp, self.lay, from_param(self))
+            self.space = SparseFrictionSpace(qp, self.lay, from_param(self))
+            if self.op.kind == "dense":
+                try:
+                    self.space = DenseFrictionSpace(qp, self.lay, reduction=self.op.reduction)
+                except ValueError:    # a friction row off the reduction's local unknowns: stay sparse
+                    pass
         else:
             self.space = _DenseSpace(self.op, qp) if self.op.kind == "dense" else \
             _SparseSpace(self.op, qp, from_param(self), keep=int(self.params["keep_factors"]))
@@ -402,8 +406,16 @@ class PenaltySolver(DualOperatorSolver):
             out = solve(lay)
             status, x, mu, msg = out.status, space.full(out.z), out.mu, out.message
         else:
+            bounds: list = []
+
             def solve_tresca(qt, warm):
-                out = solve(Layout(qt), *((None, None) if warm is None else (runs[-1].z, runs[-1].rho)))
+                # warm x; the last rho only when the threshold moved by < 10 %: after a jump (g = 0 -> mu_f lambda)
+                # every stuck node would look slipping at that rho and Newton would crawl: from rho0 again
+                lay_t = Layout(qt)
+                g = np.concatenate(lay_t.bounds(np.zeros(lay_t.m)))
+                near = bool(bounds) and np.abs(g - bounds[-1]).max(initial=0.0) < 0.1 * np.abs(g).max(initial=0.0)
+                bounds.append(g)
+                out = solve(lay_t, *((None, None) if warm is None else (runs[-1].z, runs[-1].rho if near else None)))
                 if out.status != "solved":
                     raise _TrescaFailed(out)
                 return space.full(out.z), out.mu, {}

@@ -390,10 +390,12 @@ class Uzawa(DualOperatorSolver):
         self._floor2 = load_energy(qp) ** 2
         if p["linalg"] == "reduced":
             super().setup(qp)
+        self.space = SparseFrictionSpace(qp, self.lay, from_param(self))
         if self.op is not None and self.op.kind == "dense":
-            self.space = DenseFrictionSpace(qp, self.lay, reduction=self.op.reduction)
-        else:
-            self.space = SparseFrictionSpace(qp, self.lay, from_param(self))
+            try:
+                self.space = DenseFrictionSpace(qp, self.lay, reduction=self.op.reduction)
+            except ValueError:        # a friction row off the reduction's local unknowns: stay sparse
+                pass
         self.r, self.r_units = paper_r_in_scene_units(float(p["r"]), qp.units) \
             if p["r_rule"] == "scaled" else (float(p["r"]), "as given")
         if p["r_rule"] == "auto":

@@ -50,3 +50,13 @@ def test_without_the_polish_the_forces_are_not_certified(monkeypatch):
     monkeypatch.setattr(fp, "polish", lambda *a, **k: None)
     sol = run("penalty", with_friction(crack(2), "tresca", 0.1))
     assert sol.claim == "solved" and sol.status == "inaccurate"
+
+
+def test_a_stuck_crack_is_solved_and_sticks():
+    """g = 0.5 > tau = 0.3: every node sticks; each continuation stage starts from the predictor (forces kept,
+    creep shrunk), else the warm start sees every node slip at the new rho and Newton crawls (measured: max_iter)."""
+    qp = with_friction(crack(2), "tresca", 0.5)
+    sol = run("penalty", qp)
+    assert sol.status == "solved", (sol.message, sol.verdict.why)
+    slip = np.abs(qp.blocks[0].G @ sol.x).max()
+    assert slip <= 1e-10 * np.abs(sol.x).max() and sol.iterations["newton"] <= 30

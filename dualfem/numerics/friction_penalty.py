@@ -56,10 +56,13 @@ def errors(lay: Layout, s: np.ndarray, g: list[np.ndarray], rho: float) -> float
     return err
 
 
-def polish(space, lay: Layout, z: np.ndarray, g: list[np.ndarray], rho: float):
-    """(z, mu) recomputed stably on the piece of ``z`` (penalised normal rows and sticking nodes as springs
-    rho w, slipping nodes at their exact forces ``-w g s/||s||``), or None when the polished point leaves that
-    piece (then the Newton iterate's forces stand)."""
+def polish(space, lay: Layout, z: np.ndarray, g: list[np.ndarray], rho: float, rho_new: float | None = None):
+    """(z, mu) recomputed stably on the piece of ``z`` at ``rho`` (penalised normal rows and sticking nodes as
+    springs, slipping nodes at their exact forces ``-w g s/||s||``), the springs' stiffness ``rho_new w``
+    (default rho), or None when the polished point leaves that piece (then the Newton iterate's forces stand).
+    With ``rho_new`` > rho it is the predictor of the next continuation stage: the stuck nodes' creep shrinks by
+    rho / rho_new with the forces kept, where a plain warm start would see every stuck node slip (rho_new ||s||
+    > g) and the semismooth Newton would crawl back to stick with tiny Armijo steps."""
     s = space.G @ z
     A = lay.normal & (s < 0)
     fixed = np.zeros(lay.m)
@@ -69,7 +72,7 @@ def polish(space, lay: Layout, z: np.ndarray, g: list[np.ndarray], rho: float):
         lay.nodes(A, j)[stick] = True
         slip = ~stick
         lay.nodes(fixed, j)[slip] = -(lay.nodes(lay.w, j)[slip] * (g[j][slip] / n[slip])[:, None]) * sj[slip]
-    out = space.polish(A, rho * lay.w[A], fixed)
+    out = space.polish(A, (rho if rho_new is None else rho_new) * lay.w[A], fixed)
     if out is None:
         return None
     zp, mu = out
@@ -119,4 +122,7 @@ def continuation(space, lay: Layout, p: dict, rho0: float, length: float, floor2
         if rho * p["rho_growth"] > rho_max * (1 + 1e-12):
             return PenaltyRun(z, mu, "inaccurate", f"rho reached its cap {rho:.3g} with penetration / creep "
                               f"{err / xs:.1e} relative > tol {p['tol']:g}", newton, stage, rho, err, history)
+        pred = polish(space, lay, z, g, rho, rho * p["rho_growth"])
+        if pred is not None:
+            z = pred[0]
         rho *= p["rho_growth"]
