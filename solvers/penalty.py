@@ -49,6 +49,9 @@ matrix of A: one solve with its kept factor), from the Newton matrix's answer ``
 2-4 steps (``info["polish_refinements"]``), then ``x = K^-1 (F + B'mu)``. Stop tests relative to
 |x| use the defect unknowns' largest displacement on both paths.
 
+Friction blocks (Tresca, Coulomb): regularized friction with the same rho, Coulomb by the fixed point over
+Tresca solves; :mod:`dualfem.numerics.friction_penalty`.
+
 Continuation: rho_0 = ``rho0_factor`` * median(diag K on I) / median(w) -- the penalty
 stiffness rho w of one node equal to the stiffness of its unknowns, taken from the QP itself
 (so it works for any QP and any units): of order E/h at large delta; at small delta the
@@ -67,9 +70,8 @@ import scipy.linalg as sla
 
 from dualfem.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.evaluator import load_energy, load_length
-from dualfem.numerics.coulomb import coulomb_fixed_point
 from dualfem.numerics.factor import from_param
-from dualfem.numerics.friction_penalty import PenaltyRun, continuation
+from dualfem.numerics.friction_penalty import solve_friction
 from dualfem.numerics.friction_spaces import DenseFrictionSpace, Layout, SparseFrictionSpace
 from dualfem.numerics.newton_matrix import NewtonMatrix
 from dualfem.registry import register_solver
@@ -392,52 +394,13 @@ class PenaltySolver(DualOperatorSolver):
     # ------------------------------------------------------------------ solve
     def _solve_friction(self) -> Solution:
         """Regularized friction (numerics/friction_penalty.py); Coulomb by the fixed point over Tresca solves."""
-        p, qp, space, lay = self.params, self.qp, self.space, self.lay
-        runs: list[PenaltyRun] = []
+        qp, space = self.qp, self.space
         local = None if space.kind == "dense" else np.asarray(qp.local_dofs)
-
-        def solve(lay_k, z0=None, rho=None) -> PenaltyRun:
-            runs.append(continuation(space, lay_k, p, self.rho0, self._length, self._energy2, local, z0, rho))
-            return runs[-1]
-
-        extra: dict = {}
-        details: dict = {}
-        if not lay.coulomb():
-            out = solve(lay)
-            status, x, mu, msg = out.status, space.full(out.z), out.mu, out.message
-        else:
-            bounds: list = []
-
-            def solve_tresca(qt, warm):
-                # warm x; the last rho only when the threshold moved by < 10 %: after a jump (g = 0 -> mu_f lambda)
-                # every stuck node would look slipping at that rho and Newton would crawl: from rho0 again
-                lay_t = Layout(qt)
-                g = np.concatenate(lay_t.bounds(np.zeros(lay_t.m)))
-                near = bool(bounds) and np.abs(g - bounds[-1]).max(initial=0.0) < 0.1 * np.abs(g).max(initial=0.0)
-                bounds.append(g)
-                out = solve(lay_t, *((None, None) if warm is None else (runs[-1].z, runs[-1].rho if near else None)))
-                if out.status != "solved":
-                    raise _TrescaFailed(out)
-                return space.full(out.z), out.mu, {}
-
-            try:
-                res = coulomb_fixed_point(qp, solve_tresca, tol=max(100 * p["tol"], 1e-8),
-                                          max_iter=int(p["coulomb_max_iter"]))
-                status, x, mu, extra, details = res.status, res.x, res.mu, res.summary(), res.details()
-                msg = runs[-1].message if res.status == "solved" else \
-                    f"Coulomb fixed point {'stalled' if res.stalled else 'hit coulomb_max_iter'}"
-            except _TrescaFailed as exc:
-                out = exc.args[0]
-                status, x, mu = out.status, space.full(out.z), out.mu
-                msg = f"Tresca solve {len(runs)} of the Coulomb fixed point: {out.message}"
-        last = runs[-1]
-        return Solution(solver=self.name, status=Status(status), x=x, multipliers=mu, message=msg,
-                        iterations={"newton": sum(r.newton for r in runs), "continuation": sum(r.stages for r in runs),
-                                    **extra},
-                        history=[h for r in runs for h in r.history],
+        r = solve_friction(qp, space, self.lay, self.params, self.rho0, self._length, self._energy2, local)
+        return Solution(solver=self.name, status=Status(r.status), x=r.x, multipliers=r.mu, message=r.message,
+                        iterations=r.iterations, history=r.history,
                         info={**self.op.info(), "factorizations": space.factorizations, "space": space.kind,
-                              "rho": last.rho, "rho0": self.rho0, "penetration": last.error,
-                              "tresca_solves": len(runs), **details})
+                              "rho0": self.rho0, **r.info})
 
     def solve(self) -> Solution:
         if self.friction:
@@ -495,6 +458,3 @@ class PenaltySolver(DualOperatorSolver):
                   "penetration_rel": pen / max(np.abs(x).max(initial=0.0), self._length, 1e-300)},
         )
 
-
-class _TrescaFailed(Exception):
-    """A Tresca solve inside the Coulomb fixed point ended without ``solved`` (its PenaltyRun in args[0])."""

@@ -103,6 +103,11 @@ energy norm x'Kx) are the same numbers, computed in the smaller space or the who
 same steps, answers within 1e-10 in the energy norm). ``linalg="full"`` is the textbook path (it
 ignores ``operator``): it refactorizes the sparse Hessian at every Newton step, no analysis reused,
 and allows ``inner_norm="euclidean"``.
+
+Friction blocks (Tresca, Coulomb; ``accepts``): the frictional modified Lagrangian, the tangential tractions
+projected onto their intervals / discs, Coulomb's threshold from the current pressure in the loop
+(``coulomb="inner"``) or by the fixed point over Tresca solves (``coulomb="fixed_point"``):
+:mod:`dualfem.numerics.friction_uzawa` and :mod:`dualfem.numerics.friction_spaces`.
 """
 from __future__ import annotations
 

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from dualfem.numerics.coulomb import coulomb_fixed_point
 from dualfem.numerics.friction_spaces import Layout, project
 from dualfem.numerics.friction_uzawa import inner
 
@@ -126,3 +127,67 @@ def continuation(space, lay: Layout, p: dict, rho0: float, length: float, floor2
         if pred is not None:
             z = pred[0]
         rho *= p["rho_growth"]
+
+
+@dataclass
+class PenaltyAnswer:
+    """What :func:`solve_friction` hands the plugin: the answer on all unknowns and its report."""
+
+    status: str
+    x: np.ndarray
+    mu: np.ndarray
+    message: str
+    iterations: dict
+    history: list
+    info: dict
+
+
+class _TrescaFailed(Exception):
+    """A Tresca solve inside the Coulomb fixed point ended without ``solved`` (its PenaltyRun in args[0])."""
+
+
+def solve_friction(qp, space, lay: Layout, p: dict, rho0: float, length: float, floor2: float,
+                   local=None) -> PenaltyAnswer:
+    """The penalty plugin's frictional solve: one continuation (Tresca), or the Coulomb fixed point over Tresca
+    continuations (:func:`dualfem.numerics.coulomb.coulomb_fixed_point`; each warm started at the previous x,
+    and at its final rho when the threshold moved by < 10 %: after a jump such as g = 0 -> mu_f lambda every
+    stuck node would look slipping at that rho, so the continuation starts from rho0 again)."""
+    runs: list[PenaltyRun] = []
+
+    def solve(lay_k, z0=None, rho=None) -> PenaltyRun:
+        runs.append(continuation(space, lay_k, p, rho0, length, floor2, local, z0, rho))
+        return runs[-1]
+
+    extra: dict = {}
+    details: dict = {}
+    if not lay.coulomb():
+        out = solve(lay)
+        status, x, mu, msg = out.status, space.full(out.z), out.mu, out.message
+    else:
+        bounds: list = []
+
+        def solve_tresca(qt, warm):
+            lay_t = Layout(qt)
+            g = np.concatenate(lay_t.bounds(np.zeros(lay_t.m)))
+            near = bool(bounds) and np.abs(g - bounds[-1]).max(initial=0.0) < 0.1 * np.abs(g).max(initial=0.0)
+            bounds.append(g)
+            out = solve(lay_t, *((None, None) if warm is None else (runs[-1].z, runs[-1].rho if near else None)))
+            if out.status != "solved":
+                raise _TrescaFailed(out)
+            return space.full(out.z), out.mu, {}
+
+        try:
+            res = coulomb_fixed_point(qp, solve_tresca, tol=max(100 * p["tol"], 1e-8),
+                                      max_iter=int(p["coulomb_max_iter"]))
+            status, x, mu, extra, details = res.status, res.x, res.mu, res.summary(), res.details()
+            msg = runs[-1].message if res.status == "solved" else \
+                f"Coulomb fixed point {'stalled' if res.stalled else 'hit coulomb_max_iter'}"
+        except _TrescaFailed as exc:
+            out = exc.args[0]
+            status, x, mu = out.status, space.full(out.z), out.mu
+            msg = f"Tresca solve {len(runs)} of the Coulomb fixed point: {out.message}"
+    last = runs[-1]
+    return PenaltyAnswer(status, x, mu, msg,
+                         {"newton": sum(r.newton for r in runs), "continuation": sum(r.stages for r in runs), **extra},
+                         [h for r in runs for h in r.history],
+                         {"rho": last.rho, "penetration": last.error, "tresca_solves": len(runs), **details})
