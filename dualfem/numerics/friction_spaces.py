@@ -40,8 +40,8 @@ from dualfem.core.qp import QP
 from dualfem.numerics.linalg import LocalReduction, sparse_factor
 
 EPS = float(np.finfo(float).eps)
-#: the sparse space's polish forms D_AA by K-solves up to this many rows
-POLISH_MAX = 500
+#: the sparse space's polish forms the dense Delassus matrix (block K-solves) up to this many stacked rows
+POLISH_MAX = 4000
 
 
 class Layout:
@@ -254,6 +254,7 @@ class SparseFrictionSpace:
         self.Q, self.q, self.G = qp.K.tocsr(), np.asarray(qp.F, float), qp.G.tocsr()
         self.factorizations = 0
         self._K: Any = None
+        self._D: np.ndarray | None = None
 
     def _k(self):
         if self._K is None:
@@ -282,19 +283,27 @@ class SparseFrictionSpace:
         self.factorizations += 1
         return sparse_factor(H, self.factor).solve(rhs)
 
+    def delassus(self) -> np.ndarray:
+        """D = Gs K^-1 Gs' (dense, m_total x m_total), by block solves of 256 columns; computed once."""
+        if self._D is None:
+            K, G = self._k(), self.G
+            Gt = G.T.tocsc()
+            cols = [G @ K.solve(Gt[:, i:i + 256].toarray()) for i in range(0, G.shape[0], 256)]
+            D = np.hstack(cols) if cols else np.zeros((0, 0))
+            self._D = 0.5 * (D + D.T)
+        return self._D
+
     def polish(self, A: np.ndarray, C: np.ndarray, mu_fixed: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """As :meth:`DenseFrictionSpace.polish`, with D_AA from |A| K-solves; None above ``POLISH_MAX`` rows."""
-        if np.count_nonzero(A) > POLISH_MAX:
+        """As :meth:`DenseFrictionSpace.polish`, with the Delassus matrix of :meth:`delassus` (formed once, by block
+        K-solves); None above ``POLISH_MAX`` stacked rows (its memory, 8 m^2 bytes)."""
+        if self.lay.m > POLISH_MAX:
             return None
         K, G = self._k(), self.G
         mu = mu_fixed.copy()
         if A.any():
-            GA = G[np.flatnonzero(A)]
-            X = np.column_stack([K.solve(np.asarray(GA[i].toarray()).ravel()) for i in range(GA.shape[0])])
-            M = GA @ X
-            M = 0.5 * (M + M.T)
+            M = self.delassus()[np.ix_(A, A)]
             M[np.diag_indices_from(M)] += 1.0 / C
-            mu[A] = la.solve(M, -(GA @ K.solve(self.q + G.T @ mu_fixed)), assume_a="pos")
+            mu[A] = la.solve(M, -(G @ K.solve(self.q + G.T @ mu_fixed))[A], assume_a="pos")
         return K.solve(self.q + G.T @ mu), mu
 
     def mu_min(self, w: np.ndarray, tol: float = 1e-2) -> float:
