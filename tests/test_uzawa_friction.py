@@ -72,9 +72,10 @@ def test_coulomb_in_the_loop_equals_the_fixed_point(dim):
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_zero_friction_is_the_frictionless_answer(dim):
-    base = run("uzawa_auto", crack(dim))
+    base = raw("uzawa_auto", crack(dim))
     for kind in ("coulomb", "tresca"):
         sol = raw("uzawa_auto", with_friction(crack(dim), kind, 0.0))
         assert sol.status == "solved"
-        assert _rel(sol.x, base.x) < 1e-9 and _rel(sol.multipliers[:crack(dim).m], base.multipliers) < 1e-8
+        # measured 1.5e-14 and 6.8e-13 (r differs: the stacked compliance has the friction rows)
+        assert _rel(sol.x, base.x) < 1e-12 and _rel(sol.multipliers[:crack(dim).m], base.multipliers) < 1e-11
         assert np.abs(sol.multipliers[crack(dim).m:]).max() == 0.0
