@@ -79,3 +79,13 @@ def test_zero_friction_is_the_frictionless_answer(dim):
         # measured 1.5e-14 and 6.8e-13 (r differs: the stacked compliance has the friction rows)
         assert _rel(sol.x, base.x) < 1e-12 and _rel(sol.multipliers[:crack(dim).m], base.multipliers) < 1e-11
         assert np.abs(sol.multipliers[crack(dim).m:]).max() == 0.0
+
+
+def test_bad_friction_parameters_are_refused():
+    from dualfem.core import registry
+    from dualfem.core.errors import InputError
+
+    for name, params in (("uzawa", {"coulomb": "outer"}), ("uzawa_auto", {"coulomb_max_iter": 0}),
+                         ("penalty", {"coulomb_max_iter": -1})):
+        with pytest.raises(InputError, match="coulomb"):
+            registry.solvers()[name](**params)
