@@ -67,3 +67,22 @@ def test_the_generalized_hessian_is_the_derivative_of_the_gradient(components):
     h = 1e-6
     fd = (grad(z + h * d) - grad(z - h * d)) / (2 * h)
     assert np.allclose(fd, H @ d, rtol=1e-6, atol=1e-6 * np.abs(H @ d).max())
+
+
+@pytest.mark.parametrize("components", [1, 2])
+def test_the_sparse_newton_solve_is_the_rotated_newton_matrix(components):
+    """SparseFrictionSpace writes each rotated node's 2 x 2 block on its rows plus one extra row (one pattern):
+    its solve equals the direct solve with K + Gr' diag(coef) Gr."""
+    from dualfem.numerics.friction_spaces import SparseFrictionSpace, _rotation
+
+    qp = tiny(components)
+    lay, r = Layout(qp), 3.0
+    space = SparseFrictionSpace(qp, lay)
+    G, K = qp.G.toarray(), qp.K.toarray()
+    for _ in range(3):
+        a = 2 * RNG.standard_normal(lay.m)
+        coef, rot = newton_terms(lay, a, lay.bounds(np.zeros(lay.m)), r)
+        Gr = G if rot is None else _rotation(lay, rot) @ G
+        rhs = RNG.standard_normal(qp.n)
+        assert np.allclose(space.newton(coef, rot, rhs), np.linalg.solve(K + Gr.T @ np.diag(coef) @ Gr, rhs),
+                           rtol=1e-10, atol=1e-12)

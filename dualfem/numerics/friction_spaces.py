@@ -23,8 +23,9 @@ Spaces (the Newton solve, the start K^-1 F, the energy norm):
 * :class:`DenseFrictionSpace`: on the local unknowns I of the exact reduction
   (:class:`dualfem.numerics.linalg.LocalReduction`), Newton solves by Woodbury with ``V = L^-1 Gs_I'`` (one
   |A| x |A| Cholesky per step; per active set cached when no node is rotated, i.e. in 2D);
-* :class:`SparseFrictionSpace`: on all unknowns, one sparse factorization of ``K + Gr' diag(coef) Gr`` per Newton
-  step (any size; counted in ``factorizations``).
+* :class:`SparseFrictionSpace`: on all unknowns, ``K + Gr' diag(coef) Gr`` by
+  :class:`dualfem.numerics.newton_matrix.NewtonMatrix` (one analysis; a numeric factorization per new coefficient
+  vector, kept ones reused: in 3D the slip directions change every step, so about one per Newton step).
 """
 from __future__ import annotations
 
@@ -38,6 +39,7 @@ from dualfem.core.constraints import offsets, split
 from dualfem.core.laws import Coulomb, Friction, Signorini
 from dualfem.core.qp import QP
 from dualfem.numerics.linalg import LocalReduction, sparse_factor
+from dualfem.numerics.newton_matrix import NewtonMatrix
 
 EPS = float(np.finfo(float).eps)
 #: the sparse space's polish forms the dense Delassus matrix (block K-solves) up to this many stacked rows
@@ -249,17 +251,24 @@ class SparseFrictionSpace:
 
     kind = "sparse"
 
-    def __init__(self, qp: QP, lay: Layout, factor=None):
+    def __init__(self, qp: QP, lay: Layout, factor=None, keep: int = 4):
         self.qp, self.lay, self.factor = qp, lay, factor
         self.Q, self.q, self.G = qp.K.tocsr(), np.asarray(qp.F, float), qp.G.tocsr()
-        self.factorizations = 0
         self._K: Any = None
         self._D: np.ndarray | None = None
+        # one extra row g1 + g2 per 3D friction node: with it every Newton matrix K + Gs' R' diag(c) R Gs is
+        # K + Bx' diag(c_ext) Bx on one pattern (NewtonMatrix: analyzed once, numeric factors kept by c_ext)
+        self._sum = _node_sums(lay)
+        Bx = self.G if self._sum is None else sp.vstack([self.G, self._sum @ self.G], format="csr")
+        self.nm = NewtonMatrix(self.Q, Bx, factor, keep=keep)
+
+    @property
+    def factorizations(self) -> int:
+        return self.nm.counters.factorizations + int(self._K is not None)
 
     def _k(self):
         if self._K is None:
             self._K = sparse_factor(self.Q, self.factor)
-            self.factorizations += 1
         return self._K
 
     def start(self):
@@ -278,10 +287,23 @@ class SparseFrictionSpace:
         return z
 
     def newton(self, coef, rot, rhs):
-        Gr = self.G if rot is None else (_rotation(self.lay, rot) @ self.G).tocsr()
-        H = (self.Q + Gr.T @ sp.diags(coef) @ Gr).tocsr()
-        self.factorizations += 1
-        return sparse_factor(H, self.factor).solve(rhs)
+        """Solve (K + Gr' diag(coef) Gr) d = rhs: each rotated node's 2 x 2 block R' diag(c) R = [[p, q], [q, s]]
+        becomes the coefficients (p - q, s - q) on its rows and q on its extra row g1 + g2."""
+        c = np.array(coef, float)
+        if self._sum is None:
+            return self.nm.solve(c, rhs)
+        extra = []
+        for j, R in enumerate(rot or []):
+            if R is None:
+                continue
+            cj = self.lay.nodes(c, j)
+            c0, c1 = cj[:, 0].copy(), cj[:, 1].copy()
+            p = c0 * R[:, 0, 0] ** 2 + c1 * R[:, 1, 0] ** 2
+            s_ = c0 * R[:, 0, 1] ** 2 + c1 * R[:, 1, 1] ** 2
+            q = c0 * R[:, 0, 0] * R[:, 0, 1] + c1 * R[:, 1, 0] * R[:, 1, 1]
+            cj[:, 0], cj[:, 1] = p - q, s_ - q
+            extra.append(q)
+        return self.nm.solve(np.concatenate([c, *extra]), rhs)
 
     def delassus(self) -> np.ndarray:
         """D = Gs K^-1 Gs' (dense, m_total x m_total), by block solves of 256 columns; computed once."""
@@ -318,6 +340,23 @@ class SparseFrictionSpace:
         op = LinearOperator((m, m), matvec=lambda v: sw * (G @ K.solve(G.T @ (sw * np.ravel(v)))), dtype=float)
         return float(eigsh(op, k=1, which="SA", tol=tol, v0=np.ones(m) / np.sqrt(m),
                            return_eigenvectors=False, maxiter=max(1000, 10 * m))[0])
+
+
+def _node_sums(lay: Layout) -> sp.csr_matrix | None:
+    """The operator summing the two rows of every 3D friction node (rows: those nodes, in block order), or None."""
+    rows, cols = [], []
+    count = 0
+    for k, start, c, _ in lay.fric:
+        if c != 2:
+            continue
+        nodes = (int(lay.off[k + 1]) - start) // 2
+        rows.append(np.repeat(np.arange(count, count + nodes), 2))
+        cols.append(start + np.arange(2 * nodes))
+        count += nodes
+    if not count:
+        return None
+    r, cc = np.concatenate(rows), np.concatenate(cols)
+    return sp.csr_matrix((np.ones(r.size), (r, cc)), shape=(count, lay.m))
 
 
 def _rotation(lay: Layout, rot) -> sp.csr_matrix:
