@@ -388,7 +388,7 @@ class Uzawa(DualOperatorSolver):
     # ------------------------------------------------------------------------------------------- friction
     def _setup_friction(self, qp) -> None:
         """Friction blocks (numerics/friction_uzawa.py): the stacked layout, the dense space on the reduction when
-        the operator choice is dense, else the sparse one (a factorization per Newton step), and r."""
+        the operator choice is dense, else the sparse one (Newton matrices analyzed once), and r."""
         p = self.params
         self.qp, self.op, self.reduction, self._mu, self._mu_info = qp, None, None, None, {}
         self.lay = Layout(qp)
