@@ -70,12 +70,17 @@ class CoulombResult:
     relax: float = 1.0
 
     def summary(self) -> dict:
-        """Flat counters for a Solution's ``iterations`` dict (numbers only)."""
+        """Whole-number counters for a Solution's ``iterations`` dict (the runner keeps whole numbers only)."""
+        return {"coulomb_iterations": self.iterations, "coulomb_stalled": int(self.stalled)}
+
+    def details(self) -> dict:
+        """The rest, for a Solution's ``info``: the largest observed contraction, the last relative change, the
+        relaxation, and the per-iteration changes and contractions."""
         rho = [c for c in self.contractions if np.isfinite(c)]
-        return {"coulomb_iterations": self.iterations,
-                "coulomb_contraction": float(max(rho)) if rho else 0.0,
-                "coulomb_change": float(self.changes[-1]) if self.changes else 0.0,
-                "coulomb_stalled": int(self.stalled), "coulomb_relax": self.relax}
+        return {"coulomb_contraction": float(max(rho)) if rho else 0.0,
+                "coulomb_change": float(self.changes[-1]) if self.changes else 0.0, "coulomb_relax": self.relax,
+                "coulomb_changes": [float(c) for c in self.changes],
+                "coulomb_contractions": [float(c) for c in self.contractions]}
 
 
 def coulomb_blocks(qp: QP) -> list[int]:
