@@ -1,10 +1,10 @@
 """Friction in the paper's method and its relatives: the cost of Tresca and Coulomb against the frictionless solve
 (uzawa, uzawa_auto, penalty), Coulomb in the Uzawa loop against the fixed point over Tresca solves, fixed-point
-counts against mu_f, and the 2D slip against the closed form (reports/frdual.md).
+counts against mu_f, and the 2D slip against the closed form (reports/friction_uzawa.md).
 
-    python benchmarks/frdual.py --out benchmarks/results/frdual --report reports      (~20 min on 2 loaded cores)
-    python benchmarks/frdual.py --render-only --out benchmarks/results/frdual --report reports
-    python benchmarks/frdual.py --quick --out /tmp/frdual_quick --report /tmp/frdual_quick   (smoke test, ~1 min)
+    python benchmarks/friction_uzawa.py --out benchmarks/results/friction_uzawa --report reports      (~20 min on 2 loaded cores)
+    python benchmarks/friction_uzawa.py --render-only --out benchmarks/results/friction_uzawa --report reports
+    python benchmarks/friction_uzawa.py --quick --out /tmp/friction_uzawa_quick --report /tmp/friction_uzawa_quick   (smoke test, ~1 min)
 
 Scenes: a closed straight crack (2D plane strain, half-length a = 0.05 in the unit square, gmsh mesh_size 0.005,
 tip_size 0.0005; remote sigma_yy = sigma_xx = -1, tau_xy = 0.3; E = 1000, nu = 0.3, delta = 1e3) and the library's
@@ -126,14 +126,14 @@ def slip(qp) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="benchmarks/results/frdual")
+    ap.add_argument("--out", default="benchmarks/results/friction_uzawa")
     ap.add_argument("--report", default="reports")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--render-only", action="store_true")
     ap.add_argument("--quick", action="store_true", help="coarse meshes, one repeat, three mu_f (a smoke test)")
     a = ap.parse_args(argv)
     out = Path(a.out)
-    data_file = out / "frdual.json"
+    data_file = out / "friction_uzawa.json"
     if not a.render_only:
         from dualfem.experiments.machine import loadavg, machine_info, utc_now
 
@@ -146,7 +146,7 @@ def main(argv=None) -> int:
         data["load_after"] = loadavg()
         data_file.write_text(json.dumps(data, indent=1))
     sys.path.insert(0, str(Path(__file__).parent))
-    from frdual_report import render
+    from friction_uzawa_report import render
 
     render(json.loads(data_file.read_text()), Path(a.report))
     return 0
