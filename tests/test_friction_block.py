@@ -59,3 +59,21 @@ def test_tresca_slip_against_the_closed_form(crack):
     err = np.linalg.norm(slip[inner, 0] - exact[inner]) / np.linalg.norm(exact[inner])
     assert err < 0.08                                     # 16 pairs: 5.0 %; frictionless slip would be 50 % larger
     assert np.abs(normal).max() < 0.02 * exact.max()      # closed under compression
+
+
+def test_the_certificate_forms_the_delassus_matrix_from_the_reduction(crack):
+    """faces.delassus: G_I S^-1 G_I' from the local reduction equals the row-by-row K-solves (and costs none)."""
+    from dualfem.numerics.faces import delassus
+    from dualfem.numerics.ksolver import KSolver
+
+    qp = with_friction(crack, "tresca", G)
+    ks = KSolver(qp)
+    assert getattr(ks, "red", None) is not None
+    fast = delassus(qp.G, ks, qp.n)
+
+    class RowByRow:                  # the same K-solves without the reduction's attributes
+        def __call__(self, r):
+            return ks(r)
+    slow = delassus(qp.G, RowByRow(), qp.n)
+    assert fast.shape == (qp.m_total, qp.m_total)
+    assert np.abs(fast - slow).max() <= 1e-10 * np.abs(slow).max()

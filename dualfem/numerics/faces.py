@@ -23,6 +23,28 @@ from dualfem.numerics.linalg import step_size
 MAX_ROWS = 2000
 
 
+def delassus(G, ksolve, n: int) -> np.ndarray:
+    """The dense ``D = G K^-1 G'`` (symmetrized). With a local reduction whose interface unknowns I hold every
+    column G touches (the defects' node pairs: every block of a cut mesh), ``G_I S^-1 G_I'`` from the reduction's
+    Cholesky factor of the Schur complement S (``(K^-1)_II = S^-1``): no K-solve; otherwise one K-solve per row."""
+    red = getattr(ksolve, "red", None)
+    cols = np.unique(G.indices)
+    I = getattr(red, "I", None)
+    S_cho = getattr(red, "S_cho", None)
+    if I is not None and S_cho is not None and np.isin(cols, I).all():
+        pos = np.full(n, -1, np.int64)
+        pos[I] = np.arange(len(I))
+        GI = np.zeros((G.shape[0], len(I)))
+        coo = G.tocoo()
+        np.add.at(GI, (coo.row, pos[coo.col]), coo.data)
+        D = GI @ sla.cho_solve(S_cho, GI.T)
+    else:
+        Z = np.column_stack([ksolve(G[j].toarray().ravel()) for j in range(G.shape[0])]) if G.shape[0] else \
+            np.zeros((n, 0))
+        D = np.asarray(G @ Z)
+    return 0.5 * (D + D.T)
+
+
 def blocks_active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, margin: float = 10.0,
                             Kx: np.ndarray | None = None) -> tuple[float, float]:
     """(error of x relative to :func:`size_energy`, error of mu relative to :func:`force_scale`) through the
@@ -34,10 +56,7 @@ def blocks_active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, margi
     blocks, G = qp.constraints, qp.G
     mu = np.asarray(mu, float)
     gap = G @ x
-    Z = np.column_stack([ksolve(G[j].toarray().ravel()) for j in range(qp.m_total)]) if qp.m_total else \
-        np.zeros((qp.n, 0))
-    D = np.asarray(G @ Z)
-    D = 0.5 * (D + D.T)
+    D = delassus(G, ksolve, qp.n)
     dD = np.diag(D)
     c = 1.0 / dD.mean() if dD.size and dD.mean() > 0 else 1.0
     A = constraints.face(blocks, mu, gap, c)
