@@ -1,0 +1,191 @@
+"""A posteriori error estimator for 2D P1 elasticity with thin defects: Zienkiewicz-Zhu recovery.
+
+The P1 stress ``sigma_h`` is constant per triangle. The recovered stress ``sigma*`` is continuous and
+piecewise linear on the *doubled* (cut) mesh: at each node the area-weighted mean of ``sigma_h`` over
+the triangles holding that node. Because the defect's interior nodes are doubled, a node on the "+" face
+averages only the "+" side's triangles: the recovered field jumps across the defect as the true one does
+(the tips, single nodes, average both sides). The defect term: at every doubled node the recovered
+traction is replaced by the traction the defect actually carries there (:func:`face_tractions`), so
+``sigma* . nu = [u] / delta - p nu`` with ``p`` the contact pressure (the QP's multiplier over the
+node's weight) and ``[u] / delta`` the interface term of the energy; a P1 traction mismatch on the
+faces (open or in contact) is thereby counted in the indicator of the face's triangles.
+
+Indicator of triangle T (energy units, the energy norm ``||v||^2 = a(v, v) = x' K_el x``)::
+
+    eta_T^2 = int_T (sigma* - sigma_h) : C^-1 (sigma* - sigma_h)
+
+integrated exactly (the integrand is quadratic: the three edge midpoints with weight |T| / 3).
+``eta^2 = sum eta_T^2``; the relative estimate is ``eta / sqrt(||u_h||^2 + eta^2)``.
+
+The optimal-mesh rule (:func:`optimal_sizes`, Zienkiewicz & Zhu 1987): every triangle should carry the
+same share of the allowed error; the error of P1 scales as h^p (p = 1 where the solution is smooth), so
+triangle T of size h_T should get the size ``h_T (e_bar / eta_T)^(1/p)``, then the sizes are scaled up
+when the predicted count exceeds the budget.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: sqrt(3) / 4: the area of the equilateral triangle of edge 1 (sizes are equilateral edge lengths)
+_EQUILATERAL = np.sqrt(3.0) / 4.0
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The estimator's result on one mesh. ``eta2`` (nt,): eta_T^2 per triangle; ``energy2`` (nt,):
+    ``int_T sigma_h : eps_h`` (``sum = ||u_h||^2``); ``area`` (nt,); the totals ``eta`` (energy-norm units,
+    sqrt(energy)) and ``relative`` = eta / sqrt(||u_h||^2 + eta^2)."""
+
+    eta2: np.ndarray
+    energy2: np.ndarray
+    area: np.ndarray
+
+    @property
+    def eta(self) -> float:
+        return float(np.sqrt(self.eta2.sum()))
+
+    @property
+    def energy(self) -> float:
+        """||u_h|| in the energy norm."""
+        return float(np.sqrt(self.energy2.sum()))
+
+    @property
+    def relative(self) -> float:
+        tot = self.eta2.sum() + self.energy2.sum()
+        return float(np.sqrt(self.eta2.sum() / tot)) if tot > 0 else 0.0
+
+    @property
+    def sizes(self) -> np.ndarray:
+        """Each triangle's size: the edge of the equilateral triangle of its area."""
+        return np.sqrt(self.area / _EQUILATERAL)
+
+
+def _gradients(nodes: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """P1 gradients (nt, 3, 2) and areas (nt,) of counter-clockwise or clockwise triangles."""
+    p = nodes[:, tri]                                                   # (2, 3, nt)
+    x, y = p[0], p[1]
+    two_a = (x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0])
+    j, k = [1, 2, 0], [2, 0, 1]
+    g = np.stack([((y[j] - y[k]) / two_a).T, ((x[k] - x[j]) / two_a).T], axis=2)
+    return g, 0.5 * np.abs(two_a)
+
+
+def p1_stress(nodes: np.ndarray, tri: np.ndarray, u: np.ndarray, lam: float,
+              mu: float) -> tuple[np.ndarray, np.ndarray]:
+    """Stress (nt, 3) = (s11, s22, s12) per triangle of the nodal displacement ``u`` (n, 2), and the areas.
+    ``lam``, ``mu``: the 2D Lame constants (plane stress: the effective lambda)."""
+    g, area = _gradients(nodes, tri)
+    du = np.einsum("tic,tid->tcd", u[tri.T], g)                         # du[t, c, d] = d u_c / d x_d
+    tr = du[:, 0, 0] + du[:, 1, 1]
+    s = np.stack([lam * tr + 2 * mu * du[:, 0, 0], lam * tr + 2 * mu * du[:, 1, 1],
+                  mu * (du[:, 0, 1] + du[:, 1, 0])], axis=1)
+    return s, area
+
+
+def _energy_density(s: np.ndarray, lam: float, mu: float) -> np.ndarray:
+    """sigma : C^-1 sigma for stresses (..., 3) = (s11, s22, s12) of 2D isotropic elasticity."""
+    tr = s[..., 0] + s[..., 1]
+    ss = s[..., 0] ** 2 + s[..., 1] ** 2 + 2 * s[..., 2] ** 2
+    return (ss - lam / (2 * (lam + mu)) * tr ** 2) / (2 * mu)
+
+
+def recovered_stress(tri: np.ndarray, s: np.ndarray, area: np.ndarray, n_nodes: int) -> np.ndarray:
+    """Nodal stress (n, 3): the area-weighted mean of the triangles' stresses around each node."""
+    w = np.bincount(tri.ravel(), weights=np.tile(area, 3), minlength=n_nodes)
+    out = np.empty((n_nodes, 3))
+    for c in range(3):
+        out[:, c] = np.bincount(tri.ravel(), weights=np.tile(area * s[:, c], 3), minlength=n_nodes)
+    return out / np.where(w > 0, w, 1.0)[:, None]
+
+
+def impose_traction(sn: np.ndarray, normals: np.ndarray, traction: np.ndarray) -> np.ndarray:
+    """Stresses (k, 3) changed as little as possible (a symmetric rank-2 update) so that sigma . n = t."""
+    s = np.array(sn, dtype=float)
+    n = np.asarray(normals, dtype=float)
+    sig_n = np.stack([s[:, 0] * n[:, 0] + s[:, 2] * n[:, 1], s[:, 2] * n[:, 0] + s[:, 1] * n[:, 1]], axis=1)
+    r = np.asarray(traction, dtype=float) - sig_n
+    rn = np.sum(r * n, axis=1)
+    # sigma + r n' + n r' - (r . n) n n'
+    s[:, 0] += 2 * r[:, 0] * n[:, 0] - rn * n[:, 0] ** 2
+    s[:, 1] += 2 * r[:, 1] * n[:, 1] - rn * n[:, 1] ** 2
+    s[:, 2] += r[:, 0] * n[:, 1] + n[:, 0] * r[:, 1] - rn * n[:, 0] * n[:, 1]
+    return s
+
+
+def zz_estimate(nodes: np.ndarray, tri: np.ndarray, u: np.ndarray, lam: float, mu: float,
+                faces: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Estimate:
+    """The ZZ estimate of the P1 displacement ``u`` (n, 2) on the mesh ``nodes`` (2, n), ``tri`` (3, nt).
+
+    ``faces``: (node ids (k,), unit normals (k, 2), tractions sigma . n (k, 2)) imposed on the recovered
+    stress at those nodes (the defect faces: :func:`face_tractions`)."""
+    tri = np.asarray(tri, dtype=np.int64)
+    s, area = p1_stress(nodes, tri, u, lam, mu)
+    star = recovered_stress(tri, s, area, nodes.shape[1])
+    if faces is not None and len(faces[0]):
+        ids = np.asarray(faces[0], dtype=np.int64)
+        star[ids] = impose_traction(star[ids], faces[1], faces[2])
+    corner = star[tri.T]                                               # (nt, 3, 3): per triangle, per vertex
+    mids = 0.5 * (corner + corner[:, [1, 2, 0]])                       # edge midpoints
+    dens = _energy_density(mids - s[:, None, :], lam, mu)              # (nt, 3)
+    eta2 = area / 3.0 * dens.sum(axis=1)
+    return Estimate(eta2=eta2, energy2=area * _energy_density(s, lam, mu), area=area)
+
+
+def face_tractions(interface, nodal_u: np.ndarray,
+                   pressure: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(node ids, normals, tractions) of both faces of a 2D defect interface (``QP.interface``): at node j
+    of either face sigma . nu = [u]_j / delta_j - p_j nu_j (``[u] = u+ - u-``; ``pressure`` p (m,) or None:
+    no contact term; ``interface.delta`` None: no interface term)."""
+    up, lo, nrm = interface.upper, interface.lower, interface.normals
+    t = np.zeros_like(nrm, dtype=float)
+    if interface.delta is not None:
+        t += (nodal_u[up] - nodal_u[lo]) / np.asarray(interface.delta, dtype=float)[:, None]
+    if pressure is not None:
+        t -= np.asarray(pressure, dtype=float)[:, None] * nrm
+    return np.r_[up, lo], np.vstack([nrm, nrm]), np.vstack([t, t])
+
+
+def optimal_sizes(est: Estimate, target: float, max_elements: float, order: float = 1.0,
+                  max_size: float = np.inf, steps: tuple[float, float] = (1 / 8, 2.0)) -> np.ndarray:
+    """Per-triangle sizes of the next mesh (the optimal-mesh rule, module docstring).
+
+    ``target``: the relative error wanted, in (0, 1); ``max_elements``: the budget of triangles (the sizes
+    are scaled up when sum (h_T / h_new)^2 exceeds it); ``order`` p: the error's order in h; ``steps``: the
+    smallest and largest ratio h_new / h_T in one step; ``max_size``: no size above it."""
+    h = est.sizes
+    allowed2 = target ** 2 * (est.energy2.sum() + est.eta2.sum()) / est.eta2.size
+    with np.errstate(divide="ignore"):
+        ratio = (allowed2 / np.maximum(est.eta2, 1e-300)) ** (0.5 / order)
+    h_new = np.minimum(h * np.clip(ratio, *steps), max_size)
+    count = float(np.sum((h / h_new) ** 2))
+    if count > max_elements:
+        h_new = h_new * np.sqrt(count / max_elements)
+    return h_new
+
+
+def nodal_u(qp, x: np.ndarray) -> np.ndarray:
+    """Displacement (n, 2) of every node of ``qp.geometry`` from the free unknowns ``x`` (fixed ones 0)."""
+    nd = qp.geometry.node_dofs
+    x = np.asarray(x, dtype=float) + (0.0 if qp.shift is None else qp.shift.x)
+    u = np.zeros(nd.shape[::-1])
+    mask = nd >= 0
+    u.T[mask] = x[nd[mask]]
+    return u
+
+
+def estimate(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> Estimate:
+    """:func:`zz_estimate` of a 2D P1 QP's answer (``qp.geometry``, ``qp.material``, ``qp.interface``):
+    the defect faces' tractions from the interface term and, with ``multipliers``, the contact pressure."""
+    from dualfem.core.elasticity import lame
+
+    g, mat = qp.geometry, qp.material
+    if g is None or mat is None or g.dim != 2 or g.cells.shape[0] != 3:
+        raise ValueError("the estimator needs a 2D P1 triangle mesh and the material (qp.geometry, qp.material)")
+    lam, mu = lame(mat.E, mat.nu, mat.plane)
+    u = nodal_u(qp, x)
+    faces = None
+    if qp.interface is not None and qp.interface.dim == 2 and qp.m:
+        faces = face_tractions(qp.interface, u, None if multipliers is None else qp.pressure(multipliers))
+    return zz_estimate(g.nodes, g.cells, u, lam, mu, faces)
