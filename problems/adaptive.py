@@ -46,6 +46,8 @@ class Step:
     x: np.ndarray
     multipliers: np.ndarray
     estimate: Estimate
+    #: the certified Solution (:func:`dualfem.experiments.adaptive.adapt`); None inside a scene's own loop
+    solution: object = None
 
     @property
     def unknowns(self) -> int:

@@ -95,3 +95,22 @@ def test_scene_option_refines_to_the_target():
 def test_bad_adaptive_keys_are_refused(keys, word):
     with pytest.raises(InputError, match=word.replace("(", r"\(")):
         griffith(**keys)
+
+
+def test_user_loop_certifies_each_step_and_refuses_bad_values():
+    from dualfem.experiments.adaptive import adapt as user_adapt
+
+    steps = list(user_adapt(griffith(), target_error=1e-3, max_unknowns=20_000, solver="pdas", max_steps=2))
+    assert [s.solution.status for s in steps] == ["solved", "solved"]
+    assert steps[1].estimate.eta < steps[0].estimate.eta
+    with pytest.raises(InputError, match="max_unknowns must be an integer"):
+        next(user_adapt(griffith(), max_unknowns=-1))
+    with pytest.raises(InputError, match="max_steps must be an integer"):
+        next(user_adapt(griffith(), max_steps=0))
+
+
+def test_fractured_scene_takes_the_option():
+    pr = load_scene("fractured", {"cracks": 2, "mesh_size": 0.05, "tip_size": 0.05, "refine": "adaptive",
+                                  "target_error": 0.01, "max_unknowns": 6000})
+    qp = pr.build()
+    assert qp.params["adaptive_steps"] >= 2 and qp.n <= 6000

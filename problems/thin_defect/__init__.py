@@ -278,8 +278,7 @@ class ThinDefect(Problem):
         ``self.shared``: computed once for this instance and those ``with_params`` derives from it)."""
         shared = self.shared.data
         if shared.get("cut") is None and self.params["refine"] == "adaptive":
-            steps = list(adapt(type(self)(**{**self.params, "refine": "none", "target_error": None,
-                                             "max_unknowns": None}), pdas_solve,
+            steps = list(adapt(self.with_params(refine="none", target_error=None, max_unknowns=None), pdas_solve,
                                self.params["target_error"], self.params["max_unknowns"]))
             shared["cut"] = steps[-1].problem.cut()
             shared["adaptive"] = [(s.unknowns, s.estimate.relative) for s in steps]
@@ -295,7 +294,7 @@ class ThinDefect(Problem):
     def on_sizes(self, points: np.ndarray, triangles: np.ndarray, sizes: np.ndarray) -> ThinDefect:
         """This scene (``refine = "none"``) meshed by gmsh with the per-triangle ``sizes`` on the triangulation
         (``points`` (2, n) in the reference frame, ``triangles`` (3, nt)) as its background mesh."""
-        new = type(self)(**{**self.params, "refine": "none", "target_error": None, "max_unknowns": None})
+        new = self.with_params(refine="none", target_error=None, max_unknowns=None)
         new._size_view = (np.asarray(points), np.asarray(triangles), np.asarray(sizes))
         return new
 
