@@ -92,9 +92,12 @@ def pdas_solve(qp: QP) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(sol.x), np.asarray(sol.multipliers)
 
 
-def adapt(problem, solve: Solve, target_error: float, max_unknowns: int, max_steps: int = MAX_STEPS) -> Iterator[Step]:
+def adapt(problem, solve: Solve, target_error: float, max_unknowns: int, max_steps: int = MAX_STEPS,
+          step_growth: float | None = None) -> Iterator[Step]:
     """The adaptive loop (module docstring) from ``problem``, a 2D thin-defect scene with ``mesh = "gmsh"`` and
-    ``refine = "none"``; yields every step, the last one the mesh to keep."""
+    ``refine = "none"``; yields every step, the last one the mesh to keep. ``step_growth``: at most this many
+    times the unknowns of one step in the next (None: straight to the budget when the target needs it; a
+    refinement study takes e.g. 3)."""
     pr = problem
     mesh_size = float(pr.params["mesh_size"] or min(pr.params["width"], pr.params["height"]) / pr.params["N"])
     for k in range(max_steps):
@@ -104,7 +107,8 @@ def adapt(problem, solve: Solve, target_error: float, max_unknowns: int, max_ste
         yield Step(k, pr, qp, np.asarray(x), np.asarray(mu), est)
         if est.relative <= target_error or k == max_steps - 1:
             return
-        nxt = _next(pr, qp, est, target_error, max_unknowns, mesh_size)
+        budget = max_unknowns if step_growth is None else int(min(max_unknowns, step_growth * qp.n))
+        nxt = _next(pr, qp, est, target_error, budget, mesh_size)
         if nxt is None:
             return
         pr = nxt

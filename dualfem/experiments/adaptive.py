@@ -29,16 +29,21 @@ from .runner import run
 
 def adapt(scene, target_error: float = _loop.TARGET_DEFAULT, max_unknowns: int = _loop.MAX_UNKNOWNS_DEFAULT,
           solver: str = "pdas", params: dict[str, Any] | None = None,
-          max_steps: int = _loop.MAX_STEPS) -> Iterator[_loop.Step]:
+          max_steps: int = _loop.MAX_STEPS, step_growth: float | None = None) -> Iterator[_loop.Step]:
     """Yield the adaptive steps of ``scene`` (a 2D thin-defect or fractured problem, ``mesh = "gmsh"``), each
     solved by ``solver`` (with ``params``) and certified; stops at ``target_error`` (relative, energy norm),
-    the ``max_unknowns`` budget or ``max_steps`` meshes. InputError for bad values (before any meshing)."""
+    the ``max_unknowns`` budget or ``max_steps`` meshes; ``step_growth``: at most this many times the unknowns
+    of one step in the next (None: as many as the target needs, within the budget). InputError for bad values
+    (before any meshing)."""
     p = getattr(scene, "params", {})
     if p.get("refine", "none") != "none":
         raise InputError("adapt() drives the loop itself: give it a scene with refine = \"none\"")
     _loop.check_keys("adaptive", target_error, max_unknowns, p.get("mesh", ""))
     if isinstance(max_steps, bool) or not isinstance(max_steps, int) or not 1 <= max_steps <= 20:
         raise InputError(f"max_steps must be an integer in [1, 20], got {max_steps!r}")
+    if step_growth is not None and (isinstance(step_growth, bool) or not isinstance(step_growth, (int, float))
+                                    or not 1.5 <= step_growth <= 100):
+        raise InputError(f"step_growth must be a number in [1.5, 100] or None, got {step_growth!r}")
     solutions: dict[int, Solution] = {}
 
     def solve(qp: QP) -> tuple[np.ndarray, np.ndarray]:
@@ -49,6 +54,7 @@ def adapt(scene, target_error: float = _loop.TARGET_DEFAULT, max_unknowns: int =
         solutions[id(qp)] = sol
         return np.asarray(sol.x), np.asarray(sol.multipliers)
 
-    for step in _loop.adapt(scene, solve, float(target_error), int(max_unknowns), max_steps):
+    for step in _loop.adapt(scene, solve, float(target_error), int(max_unknowns), max_steps,
+                            None if step_growth is None else float(step_growth)):
         step.solution = solutions.pop(id(step.qp))
         yield step
