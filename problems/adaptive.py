@@ -30,6 +30,9 @@ REFINE = ("none", "adaptive")
 #: the default of ``target_error`` (relative, energy norm) and ``max_unknowns``, and their ranges
 TARGET_DEFAULT, TARGET_RANGE = 0.05, (1e-4, 0.5)
 MAX_UNKNOWNS_DEFAULT, MAX_UNKNOWNS_RANGE = 200_000, (500, 5_000_000)
+#: the smallest element size asked of gmsh, relative to max(width, height): below it gmsh (tolerances ~1e-8 of
+#: the body) has produced slivers of area 1e-20 near a tip
+MIN_SIZE = 2e-5
 #: meshes in one adaptive run at most (the scene option)
 MAX_STEPS = 8
 
@@ -118,7 +121,8 @@ def _next(pr, qp: QP, est: Estimate, target: float, max_unknowns: int, mesh_size
     """The problem on the next mesh, or None when the budget leaves no room to refine."""
     per_element = qp.n / est.eta2.size                      # unknowns per triangle on this mesh
     budget = 0.9 * max_unknowns / per_element
-    sizes = optimal_sizes(est, target, budget, order=1.0, max_size=mesh_size)
+    min_size = MIN_SIZE * max(float(pr.params["width"]), float(pr.params["height"]))
+    sizes = optimal_sizes(est, target, budget, order=1.0, max_size=mesh_size, min_size=min_size)
     predicted = float(np.sum((est.sizes / sizes) ** 2)) * per_element
     if predicted < 1.2 * qp.n and qp.n > 0.5 * max_unknowns:
         return None

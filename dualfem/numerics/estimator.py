@@ -148,17 +148,19 @@ def face_tractions(interface, nodal_u: np.ndarray,
 
 
 def optimal_sizes(est: Estimate, target: float, max_elements: float, order: float = 1.0,
-                  max_size: float = np.inf, steps: tuple[float, float] = (1 / 8, 2.0)) -> np.ndarray:
+                  max_size: float = np.inf, steps: tuple[float, float] = (1 / 8, 2.0),
+                  min_size: float = 0.0) -> np.ndarray:
     """Per-triangle sizes of the next mesh (the optimal-mesh rule, module docstring).
 
     ``target``: the relative error wanted, in (0, 1); ``max_elements``: the budget of triangles (the sizes
     are scaled up when sum (h_T / h_new)^2 exceeds it); ``order`` p: the error's order in h; ``steps``: the
-    smallest and largest ratio h_new / h_T in one step; ``max_size``: no size above it."""
+    smallest and largest ratio h_new / h_T in one step; ``max_size``: no size above it; ``min_size``: none below
+    it (the mesher's resolution: at a crack tip the rule keeps asking for smaller elements)."""
     h = est.sizes
     allowed2 = target ** 2 * (est.energy2.sum() + est.eta2.sum()) / est.eta2.size
     with np.errstate(divide="ignore"):
         ratio = (allowed2 / np.maximum(est.eta2, 1e-300)) ** (0.5 / order)
-    h_new = np.minimum(h * np.clip(ratio, *steps), max_size)
+    h_new = np.clip(h * np.clip(ratio, *steps), min_size, max_size)
     count = float(np.sum((h / h_new) ** 2))
     if count > max_elements:
         h_new = h_new * np.sqrt(count / max_elements)
