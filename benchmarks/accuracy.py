@@ -1,4 +1,4 @@
-"""Error against unknowns and against time, per discretization (reports/accuracy.md): 2D Griffith cracks.
+"""Error against unknowns and against time, per discretization (reports/accuracy.md): Griffith, penny, ellipse.
 
     python benchmarks/accuracy.py --report reports            # ~5 min on 2 shared cores (nice -n 10)
     python benchmarks/accuracy.py --report reports --render-only
@@ -22,6 +22,7 @@ Discretizations: ``uniform`` (mesh_size = tip_size = h, box 10 a: a larger box i
 ``graded 0.3`` (box 100 a, mesh_size 5 a, tip_size halved, size_growth 0.3: today's default), ``graded 0.05``
 (the same with size_growth 0.05), ``adaptive`` (box 100 a, each step of :func:`dualfem.experiments.adaptive.adapt`
 from mesh_size 5 a, tip_size 0.5 a; time = the steps so far). Each answer by pdas, certified by the runner.
+3D (the penny and an elliptic crack under tension, uniform and graded meshes): benchmarks/accuracy_3d.py.
 """
 from __future__ import annotations
 
@@ -178,6 +179,13 @@ def main(argv: list[str] | None = None) -> int:
             b = bias(case)
             res["bias"][case] = {str(k): v for k, v in b.items()}
             res["rows"] += curves(case, b, args.quick)
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from accuracy_3d import CRACKS, study3
+
+        res["bias3"] = {}
+        for crack in CRACKS:
+            res["bias3"][crack], rows = study3(crack, args.quick)
+            res["rows"] += rows
         res["wall_s"] = time.perf_counter() - t0
         res["machine"] = machine()
         path.write_text(json.dumps(res, indent=1), encoding="utf-8")
