@@ -1,4 +1,4 @@
-"""Adaptive refinement of a 2D gmsh thin-defect scene: solve, estimate, re-mesh, until the estimate is met.
+"""Adaptive refinement of a gmsh scene (2D thin-defect, fractured, 3D): solve, estimate, re-mesh, until met.
 
 One step: build the QP of the current mesh, solve it (``solve(qp) -> (x, multipliers)``, any solver), the
 Zienkiewicz-Zhu estimate of the answer (:func:`dualfem.numerics.estimator.estimate`: recovery on the cut mesh,
@@ -102,7 +102,7 @@ def adapt(problem, solve: Solve, target_error: float, max_unknowns: int, max_ste
     times the unknowns of one step in the next (None: straight to the budget when the target needs it; a
     refinement study takes e.g. 3)."""
     pr = problem
-    mesh_size = float(pr.params["mesh_size"] or min(pr.params["width"], pr.params["height"]) / pr.params["N"])
+    mesh_size = _largest_size(pr)
     for k in range(max_steps):
         qp = pr.build()
         x, mu = solve(qp)
@@ -117,20 +117,30 @@ def adapt(problem, solve: Solve, target_error: float, max_unknowns: int, max_ste
         pr = nxt
 
 
+def _largest_size(pr) -> float:
+    """The scene's mesh_size: no element of a refined mesh is larger (3D: the problem's property)."""
+    size = getattr(pr, "mesh_size", None)
+    if isinstance(size, float):
+        return size
+    p = pr.params
+    return float(p["mesh_size"] or min(p["width"], p["height"]) / p["N"])
+
+
 def _next(pr, qp: QP, est: Estimate, target: float, max_unknowns: int, mesh_size: float):
     """The problem on the next mesh, or None when the budget leaves no room to refine."""
     per_element = qp.n / est.eta2.size                      # unknowns per triangle on this mesh
     budget = 0.9 * max_unknowns / per_element
-    min_size = MIN_SIZE * max(float(pr.params["width"]), float(pr.params["height"]))
+    min_size = MIN_SIZE * max(float(pr.params[k]) for k in ("width", "height", "depth") if k in pr.params)
     sizes = optimal_sizes(est, target, budget, order=1.0, max_size=mesh_size, min_size=min_size)
     predicted = float(np.sum((est.sizes / sizes) ** 2)) * per_element
     if predicted < 1.2 * qp.n and qp.n > 0.5 * max_unknowns:
         return None
-    c, _ = pr.cut()
+    c = pr.cut()[0]
+    cells = c.tets if est.dim == 3 else c.triangles
     for _ in range(3):                                      # the mesh may overshoot the prediction: coarsen
-        nxt = pr.on_sizes(c.points, c.triangles, sizes)
+        nxt = pr.on_sizes(c.points, cells, sizes)
         n = nxt.size_of_mesh()
         if n <= max_unknowns:
             return nxt
-        sizes = sizes * np.sqrt(1.05 * n / max_unknowns)
+        sizes = sizes * (1.05 * n / max_unknowns) ** (1.0 / est.dim)
     return None

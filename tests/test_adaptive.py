@@ -114,3 +114,42 @@ def test_fractured_scene_takes_the_option():
                                   "target_error": 0.01, "max_unknowns": 6000})
     qp = pr.build()
     assert qp.params["adaptive_steps"] >= 2 and qp.n <= 6000
+
+
+def test_recovery_3d_is_exact_for_a_uniform_stress_and_sees_a_quadratic_one():
+    from scipy.spatial import Delaunay
+
+    from dualfem.numerics.estimator import zz_estimate3
+
+    rng = np.random.default_rng(2)
+    corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
+    p = np.r_[corners, rng.random((10, 3)) * 0.8 + 0.1].T
+    tets = Delaunay(p.T).simplices.T
+    u = np.stack([0.01 * p[0] + 0.02 * p[2], -0.003 * p[1], 0.004 * p[0]], axis=1)
+    est = zz_estimate3(p, tets, u, 1.0, 1.0)
+    assert est.eta < 1e-12 * est.energy and est.energy > 0 and est.dim == 3
+    assert np.isclose(est.area.sum(), 1.0)
+    u2 = np.stack([p[0] ** 2, 0 * p[1], 0 * p[2]], axis=1)
+    assert zz_estimate3(p, tets, u2, 1.0, 1.0).relative > 1e-3
+
+
+def test_three_d_two_steps_reduce_the_estimate_and_the_opening_error():
+    from dualfem.problems.adaptive import adapt as loop
+
+    def penny(**extra):
+        return load_scene("penny", {"mesh_size": 2.5, "tip_size": 0.5, **extra})
+
+    def opening_error(step) -> float:       # Sneddon's opening over r <= 0.8 (cube of side 10, radius 1)
+        qp = step.qp
+        lo = qp.interface.lower
+        r = np.hypot(*(qp.geometry.nodes[:2, lo] - 5.0))
+        exact = 8 * (1 - 0.3 ** 2) / (np.pi * 1000.0) * np.sqrt(np.maximum(1 - r * r, 0))
+        k = r <= 0.8
+        w = qp.weights[k]
+        return float(np.sqrt(np.sum(w * (qp.B @ step.x - exact)[k] ** 2) / np.sum(w * exact[k] ** 2)))
+
+    a, b = list(loop(penny(), _inner_solve, target_error=1e-4, max_unknowns=8000, max_steps=2, step_growth=3.0))
+    assert a.estimate.dim == 3 and b.unknowns > 1.3 * a.unknowns
+    assert b.estimate.eta < a.estimate.eta and opening_error(b) < 0.9 * opening_error(a)
+    with pytest.raises(InputError, match="max_unknowns must be an integer"):
+        penny(refine="adaptive", max_unknowns=3)

@@ -41,6 +41,8 @@ class Estimate:
     eta2: np.ndarray
     energy2: np.ndarray
     area: np.ndarray
+    #: 2 (triangles; ``area`` their areas) or 3 (tetrahedra; ``area`` their volumes)
+    dim: int = 2
 
     @property
     def eta(self) -> float:
@@ -58,7 +60,10 @@ class Estimate:
 
     @property
     def sizes(self) -> np.ndarray:
-        """Each triangle's size: the edge of the equilateral triangle of its area."""
+        """Each element's size: the edge of the equilateral triangle of its area (the regular tetrahedron of
+        its volume, V = h^3 / (6 sqrt 2))."""
+        if self.dim == 3:
+            return np.cbrt(6 * np.sqrt(2.0) * self.area)
         return np.sqrt(self.area / _EQUILATERAL)
 
 
@@ -153,7 +158,7 @@ def optimal_sizes(est: Estimate, target: float, max_elements: float, order: floa
     """Per-triangle sizes of the next mesh (the optimal-mesh rule, module docstring).
 
     ``target``: the relative error wanted, in (0, 1); ``max_elements``: the budget of triangles (the sizes
-    are scaled up when sum (h_T / h_new)^2 exceeds it); ``order`` p: the error's order in h; ``steps``: the
+    are scaled up when sum (h_T / h_new)^dim exceeds it); ``order`` p: the error's order in h; ``steps``: the
     smallest and largest ratio h_new / h_T in one step; ``max_size``: no size above it; ``min_size``: none below
     it (the mesher's resolution: at a crack tip the rule keeps asking for smaller elements)."""
     h = est.sizes
@@ -161,9 +166,9 @@ def optimal_sizes(est: Estimate, target: float, max_elements: float, order: floa
     with np.errstate(divide="ignore"):
         ratio = (allowed2 / np.maximum(est.eta2, 1e-300)) ** (0.5 / order)
     h_new = np.clip(h * np.clip(ratio, *steps), min_size, max_size)
-    count = float(np.sum((h / h_new) ** 2))
+    count = float(np.sum((h / h_new) ** est.dim))
     if count > max_elements:
-        h_new = h_new * np.sqrt(count / max_elements)
+        h_new = h_new * (count / max_elements) ** (1.0 / est.dim)
     return h_new
 
 
@@ -183,11 +188,69 @@ def estimate(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> Estima
     from dualfem.core.elasticity import lame
 
     g, mat = qp.geometry, qp.material
-    if g is None or mat is None or g.dim != 2 or g.cells.shape[0] != 3:
-        raise ValueError("the estimator needs a 2D P1 triangle mesh and the material (qp.geometry, qp.material)")
-    lam, mu = lame(mat.E, mat.nu, mat.plane)
+    if g is None or mat is None or g.cells.shape[0] != g.dim + 1:
+        raise ValueError("the estimator needs a P1 triangle or tetrahedron mesh and the material (qp.geometry, "
+                         "qp.material)")
     u = nodal_u(qp, x)
+    if g.dim == 3:
+        lam3, mu3 = _lame3(mat.E, mat.nu)
+        faces3 = None
+        if qp.interface is not None and qp.m:
+            faces3 = face_tractions(qp.interface, u, None if multipliers is None else qp.pressure(multipliers))
+        return zz_estimate3(g.nodes, g.cells, u, lam3, mu3, faces3)
+    lam, mu = lame(mat.E, mat.nu, mat.plane)
     faces = None
     if qp.interface is not None and qp.interface.dim == 2 and qp.m:
         faces = face_tractions(qp.interface, u, None if multipliers is None else qp.pressure(multipliers))
     return zz_estimate(g.nodes, g.cells, u, lam, mu, faces)
+
+
+def _lame3(E: float, nu: float) -> tuple[float, float]:
+    return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+
+
+#: the 4-point rule on a tetrahedron, exact for quadratics: barycentric (A, B, B, B) and its permutations
+_A, _B = 0.5854101966249685, 0.1381966011250105
+
+
+def _full_energy(s: np.ndarray, lam: float, mu: float) -> np.ndarray:
+    """sigma : C^-1 sigma for full stress tensors (..., d, d) of isotropic elasticity in d dimensions."""
+    d = s.shape[-1]
+    tr = np.trace(s, axis1=-2, axis2=-1)
+    return (np.sum(s * s, axis=(-2, -1)) - lam / (d * lam + 2 * mu) * tr ** 2) / (2 * mu)
+
+
+def zz_estimate3(nodes: np.ndarray, tets: np.ndarray, u: np.ndarray, lam: float, mu: float,
+                 faces: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> Estimate:
+    """:func:`zz_estimate` on P1 tetrahedra (``nodes`` (3, n), ``tets`` (4, nt), ``u`` (n, 3)): the recovered
+    stress the volume-weighted nodal mean, the defect faces' tractions imposed, the indicator integrated by
+    the 4-point rule (exact: the integrand is quadratic); ``area`` holds the volumes."""
+    from .p1 import tet_gradients
+
+    tets = np.asarray(tets, dtype=np.int64)
+    g, vol = tet_gradients(nodes, tets)
+    vol = np.abs(vol)
+    du = np.einsum("tic,idt->tcd", u[tets.T], g)                        # du[t, c, d] = d u_c / d x_d
+    eps = 0.5 * (du + du.transpose(0, 2, 1))
+    sig = 2 * mu * eps + lam * np.trace(eps, axis1=1, axis2=2)[:, None, None] * np.eye(3)
+    n_nodes = nodes.shape[1]
+    w = np.bincount(tets.ravel(), weights=np.tile(vol, 4), minlength=n_nodes)
+    flat = sig.reshape(-1, 9)
+    star = np.stack([np.bincount(tets.ravel(), weights=np.tile(vol * flat[:, k], 4), minlength=n_nodes)
+                     for k in range(9)], axis=1) / np.where(w > 0, w, 1.0)[:, None]
+    star = star.reshape(-1, 3, 3)
+    if faces is not None and len(faces[0]):
+        ids = np.asarray(faces[0], dtype=np.int64)
+        n = np.asarray(faces[1], dtype=float)
+        r = np.asarray(faces[2], dtype=float) - np.einsum("kij,kj->ki", star[ids], n)
+        rn = np.sum(r * n, axis=1)
+        star[ids] += (r[:, :, None] * n[:, None, :] + n[:, :, None] * r[:, None, :]
+                      - rn[:, None, None] * n[:, :, None] * n[:, None, :])
+    corner = star[tets.T]                                               # (nt, 4, 3, 3)
+    eta2 = np.zeros(tets.shape[1])
+    for q in range(4):
+        bary = np.full(4, _B)
+        bary[q] = _A
+        at_q = np.einsum("v,tvij->tij", bary, corner)
+        eta2 += vol / 4.0 * _full_energy(at_q - sig, lam, mu)
+    return Estimate(eta2=eta2, energy2=vol * _full_energy(sig, lam, mu), area=vol, dim=3)
