@@ -123,8 +123,8 @@ def render(res: dict, md: Path) -> None:
             lines.append(f"| {case} | {d} | {cell} | {z['unknowns']:,} | {_fmt(z['jump_error'])}"
                          f"{' *' if z['floor'] else ''} | {_fmt(z['energy_rel'])} |")
     lines += ["", "## What is not here", "",
-              "In 3D only uniform and graded meshes: the estimator and the re-meshing are 2D only, so "
-              "there is no adaptive 3D curve, and no 3D energy error (no closed-form energy used here). "
+              "No 3D energy error (no closed-form energy used here), so no 3D effectivity index; no "
+              "compression plus shear case in 3D. "
               "The estimate eta (rel.) is relative to the whole body's energy (the uniform "
               "field included), the scene key target_error's measure; the energy error column is relative to the "
               "crack's part of the solution.", ""]
