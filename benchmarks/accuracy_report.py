@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-DISCS = ("uniform", "graded 0.3", "graded 0.05", "adaptive")
+DISCS = ("uniform", "graded 0.3", "graded 0.1", "graded 0.05", "adaptive")
 TITLES = {"open": "open crack under tension (opening)",
           "slip": "closed crack at 30 degrees, compression + shear (slip)"}
 
@@ -18,7 +18,7 @@ def figure(rows: list[dict], case: str, out: Path) -> None:
 
     from dualfem.post.style import PALETTE
 
-    marks = ("s", "o", "D", "^")
+    marks = ("s", "o", "v", "D", "^")
     fig, ax = plt.subplots(1, 3, figsize=(13, 3.8))
     for i, d in enumerate(DISCS):
         r = [x for x in rows if x["case"] == case and x["disc"] == d]
@@ -139,7 +139,7 @@ def figure3(rows: list[dict], out: Path) -> None:
 
     from dualfem.post.style import PALETTE
 
-    marks = ("s", "o", "D", "^")
+    marks = ("s", "o", "v", "D", "^")
     fig, ax = plt.subplots(1, 4, figsize=(16, 3.8))
     for j, case in enumerate(("penny", "ellipse")):
         for i, d in enumerate(DISCS):
@@ -152,6 +152,7 @@ def figure3(rows: list[dict], out: Path) -> None:
         ax[2 * j].set_xlabel("unknowns")
         ax[2 * j + 1].set_xlabel("time to answer (s)")
         for a in ax[2 * j: 2 * j + 2]:
+            a.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
             a.set_ylabel(f"{case}: opening, relative L2 error")
             a.grid(True, which="both", alpha=0.3)
     ax[0].legend(fontsize=8)
