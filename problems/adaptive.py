@@ -144,3 +144,42 @@ def _next(pr, qp: QP, est: Estimate, target: float, max_unknowns: int, mesh_size
             return nxt
         sizes = sizes * (1.05 * n / max_unknowns) ** (1.0 / est.dim)
     return None
+
+
+class Adaptive:
+    """The scene option ``refine = "adaptive"`` for a gmsh problem (mixed into ThinDefect and ThreeD): the
+    loop runs once per :class:`~dualfem.core.problem.Shared`, inside ``cut()``, and the last mesh is kept."""
+
+    #: (points, cells, sizes): the background mesh of this instance's gmsh mesh (:meth:`on_sizes`), or None
+    _size_view: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+    def adapt_mesh(self) -> None:
+        """With ``refine = "adaptive"`` and no mesh yet: run the loop (``pdas``), keep the last step's cut mesh
+        and the steps' (unknowns, relative estimate) in ``self.shared``."""
+        shared = self.shared.data          # type: ignore[attr-defined]
+        p = self.params                    # type: ignore[attr-defined]
+        if shared.get("cut") is None and p["refine"] == "adaptive":
+            steps = list(adapt(self.unrefined(), pdas_solve, p["target_error"], p["max_unknowns"]))
+            shared["cut"] = steps[-1].problem.cut()
+            shared["adaptive"] = [(s.unknowns, s.estimate.relative) for s in steps]
+
+    def unrefined(self):
+        """This scene with ``refine = "none"``."""
+        return self.with_params(refine="none", target_error=None, max_unknowns=None)  # type: ignore[attr-defined]
+
+    def on_sizes(self, points: np.ndarray, cells: np.ndarray, sizes: np.ndarray):
+        """This scene (``refine = "none"``) meshed by gmsh with the per-element ``sizes`` on an earlier mesh
+        (``points`` (dim, n) in the reference frame, ``cells`` (dim + 1, nt)) as its background mesh."""
+        new = self.unrefined()
+        new._size_view = (np.asarray(points), np.asarray(cells), np.asarray(sizes))
+        return new
+
+    def size_of_mesh(self) -> int:
+        """dim times the nodes of the cut mesh (meshing it): the unknowns before supports are removed."""
+        return int(self.dim) * int(self.cut()[0].points.shape[1])  # type: ignore[attr-defined]
+
+    def adaptive_params(self, params: dict) -> None:
+        """``adaptive_steps`` and ``adaptive_estimate`` (the last relative estimate) into a QP's parameters."""
+        steps = self.shared.data.get("adaptive")  # type: ignore[attr-defined]
+        if steps:
+            params["adaptive_steps"], params["adaptive_estimate"] = len(steps), float(steps[-1][1])

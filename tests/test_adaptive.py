@@ -153,3 +153,11 @@ def test_three_d_two_steps_reduce_the_estimate_and_the_opening_error():
     assert b.estimate.eta < a.estimate.eta and opening_error(b) < 0.9 * opening_error(a)
     with pytest.raises(InputError, match="max_unknowns must be an integer"):
         penny(refine="adaptive", max_unknowns=3)
+
+
+
+def test_three_d_scene_option():
+    base = load_scene("penny", {"mesh_size": 2.5, "tip_size": 0.5}).build()
+    qp = load_scene("penny", {"mesh_size": 2.5, "tip_size": 0.5, "refine": "adaptive", "target_error": 1e-4,
+                              "max_unknowns": 4000}).build()
+    assert qp.params["adaptive_steps"] >= 2 and base.n < qp.n <= 4000

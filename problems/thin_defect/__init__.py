@@ -66,7 +66,7 @@ from dualfem.registry import register_problem
 from .. import _boundary as bd
 from .._defect_geometry import check_growth
 from .._interface import delta_free_part, interface, local_unknowns, with_delta
-from ..adaptive import adapt, pdas_solve
+from ..adaptive import Adaptive
 from ..adaptive import check_keys as check_adaptive
 from ..loads import check_load_model, resolve_load
 from .assemble import boundary_edges_on, free_dofs, stiffness, traction_vector
@@ -90,7 +90,7 @@ def _load_label(load) -> str:
 
 
 @register_problem
-class ThinDefect(Problem):
+class ThinDefect(Adaptive, Problem):
     """Elastic rectangle with thin defects (fracture parameter delta), structured or gmsh mesh."""
 
     name = "thin_defect"
@@ -267,7 +267,7 @@ class ThinDefect(Problem):
         h = p["mesh_size"] or min(W, H) / N
         dm = mesh_with_defects(W, H, [{"points": d["points"], "curve": d["curve"]} for d in self._defects],
                                h, p["tip_size"] or None, size_growth=p["size_growth"],
-                               size_view=getattr(self, "_size_view", None), **self._gmsh_options())
+                               size_view=self._size_view, **self._gmsh_options())
         pts, tri = np.asarray(dm.points, dtype=float), np.asarray(dm.triangles, dtype=np.int32)
         if np.bincount(tri.ravel(), minlength=pts.shape[1]).min() == 0:
             raise RuntimeError("the gmsh mesh has nodes in no triangle (problems/gmsh_mesh.py must drop them)")
@@ -277,11 +277,7 @@ class ThinDefect(Problem):
         """The doubled mesh in the reference frame, and its node coordinates after ``rotate_deg`` (kept in
         ``self.shared``: computed once for this instance and those ``with_params`` derives from it)."""
         shared = self.shared.data
-        if shared.get("cut") is None and self.params["refine"] == "adaptive":
-            steps = list(adapt(self.with_params(refine="none", target_error=None, max_unknowns=None), pdas_solve,
-                               self.params["target_error"], self.params["max_unknowns"]))
-            shared["cut"] = steps[-1].problem.cut()
-            shared["adaptive"] = [(s.unknowns, s.estimate.relative) for s in steps]
+        self.adapt_mesh()
         if shared.get("cut") is None:
             pts, tri, dn = self._reference_mesh()
             p = self.params
@@ -290,17 +286,6 @@ class ThinDefect(Problem):
             centre = np.array([p["width"], p["height"]]) / 2
             shared["cut"] = (c, rotate(c.points, float(p["rotate_deg"]), centre))
         return shared["cut"]
-
-    def on_sizes(self, points: np.ndarray, triangles: np.ndarray, sizes: np.ndarray) -> ThinDefect:
-        """This scene (``refine = "none"``) meshed by gmsh with the per-triangle ``sizes`` on the triangulation
-        (``points`` (2, n) in the reference frame, ``triangles`` (3, nt)) as its background mesh."""
-        new = self.with_params(refine="none", target_error=None, max_unknowns=None)
-        new._size_view = (np.asarray(points), np.asarray(triangles), np.asarray(sizes))
-        return new
-
-    def size_of_mesh(self) -> int:
-        """Twice the nodes of the cut mesh (meshing it): the unknowns before supports are removed."""
-        return 2 * int(self.cut()[0].points.shape[1])
 
     def mesh(self):
         """(scikit-fem MeshTri of the doubled, rotated mesh, the Cut)."""
@@ -503,9 +488,7 @@ class ThinDefect(Problem):
         for k in ("defects_file", "size_growth", "refine", "target_error", "max_unknowns"):
             if p[k] == ThinDefect.defaults[k]:
                 params.pop(k, None)
-        if self.shared.data.get("adaptive"):
-            steps = self.shared.data["adaptive"]
-            params["adaptive_steps"], params["adaptive_estimate"] = len(steps), float(steps[-1][1])
+        self.adaptive_params(params)
         self.jump_operators = J
         geometry = GeometryPart(2, maps.pop("nodes"), maps.pop("triangles"), maps.pop("node_dofs"))
         return QP(K=K, F=self._load_vector(a), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],

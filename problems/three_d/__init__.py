@@ -57,7 +57,7 @@ from dualfem.registry import register_problem
 from .. import _boundary as bd
 from .._defect_geometry import check_growth
 from .._interface import delta_free_part, interface, local_unknowns, with_delta
-from ..adaptive import adapt, pdas_solve
+from ..adaptive import Adaptive
 from ..adaptive import check_keys as check_adaptive
 from ..defects_file import read_defects
 from ..loads import check_load_model
@@ -104,7 +104,7 @@ def _file_tables(defects_file, tables) -> tuple[list | None, str]:
 
 
 @register_problem
-class ThreeD(Problem):
+class ThreeD(Adaptive, Problem):
     """Elastic box with defect surfaces (disks, ellipses, polygons, spherical caps), P1 tetrahedra (gmsh)."""
 
     name = "three_d"
@@ -277,14 +277,10 @@ class ThreeD(Problem):
         """(the doubled mesh in the reference frame, its rotated node coordinates, the uncut mesh's top-face
         triangles); computed once per :class:`~dualfem.core.problem.Shared`."""
         shared = self.shared.data
-        if shared.get("cut") is None and self.params["refine"] == "adaptive":
-            steps = list(adapt(self.with_params(refine="none", target_error=None, max_unknowns=None), pdas_solve,
-                               self.params["target_error"], self.params["max_unknowns"]))
-            shared["cut"] = steps[-1].problem.cut()
-            shared["adaptive"] = [(s.unknowns, s.estimate.relative) for s in steps]
+        self.adapt_mesh()
         if shared.get("cut") is None:
             m = mesh_box(self.box, self._surfaces, self.mesh_size, self.tip_size, self.surface_size,
-                         self.params["size_growth"], getattr(self, "_size_view", None))
+                         self.params["size_growth"], self._size_view)
             c = cut(m.points, m.tets, m.faces, self._surfaces)
             from .assemble import boundary_faces
 
@@ -294,18 +290,6 @@ class ThreeD(Problem):
             shared["cut"] = (c, self.rotation() @ (c.points - centre) + centre, top)
         return shared["cut"]
 
-    def on_sizes(self, points: np.ndarray, tets: np.ndarray, sizes: np.ndarray) -> ThreeD:
-        """This scene (``refine = "none"``) meshed with the per-tetrahedron ``sizes`` on an earlier mesh
-        (``points`` (3, n) in the reference frame, ``tets`` (4, nt)) as gmsh's background mesh."""
-        new = self.with_params(refine="none", target_error=None, max_unknowns=None)
-        new._size_view = (np.asarray(points), np.asarray(tets), np.asarray(sizes))
-        return new
-
-    def size_of_mesh(self) -> int:
-        """Three times the nodes of the cut mesh (meshing it)."""
-        return 3 * int(self.cut()[0].points.shape[1])
-
-    # -------------------------------------------------------------- assembly
     def _delta_free(self) -> dict:
         """Mesh, DOF maps, K_el and maps: what depends neither on delta nor on the load (shared, read-only)."""
         a = self.shared.data.get("delta_free")
@@ -394,9 +378,7 @@ class ThreeD(Problem):
         for k in ("defects_file", "size_growth", "refine", "target_error", "max_unknowns"):
             if p[k] == self.defaults[k]:
                 params.pop(k, None)
-        if self.shared.data.get("adaptive"):
-            steps = self.shared.data["adaptive"]
-            params["adaptive_steps"], params["adaptive_estimate"] = len(steps), float(steps[-1][1])
+        self.adaptive_params(params)
         geometry = GeometryPart(3, a["points"], c.tets, nd)
         iface = dataclasses.replace(iface, weights=c.weights.copy())       # each QP its own weights
         return QP(K=K, F=F, B=B, weights=iface.weights, K_fixed=a["K_el"], local_dofs=a["local"],
