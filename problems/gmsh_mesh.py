@@ -160,6 +160,24 @@ def _build(gmsh, width: float, height: float, parsed, right_split: tuple[float, 
     return sides, surface, curves, tips
 
 
+def _size_view(gmsh, view: tuple[np.ndarray, np.ndarray, np.ndarray], scale: float) -> int:
+    """A gmsh post-processing view of a per-triangle size (list data "ST", the size constant on each
+    triangle), coordinates and sizes times ``scale``, set as the background mesh (a ``PostView`` field)."""
+    pts, tri, sizes = (np.asarray(a) for a in view)
+    tri = tri.astype(np.int64)
+    xy = pts[:, tri] * scale                                            # (2, 3, nt)
+    nt = tri.shape[1]
+    data = np.concatenate([xy[0].T, xy[1].T, np.zeros((nt, 3)), np.repeat(np.asarray(sizes, float)[:, None] * scale,
+                                                                           3, axis=1)], axis=1)
+    tag = gmsh.view.add("dualfem_size")
+    gmsh.view.addListData(tag, "ST", nt, data.ravel().tolist())
+    fld = gmsh.model.mesh.field
+    f = fld.add("PostView")
+    fld.setNumber(f, "ViewTag", tag)
+    fld.setAsBackgroundMesh(f)
+    return tag
+
+
 def _size_fields(gmsh, mesh_size: float, tip_size: float | None, tips: list[int], coarsen: float = 1.0,
                  grade: float = GRADE) -> None:
     """Element size mesh_size, tip_size near the tips growing with slope ``grade``; every size times
@@ -272,7 +290,8 @@ def refine_uniformly(dm: DefectMesh) -> DefectMesh:
 
 def mesh_with_defects(width: float, height: float, defects: list[dict], mesh_size: float,
                       tip_size: float | None = None, algorithm: str = "frontal", refine: int = 0,
-                      max_samples: int = MAX_SAMPLES, size_growth: float = GRADE) -> DefectMesh:
+                      max_samples: int = MAX_SAMPLES, size_growth: float = GRADE,
+                      size_view: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> DefectMesh:
     """Mesh (0, width) x (0, height) with first-order triangles of size about ``mesh_size``
     (``tip_size`` near the defect tips), the defects embedded as internal edges.
 
@@ -283,7 +302,10 @@ def mesh_with_defects(width: float, height: float, defects: list[dict], mesh_siz
     edges in two): elements of about the same size, of the coarse mesh's shapes, in a fraction of the
     time (:data:`ALGORITHMS`); polyline defects only (a spline's new nodes would be chord midpoints).
     ``max_samples``: see :func:`validate`. ``size_growth``: the slope of the element size away from a
-    tip (size per unit distance, in :data:`GRADE_RANGE`; :func:`check_growth`).
+    tip (size per unit distance, in :data:`GRADE_RANGE`; :func:`check_growth`). ``size_view``:
+    (points (2, n), triangles (3, nt), sizes (nt,)) a per-triangle element size on any triangulation of the
+    body (an earlier mesh: adaptive refinement, :mod:`dualfem.problems.adaptive`), used by gmsh as its
+    background mesh in place of ``tip_size`` (sizes above ``mesh_size`` are cut to it).
     Raises InputError on bad input (see :func:`validate`), MissingDependency without gmsh.
     """
     if algorithm not in ALGORITHMS:
@@ -299,13 +321,20 @@ def mesh_with_defects(width: float, height: float, defects: list[dict], mesh_siz
     parsed = [(np.asarray(P, dtype=float) / L, curve) for P, curve in parsed]
     with _session(gmsh, ALGORITHMS[algorithm]):
         sides, surface, curves, tips = _build(gmsh, float(width) / L, float(height) / L, parsed)
-        _size_fields(gmsh, float(mesh_size) / L, None if tip_size is None else float(tip_size) / L, tips,
-                     2.0 ** refine, size_growth)
+        view = None
+        if size_view is None:
+            _size_fields(gmsh, float(mesh_size) / L, None if tip_size is None else float(tip_size) / L, tips,
+                         2.0 ** refine, size_growth)
+        else:
+            gmsh.option.setNumber("Mesh.MeshSizeMax", float(mesh_size) / L * 2.0 ** refine)
+            view = _size_view(gmsh, size_view, 2.0 ** refine / L)
         try:
             gmsh.model.mesh.generate(2)
         except Exception as exc:  # gmsh raises a bare Exception with its last error message
             raise RuntimeError(f"gmsh could not mesh the body with its defects: {exc}") from exc
         dm = _extract(gmsh, sides, surface, curves)
+        if view is not None:
+            gmsh.view.remove(view)
     for _ in range(refine):
         dm = refine_uniformly(dm)
     dm.points = dm.points * L

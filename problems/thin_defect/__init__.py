@@ -66,6 +66,8 @@ from dualfem.registry import register_problem
 from .. import _boundary as bd
 from .._defect_geometry import check_growth
 from .._interface import delta_free_part, interface, local_unknowns, with_delta
+from ..adaptive import Adaptive
+from ..adaptive import check_keys as check_adaptive
 from ..loads import check_load_model, resolve_load
 from .assemble import boundary_edges_on, free_dofs, stiffness, traction_vector
 from .cut import Cut, cut
@@ -88,7 +90,7 @@ def _load_label(load) -> str:
 
 
 @register_problem
-class ThinDefect(Problem):
+class ThinDefect(Adaptive, Problem):
     """Elastic rectangle with thin defects (fracture parameter delta), structured or gmsh mesh."""
 
     name = "thin_defect"
@@ -122,6 +124,9 @@ class ThinDefect(Problem):
         "remote_stress": None,
         "defects_file": "",
         "size_growth": 0.3,
+        "refine": "none",
+        "target_error": None,
+        "max_unknowns": None,
     }
     #: scene keys naming files, relative to the scene file (:attr:`dualfem.problem.Problem.path_keys`)
     path_keys = ("defects_file",)
@@ -165,6 +170,8 @@ class ThinDefect(Problem):
         p["mesh_size"] = check_positive("mesh_size", p["mesh_size"], allow_zero=True)
         p["tip_size"] = check_positive("tip_size", p["tip_size"], allow_zero=True)
         p["size_growth"] = check_growth(p["size_growth"])
+        p["refine"], p["target_error"], p["max_unknowns"] = check_adaptive(p["refine"], p["target_error"],
+                                                                          p["max_unknowns"], p["mesh"])
         rot = p["rotate_deg"]
         if not isinstance(rot, (int, float)) or not np.isfinite(rot):
             raise InputError(f"rotate_deg must be a finite number (degrees), got {rot!r}")
@@ -231,6 +238,8 @@ class ThinDefect(Problem):
         p = self.params
         if p["mesh"] == "structured":
             return 2 * (p["N"] + 1) ** 2, f"N={p['N']}"
+        if p["refine"] == "adaptive":
+            return int(p["max_unknowns"]), f"refine='adaptive', max_unknowns={p['max_unknowns']}"
         from dualfem.problems.gmsh_mesh import estimate_triangles
 
         h = p["mesh_size"] or min(p["width"], p["height"]) / p["N"]
@@ -257,7 +266,8 @@ class ThinDefect(Problem):
 
         h = p["mesh_size"] or min(W, H) / N
         dm = mesh_with_defects(W, H, [{"points": d["points"], "curve": d["curve"]} for d in self._defects],
-                               h, p["tip_size"] or None, size_growth=p["size_growth"], **self._gmsh_options())
+                               h, p["tip_size"] or None, size_growth=p["size_growth"],
+                               size_view=self._size_view, **self._gmsh_options())
         pts, tri = np.asarray(dm.points, dtype=float), np.asarray(dm.triangles, dtype=np.int32)
         if np.bincount(tri.ravel(), minlength=pts.shape[1]).min() == 0:
             raise RuntimeError("the gmsh mesh has nodes in no triangle (problems/gmsh_mesh.py must drop them)")
@@ -267,6 +277,7 @@ class ThinDefect(Problem):
         """The doubled mesh in the reference frame, and its node coordinates after ``rotate_deg`` (kept in
         ``self.shared``: computed once for this instance and those ``with_params`` derives from it)."""
         shared = self.shared.data
+        self.adapt_mesh()
         if shared.get("cut") is None:
             pts, tri, dn = self._reference_mesh()
             p = self.params
@@ -473,9 +484,11 @@ class ThinDefect(Problem):
             params["defects"] = defects_label(self._defects)
         if self._loads is not None:
             params["loads"] = self._loads.label()
-        for k in ("defects_file", "size_growth"):          # the QP's parameters as before these keys, at their defaults
+        # the QP's parameters as before these keys, at their defaults
+        for k in ("defects_file", "size_growth", "refine", "target_error", "max_unknowns"):
             if p[k] == ThinDefect.defaults[k]:
                 params.pop(k, None)
+        self.adaptive_params(params)
         self.jump_operators = J
         geometry = GeometryPart(2, maps.pop("nodes"), maps.pop("triangles"), maps.pop("node_dofs"))
         return QP(K=K, F=self._load_vector(a), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],

@@ -57,6 +57,8 @@ from dualfem.registry import register_problem
 from .. import _boundary as bd
 from .._defect_geometry import check_growth
 from .._interface import delta_free_part, interface, local_unknowns, with_delta
+from ..adaptive import Adaptive
+from ..adaptive import check_keys as check_adaptive
 from ..defects_file import read_defects
 from ..loads import check_load_model
 from .assemble import free_dofs, stiffness
@@ -102,7 +104,7 @@ def _file_tables(defects_file, tables) -> tuple[list | None, str]:
 
 
 @register_problem
-class ThreeD(Problem):
+class ThreeD(Adaptive, Problem):
     """Elastic box with defect surfaces (disks, ellipses, polygons, spherical caps), P1 tetrahedra (gmsh)."""
 
     name = "three_d"
@@ -134,6 +136,9 @@ class ThreeD(Problem):
         "remote_stress": "",
         "defects_file": "",
         "size_growth": 0.3,
+        "refine": "none",
+        "target_error": None,
+        "max_unknowns": None,
     }
     #: scene keys naming files, relative to the scene file (:attr:`dualfem.problem.Problem.path_keys`)
     path_keys = ("defects_file",)
@@ -180,6 +185,8 @@ class ThreeD(Problem):
         p["tip_size"] = check_positive("tip_size", p["tip_size"], allow_zero=True)
         p["surface_size"] = check_positive("surface_size", p["surface_size"], allow_zero=True)
         p["size_growth"] = check_growth(p["size_growth"])
+        p["refine"], p["target_error"], p["max_unknowns"] = check_adaptive(p["refine"], p["target_error"],
+                                                                          p["max_unknowns"], "gmsh")
         self._axis = _vector3("rotate_axis", p["rotate_axis"])
         p["rotate_axis"] = tuple(float(c) for c in self._axis)
         box = self.box
@@ -253,7 +260,10 @@ class ThreeD(Problem):
             f"mesh_size=0 (min(width, depth, height)/N = {self.mesh_size:g} with N={p['N']})"
 
     def size_estimate(self) -> tuple[int, str]:
-        """Unknowns before meshing: 3 per node, about 5.5 tetrahedra per node (20 % margin for the doubling)."""
+        """Unknowns before meshing: 3 per node, about 5.5 tetrahedra per node (20 % margin for the doubling);
+        adaptive: the budget ``max_unknowns``."""
+        if self.params["refine"] == "adaptive":
+            return int(self.params["max_unknowns"]), f"refine='adaptive', max_unknowns={self.params['max_unknowns']}"
         tets = estimate_tetrahedra(self.box, self.mesh_size, self.tip_size,
                                    sum(s.front_length() for s in self._surfaces), self.surface_size,
                                    sum(s.area() for s in self._surfaces), self.params["size_growth"])
@@ -267,9 +277,10 @@ class ThreeD(Problem):
         """(the doubled mesh in the reference frame, its rotated node coordinates, the uncut mesh's top-face
         triangles); computed once per :class:`~dualfem.core.problem.Shared`."""
         shared = self.shared.data
+        self.adapt_mesh()
         if shared.get("cut") is None:
             m = mesh_box(self.box, self._surfaces, self.mesh_size, self.tip_size, self.surface_size,
-                         self.params["size_growth"])
+                         self.params["size_growth"], self._size_view)
             c = cut(m.points, m.tets, m.faces, self._surfaces)
             from .assemble import boundary_faces
 
@@ -279,7 +290,6 @@ class ThreeD(Problem):
             shared["cut"] = (c, self.rotation() @ (c.points - centre) + centre, top)
         return shared["cut"]
 
-    # -------------------------------------------------------------- assembly
     def _delta_free(self) -> dict:
         """Mesh, DOF maps, K_el and maps: what depends neither on delta nor on the load (shared, read-only)."""
         a = self.shared.data.get("delta_free")
@@ -364,9 +374,11 @@ class ThreeD(Problem):
         params = {k: (v if isinstance(v, (int, float, str)) else str(np.asarray(v).tolist()))
                   for k, v in p.items() if not callable(v) and k != "defects"}
         params["defects"] = "; ".join(_label(s) for s in self._surfaces)
-        for k in ("defects_file", "size_growth"):          # the QP's parameters as before these keys, at their defaults
+        # the QP's parameters as before these keys, at their defaults
+        for k in ("defects_file", "size_growth", "refine", "target_error", "max_unknowns"):
             if p[k] == self.defaults[k]:
                 params.pop(k, None)
+        self.adaptive_params(params)
         geometry = GeometryPart(3, a["points"], c.tets, nd)
         iface = dataclasses.replace(iface, weights=c.weights.copy())       # each QP its own weights
         return QP(K=K, F=F, B=B, weights=iface.weights, K_fixed=a["K_el"], local_dofs=a["local"],

@@ -156,9 +156,12 @@ def _surface(gmsh, s: Surface) -> int:
 
 
 def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | None,
-             surface_size: float | None = None, grade: float = GRADE) -> BoxMesh:
+             surface_size: float | None = None, grade: float = GRADE,
+             size_view: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> BoxMesh:
     """The tetrahedral mesh of the box with every surface embedded (see the module docstring); ``grade``:
-    the size fields' slope."""
+    the size fields' slope. ``size_view``: (points (3, n), tetrahedra (4, nt), sizes (nt,)) a per-tetrahedron
+    size on an earlier mesh of the box, gmsh's background mesh in place of the size fields (adaptive
+    refinement, :mod:`dualfem.problems.adaptive`; sizes above ``mesh_size`` are cut to it)."""
     gmsh = _import_gmsh()
     owner = not gmsh.isInitialized()
     if owner:
@@ -178,7 +181,11 @@ def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | N
             raise InputError("the defects must neither cut the box's sides nor each other (gmsh split a defect "
                              "surface or the volume)")
         front = sorted({abs(t) for p in pieces for _, t in gmsh.model.getBoundary([(2, p[0])], oriented=False)})
-        _fields(gmsh, mesh_size, tip_size, front, surface_size, [p[0] for p in pieces], grade)
+        if size_view is None:
+            _fields(gmsh, mesh_size, tip_size, front, surface_size, [p[0] for p in pieces], grade)
+        else:
+            gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
+            _view(gmsh, size_view)
         try:
             gmsh.model.mesh.generate(3)
         except Exception as exc:  # noqa: BLE001 - gmsh raises a bare Exception with its last error message
@@ -190,6 +197,22 @@ def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | N
             gmsh.finalize()
         else:
             gmsh.model.remove()
+
+
+def _view(gmsh, view: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+    """A post-processing view of a per-tetrahedron size (list data "SS", constant on each tetrahedron) as
+    gmsh's background mesh (a ``PostView`` field)."""
+    pts, tets, sizes = (np.asarray(a) for a in view)
+    xyz = pts[:, tets.astype(np.int64)]                                   # (3, 4, nt)
+    nt = xyz.shape[2]
+    data = np.concatenate([xyz[0].T, xyz[1].T, xyz[2].T, np.repeat(np.asarray(sizes, float)[:, None], 4, axis=1)],
+                          axis=1)
+    tag = gmsh.view.add("dualfem_size")
+    gmsh.view.addListData(tag, "SS", nt, data.ravel().tolist())
+    fld = gmsh.model.mesh.field
+    f = fld.add("PostView")
+    fld.setNumber(f, "ViewTag", tag)
+    fld.setAsBackgroundMesh(f)
 
 
 def _fields(gmsh, mesh_size: float, tip_size: float | None, front: list[int],
