@@ -13,11 +13,9 @@ import dataclasses
 import numpy as np
 import scipy.sparse as sp
 
-from dualfem.core.constraints import Constraint
-from dualfem.core.errors import InputError
-from dualfem.core.laws import Coulomb, Tresca
-from dualfem.core.parts import InterfacePart
-from dualfem.core.qp import QP
+from dualfem.errors import InputError
+from dualfem.laws import Constraint, Coulomb, Tresca
+from dualfem.qp import QP, InterfacePart
 
 KINDS = ("tresca", "coulomb")
 

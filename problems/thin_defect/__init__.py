@@ -55,6 +55,7 @@ from dualfem.qp import QP, GeometryPart, MaterialPart, UnitsPart
 from dualfem.registry import register_problem
 
 from .. import _boundary as bd
+from .. import _friction_keys as fk
 from .._interface import delta_free_part, interface, local_unknowns, with_delta
 from ..loads import resolve_load
 from .assemble import boundary_edges_on, free_dofs, stiffness, traction_vector
@@ -89,7 +90,7 @@ class ThinDefect(Problem):
     unit_map = UnitMap({"E": "stress", "width": "length", "height": "length", "load_scale": "stress",
                         "delta": "length/stress", "mesh_size": "length_if_set", "tip_size": "length_if_set",
                         "defect": "points", "defects": "defect_tables", "body_force": "body_force",
-                        "boundary": "traction_tables", "load": "stress_field"},
+                        "boundary": "traction_tables", "load": "stress_field", "friction_bound": "stress_value"},
                        scaling_names=("f1", "f2", "f3"))   # the paper's loads scale with width by themselves
     defaults = {
         "N": 64,
@@ -110,6 +111,7 @@ class ThinDefect(Problem):
         "boundary": (),
         "body_force": None,
         "remote_stress": None,
+        **fk.DEFAULTS,
     }
     presets = {"f1": {"load": "f1"}, "f2": {"load": "f2"}, "f3": {"load": "f3"}}
     #: keys that keep the mesh and K_el: ``with_params`` / a Workspace's ``update`` reuse the delta-free assembly
@@ -173,6 +175,8 @@ class ThinDefect(Problem):
                                  f"size: delta * E / max(width, height) = {ratio:.1e} must be "
                                  f">= {MIN_DELTA_E_OVER_L:g} "
                                  f"(below it the defect is glued to double precision)")
+        self._friction = fk.parse_friction(p, [d.get("friction", {}) for d in self._defects], 2,
+                                           (p["width"], p["height"]))
         self._loads: bd.LoadSpec | None = bd.parse_loads(p, 2)
         self._traction = None
         if self._loads is None:
@@ -448,16 +452,20 @@ class ThinDefect(Problem):
             tau = (pb - pa) / np.linalg.norm(pb - pa)
             maps["normal"], maps["tangent"] = R @ np.array([-tau[1], tau[0]]), R @ tau
         params = {k: (v if isinstance(v, (int, float, str)) else str(np.asarray(v).tolist()))
-                  for k, v in p.items() if not callable(v) and k != "defects" and k not in bd.KEYS}
+                  for k, v in p.items() if not callable(v) and k != "defects" and k not in bd.KEYS
+                  and k not in fk.KEYS}
+        if fk.frictional(self._friction):
+            params["friction"] = fk.params_label(self._friction)
         if isinstance(p["defects"], (list, tuple)) and len(p["defects"]):
             params["defects"] = defects_label(self._defects)
         if self._loads is not None:
             params["loads"] = self._loads.label()
         self.jump_operators = J
         geometry = GeometryPart(2, maps.pop("nodes"), maps.pop("triangles"), maps.pop("node_dofs"))
-        return QP(K=K, F=self._load_vector(a), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],
-                  name=self._qp_name(),
-                  params=params, maps=maps, geometry=geometry, interface=iface,
-                  units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
-                  material=MaterialPart(float(p["E"]), float(p["nu"]), str(p["plane"])))
+        qp = QP(K=K, F=self._load_vector(a), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],
+                name=self._qp_name(),
+                params=params, maps=maps, geometry=geometry, interface=iface,
+                units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
+                material=MaterialPart(float(p["E"]), float(p["nu"]), str(p["plane"])))
+        return fk.add_friction(qp, self._friction, c.points[:, c.lower])
 

@@ -49,6 +49,7 @@ from dualfem.qp import QP, GeometryPart, MaterialPart, UnitsPart
 from dualfem.registry import register_problem
 
 from .. import _boundary as bd
+from .. import _friction_keys as fk
 from .._interface import delta_free_part, interface, local_unknowns, with_delta
 from .assemble import free_dofs, stiffness
 from .cut import Cut3, cut
@@ -111,6 +112,7 @@ class ThreeD(Problem):
         "boundary": (),
         "body_force": "",
         "remote_stress": "",
+        **fk.DEFAULTS,
     }
     presets = {"three_d": {}}
     #: keys a sweep changes without re-meshing (Workspace.update, with_params): the loads change F only, the
@@ -183,6 +185,7 @@ class ThreeD(Problem):
                 raise InputError(f"delta of defect {i} ({s.delta:g}) is too small for E = {p['E']:g} and the box: "
                                  f"delta * E / max(width, depth, height) = {ratio:.1e} must be "
                                  f">= {MIN_DELTA_E_OVER_L:g}")
+        self._friction = fk.parse_friction(p, [s.friction for s in self._surfaces], 3, box)
         self._loads = bd.parse_loads(p, 3)
         if self._loads is None:
             with np.errstate(all="ignore"):
@@ -330,14 +333,17 @@ class ThreeD(Problem):
         F = np.zeros(a["n"])
         F[nd[nd >= 0]] = Fn[nd >= 0]
         params = {k: (v if isinstance(v, (int, float, str)) else str(np.asarray(v).tolist()))
-                  for k, v in p.items() if not callable(v) and k != "defects"}
+                  for k, v in p.items() if not callable(v) and k != "defects" and k not in fk.KEYS}
         params["defects"] = "; ".join(_label(s) for s in self._surfaces)
+        if fk.frictional(self._friction):
+            params["friction"] = fk.params_label(self._friction)
         geometry = GeometryPart(3, a["points"], c.tets, nd)
         iface = dataclasses.replace(iface, weights=c.weights.copy())       # each QP its own weights
-        return QP(K=K, F=F, B=B, weights=iface.weights, K_fixed=a["K_el"], local_dofs=a["local"],
-                  name=f"three_d[{self._load_label()}]", params=params, geometry=geometry, interface=iface,
-                  units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
-                  material=MaterialPart(float(p["E"]), float(p["nu"]), "strain"))
+        qp = QP(K=K, F=F, B=B, weights=iface.weights, K_fixed=a["K_el"], local_dofs=a["local"],
+                name=f"three_d[{self._load_label()}]", params=params, geometry=geometry, interface=iface,
+                units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
+                material=MaterialPart(float(p["E"]), float(p["nu"]), "strain"))
+        return fk.add_friction(qp, self._friction, c.points[:, c.lower])
 
 
 def _label(s: Surface) -> str:
