@@ -93,6 +93,11 @@ class Law:
         handles a block only through this description (or :meth:`norm_term`)."""
         return None
 
+    def certificate_note(self) -> str:
+        """What the certificate of a QP with this law measures, when it is not plainly the QP's own error (a
+        note in ``info["certificate"]["notes"]``); "" for a convex law."""
+        return ""
+
     def norm_term(self, weights: np.ndarray) -> np.ndarray | None:
         """Per node j, the radius r_j (force) of an objective term ``sum_j r_j ||s_j||`` with fixed data (``s_j``
         the ``components`` rows of node j), for the conic backends' epigraph (:mod:`dualfem.numerics.epigraph`);
@@ -320,6 +325,11 @@ class Coulomb(Friction):
 
     def energy(self, gap, weights):
         return 0.0
+
+    def certificate_note(self) -> str:
+        return ("coulomb: certified as the Tresca problem whose threshold is the answer's own mu_f max(lambda, 0) "
+                "(Coulomb friction is quasi-variational: no duality gap of its own; the bound is that Tresca "
+                "problem's error)")
 
     def __repr__(self) -> str:
         c = self.coefficient if np.ndim(self.coefficient) == 0 else _digest(self.coefficient)

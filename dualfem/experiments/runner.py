@@ -485,7 +485,7 @@ def summary(qp: QP, sol: Solution) -> dict:
         if cert:
             out["certificate"] = {k: v for k, v in cert.items()
                                   if k in ("value", "bound", "active_set", "infeasible", "multipliers",
-                                           "multipliers_floor", "path")}
+                                           "multipliers_floor", "path", "notes")}
     else:
         out.update({"energy": None, "max_jump": None, "n_contact": None, "residuals": None})
     return out
