@@ -82,3 +82,16 @@ def test_coulomb_is_skipped_by_the_conic_backends_with_a_reason():
     qp = load_scene("f2", {"N": 16, "friction": "coulomb", "friction_coefficient": 0.3}).build()
     sol = run("clarabel", qp)
     assert sol.status == Status.SKIPPED and "coulomb" in sol.message
+
+
+@pytest.mark.parametrize("name", ["osqp", "qp_proxqp", "qp_daqp"])
+def test_qp_backends_take_2d_friction_and_skip_3d_discs(name):
+    from dualfem.core.registry import solvers
+
+    if name not in solvers() or solvers()[name].missing():
+        pytest.skip(f"{name} is not installed")
+    ref = run("clarabel", _qp("2d"))
+    sol = run(name, _qp("2d"))
+    assert sol.status == Status.SOLVED and _rel(sol.x, ref.x) < 1e-6, sol.message
+    sol = run(name, _qp("3d"))
+    assert sol.status == Status.SKIPPED and "second-order cones" in sol.message

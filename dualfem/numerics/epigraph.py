@@ -88,6 +88,16 @@ def norm_blocks(qp: QP) -> list[int]:
     return [k for k, b in enumerate(qp.constraints) if b.law.norm_term(b.weights) is not None]
 
 
+def not_linear(qp: QP) -> str | None:
+    """Why ``qp`` is not a QP for a QP backend (None when it is): its Tresca blocks in 3D are discs, second-order
+    cones that no linear row describes."""
+    for k in norm_blocks(qp):
+        if qp.constraints[k].law.components > 1:
+            return (f"constraint block {k} ({qp.constraints[k].law.name}) holds 3D friction discs (second-order "
+                    f"cones), which a QP backend cannot take; 2D friction (intervals) only")
+    return None
+
+
 def uniform_scaling(qp: QP, enable: bool = True) -> ScaledQP:
     """:func:`dualfem.numerics.scaling.scale` with the rows of each friction node scaled by one factor (the
     smallest of its rows' factors: every scaled row of the node then has infinity norm <= 1)."""
