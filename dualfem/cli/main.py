@@ -317,6 +317,9 @@ def human_summary(rec: dict, scene: str | None = None) -> str:
         r = rec["residuals"]
         lines.append(f"energy {rec['energy']:.10g}  max jump {rec['max_jump']:.4g}  "
                      f"contact nodes {rec['n_contact']}/{rec['n_defect_nodes']}")
+        for f in rec.get("friction", ()):
+            lines.append(f"friction ({f['law']}): {f['slipping']}/{f['nodes']} nodes slip, "
+                         f"max slip {f['max_slip']:.4g}")
         lines.append("residuals (evaluator): " + "  ".join(f"{k} {v:.2e}" for k, v in r.items()))
     return "\n".join(lines)
 
