@@ -1,4 +1,4 @@
-"""Friction against its closed forms: the cases of the validation tests and of ``reports/friction.md``.
+"""Friction against its closed forms: the cases of the validation tests and of the friction report.
 
 Every case builds a scene with the friction keys (docs/friction.md), solves it through the runner (certified like
 any answer) and measures the answer against a closed form. E = 1000, nu = 0.3, delta = 1e3 (a free interface:
