@@ -174,6 +174,26 @@ def add_friction(qp: QP, specs: list[FrictionSpec], points: np.ndarray) -> QP:
     return dataclasses.replace(qp, blocks=(*qp.blocks, *blocks), store=None)
 
 
+def boundary_friction(qp: QP, spec: FrictionSpec, G, weights: np.ndarray, points: np.ndarray) -> QP:
+    """``qp`` with the friction of a contact boundary (not a defect: the Signorini problem plugin's foundation):
+    one row per contact node (2D: ``G`` (m, n) the tangential displacements, node j = row j of the Signorini
+    block), Tresca's threshold evaluated at ``points`` (dim, m). ``qp`` itself without friction."""
+    from dualfem.laws import Constraint, Coulomb, Tresca
+
+    if spec.kind == "none":
+        return qp
+    if spec.kind == "coulomb":
+        law = Coulomb(spec.coefficient, components=1)
+    else:
+        with np.errstate(all="ignore"):
+            g = np.broadcast_to(spec.bound(points)[0], (points.shape[1],)).astype(float)
+        if not (np.all(np.isfinite(g)) and np.all(g >= 0)):
+            raise InputError(f"friction_bound = {spec.bound.values[0]!r} must be finite and >= 0 at every contact "
+                             f"node (min {np.nanmin(g) if g.size else 0:g})")
+        law = Tresca(g, components=1)
+    return dataclasses.replace(qp, blocks=(*qp.blocks, Constraint.make(G, weights, law)), store=None)
+
+
 def params_label(specs: list[FrictionSpec]) -> str:
     """The friction of each defect as compact text (``QP.params["friction"]``)."""
     def one(s: FrictionSpec) -> str:

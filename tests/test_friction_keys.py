@@ -96,3 +96,20 @@ def test_units_scale_the_bound_as_a_stress():
                           "friction": "tresca", "friction_bound": out["friction_bound"]}).build()
     b = _qp(friction="tresca", friction_bound="1 + x")
     assert np.allclose(a.blocks[0].law.bound, 10.0 * b.blocks[0].law.bound)
+
+
+def test_signorini_plugin_friction_on_the_foundation():
+    pytest.importorskip("clarabel")
+    from dualfem.experiments.runner import run
+
+    free = run("clarabel", load_scene("signorini_flat", {"N": 16}).build())
+    zero = load_scene("signorini_flat", {"N": 16, "friction": "tresca", "friction_bound": 0.0}).build()
+    stuck = load_scene("signorini_flat", {"N": 16, "friction": "tresca", "friction_bound": 1e4}).build()
+    (b,) = stuck.blocks
+    assert isinstance(b.law, Tresca) and b.m == stuck.m and np.array_equal(b.weights, stuck.weights)
+    assert np.abs(run("clarabel", zero).x - free.x).max() < 1e-12 * np.abs(free.x).max()
+    s = run("clarabel", stuck)
+    assert s.status == "solved" and np.abs(b.G @ s.x).max() < 1e-14 * np.abs(s.x).max()     # no slip at all
+    assert np.abs(b.G @ free.x).max() > 1e-3 * np.abs(free.x).max()                         # it slid without
+    with pytest.raises(InputError, match="friction_coefficient is Coulomb"):
+        load_scene("signorini", {"friction_coefficient": 0.2}).build()
