@@ -142,3 +142,70 @@ def stuck_2d(N: int = 16, bound: float = 10.0, solver: str = "clarabel") -> dict
     return {"status": str(a.status), "difference": float(np.abs(ua - ub).max() / np.abs(ub).max()),
             "max_slip": float(np.abs(tangential).max() / np.abs(ub).max()),
             "stick_nodes": int(np.sum(np.abs(tangential[:, 0]) <= 1e-12 * np.abs(ub).max())), "m": cracked.m}
+
+
+# ------------------------------------------------------------------------------------------- the study
+#: the report's defaults: 2D mesh levels (mesh_size, tip_size), crack angles (degrees) and (law, value) cases
+LEVELS_2D = ((0.05, 0.004), (0.05, 0.002), (0.05, 0.001))
+ANGLES = (20.0, 30.0, 45.0, 60.0)
+CASES_2D = (("none", 0.0), ("tresca", 0.1), ("coulomb", 0.2), ("coulomb", 0.5))
+#: 3D penny levels (mesh_size, tip_size) and cases
+LEVELS_3D = ((2.0, 0.25), (1.5, 0.15))
+CASES_3D = (("none", 0.0), ("tresca", 0.2), ("coulomb", 0.2))
+
+
+def compare_row(name: str, qp, label: str) -> dict:
+    """One solver on one frictional QP: status (the skip reason when it does not take the law), times, counters
+    and the certified error."""
+    sol = run(name, qp)
+    cert = sol.info.get("certificate", {}) if sol.info else {}
+    return {"solver": name, "case": label, "status": str(sol.status), "message": sol.message,
+            "setup_s": sol.time_s.get("setup"), "solve_s": sol.time_s.get("solve"),
+            "iterations": {k: v for k, v in (sol.iterations or {}).items() if isinstance(v, (int, float))},
+            "certified": cert.get("value")}
+
+
+def _compare(solvers, fine2, fine3, progress) -> list[dict]:
+    """Every solver of ``solvers`` on the 2D crack at 30 degrees (finest level) and the penny (coarsest level),
+    Tresca and Coulomb."""
+    rows = []
+    th = np.radians(30.0)
+    d = 0.05 * np.array([np.cos(th), np.sin(th)])
+    base2 = {"mesh": "gmsh", "mesh_size": fine2[0], "tip_size": fine2[1], "E": E, "nu": NU, "delta": DELTA,
+             "remote_stress": [list(r) for r in STRESS_2D], "defects": [{"points": [(0.5 - d).tolist(),
+                                                                                  (0.5 + d).tolist()]}]}
+    base3 = {"mesh_size": fine3[0], "tip_size": fine3[1], "E": E, "nu": NU, "delta": DELTA,
+             "remote_stress": [[0.0, 0.0, TAU], [0.0, 0.0, 0.0], [TAU, 0.0, -SIGMA_N]]}
+    for label, scene, keys in (("2D tresca g=0.1", "f2", {**base2, **_keys("tresca", 0.1)}),
+                               ("2D coulomb mu_f=0.2", "f2", {**base2, **_keys("coulomb", 0.2)}),
+                               ("3D tresca g=0.2", "penny", {**base3, **_keys("tresca", 0.2)}),
+                               ("3D coulomb mu_f=0.2", "penny", {**base3, **_keys("coulomb", 0.2)})):
+        qp = load_scene(scene, keys).build()
+        for name in solvers:
+            rows.append(compare_row(name, qp, label))
+            progress(f"compare {label} {name}: {rows[-1]['status']}")
+    return rows
+
+
+def study(levels_2d=LEVELS_2D, angles=ANGLES, cases_2d=CASES_2D, levels_3d=LEVELS_3D, cases_3d=CASES_3D,
+          solver: str = "clarabel", solvers=(), progress=None) -> dict:
+    """Every case of the report (JSON-able): ``inclined`` (2D rows), ``penny`` (3D rows), ``stuck``, and
+    ``compare`` (``solvers`` on four frictional QPs; empty when none is given). ``solver`` solves the
+    validation cases (its certified answers are what is compared with the closed forms)."""
+    say = progress or (lambda m: None)
+    out: dict = {"solver": solver, "E": E, "nu": NU, "delta": DELTA, "stress_2d": [list(r) for r in STRESS_2D],
+                 "sigma_n_3d": SIGMA_N, "tau_3d": TAU, "inclined": [], "penny": []}
+    for h, tip in levels_2d:
+        for angle in angles:
+            for law, value in cases_2d:
+                row = inclined_2d(angle, law, value, h, tip, solver=solver)
+                out["inclined"].append(row)
+                say(f"2D {angle:g} deg {law} {value:g} tip {tip:g}: {row['status']} {row.get('error', '-')}")
+    for h, tip in levels_3d:
+        for law, value in cases_3d:
+            row = penny_3d(law, value, h, tip, solver=solver)
+            out["penny"].append(row)
+            say(f"3D {law} {value:g} mesh {h:g}/{tip:g}: {row['status']} {row.get('error', '-')}")
+    out["stuck"] = stuck_2d(solver=solver)
+    out["compare"] = _compare(solvers, levels_2d[-1], levels_3d[0], say) if solvers else []
+    return out
