@@ -57,14 +57,32 @@ class FaceStep:
 
 
 def delassus(qp: QP, ksolve) -> tuple[np.ndarray, float]:
-    """(the dense Delassus matrix ``D = G K^-1 G'`` from ``m_total`` K-solves, ``c = 1 / mean diag D``)."""
+    """(the dense Delassus matrix ``D = G K^-1 G'``, ``c = 1 / mean diag D``): from the exact local reduction of
+    ``ksolve`` when every row of G acts on its local unknowns I (``D = G_I S^-1 G_I'``, S the Schur complement of
+    K onto I: one dense solve), else from ``m_total`` K-solves."""
     G = qp.G
-    Z = np.column_stack([ksolve(G[j].toarray().ravel()) for j in range(qp.m_total)]) if qp.m_total else \
-        np.zeros((qp.n, 0))
-    D = np.asarray(G @ Z)
+    D = _local_delassus(qp, ksolve)
+    if D is None:
+        Z = np.column_stack([ksolve(G[j].toarray().ravel()) for j in range(qp.m_total)]) if qp.m_total else \
+            np.zeros((qp.n, 0))
+        D = np.asarray(G @ Z)
     D = 0.5 * (D + D.T)
     dD = np.diag(D)
     return D, (1.0 / dD.mean() if dD.size and dD.mean() > 0 else 1.0)
+
+
+def _local_delassus(qp: QP, ksolve) -> np.ndarray | None:
+    """``G_I S^-1 G_I'`` from the K-solver's exact local reduction (None without one, or when G reaches beyond I)."""
+    red = getattr(ksolve, "red", None)
+    if red is None or getattr(red, "qp", None) is not qp:
+        return None
+    G = qp.G.tocsc()
+    outside = np.ones(qp.n, bool)
+    outside[red.I] = False
+    if G[:, outside].nnz:
+        return None
+    GI = G[:, red.I].toarray()
+    return GI @ sla.cho_solve(red.S_cho, GI.T)
 
 
 def face_step(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, D: np.ndarray, c: float,
