@@ -95,3 +95,27 @@ def test_qp_backends_take_2d_friction_and_skip_3d_discs(name):
     assert sol.status == Status.SOLVED and _rel(sol.x, ref.x) < 1e-6, sol.message
     sol = run(name, _qp("3d"))
     assert sol.status == Status.SKIPPED and "second-order cones" in sol.message
+
+
+def test_rotation_and_unit_invariance():
+    """The frictional answer of a rotated scene has the same jumps in the defect's frame; in other units the
+    displacements scale by the length and the forces by stress x length (friction_bound converts as a stress)."""
+    from dualfem.problems.thin_defect import ThinDefect
+
+    keys = {"N": 16, "friction": "tresca", "friction_bound": 2.0}
+    base = _qp_of(keys)
+    a = run("clarabel", base)
+    rot = _qp_of({**keys, "rotate_deg": 30.0})
+    b = run("clarabel", rot)
+    ja, jb = np.concatenate(base.interface.jumps(a.x), axis=None), np.concatenate(rot.interface.jumps(b.x), axis=None)
+    assert np.abs(ja - jb).max() < 1e-9 * np.abs(ja).max()
+    assert _rel(b.multipliers, a.multipliers) < 1e-8
+    s, L = 1e3, 2.0
+    conv = ThinDefect.unit_map.convert(ThinDefect.defaults, {**keys, "load": "f2"}, s, L)
+    c = run("clarabel", _qp_of(conv))
+    assert c.status == Status.SOLVED
+    assert _rel(c.x, L * a.x) < 1e-8 and _rel(c.multipliers, s * L * a.multipliers) < 1e-8
+
+
+def _qp_of(keys):
+    return load_scene("f2", keys).build()
