@@ -90,8 +90,11 @@ def inclined_2d(angle_deg: float, law: str, value: float, mesh_size: float = 0.0
                pressure=(sol.multipliers[:qp.m] / qp.weights).tolist(),
                closure=float(np.abs(normal).max() / max(np.abs(sol.x).max(), 1e-300)),
                max_slip=float(slip.max(initial=0.0)), scale=float(np.abs(sol.x).max()))
+    inner = np.abs(x) <= 0.8 * a
     if exact.max() > 0:
-        out["error"] = _l2(qp.weights, slip, exact, np.abs(x) <= 0.8 * a)
+        out["error"] = _l2(qp.weights, slip, exact, inner)
+    # the nodal contact pressure against sigma_n (it feeds Coulomb's threshold mu_f lambda_j)
+    out["pressure_error"] = _l2(qp.weights, np.asarray(out["pressure"]), np.full(qp.m, sigma_n), inner)
     return out
 
 

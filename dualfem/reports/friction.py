@@ -60,6 +60,25 @@ def _inclined_table(rows: list[dict]) -> list[str]:
     return out
 
 
+def _pressure_table(rows: list[dict]) -> list[str]:
+    """The nodal contact pressure lambda_j / w_j against sigma_n (relative L2, abs(x) <= 0.8 a), per angle and level:
+    what Coulomb's threshold mu_f lambda_j is made of."""
+    levels = sorted({r["tip_size"] for r in rows}, reverse=True)
+    angles = sorted({r["angle"] for r in rows})
+    out = ["| angle | sigma_n | " + " | ".join(f"tip {t:g}: frictionless / Coulomb" for t in levels) + " |",
+           "|---|---|" + "---|" * len(levels)]
+    for angle in angles:
+        cells = []
+        for t in levels:
+            rs = [r for r in rows if r["angle"] == angle and r["tip_size"] == t and "pressure_error" in r]
+            free = next((_fmt(r["pressure_error"]) for r in rs if r["law"] == "none"), "-")
+            coul = ", ".join(_fmt(r["pressure_error"]) for r in rs if r["law"] == "coulomb") or "-"
+            cells.append(f"{free} / {coul}")
+        sn = next(r["sigma_n"] for r in rows if r["angle"] == angle)
+        out.append(f"| {angle:g} | {sn:.3f} | " + " | ".join(cells) + " |")
+    return out
+
+
 def _penny_table(rows: list[dict]) -> list[str]:
     out = ["| mesh_size / tip_size | defect nodes | case | status | slip L2 error (r <= 0.8 a) | minus the "
            "frictionless error | max abs(slip across tau) / max abs(slip) | s |", "|---|---|---|---|---|---|---|---|"]
@@ -166,6 +185,8 @@ def render(res: dict, out: Path, command: str | None = None) -> Path:
              *_inclined_table(res["inclined"]), ""]
     if f2:
         lines += [f"![2D slip along the crack]({f2})", ""]
+    lines += ["The nodal contact pressure lambda_j / w_j against sigma_n (relative L2 over abs(x) <= 0.8 a), the "
+              "input of Coulomb's threshold mu_f lambda_j:", "", *_pressure_table(res["inclined"]), ""]
     lines += ["## 3D: penny crack (radius 1 in a cube of side 10) under compression and shear", "",
               f"sigma_zz = -{res.get('sigma_n_3d', 1.0):g}, sigma_xz = tau = {res.get('tau_3d', 0.5):g}. Closed "
               "form (Segedin's shear solution with the effective shear): slip along x 16 (1 - nu^2) (tau - tau_c) / "
