@@ -170,27 +170,6 @@ def _plugin_info(describe: Callable[[Any], dict], cls: Any) -> dict:
 
 
 # ------------------------------------------------------------------------- export
-def _export_fclib(args) -> int:
-    """``export --format fclib``: the scene's Coulomb problem in FCLIB's global format (dualfem.core.fclib)."""
-    import importlib.util
-    from pathlib import Path
-
-    from dualfem.core.fclib import fclib_global, write_fclib
-    from dualfem.core.io import check_output_path
-    from dualfem.core.scene import build_qp
-
-    if Path(args.output).suffix not in (".hdf5", ".h5"):
-        raise InputError(f"-o must name a .hdf5 or .h5 file with --format fclib, got {args.output!r}")
-    if importlib.util.find_spec("h5py") is None:
-        raise InputError("--format fclib needs h5py: pip install 'dualfem[xdmf]'")
-    check_output_path(args.output, "-o")
-    prob = fclib_global(build_qp(scene_from_args(args)))
-    write_fclib(args.output, prob)
-    print(f"wrote {args.output}: FCLIB global problem, n={prob.M.shape[0]} unknowns, {prob.mu.size} contacts "
-          f"(spacedim {prob.spacedim})", file=sys.stderr)
-    return 0
-
-
 def _cfg_export(p):
     add_scene_args(p)
     p.add_argument("-o", "--output", required=True, metavar="FILE", help="output .npz or .mat file (--format fclib: "
@@ -211,7 +190,9 @@ def cmd_export(args) -> int:
     from dualfem.core.scene import build_qp
 
     if args.format == "fclib":
-        return _export_fclib(args)
+        from dualfem.cli.export_fclib import export_fclib
+
+        return export_fclib(args)
     if Path(args.output).suffix not in (".npz", ".mat"):
         raise InputError(f"-o must name a .npz or .mat file, got {args.output!r}")
     check_output_path(args.output, "-o")

@@ -452,21 +452,6 @@ def attach_residuals(qp: QP, sol: Solution) -> Solution:
     return sol
 
 
-def friction_summary(qp: QP, x: np.ndarray) -> list[dict]:
-    """Per friction block (a law with ``components``): its law, nodes, slipping nodes (slip ``||s_j||`` above
-    ``CONTACT_RTOL |x|_inf``, the contact set's tolerance) and the largest slip (length)."""
-    out = []
-    tol = evaluator.CONTACT_RTOL * max(float(np.abs(x).max(initial=0.0)), evaluator.TINY)
-    for b in qp.blocks:
-        c = getattr(b.law, "components", None)
-        if not c:
-            continue
-        slip = np.linalg.norm((b.G @ x).reshape(-1, c), axis=1)
-        out.append({"law": b.law.name, "nodes": int(slip.size), "slipping": int(np.sum(slip > tol)),
-                    "max_slip": float(slip.max(initial=0.0))})
-    return out
-
-
 def summary(qp: QP, sol: Solution) -> dict:
     """The JSON record of one solve (field names are a stable interface)."""
     out: dict[str, Any] = {
@@ -496,7 +481,7 @@ def summary(qp: QP, sol: Solution) -> dict:
             "residuals": evaluator.kkt_residuals(sol.residuals),
             "stationarity_raw": sol.residuals.get("stationarity_raw"),
         })
-        friction = friction_summary(qp, sol.x)
+        friction = evaluator.friction_summary(qp, sol.x)
         if friction:
             out["friction"] = friction
         cert = sol.info.get("certificate")
