@@ -149,12 +149,12 @@ def stuck_2d(N: int = 16, bound: float = 10.0, solver: str = "clarabel") -> dict
 
 # ------------------------------------------------------------------------------------------- the study
 #: the report's defaults: 2D mesh levels (mesh_size, tip_size), crack angles (degrees) and (law, value) cases
-LEVELS_2D = ((0.05, 0.004), (0.05, 0.002), (0.05, 0.001))
-ANGLES = (20.0, 30.0, 45.0, 60.0)
+LEVELS_2D = ((0.02, 0.002), (0.01, 0.001), (0.005, 0.0005))
+ANGLES = (20.0, 30.0, 60.0)
 CASES_2D = (("none", 0.0), ("tresca", 0.1), ("coulomb", 0.2), ("coulomb", 0.5))
 #: 3D penny levels (mesh_size, tip_size) and cases
 LEVELS_3D = ((2.0, 0.25), (1.5, 0.15))
-CASES_3D = (("none", 0.0), ("tresca", 0.2), ("coulomb", 0.2))
+CASES_3D = (("none", 0.0), ("tresca", 0.2), ("tresca", 0.6), ("coulomb", 0.2))
 
 
 def compare_row(name: str, qp, label: str) -> dict:
