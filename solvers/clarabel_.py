@@ -115,6 +115,15 @@ class ClarabelSolver(Solver):
             setattr(settings, k, v)
         for k in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
             setattr(settings, k, self.params["tol"])
+        self._settings = settings
+        self._build(qp)
+
+    def _build(self, qp) -> None:
+        """Clarabel's solver for ``qp`` (``self._solver``; ``self._epi`` the epigraph of a frictional QP)."""
+        import clarabel
+
+        self._qp_now = qp
+        settings = self._settings
         cone = {"nonneg": clarabel.NonnegativeConeT, "zero": clarabel.ZeroConeT, "soc": clarabel.SecondOrderConeT}
         self._epi = None
         if norm_blocks(qp):         # friction: the conic program over [y, t] (dualfem.numerics.epigraph)
@@ -127,6 +136,11 @@ class ClarabelSolver(Solver):
                                               [cone[kind](m) for kind, m in conic_rows(qp.constraints)], settings)
 
     def solve(self) -> Solution:
+        return self._run()
+
+    def _run(self) -> Solution:
+        """Clarabel on the QP of the last :meth:`_build`, unscaled and polished."""
+        qp = self._qp_now
         sol = self._solver.solve()
         name = str(sol.status).split(".")[-1]
         status = _STATUS.get(name, Status.ERROR)
@@ -135,10 +149,10 @@ class ClarabelSolver(Solver):
         else:
             x, z = self._scaled.unscale(np.array(sol.x), np.array(sol.z))
         info = {}
-        if self.params["polish"] and status == Status.SOLVED and not self.qp.blocks:   # the polish is Signorini's
-            x, z, info = polish_if_better(self.qp, x, z)
+        if self.params["polish"] and status == Status.SOLVED and not qp.blocks:   # the polish is Signorini's
+            x, z, info = polish_if_better(qp, x, z)
         elif self.params["polish"] and status == Status.SOLVED and self._epi is not None:     # friction's
-            x, z, info = face_polish_if_better(self.qp, x, z)
+            x, z, info = face_polish_if_better(qp, x, z)
         return Solution(
             solver=self.name, status=status, x=x, multipliers=z,
             iterations={"ipm": int(sol.iterations)}, message=f"clarabel: {name}",
