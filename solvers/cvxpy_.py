@@ -164,7 +164,7 @@ class CvxpySolver(Solver):
         import cvxpy as cp
         import scipy.sparse as sp
 
-        self.qp = qp
+        self.qp = self._qp_now = qp
         self._friction = None
         if norm_blocks(qp):
             self._setup_friction(qp)
@@ -189,6 +189,7 @@ class CvxpySolver(Solver):
         import cvxpy as cp
         import scipy.sparse as sp
 
+        self._qp_now = qp
         self._scaled = s = uniform_scaling(qp, self.params["scale"])
         o = np.cumsum([0, *(b.m for b in qp.constraints)])
         y = cp.Variable(qp.n)
@@ -255,7 +256,7 @@ class CvxpySolver(Solver):
         x, mu = self._scaled.unscale(np.asarray(yv, float).ravel(), np.asarray(nu, float).ravel())
         msg = f"cvxpy/{backend}: {text}"
         if self.params["polish"] and status in (Status.SOLVED, Status.INACCURATE) and self._friction is not None:
-            x, mu, pinfo = face_polish_if_better(self.qp, x, mu)
+            x, mu, pinfo = face_polish_if_better(self._qp_now, x, mu)
             info["polish"] = {"applied": pinfo.pop("polished"), **pinfo}
             if not info["polish"]["applied"]:
                 status = Status.INACCURATE if status == Status.SOLVED else status
@@ -265,7 +266,7 @@ class CvxpySolver(Solver):
         elif self.params["polish"] and status in (Status.SOLVED, Status.INACCURATE) and self._eq is None:
 
             try:
-                pol = active_set_polish(self.qp, x, mu)
+                pol = active_set_polish(self._qp_now, x, mu)
             except Exception as exc:  # noqa: BLE001 - the polish is optional; say why it failed
                 pol = None
                 info["polish_error"] = f"{type(exc).__name__}: {exc}"
