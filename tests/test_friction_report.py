@@ -12,6 +12,7 @@ pytest.importorskip("gmsh")
 pytest.importorskip("clarabel")
 
 
+@pytest.mark.slow
 def test_one_case_study_renders_and_rerenders(tmp_path):
     from dualfem.core.io import dumps
     from dualfem.experiments.friction import study
@@ -26,6 +27,12 @@ def test_one_case_study_renders_and_rerenders(tmp_path):
     assert main(["report", "friction", "--from-json", str(tmp_path / "friction.json"), "--out",
                  str(tmp_path / "again")]) == 0
     assert (tmp_path / "again" / "friction.md").read_text() == md
+    # --compare on a stored study: the solvers' table alone, stored beside the re-rendered page
+    assert main(["report", "friction", "--from-json", str(tmp_path / "friction.json"), "--compare", "osqp",
+                 "--out", str(tmp_path / "cmp")]) == 0
+    page = (tmp_path / "cmp" / "friction.md").read_text()
+    assert "| 2D tresca g=0.1 | osqp | solved |" in page and "| 3D tresca g=0.2 | osqp | skipped: " in page
+    assert json.loads((tmp_path / "cmp" / "friction.json").read_text())["compare"]
 
 
 def test_a_file_that_is_not_a_study_is_refused(tmp_path, capsys):

@@ -191,16 +191,21 @@ def _compare(solvers, fine2, fine3, progress) -> list[dict]:
 
 
 def study(levels_2d=LEVELS_2D, angles=ANGLES, cases_2d=CASES_2D, levels_3d=LEVELS_3D, cases_3d=CASES_3D,
-          solver: str = "clarabel", solvers=(), progress=None) -> dict:
+          solver: str = "clarabel", solvers=(), progress=None, coulomb_levels: int | None = None) -> dict:
     """Every case of the report (JSON-able): ``inclined`` (2D rows), ``penny`` (3D rows), ``stuck``, and
     ``compare`` (``solvers`` on four frictional QPs; empty when none is given). ``solver`` solves the
-    validation cases (its certified answers are what is compared with the closed forms)."""
+    validation cases (its certified answers are what is compared with the closed forms); ``coulomb_levels``:
+    the 2D Coulomb cases run on that many of the coarsest levels only (a fixed point of several solves per case;
+    None: all levels)."""
     say = progress or (lambda m: None)
     out: dict = {"solver": solver, "E": E, "nu": NU, "delta": DELTA, "stress_2d": [list(r) for r in STRESS_2D],
-                 "sigma_n_3d": SIGMA_N, "tau_3d": TAU, "inclined": [], "penny": []}
-    for h, tip in levels_2d:
+                 "sigma_n_3d": SIGMA_N, "tau_3d": TAU, "inclined": [], "penny": [],
+                 "levels_2d": [list(lv) for lv in levels_2d], "levels_3d": [list(lv) for lv in levels_3d]}
+    for k, (h, tip) in enumerate(levels_2d):
         for angle in angles:
             for law, value in cases_2d:
+                if law == "coulomb" and coulomb_levels is not None and k >= coulomb_levels:
+                    continue
                 row = inclined_2d(angle, law, value, h, tip, solver=solver)
                 out["inclined"].append(row)
                 say(f"2D {angle:g} deg {law} {value:g} tip {tip:g}: {row['status']} {row.get('error', '-')}")
@@ -210,5 +215,13 @@ def study(levels_2d=LEVELS_2D, angles=ANGLES, cases_2d=CASES_2D, levels_3d=LEVEL
             out["penny"].append(row)
             say(f"3D {law} {value:g} mesh {h:g}/{tip:g}: {row['status']} {row.get('error', '-')}")
     out["stuck"] = stuck_2d(solver=solver)
-    out["compare"] = _compare(solvers, levels_2d[-1], levels_3d[0], say) if solvers else []
+    out["compare"] = compare(out, solvers, say) if solvers else []
     return out
+
+
+def compare(res: dict, solvers, progress=None) -> list[dict]:
+    """The ``compare`` rows of a study ``res``: ``solvers`` on the 2D crack at 30 degrees at the study's finest
+    2D level (else the default's) and the penny at its coarsest 3D level."""
+    lv2 = tuple(res.get("levels_2d") or LEVELS_2D)[-1]
+    lv3 = tuple(res.get("levels_3d") or LEVELS_3D)[0]
+    return _compare(list(solvers), tuple(lv2), tuple(lv3), progress or (lambda m: None))

@@ -30,7 +30,12 @@ def run(argv: list[str]) -> int:
     ap.add_argument("--compare", default="", metavar="S1,S2",
                     help="comma-separated solvers to run on four frictional scenes (default: none)")
     ap.add_argument("--quick", action="store_true", help="one coarse level of each case")
-    ap.add_argument("--from-json", default=None, metavar="FILE", help="re-render from a friction.json (no solves)")
+    ap.add_argument("--coulomb-levels", type=int, default=2,
+                    help="2D Coulomb cases on this many of the coarsest levels (default 2: each is a fixed point of "
+                         "several solves)")
+    ap.add_argument("--from-json", default=None, metavar="FILE",
+                    help="re-render from a friction.json (no solves; with --compare: run the solvers' comparison "
+                         "on its scenes and store it)")
     argv = strip_dashes(argv)
     args = ap.parse_args(argv)
     out = Path(args.out)
@@ -41,6 +46,15 @@ def run(argv: list[str]) -> int:
         except (OSError, ValueError) as exc:
             raise InputError(f"--from-json {args.from_json!r}: cannot read it: {exc}") from None
         check_study(res, f"--from-json {args.from_json!r}")
+        solvers = [s.strip() for s in args.compare.split(",") if s.strip()]
+        if solvers:                 # the solvers' comparison alone, on the stored study's scenes
+            from dualfem.experiments.friction import compare
+
+            res["compare"] = compare(res, solvers, lambda m: print(m, file=sys.stderr, flush=True))
+            res["command"] = f"{res.get('command', 'dualfem report friction')}; then dualfem report friction " \
+                             f"{' '.join(argv)}"
+            out.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(out / "friction.json", dumps(res) + "\n")
         md = render(res, out, res.get("command"))
         print(f"wrote {md} from {args.from_json}", file=sys.stderr)
         return 0
@@ -50,7 +64,7 @@ def run(argv: list[str]) -> int:
     kw = {"levels_2d": fr.LEVELS_2D[:1], "angles": (20.0, 30.0), "levels_3d": ((3.0, 0.5),)} if args.quick else {}
     t0 = time.perf_counter()
     res = fr.study(solver=args.solver, solvers=solvers, progress=lambda m: print(m, file=sys.stderr, flush=True),
-                   **kw)
+                   coulomb_levels=args.coulomb_levels, **kw)
     res["time_s"] = time.perf_counter() - t0
     res["command"] = " ".join(["dualfem report friction", *argv])
     out.mkdir(parents=True, exist_ok=True)
