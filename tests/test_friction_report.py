@@ -33,6 +33,9 @@ def test_one_case_study_renders_and_rerenders(tmp_path):
     page = (tmp_path / "cmp" / "friction.md").read_text()
     assert "| 2D tresca g=0.1 | osqp | solved |" in page and "| 3D tresca g=0.2 | osqp | skipped: " in page
     assert json.loads((tmp_path / "cmp" / "friction.json").read_text())["compare"]
+    again = study(levels_2d=((0.05, 0.004),), angles=(30.0,), cases_2d=(("tresca", 0.1),), levels_3d=(),
+                  cases_3d=(), resume=res)                  # --resume: the stored rows are kept, not solved again
+    assert again["inclined"][0] is res["inclined"][0] and again["stuck"] is res["stuck"]
 
 
 def test_a_file_that_is_not_a_study_is_refused(tmp_path, capsys):

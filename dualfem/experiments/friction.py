@@ -191,13 +191,16 @@ def _compare(solvers, fine2, fine3, progress) -> list[dict]:
 
 
 def study(levels_2d=LEVELS_2D, angles=ANGLES, cases_2d=CASES_2D, levels_3d=LEVELS_3D, cases_3d=CASES_3D,
-          solver: str = "clarabel", solvers=(), progress=None, coulomb_levels: int | None = None) -> dict:
+          solver: str = "clarabel", solvers=(), progress=None, coulomb_levels: int | None = None,
+          resume: dict | None = None) -> dict:
     """Every case of the report (JSON-able): ``inclined`` (2D rows), ``penny`` (3D rows), ``stuck``, and
     ``compare`` (``solvers`` on four frictional QPs; empty when none is given). ``solver`` solves the
     validation cases (its certified answers are what is compared with the closed forms); ``coulomb_levels``:
     the 2D Coulomb cases run on that many of the coarsest levels only (a fixed point of several solves per case;
-    None: all levels)."""
+    None: all levels); ``resume``: a study stored earlier whose rows of the same case, level and solver are kept
+    (not solved again) unless they were skipped."""
     say = progress or (lambda m: None)
+    kept = _kept(resume, solver)
     out: dict = {"solver": solver, "E": E, "nu": NU, "delta": DELTA, "stress_2d": [list(r) for r in STRESS_2D],
                  "sigma_n_3d": SIGMA_N, "tau_3d": TAU, "inclined": [], "penny": [],
                  "levels_2d": [list(lv) for lv in levels_2d], "levels_3d": [list(lv) for lv in levels_3d]}
@@ -206,17 +209,34 @@ def study(levels_2d=LEVELS_2D, angles=ANGLES, cases_2d=CASES_2D, levels_3d=LEVEL
             for law, value in cases_2d:
                 if law == "coulomb" and coulomb_levels is not None and k >= coulomb_levels:
                     continue
-                row = inclined_2d(angle, law, value, h, tip, solver=solver)
+                row = kept.get(("2d", angle, law, value, h, tip)) or \
+                    inclined_2d(angle, law, value, h, tip, solver=solver)
                 out["inclined"].append(row)
                 say(f"2D {angle:g} deg {law} {value:g} tip {tip:g}: {row['status']} {row.get('error', '-')}")
     for h, tip in levels_3d:
         for law, value in cases_3d:
-            row = penny_3d(law, value, h, tip, solver=solver)
+            row = kept.get(("3d", law, value, h, tip)) or penny_3d(law, value, h, tip, solver=solver)
             out["penny"].append(row)
             say(f"3D {law} {value:g} mesh {h:g}/{tip:g}: {row['status']} {row.get('error', '-')}")
-    out["stuck"] = stuck_2d(solver=solver)
+    out["stuck"] = kept.get("stuck") or stuck_2d(solver=solver)
     out["compare"] = compare(out, solvers, say) if solvers else []
     return out
+
+
+def _kept(resume: dict | None, solver: str) -> dict:
+    """The rows of a stored study to keep, by case key (same solver; skipped rows are solved again)."""
+    if not resume or resume.get("solver") != solver:
+        return {}
+    kept: dict = {}
+    for r in resume.get("inclined", []):
+        if r.get("status") != "skipped":
+            kept[("2d", r["angle"], r["law"], r["value"], r["mesh_size"], r["tip_size"])] = r
+    for r in resume.get("penny", []):
+        if r.get("status") != "skipped":
+            kept[("3d", r["law"], r["value"], r["mesh_size"], r["tip_size"])] = r
+    if resume.get("stuck", {}).get("status") == "solved":
+        kept["stuck"] = resume["stuck"]
+    return kept
 
 
 def compare(res: dict, solvers, progress=None) -> list[dict]:

@@ -30,6 +30,8 @@ def run(argv: list[str]) -> int:
     ap.add_argument("--compare", default="", metavar="S1,S2",
                     help="comma-separated solvers to run on four frictional scenes (default: none)")
     ap.add_argument("--quick", action="store_true", help="one coarse level of each case")
+    ap.add_argument("--resume", action="store_true",
+                    help="keep the rows of OUT/friction.json of the same case, level and solver (not skipped ones)")
     ap.add_argument("--coulomb-levels", type=int, default=2,
                     help="2D Coulomb cases on this many of the coarsest levels (default 2: each is a fixed point of "
                          "several solves)")
@@ -62,9 +64,13 @@ def run(argv: list[str]) -> int:
 
     solvers = [s.strip() for s in args.compare.split(",") if s.strip()]
     kw = {"levels_2d": fr.LEVELS_2D[:1], "angles": (20.0, 30.0), "levels_3d": ((3.0, 0.5),)} if args.quick else {}
+    resume = None
+    if args.resume and (out / "friction.json").is_file():
+        resume = json.loads((out / "friction.json").read_text(encoding="utf-8"))
+        check_study(resume, f"--resume {str(out / 'friction.json')!r}")
     t0 = time.perf_counter()
     res = fr.study(solver=args.solver, solvers=solvers, progress=lambda m: print(m, file=sys.stderr, flush=True),
-                   coulomb_levels=args.coulomb_levels, **kw)
+                   coulomb_levels=args.coulomb_levels, resume=resume, **kw)
     res["time_s"] = time.perf_counter() - t0
     res["command"] = " ".join(["dualfem report friction", *argv])
     out.mkdir(parents=True, exist_ok=True)
