@@ -86,10 +86,10 @@ def _penny_table(rows: list[dict]) -> list[str]:
         free = next((f for f in rows if f["law"] == "none" and f["mesh_size"] == r["mesh_size"]
                      and f["tip_size"] == r["tip_size"]), None)
         diff = r.get("error", np.nan) - free.get("error", np.nan) if free and r["law"] != "none" else None
-        across = r.get("max_across", np.nan) / max(r.get("max_slip", 0.0), 1e-300)
+        across = f"{r['max_across'] / r['max_slip']:.1e}" if "error" in r and r.get("max_slip") else "-"
         out.append(f"| {r['mesh_size']:g} / {r['tip_size']:g} | {r['m']} | {_case(r['law'], r['value'])} | "
-                   f"{r['status']} | {_fmt(r.get('error'))} | {_fmt(diff, '+.2%')} | {across:.1e} | "
-                   f"{r['seconds']:.1f} |")
+                   f"{r['status']} | {_outcome(r) if r['status'] == 'solved' else '-'} | {_fmt(diff, '+.2%')} | "
+                   f"{across} | {r['seconds']:.1f} |")
     return out
 
 
