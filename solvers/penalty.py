@@ -49,6 +49,9 @@ matrix of A: one solve with its kept factor), from the Newton matrix's answer ``
 2-4 steps (``info["polish_refinements"]``), then ``x = K^-1 (F + B'mu)``. Stop tests relative to
 |x| use the defect unknowns' largest displacement on both paths.
 
+Friction blocks (Tresca, Coulomb): regularized friction with the same rho, Coulomb by the fixed point over
+Tresca solves; :mod:`dualfem.numerics.friction_penalty`.
+
 Continuation: rho_0 = ``rho0_factor`` * median(diag K on I) / median(w) -- the penalty
 stiffness rho w of one node equal to the stiffness of its unknowns, taken from the QP itself
 (so it works for any QP and any units): of order E/h at large delta; at small delta the
@@ -68,6 +71,8 @@ import scipy.linalg as sla
 from dualfem.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.evaluator import load_energy, load_length
 from dualfem.numerics.factor import from_param
+from dualfem.numerics.friction_penalty import solve_friction
+from dualfem.numerics.friction_spaces import DenseFrictionSpace, Layout, SparseFrictionSpace
 from dualfem.numerics.newton_matrix import NewtonMatrix
 from dualfem.registry import register_solver
 from dualfem.solution import Solution, Status
@@ -207,6 +212,7 @@ class PenaltySolver(DualOperatorSolver):
 
     name = "penalty"
     family = "dual"
+    accepts = ("signorini", "tresca", "coulomb")
     description = "quadratic penalty, semismooth Newton + line search, continuation in rho (inexact)"
     exact = False
     #: relative energy-norm error of x against the QP's own solution x*, the modelling error included: it
@@ -227,11 +233,12 @@ class PenaltySolver(DualOperatorSolver):
         "keep_factors": 4,        # matrix_free: numeric factorizations of Newton matrices kept (by active set)
         "time_limit": 600.0,      # seconds of solve time (checked between Newton steps)
         "verbose": False,         # print one line per penalty stage to stderr
+        "coulomb_max_iter": 50,   # Coulomb friction (by the fixed point over Tresca solves): most Tresca solves
     }
     renamed = {"penetration_tol": "tol", "max_newton": "max_iter"}
     ranges = {"rho0_factor": "(0, inf)", "rho_growth": "(1, inf)", "rho_max_factor": "(0, inf)",
               "newton_tol": "(0, inf)", "sigma": "(0, 0.5)", "max_backtracks": "[1, inf)", "factor": None,
-              "operator": OPERATORS, "keep_factors": "[1, inf)"}
+              "operator": OPERATORS, "keep_factors": "[1, inf)", "coulomb_max_iter": "[1, inf)"}
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -240,7 +247,17 @@ class PenaltySolver(DualOperatorSolver):
 
     def setup(self, qp) -> None:
         super().setup(qp)                 # self.op: dense or matrix_free
-        self.space = _DenseSpace(self.op, qp) if self.op.kind == "dense" else \
+        self.friction = bool(qp.blocks)
+        if self.friction:                 # numerics/friction_penalty.py: regularized friction
+            self.lay = Layout(qp)
+            self.space = SparseFrictionSpace(qp, self.lay, from_param(self))
+            if self.op.kind == "dense":
+                try:
+                    self.space = DenseFrictionSpace(qp, self.lay, reduction=self.op.reduction)
+                except ValueError:    # a friction row off the reduction's local unknowns: stay sparse
+                    pass
+        else:
+            self.space = _DenseSpace(self.op, qp) if self.op.kind == "dense" else \
             _SparseSpace(self.op, qp, from_param(self), keep=int(self.params["keep_factors"]))
         kd = qp.K.diagonal()[np.asarray(qp.local_dofs)]
         # no constraint (m = 0, an uncracked body): no penalty term, rho only labels the messages
@@ -375,7 +392,19 @@ class PenaltySolver(DualOperatorSolver):
         return xn, mu, pen
 
     # ------------------------------------------------------------------ solve
+    def _solve_friction(self) -> Solution:
+        """Regularized friction (numerics/friction_penalty.py); Coulomb by the fixed point over Tresca solves."""
+        qp, space = self.qp, self.space
+        local = None if space.kind == "dense" else np.asarray(qp.local_dofs)
+        r = solve_friction(qp, space, self.lay, self.params, self.rho0, self._length, self._energy2, local)
+        return Solution(solver=self.name, status=Status(r.status), x=r.x, multipliers=r.mu, message=r.message,
+                        iterations=r.iterations, history=r.history,
+                        info={**self.op.info(), "factorizations": space.factorizations, "space": space.kind,
+                              "rho0": self.rho0, **r.info})
+
     def solve(self) -> Solution:
+        if self.friction:
+            return self._solve_friction()
         p, sp_, w = self.params, self.space, self.qp.weights
         xI = sp_.start()                                # unconstrained minimiser
         self._deadline = time.perf_counter() + p["time_limit"]
@@ -428,3 +457,4 @@ class PenaltySolver(DualOperatorSolver):
                   "rho": rho, "rho0": self.rho0, "penetration": pen,
                   "penetration_rel": pen / max(np.abs(x).max(initial=0.0), self._length, 1e-300)},
         )
+

@@ -103,6 +103,11 @@ energy norm x'Kx) are the same numbers, computed in the smaller space or the who
 same steps, answers within 1e-10 in the energy norm). ``linalg="full"`` is the textbook path (it
 ignores ``operator``): it refactorizes the sparse Hessian at every Newton step, no analysis reused,
 and allows ``inner_norm="euclidean"``.
+
+Friction blocks (Tresca, Coulomb; ``accepts``): the frictional modified Lagrangian, the tangential tractions
+projected onto their intervals / discs, Coulomb's threshold from the current pressure in the loop
+(``coulomb="inner"``) or by the fixed point over Tresca solves (``coulomb="fixed_point"``):
+:mod:`dualfem.numerics.friction_uzawa` and :mod:`dualfem.numerics.friction_spaces`.
 """
 from __future__ import annotations
 
@@ -114,7 +119,10 @@ import numpy as np
 from dualfem.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.errors import InputError
 from dualfem.evaluator import load_energy, load_length
+from dualfem.numerics.coulomb import coulomb_fixed_point
 from dualfem.numerics.factor import from_param
+from dualfem.numerics.friction_spaces import DenseFrictionSpace, Layout, SparseFrictionSpace
+from dualfem.numerics.friction_uzawa import FrictionRun, outer
 from dualfem.numerics.newton_spaces import FullSpace as _FullSpace
 from dualfem.numerics.newton_spaces import ReducedSpace as _ReducedSpace
 from dualfem.numerics.newton_spaces import SparseSpace as _SparseSpace
@@ -152,6 +160,7 @@ class Uzawa(DualOperatorSolver):
 
     name = "uzawa"
     family = "dual"
+    accepts = ("signorini", "tresca", "coulomb")
     description = "Uzawa / modified Lagrangian + generalized Newton-Armijo (Zhiltsov & Maksimova 2023)"
     tolerance = 1e-6
     defaults = {
@@ -180,6 +189,9 @@ class Uzawa(DualOperatorSolver):
         "time_limit": 600.0,      # seconds
         "error_factor": 10.0,     # 'inaccurate' if the estimated dual error exceeds this x tol
         "verbose": False,         # print one line per outer iteration to stderr
+        "coulomb": "inner",       # Coulomb friction: threshold from the current pressure in the Uzawa loop ("inner",
+                                  # the school's way) or the fixed point over Tresca solves ("fixed_point")
+        "coulomb_max_iter": 50,   # with coulomb="fixed_point": most Tresca solves
     }
     renamed = {"tol_outer": "tol", "max_outer": "max_iter"}
     ranges = {"r": "(0, inf)", "r_rule": ("scaled", "fixed", "auto"), "r_factor": "(0, inf)",
@@ -188,7 +200,7 @@ class Uzawa(DualOperatorSolver):
               "max_backtracks": "[1, inf)", "l0": "[0, inf)", "linalg": ("reduced", "full"),
               "operator": OPERATORS, "keep_factors": "[1, inf)", "eig_tol": "(0, 1)",
               "factor": None, "inner_norm": ("energy", "euclidean"), "shortcut": bool, "stall_window": "[1, inf)",
-              "error_factor": "(0, inf)"}
+              "error_factor": "(0, inf)", "coulomb": ("inner", "fixed_point"), "coulomb_max_iter": "[1, inf)"}
 
     def validate(self) -> None:
         super().validate()
@@ -208,6 +220,9 @@ class Uzawa(DualOperatorSolver):
 
     def setup(self, qp) -> None:
         p = self.params
+        self.friction = bool(qp.blocks)
+        if self.friction:
+            return self._setup_friction(qp)
         self.qp, self.op, self.reduction = qp, None, None
         self._mu, self._mu_info = None, {}
         # the inner test's size has the evaluator's floor (the energy / length the load sets), so that a
@@ -240,6 +255,8 @@ class Uzawa(DualOperatorSolver):
         return self._mu
 
     def solve(self) -> Solution:
+        if self.friction:
+            return self._solve_friction()
         p, qp, sp_ = self.params, self.qp, self.space
         r, w = self.r, qp.weights
         t_start = time.perf_counter()
@@ -366,6 +383,77 @@ class Uzawa(DualOperatorSolver):
             if time.perf_counter() > deadline:
                 return z, steps, False, "time limit"
         return z, steps, False, f"max_inner={p['max_inner']} Newton steps without meeting tol_inner"
+
+
+    # ------------------------------------------------------------------------------------------- friction
+    def _setup_friction(self, qp) -> None:
+        """Friction blocks (numerics/friction_uzawa.py): the stacked layout, the dense space on the reduction when
+        the operator choice is dense, else the sparse one (Newton matrices analyzed once), and r."""
+        p = self.params
+        self.qp, self.op, self.reduction, self._mu, self._mu_info = qp, None, None, None, {}
+        self.lay = Layout(qp)
+        self._floor2 = load_energy(qp) ** 2
+        if p["linalg"] == "reduced":
+            super().setup(qp)
+        self.space = SparseFrictionSpace(qp, self.lay, from_param(self))
+        if self.op is not None and self.op.kind == "dense":
+            try:
+                self.space = DenseFrictionSpace(qp, self.lay, reduction=self.op.reduction)
+            except ValueError:        # a friction row off the reduction's local unknowns: stay sparse
+                pass
+        self.r, self.r_units = paper_r_in_scene_units(float(p["r"]), qp.units) \
+            if p["r_rule"] == "scaled" else (float(p["r"]), "as given")
+        if p["r_rule"] == "auto":
+            self.r, self.r_units = float(p["r_factor"] / self._friction_mu_min()), "r_factor / min dual compliance"
+
+    def _friction_mu_min(self) -> float:
+        if self._mu is None:
+            self._mu = float(max(self.space.mu_min(self.lay.w), 1e-300))
+        return self._mu
+
+    def _solve_friction(self) -> Solution:
+        p, qp, space, lay = self.params, self.qp, self.space, self.lay
+        runs: list[FrictionRun] = []
+        info = {"r": self.r, "r_units": self.r_units, "space": space.kind, "coulomb": p["coulomb"]}
+
+        def run(lay_k, z0=None, y0=None) -> FrictionRun:
+            report = (lambda k, z, y: self.report_iterate(k, lambda: space.full(z), lambda: lay_k.w * y)) \
+                if not runs else None
+            out = outer(space, lay_k, p, self.r, self._friction_mu_min, self._floor2, z0=z0, y0=y0, report=report)
+            runs.append(out)
+            return out
+
+        def result(status, x, mu, msg="", extra=None):
+            info.update({"factorizations": space.factorizations, "tresca_solves": len(runs)})
+            its = {"outer": sum(r_.k for r_ in runs), "inner": sum(r_.m for r_ in runs), **(extra or {})}
+            return Solution(solver=self.name, status=Status(status), x=x, multipliers=mu, iterations=its,
+                            history=[h for r_ in runs for h in r_.history], message=msg, info=info)
+
+        if not (lay.coulomb() and p["coulomb"] == "fixed_point"):
+            out = run(lay)
+            return result(out.status, space.full(out.z), lay.w * out.y, out.message)
+
+        def solve_tresca(qt, warm):
+            lay_t = Layout(qt)
+            out = run(lay_t, *((None, None) if warm is None else (runs[-1].z, warm[1] / lay_t.w)))
+            if out.status != "solved":
+                raise _TrescaFailed(out)
+            return space.full(out.z), lay_t.w * out.y, {}
+
+        try:
+            res = coulomb_fixed_point(qp, solve_tresca, tol=10 * p["tol"], max_iter=int(p["coulomb_max_iter"]))
+        except _TrescaFailed as exc:
+            out = exc.args[0]
+            return result(out.status, space.full(out.z), lay.w * out.y,
+                          f"Tresca solve {len(runs)} of the Coulomb fixed point: {out.status} {out.message}")
+        msg = "" if res.status == "solved" else \
+            f"Coulomb fixed point {'stalled' if res.stalled else 'hit coulomb_max_iter'} (change {res.changes[-1]:.3g})"
+        info.update(res.details())
+        return result(res.status, res.x, res.mu, msg, res.summary())
+
+
+class _TrescaFailed(Exception):
+    """A Tresca solve inside the Coulomb fixed point ended without ``solved`` (its FrictionRun in args[0])."""
 
 
 @register_solver
