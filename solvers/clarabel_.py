@@ -29,6 +29,8 @@ import scipy.sparse as sp
 
 from dualfem.errors import InputError
 from dualfem.laws import conic_rows
+from dualfem.numerics.coulomb import coulomb_blocks
+from dualfem.numerics.coulomb_run import coulomb_by_tresca
 from dualfem.numerics.epigraph import epigraph, norm_blocks
 from dualfem.numerics.face_polish import polish_if_better as face_polish_if_better
 from dualfem.numerics.polish import polish_if_better
@@ -59,8 +61,8 @@ class ClarabelSolver(Solver):
     family = "interior point"
     #: the bilateral law (G x = 0, mu free) through Clarabel's zero cone (conic_rows; tested in tests/plugin_laws);
     #: Tresca friction through epigraph variables (second-order cones in 3D, two linear rows per node in 2D:
-    #: dualfem.numerics.epigraph)
-    accepts = ("signorini", "bilateral", "tresca")
+    #: dualfem.numerics.epigraph); Coulomb by the fixed point over those Tresca solves (dualfem.numerics.coulomb_run)
+    accepts = ("signorini", "bilateral", "tresca", "coulomb")
     description = "Clarabel (interior point, Rust) via its Python interface"
     requires = ("clarabel",)
     #: relative energy-norm error of an unpolished 'Solved' answer (docs/measurements.md)
@@ -80,11 +82,13 @@ class ClarabelSolver(Solver):
         "verbose": False,
         "scale": True,
         "polish": True,           # dualfem's active-set polish (numerics.polish), kept only if it helps
+        "coulomb_tol": 1e-10,     # Coulomb: relative change of the threshold that stops the fixed point
+        "coulomb_max_iter": 50,   # Coulomb: most Tresca solves
     }
 
     renamed = {"tol_gap_abs": "tol", "tol_gap_rel": "tol", "tol_feas": "tol"}
     ranges = {"tol_ktratio": "(0, inf)", "equilibrate_enable": bool, "direct_solve_method": None,
-              "scale": bool, "polish": bool}
+              "scale": bool, "polish": bool, "coulomb_tol": "(0, 1)", "coulomb_max_iter": "[1, 1000]"}
 
     def validate(self) -> None:
         if self.missing() is None:
@@ -110,13 +114,14 @@ class ClarabelSolver(Solver):
         self.qp = qp
         settings = clarabel.DefaultSettings()
         for k, v in self.params.items():
-            if k in ("scale", "polish", "tol"):
+            if k in ("scale", "polish", "tol", "coulomb_tol", "coulomb_max_iter"):
                 continue
             setattr(settings, k, v)
         for k in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
             setattr(settings, k, self.params["tol"])
         self._settings = settings
-        self._build(qp)
+        if not coulomb_blocks(qp):      # Coulomb: built per Tresca problem of the fixed point (solve)
+            self._build(qp)
 
     def _build(self, qp) -> None:
         """Clarabel's solver for ``qp`` (``self._solver``; ``self._epi`` the epigraph of a frictional QP)."""
@@ -136,7 +141,20 @@ class ClarabelSolver(Solver):
                                               [cone[kind](m) for kind, m in conic_rows(qp.constraints)], settings)
 
     def solve(self) -> Solution:
+        if coulomb_blocks(self.qp):
+            return self._coulomb()
         return self._run()
+
+    def _coulomb(self) -> Solution:
+        """Coulomb by the fixed point over this solver's Tresca solves (:mod:`dualfem.numerics.coulomb_run`)."""
+        def tresca(tq):
+            self._build(tq)
+            return self._run()
+
+        c = coulomb_by_tresca(self.qp, tresca, float(self.params["coulomb_tol"]),
+                              int(self.params["coulomb_max_iter"]), "clarabel")
+        return Solution(solver=self.name, status=c.status, x=c.x, multipliers=c.mu, iterations=c.iterations,
+                        message=f"clarabel: {c.message}", info=c.info)
 
     def _run(self) -> Solution:
         """Clarabel on the QP of the last :meth:`_build`, unscaled and polished."""

@@ -36,6 +36,8 @@ import numpy as np
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.errors import InputError
 from dualfem.laws import conic_rows
+from dualfem.numerics.coulomb import coulomb_blocks
+from dualfem.numerics.coulomb_run import coulomb_by_tresca
 from dualfem.numerics.epigraph import norm_blocks, uniform_scaling
 from dualfem.numerics.face_polish import polish_if_better as face_polish_if_better
 from dualfem.numerics.polish import active_set_polish
@@ -100,8 +102,8 @@ class CvxpySolver(Solver):
     #: the bilateral law (G x = 0, mu free) as cvxpy equality rows (conic_rows), with the default backend
     #: CLARABEL only (tests/plugin_laws; the Signorini polish does not apply, so an instance with another
     #: backend accepts Signorini only: :meth:`validate`); Tresca friction as norm terms of the objective
-    #: (:meth:`_setup_friction`), also CLARABEL only
-    accepts = ("signorini", "bilateral", "tresca")
+    #: (:meth:`_setup_friction`), Coulomb by the fixed point over those (dualfem.numerics.coulomb_run), CLARABEL only
+    accepts = ("signorini", "bilateral", "tresca", "coulomb")
     description = "cvxpy with a chosen backend (CLARABEL, OSQP, SCS, ... as installed)"
     requires = ("cvxpy",)
     tolerance = BACKEND_TOLERANCE["CLARABEL"]
@@ -114,10 +116,13 @@ class CvxpySolver(Solver):
         "scale": True,
         "polish": True,
         "verbose": False,
+        "coulomb_tol": 1e-10,     # Coulomb: relative change of the threshold that stops the fixed point
+        "coulomb_max_iter": 50,   # Coulomb: most Tresca solves
     }
 
     renamed = {"eps": "tol"}
-    ranges = {"solver": None, "scale": bool, "polish": bool}   # solver: an installed backend (validate)
+    ranges = {"solver": None, "scale": bool, "polish": bool,   # solver: an installed backend (validate)
+              "coulomb_tol": "(0, 1)", "coulomb_max_iter": "[1, 1000]"}
 
     @classmethod
     def variant_family(cls, variant: str) -> str:
@@ -166,6 +171,8 @@ class CvxpySolver(Solver):
 
         self.qp = self._qp_now = qp
         self._friction = None
+        if coulomb_blocks(qp):      # built per Tresca problem of the fixed point (solve)
+            return
         if norm_blocks(qp):
             self._setup_friction(qp)
             return
@@ -224,6 +231,18 @@ class CvxpySolver(Solver):
         return np.concatenate(parts)
 
     def solve(self) -> Solution:
+        if coulomb_blocks(self.qp):
+            def tresca(tq):
+                self._setup_friction(tq)
+                return self._solve_built()
+
+            c = coulomb_by_tresca(self.qp, tresca, float(self.params["coulomb_tol"]),
+                                  int(self.params["coulomb_max_iter"]), "cvxpy")
+            return Solution(solver=self.name, status=c.status, x=c.x, multipliers=c.mu, iterations=c.iterations,
+                            message=f"cvxpy: {c.message}", info=c.info)
+        return self._solve_built()
+
+    def _solve_built(self) -> Solution:
         import cvxpy as cp
 
         backend = self.params["solver"]

@@ -78,9 +78,9 @@ def test_epigraph_soc_and_linear_forms_give_the_same_multipliers():
     assert _rel(out[0][0], out[1][0]) < 1e-6 and _rel(out[0][1], out[1][1]) < 1e-5
 
 
-def test_coulomb_is_skipped_by_the_conic_backends_with_a_reason():
+def test_coulomb_is_skipped_by_a_backend_without_it_with_a_reason():
     qp = load_scene("f2", {"N": 16, "friction": "coulomb", "friction_coefficient": 0.3}).build()
-    sol = run("clarabel", qp)
+    sol = run("osqp", qp)
     assert sol.status == Status.SKIPPED and "coulomb" in sol.message
 
 
