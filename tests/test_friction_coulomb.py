@@ -52,3 +52,23 @@ def test_clarabel_and_cvxpy_agree_on_coulomb():
     assert a.status == b.status == Status.SOLVED, (a.message, b.message)
     assert _rel(a.x, b.x) < 1e-8 and "Coulomb fixed point" in a.message
     assert "Tresca problem whose threshold" in a.info["certificate"]["notes"]
+
+
+@pytest.mark.parametrize("keys", [{"friction": "tresca", "friction_bound": 0.5},
+                                  {"friction": "coulomb", "friction_coefficient": 0.3}], ids=["tresca", "coulomb"])
+def test_every_solver_that_takes_the_law_agrees_to_1e_8(keys):
+    from dualfem.core.registry import solvers
+
+    qp = load_scene("f2", {"N": 16, **keys}).build()
+    ref = run("clarabel", qp)
+    assert ref.status == Status.SOLVED
+    law = keys["friction"]
+    names = [n for n, cls in solvers().items() if law in getattr(cls, "accepts", ()) and not cls.missing()
+             and n != "clarabel" and not n.startswith("qp_")]
+    assert {"cvxpy", "uzawa", "uzawa_auto", "penalty"} <= set(names)
+    for name in names:
+        sol = run(name, qp)
+        if sol.status == Status.SKIPPED:
+            continue
+        assert sol.status == Status.SOLVED, (name, sol.message)
+        assert _rel(sol.x, ref.x) < 1e-8, (name, _rel(sol.x, ref.x))
