@@ -18,6 +18,8 @@ import scipy.sparse as sp
 
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.laws import upper_bounds
+from dualfem.numerics.coulomb import coulomb_blocks
+from dualfem.numerics.coulomb_run import coulomb_by_tresca
 from dualfem.numerics.epigraph import epigraph, norm_blocks, not_linear
 from dualfem.numerics.scaling import scale
 from dualfem.registry import register_solver
@@ -44,8 +46,9 @@ class OSQPSolver(Solver):
     name = "osqp"
     family = "first-order"
     #: the bilateral law (G x = 0, mu free) as rows with l = u = 0 (upper_bounds; tested in tests/plugin_laws);
-    #: Tresca friction in 2D as the linear epigraph of dualfem.numerics.epigraph (3D discs: skipped, :meth:`skip`)
-    accepts = ("signorini", "bilateral", "tresca")
+    #: Tresca friction in 2D as the linear epigraph of dualfem.numerics.epigraph (3D discs: skipped, :meth:`skip`);
+    #: Coulomb in 2D by the fixed point over those Tresca solves (dualfem.numerics.coulomb_run)
+    accepts = ("signorini", "bilateral", "tresca", "coulomb")
     description = "OSQP 1.x (ADMM) via its Python interface"
     requires = ("osqp",)
     tolerance = 1e-3
@@ -59,10 +62,12 @@ class OSQPSolver(Solver):
         "time_limit": 600.0,      # seconds
         "verbose": False,
         "scale": True,
+        "coulomb_tol": 1e-8,      # Coulomb: relative change of the threshold that stops the fixed point
+        "coulomb_max_iter": 50,   # Coulomb: most Tresca solves
     }
     renamed = {"eps_abs": "tol", "eps_rel": "tol", "polishing": "polish"}
     ranges = {"polish": bool, "polish_refine_iter": "[0, 1000]", "scaling": "[0, 100]", "adaptive_rho": bool,
-              "scale": bool}   # scaling: OSQP's iterations
+              "scale": bool, "coulomb_tol": "(0, 1)", "coulomb_max_iter": "[1, 1000]"}   # scaling: OSQP's iterations
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -81,11 +86,15 @@ class OSQPSolver(Solver):
         return not_linear(qp)
 
     def setup(self, qp) -> None:
+        self.qp = qp
+        if not coulomb_blocks(qp):      # Coulomb: built per Tresca problem of the fixed point (solve)
+            self._build(qp)
+
+    def _build(self, qp) -> None:
         import osqp
 
-        self.qp = qp
         settings = {k: v for k, v in self.params.items()
-                    if k not in ("scale", "tol", "polish")}
+                    if k not in ("scale", "tol", "polish", "coulomb_tol", "coulomb_max_iter")}
         settings.update(eps_abs=self.params["tol"], eps_rel=self.params["tol"], polishing=self.params["polish"])
         self._solver = osqp.OSQP()
         self._epi = None
@@ -101,6 +110,18 @@ class OSQPSolver(Solver):
                                **settings)
 
     def solve(self) -> Solution:
+        if coulomb_blocks(self.qp):
+            def tresca(tq):
+                self._build(tq)
+                return self._run()
+
+            c = coulomb_by_tresca(self.qp, tresca, float(self.params["coulomb_tol"]),
+                                  int(self.params["coulomb_max_iter"]), "osqp")
+            return Solution(solver=self.name, status=c.status, x=c.x, multipliers=c.mu, iterations=c.iterations,
+                            message=f"osqp: {c.message}", info=c.info)
+        return self._run()
+
+    def _run(self) -> Solution:
         with c_stdout_to_stderr():
             res = self._solver.solve(raise_error=False) if _accepts_raise(self._solver) else self._solver.solve()
         text = str(res.info.status).lower()

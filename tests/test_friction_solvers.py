@@ -79,8 +79,12 @@ def test_epigraph_soc_and_linear_forms_give_the_same_multipliers():
 
 
 def test_coulomb_is_skipped_by_a_backend_without_it_with_a_reason():
+    from dualfem.core.registry import solvers
+
+    if "qp_proxqp" not in solvers() or solvers()["qp_proxqp"].missing():
+        pytest.skip("qp_proxqp is not installed")
     qp = load_scene("f2", {"N": 16, "friction": "coulomb", "friction_coefficient": 0.3}).build()
-    sol = run("osqp", qp)
+    sol = run("qp_proxqp", qp)
     assert sol.status == Status.SKIPPED and "coulomb" in sol.message
 
 
@@ -95,6 +99,10 @@ def test_qp_backends_take_2d_friction_and_skip_3d_discs(name):
     assert sol.status == Status.SOLVED and _rel(sol.x, ref.x) < 1e-6, sol.message
     sol = run(name, _qp("3d"))
     assert sol.status == Status.SKIPPED and "second-order cones" in sol.message
+    if name == "osqp":                  # Coulomb's Tresca problems are discs in 3D too
+        coul = load_scene("three_d", {"N": 4, "friction": "coulomb", "friction_coefficient": 0.3}).build()
+        sol = run(name, coul)
+        assert sol.status == Status.SKIPPED and "second-order cones" in sol.message
 
 
 def test_rotation_and_unit_invariance():

@@ -89,12 +89,12 @@ def norm_blocks(qp: QP) -> list[int]:
 
 
 def not_linear(qp: QP) -> str | None:
-    """Why ``qp`` is not a QP for a QP backend (None when it is): its Tresca blocks in 3D are discs, second-order
-    cones that no linear row describes."""
-    for k in norm_blocks(qp):
-        if qp.constraints[k].law.components > 1:
-            return (f"constraint block {k} ({qp.constraints[k].law.name}) holds 3D friction discs (second-order "
-                    f"cones), which a QP backend cannot take; 2D friction (intervals) only")
+    """Why ``qp`` is not a QP for a QP backend (None when it is): its friction blocks in 3D (Tresca, or Coulomb's
+    Tresca problems) are discs, second-order cones that no linear row describes."""
+    for k, b in enumerate(qp.constraints):
+        if getattr(b.law, "components", 1) > 1:
+            return (f"constraint block {k} ({b.law.name}) holds 3D friction discs (second-order cones), which a QP "
+                    f"backend cannot take; 2D friction (intervals) only")
     return None
 
 
