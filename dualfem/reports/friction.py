@@ -153,7 +153,8 @@ def _figure_3d(rows: list[dict], outdir: Path) -> str | None:
         ax.add_patch(plt.Circle((0, 0), 1.0, fill=False, lw=0.8))
         ax.set_aspect("equal")
         ax.set_title(_case(r["law"], r["value"]), fontsize=9)
-        fig.colorbar(sc, ax=ax, shrink=0.8, label="slip along x")
+        if (~stick).any():
+            fig.colorbar(sc, ax=ax, shrink=0.8, label="slip along x")
         if stick.any():
             ax.legend(fontsize=7, loc="lower right")
     fig.suptitle("3D penny under compression and shear: slip over the disk")
