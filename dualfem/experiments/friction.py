@@ -169,7 +169,7 @@ def compare_row(name: str, qp, label: str) -> dict:
 
 
 def _compare(solvers, fine2, fine3, progress) -> list[dict]:
-    """Every solver of ``solvers`` on the 2D crack at 30 degrees (finest level) and the penny (coarsest level),
+    """Every solver of ``solvers`` on the 2D crack at 30 degrees (the given level) and the penny (coarsest level),
     Tresca and Coulomb."""
     rows = []
     th = np.radians(30.0)
@@ -240,8 +240,9 @@ def _kept(resume: dict | None, solver: str) -> dict:
 
 
 def compare(res: dict, solvers, progress=None) -> list[dict]:
-    """The ``compare`` rows of a study ``res``: ``solvers`` on the 2D crack at 30 degrees at the study's finest
+    """The ``compare`` rows of a study ``res``: ``solvers`` on the 2D crack at 30 degrees at the study's middle
     2D level (else the default's) and the penny at its coarsest 3D level."""
-    lv2 = tuple(res.get("levels_2d") or LEVELS_2D)[-1]
+    levels = tuple(res.get("levels_2d") or LEVELS_2D)
+    lv2 = levels[len(levels) // 2]
     lv3 = tuple(res.get("levels_3d") or LEVELS_3D)[0]
     return _compare(list(solvers), tuple(lv2), tuple(lv3), progress or (lambda m: None))

@@ -202,7 +202,7 @@ def render(res: dict, out: Path, command: str | None = None) -> Path:
               f"{st['stick_nodes']} of {st['m']} nodes stick.", ""]
     if res["compare"]:
         lines += ["## Solvers on frictional scenes", "",
-                  "Each solver on the 2D crack at 30 degrees (finest level) and on the penny (coarsest level); a "
+                  "Each solver on the 2D crack at 30 degrees (middle level) and on the penny (coarsest level); a "
                   "solver that does not take a law is skipped with its reason (`Solver.accepts`). Times are one "
                   "run each on a shared 2-core machine: read ratios, not seconds.", "",
                   *_compare_table(res["compare"]), ""]
