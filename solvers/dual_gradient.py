@@ -19,6 +19,12 @@ rival for active-set or semismooth Newton methods on fine meshes or ill-conditio
 and it exists as a readable reference and as the starting point of ``docs/plugins.md``; ``skip``
 refuses QPs with more than ``max_n`` unknowns.
 
+Tresca friction (a QP with Tresca blocks): the same iteration on all blocks stacked (G = qp.G for B, the
+multipliers [lambda; t]), the projection onto lambda >= 0 and the friction discs ||t_j|| <= g_j w_j
+(:class:`dualfem.numerics.friction_dual.FrictionLayout`), the stopping test the evaluator's residuals with the
+laws (:func:`dualfem.core.evaluator.residuals`: primal and complementarity, friction's included). Coulomb is not
+taken (its radius moves with lambda: skipped with a reason by ``accepts``; pdas and mprgp solve it).
+
 Stopping test: the evaluator's own scale-free residuals (:mod:`dualfem.evaluator`) of
 ``(x(mu), mu)``. Stationarity and dual feasibility hold by construction (up to the solve's
 round-off), so the test is ``primal <= tol`` and ``complementarity <= tol``. Without convergence
@@ -33,8 +39,10 @@ import time
 import numpy as np
 import scipy.sparse.linalg as sla
 
+from dualfem.core import evaluator
 from dualfem.evaluator import load_length
 from dualfem.numerics.factor import from_param
+from dualfem.numerics.friction_dual import FrictionLayout, layout_refusal
 from dualfem.numerics.linalg import sparse_factor
 from dualfem.registry import register_solver
 from dualfem.solution import Solution, Status
@@ -47,6 +55,8 @@ class DualGradient(Solver):
 
     name = "dual_gradient"
     family = "dual"
+    #: Tresca friction by projection onto the discs; not Coulomb (skipped with a reason)
+    accepts = ("signorini", "tresca")
     description = "projected gradient / FISTA on the dual (template solver; slow, small QPs only)"
     defaults = {
         "tol": 1e-10,          # stopping threshold on the evaluator's primal & complementarity residuals
@@ -75,33 +85,44 @@ class DualGradient(Solver):
         if qp.n > self.params["max_n"]:
             return (f"dual_gradient is a slow reference method (one sparse solve per iteration, iterations growing "
                     f"with the mesh): n = {qp.n} > max_n = {self.params['max_n']} (raise max_n to force it)")
-        return None
+        return layout_refusal(qp) if qp.blocks else None
 
     def setup(self, qp) -> None:
         self.qp = qp
         self._lu = sparse_factor(qp.K, from_param(self))
         self._length = load_length(qp)        # the evaluator's length floor: a solution x* = 0 has a scale
-        B = qp.B
+        B = self.G = qp.G                     # qp.B itself without friction blocks
+        self.layout = FrictionLayout.of(qp) if qp.blocks else None
         if qp.m == 0:
             self.L = 1.0
             return
-        op = sla.LinearOperator((qp.m, qp.m), dtype=float,
+        M = B.shape[0]
+        op = sla.LinearOperator((M, M), dtype=float,
                                 matvec=lambda v: B @ self._lu.solve(np.asarray(B.T @ np.ravel(v))))
-        if qp.m <= 3:
-            D = np.column_stack([op.matvec(e) for e in np.eye(qp.m)])
+        if M <= 3:
+            D = np.column_stack([op.matvec(e) for e in np.eye(M)])
             self.L = float(np.linalg.eigvalsh(0.5 * (D + D.T)).max())
         else:
             self.L = float(sla.eigsh(op, k=1, which="LA", tol=1e-3, return_eigenvectors=False,
-                                     v0=np.ones(qp.m))[0])
+                                     v0=np.ones(M))[0])
         if not np.isfinite(self.L) or self.L <= 0:
             raise RuntimeError(f"the Delassus matrix B K^-1 B' has largest eigenvalue {self.L}: K is not SPD")
 
     def _x(self, mu: np.ndarray) -> np.ndarray:
-        return self._lu.solve(self.qp.F + self.qp.B.T @ mu)
+        return self._lu.solve(self.qp.F + self.G.T @ mu)
+
+    def _project(self, mu: np.ndarray) -> np.ndarray:
+        """mu onto the dual set: mu >= 0; with friction also each t_j onto its Tresca disc."""
+        if self.layout is None:
+            return np.maximum(0.0, mu)
+        return self.layout.project(mu, self.layout.bound)
 
     def _residuals(self, x: np.ndarray, mu: np.ndarray) -> tuple[float, float]:
         """The evaluator's primal and complementarity residuals (same scales, recomputed cheaply)."""
         qp = self.qp
+        if qp.blocks:                     # friction: the evaluator's own residuals, laws included
+            res = evaluator.residuals(qp, x, mu)
+            return float(res["primal"]), float(res["complementarity"])
         gap = qp.B @ x
         Bmu = qp.B.T @ mu
         fs = max(np.abs(qp.F).max(initial=0.0), np.abs(qp.F + Bmu).max(initial=0.0),
@@ -112,12 +133,12 @@ class DualGradient(Solver):
         return primal, compl
 
     def solve(self) -> Solution:
-        qp, p = self.qp, self.params
+        p = self.params
         t_start = time.perf_counter()
         step = p["step_safety"] / self.L
         tol, max_iter = p["tol"], int(p["max_iter"])
         limit = p["time_limit"]
-        mu = np.zeros(qp.m)
+        mu = np.zeros(self.G.shape[0])
         x = self._x(mu)
         mu_old, x_old = mu, x
         theta = 1.0
@@ -140,7 +161,7 @@ class DualGradient(Solver):
                 xy = x + beta * (x - x_old)          # x is affine in mu: no extra solve
             else:
                 theta_new, y, xy = theta, mu, x
-            mu_new = np.maximum(0.0, y - step * (qp.B @ xy))
+            mu_new = self._project(y - step * (self.G @ xy))
             x_new = self._x(mu_new)
             if p["accelerate"] and (y - mu_new) @ (mu_new - mu) > 0:
                 theta_new = 1.0                      # gradient restart (O'Donoghue & Candes 2015)

@@ -64,6 +64,13 @@ Jacobi-PCG on D_AA warm-started from the MPRGP forces, one K-solve per CG iterat
 operator) ``refine`` iterative-refinement steps of the full KKT system
 (:func:`dualfem.numerics.polish.refine_on_active_set`) remove the rounding error of the reduction.
 Multipliers are nodal contact forces (mu >= 0, ``Kx - F = B'mu``).
+
+**Friction** (Tresca / Coulomb blocks): MPGP, Dostál's generalization to separable convex sets (half-lines and
+the friction discs, :mod:`dualfem.numerics.friction_mpgp`), on the dual operator of all blocks stacked
+(:func:`dualfem.numerics.friction_dual.stacked_qp`), without a preconditioner, then (``friction_polish``) HSW's
+semismooth Newton from its answer (:mod:`dualfem.numerics.friction_newton`: the exact point of its sets, kept if it
+converges). Coulomb: the fixed point g <- mu_f lambda / w over such Tresca solves, warm-started
+(:mod:`dualfem.numerics.coulomb`; ``coulomb_tol``, ``coulomb_max_iter``; stalled or not converged: ``max_iter``).
 """
 from __future__ import annotations
 
@@ -73,7 +80,12 @@ import numpy as np
 
 from dualfem.dual_solver import OPERATORS, DualOperatorSolver
 from dualfem.numerics import dual_precond as dp
+from dualfem.numerics.coulomb import coulomb_fixed_point
 from dualfem.numerics.dual_operator import power_norm
+from dualfem.numerics.factor import from_param
+from dualfem.numerics.friction_dual import FrictionLayout, friction_operator, layout_refusal
+from dualfem.numerics.friction_mpgp import mpgp
+from dualfem.numerics.friction_newton import semismooth_newton
 from dualfem.numerics.polish import refine_on_active_set
 from dualfem.registry import register_solver
 from dualfem.solution import Solution, Status
@@ -196,6 +208,9 @@ class MPRGPSolver(DualOperatorSolver):
 
     name = "mprgp"
     family = "dual"
+    #: friction: MPGP over half-lines and discs (dualfem.numerics.friction_mpgp); Coulomb by the fixed point
+    #: over Tresca solves (dualfem.numerics.coulomb)
+    accepts = ("signorini", "tresca", "coulomb")
     description = "MPRGP (Dostal's modified proportioning / reduced gradient projections) on the dual (exact)"
     tolerance = 1e-9
     exact = True
@@ -213,18 +228,32 @@ class MPRGPSolver(DualOperatorSolver):
         "alpha_factor": 1.8,      # expansion steplength alpha = alpha_factor / |D|_est, in (0, 2]
         "power_iter": 20,         # power iterations for |D|
         "refine": 1,              # iterative-refinement steps of the final KKT system (dense operator)
+        "coulomb_tol": 1e-11,     # friction, Coulomb: relative change of the threshold that stops the fixed point
+        "coulomb_max_iter": 50,   # ... and its most Tresca solves
+        "friction_polish": True,  # friction: HSW's Newton from MPGP's answer (its sets), kept if it converges
     }
 
     # "matrixfree" (the old spelling) passes the range check; validate() normalises it to matrix_free
     ranges = {"operator": OPERATORS + ("matrixfree",), "factor": None, "precond": ("auto", *dp.PRECONDS),
               "layers": "[0, inf)", "gamma": "(0, inf)", "alpha_factor": "(0, 2]", "power_iter": "[1, inf)",
-              "refine": "[0, inf)"}
+              "refine": "[0, inf)", "coulomb_tol": "(0, 1)", "coulomb_max_iter": "[1, inf)",
+              "friction_polish": bool}
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
         return {"tol": min(float(tol) * 1e-3, cls.defaults["tol"])}
 
+    def skip(self, qp) -> str | None:
+        refusal = layout_refusal(qp) if qp.blocks else None
+        return refusal if refusal is not None else super().skip(qp)
+
     def setup(self, qp) -> None:
+        if qp.blocks:                  # friction: the dual operator of all blocks stacked, no preconditioner
+            self.qp, self.precond_kind, self.scale, self.precond = qp, "none", None, None
+            self.op = friction_operator(qp, self.params["operator"], from_param(self), self.tolerance)
+            self.reduction = None
+            self.norm = self.op.norm_estimate(int(self.params["power_iter"])) if self.op.b0.size else 0.0
+            return
         super().setup(qp)
         op, kind = self.op, self.params["precond"]
         if kind == "auto":     # matrix-free: FETI's Dirichlet in 2D, the lumped one in 3D
@@ -250,7 +279,56 @@ class MPRGPSolver(DualOperatorSolver):
         s = self.scale
         return s * self.op.apply(s * v)
 
+    def _tresca(self, layout: FrictionLayout, mu0, counts: dict, deadline: float):
+        """MPGP for the Tresca radii of ``layout``, then HSW's Newton from its answer (exact sets: the polish);
+        returns (mu, converged, message) and adds the counts."""
+        p, op = self.params, self.op
+        r = layout.radius(np.zeros(op.b0.size))
+        res = mpgp(op.apply, op.b0, layout, r, p["alpha_factor"] / self.norm, p["gamma"], p["tol"],
+                   int(p["max_iter"]), deadline, mu0)
+        for key, v in res.counts.items():
+            counts[key] = counts.get(key, 0) + v
+        mu = res.mu
+        if res.converged and p["friction_polish"]:
+            c = 1.0 / op.diagonal().mean()
+            pol = semismooth_newton(op, layout, c, 1e-13 if op.kind == "dense" else 1e-11, 10, mu0=mu)
+            counts["polish_newton"] = counts.get("polish_newton", 0) + pol.steps
+            if pol.converged:
+                mu = pol.mu
+        return mu, res.converged, res.message
+
+    def _solve_friction(self) -> Solution:
+        """Tresca: MPGP (+ a Newton polish); Coulomb: the fixed point over Tresca solves, each by MPGP."""
+        p, op, qp = self.params, self.op, self.qp
+        deadline = time.perf_counter() + p["time_limit"]
+        counts: dict = {"cg": 0, "expansion": 0, "proportioning": 0}
+        layout = FrictionLayout.of(qp)
+        if not layout.coulomb.any():
+            mu, ok, message = self._tresca(layout, None, counts, deadline)
+            status = Status.SOLVED if ok else (Status.TIME_LIMIT if time.perf_counter() > deadline else Status.MAX_ITER)
+            return Solution(solver=self.name, status=status, x=op.x_of(mu), multipliers=mu, iterations=counts,
+                            message=message, info={"alpha": p["alpha_factor"] / self.norm, "precond": "none",
+                                                   "friction": "mpgp", **op.info()})
+        failed: list[str] = []
+
+        def solve_tresca(qpt, warm):
+            mu, ok, msg = self._tresca(FrictionLayout.of(qpt), None if warm is None else warm[1], counts, deadline)
+            if not ok:
+                failed.append(msg)
+            return op.x_of(mu), mu, {}
+
+        fp = coulomb_fixed_point(qp, solve_tresca, float(p["coulomb_tol"]), int(p["coulomb_max_iter"]))
+        status = Status.SOLVED if fp.status == "solved" and not failed else Status.MAX_ITER
+        message = (f"Coulomb fixed point {fp.status} in {fp.iterations} Tresca solves by MPGP"
+                   + (f"; an inner solve failed: {failed[-1]}" if failed else ""))
+        return Solution(solver=self.name, status=status, x=fp.x, multipliers=fp.mu,
+                        iterations={**counts, **fp.summary()}, message=message,
+                        info={"alpha": p["alpha_factor"] / self.norm, "precond": "none", "friction": "mpgp",
+                              "coulomb_changes": fp.changes, **op.info()})
+
     def solve(self) -> Solution:
+        if self.qp.blocks:
+            return self._solve_friction()
         p, op, qp = self.params, self.op, self.qp
         b0 = op.b0
         if qp.m == 0 or not np.any(b0):

@@ -38,6 +38,14 @@ sparse factorization of the Newton matrix K + B_A'C B_A per active set (one anal
 PARDISO) with augmented-Lagrangian steps (``newton="factor"``; ``info["al_steps"]``,
 ``info["newton_factorizations"]``). The two tie in time (docs/measurements.md); cg keeps no extra factor.
 
+**Friction** (a QP with Tresca / Coulomb blocks, :mod:`dualfem.core.laws`): the dual operator is that of all blocks
+stacked (:func:`dualfem.numerics.friction_dual.stacked_qp`, the same factorization of K) and the solve is
+Hüeber-Stadler-Wohlmuth's semismooth Newton with contact / open and stick / slip sets
+(:mod:`dualfem.numerics.friction_newton`; 2D boxes, 3D discs); Coulomb monolithic (``coulomb="newton"``: the
+radius mu_f lambda inside the Newton system) or by the fixed point over Tresca solves (``coulomb="fixed_point"``,
+:mod:`dualfem.numerics.coulomb`). Counters: ``iterations`` (newton, active_set_changes; the fixed point's),
+``info`` (n_contact, n_stick, n_slip, gmres_iterations matrix-free). Not converged: ``max_iter``, never solved.
+
 Multipliers are the nodal contact forces mu >= 0 with ``K x - F = B' mu``; x is recovered as
 ``K^-1 (F + B'mu)`` (dense: ``xI = S^-1 (g + BI' mu)`` and one solve with the cached factor of K_fixed),
 then (dense operator) refined on the final active set.
@@ -51,8 +59,12 @@ import numpy as np
 import scipy.linalg as sla
 
 from dualfem.dual_solver import OPERATORS, DualOperatorSolver
+from dualfem.numerics.coulomb import coulomb_fixed_point
 from dualfem.numerics.dual_operator import FACE_METHODS
 from dualfem.numerics.dual_precond import dirichlet_by_default, dirichlet_inverse
+from dualfem.numerics.factor import from_param
+from dualfem.numerics.friction_dual import FrictionLayout, friction_operator, layout_refusal
+from dualfem.numerics.friction_newton import semismooth_newton
 from dualfem.numerics.polish import refine_on_active_set
 from dualfem.registry import register_solver
 from dualfem.solution import Solution, Status
@@ -69,6 +81,8 @@ class PDASSolver(DualOperatorSolver):
 
     name = "pdas"
     family = "dual"
+    #: friction (Tresca, Coulomb): HSW's semismooth Newton on the stacked dual (dualfem.numerics.friction_newton)
+    accepts = ("signorini", "tresca", "coulomb")
     description = "semismooth Newton / primal-dual active set on the defect unknowns (exact)"
     tolerance = 1e-9
     exact = True
@@ -99,13 +113,16 @@ class PDASSolver(DualOperatorSolver):
                                   # steps: cg 8.2 s (149 K-solves), factor 7.9 s (4 factorizations, 95 solves)
                                   # on a loaded machine: a tie; cg keeps no extra factor (memory)
         "time_limit": 600.0,      # seconds of solve time (checked once per Newton step)
+        "coulomb": "newton",      # Coulomb friction: "newton" (monolithic: the radius mu_f lambda inside the Newton
+                                  # system) or "fixed_point" (dualfem.numerics.coulomb over Tresca Newton solves)
         "verbose": False,         # print one line per Newton step to stderr
     }
 
     ranges = {"c": "[0, inf)", "globalize": ("armijo", "none"), "sigma": "(0, 0.5)", "max_backtracks": "[1, inf)",
               "refine": "[0, inf)", "refine_tol": "(0, inf)", "factor": None,
               "operator": OPERATORS, "newton": FACE_METHODS,
-              "precond": ("auto", "dirichlet", "jacobi"), "layers": "[1, inf)"}   # c = 0: automatic
+              "precond": ("auto", "dirichlet", "jacobi"), "layers": "[1, inf)",
+              "coulomb": ("newton", "fixed_point")}   # c = 0: automatic
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -150,7 +167,19 @@ class PDASSolver(DualOperatorSolver):
         return refine_on_active_set(self.qp, self.op.reduction, x, mu, steps, float(self.params["refine_tol"]))
 
     # ------------------------------------------------------------------ solve
+    def skip(self, qp) -> str | None:
+        if qp.blocks:
+            refusal = layout_refusal(qp)
+            if refusal is not None:
+                return refusal
+        return super().skip(qp)
+
     def setup(self, qp) -> None:
+        if qp.blocks:                      # friction: the dual operator of all blocks stacked (same factorization)
+            self.qp = qp
+            self.op = friction_operator(qp, self.params["operator"], from_param(self), self.tolerance)
+            self.reduction = None          # the stacked QP's reduction is not the QP's (its B differs)
+            return
         super().setup(qp)
         if self.op.kind == "matrix_free":
             self.op.face = self.params["newton"]
@@ -221,7 +250,55 @@ class PDASSolver(DualOperatorSolver):
             mu_p = None
         return np.maximum(mu, 0.0) if mu_p is None else mu_p
 
+    def _solve_friction(self) -> Solution:
+        """Tresca / Coulomb friction: HSW's semismooth Newton (:mod:`dualfem.numerics.friction_newton`)."""
+        p, op = self.params, self.op
+        layout = FrictionLayout.of(self.qp)
+        c = p["c"] if p["c"] > 0 else (1.0 / op.diagonal().mean() if op.b0.size else 1.0)
+        deadline = time.perf_counter() + p["time_limit"]
+        if layout.coulomb.any() and p["coulomb"] == "fixed_point":
+            return self._coulomb_fixed_point(c, deadline)
+        r = semismooth_newton(op, layout, c, self._tol(), int(p["max_iter"]), deadline=deadline)
+        if r.converged:
+            status = Status.SOLVED
+        else:
+            status = Status.TIME_LIMIT if time.perf_counter() > deadline else Status.MAX_ITER
+        x = op.x_of(r.mu)
+        self.report_iterate(r.steps, lambda: x, r.mu)
+        return Solution(solver=self.name, status=status, x=x, multipliers=r.mu,
+                        iterations={"newton": r.steps, "active_set_changes": r.changes}, history=r.history,
+                        message=r.message,
+                        info={"c": c, "active_set_changes": r.changes, **{f"n_{k}": v for k, v in r.sets.items()},
+                              "gmres_iterations": r.gmres_iterations, "friction": "semismooth newton (HSW)",
+                              "n_local": int(self.qp.local_dofs.size), **op.info()})
+
+    def _coulomb_fixed_point(self, c: float, deadline: float) -> Solution:
+        """Coulomb by the fixed point g <- mu_f lambda / w (:mod:`dualfem.numerics.coulomb`), each Tresca problem by
+        the semismooth Newton warm-started from the previous answer."""
+        op, p, failed = self.op, self.params, []
+        counts = {"newton": 0, "active_set_changes": 0}
+
+        def solve_tresca(qpt, warm):
+            r = semismooth_newton(op, FrictionLayout.of(qpt), c, self._tol(), int(p["max_iter"]), deadline=deadline,
+                                  mu0=None if warm is None else warm[1])
+            counts["newton"] += r.steps
+            counts["active_set_changes"] += r.changes
+            if not r.converged:
+                failed.append(r.message)
+            return op.x_of(r.mu), r.mu, {}
+
+        fp = coulomb_fixed_point(self.qp, solve_tresca, 1e-11, 50)
+        status = Status.SOLVED if fp.status == "solved" and not failed else Status.MAX_ITER
+        message = (f"Coulomb fixed point {fp.status} in {fp.iterations} Tresca solves by semismooth Newton"
+                   + (f"; an inner solve failed: {failed[-1]}" if failed else ""))
+        return Solution(solver=self.name, status=status, x=fp.x, multipliers=fp.mu,
+                        iterations={**counts, **fp.summary()}, message=message,
+                        info={"c": c, "friction": "coulomb fixed point over semismooth newton",
+                              "coulomb_changes": fp.changes, **op.info()})
+
     def solve(self) -> Solution:
+        if self.qp.blocks:
+            return self._solve_friction()
         p = self.params
         op, b0 = self.op, self.op.b0
         c = p["c"] if p["c"] > 0 else (1.0 / op.diagonal().mean() if b0.size else 1.0)
