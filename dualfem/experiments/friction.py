@@ -183,9 +183,8 @@ def _compare(solvers, fine2, fine3, progress) -> list[dict]:
                                ("2D coulomb mu_f=0.2", "f2", {**base2, **_keys("coulomb", 0.2)}),
                                ("3D tresca g=0.2", "penny", {**base3, **_keys("tresca", 0.2)}),
                                ("3D coulomb mu_f=0.2", "penny", {**base3, **_keys("coulomb", 0.2)})):
-        qp = load_scene(scene, keys).build()
-        for name in solvers:
-            rows.append(compare_row(name, qp, label))
+        for name in solvers:          # a fresh QP each: no factorization of one solver's run serves the next
+            rows.append(compare_row(name, load_scene(scene, keys).build(), label))
             progress(f"compare {label} {name}: {rows[-1]['status']}")
     return rows
 

@@ -53,8 +53,8 @@ def run(argv: list[str]) -> int:
             from dualfem.experiments.friction import compare
 
             res["compare"] = compare(res, solvers, lambda m: print(m, file=sys.stderr, flush=True))
-            res["command"] = f"{res.get('command', 'dualfem report friction')}; then dualfem report friction " \
-                             f"{' '.join(argv)}"
+            base = str(res.get("command", "dualfem report friction")).split("; then ")[0]   # the study's own run
+            res["command"] = f"{base}; then dualfem report friction {' '.join(argv)}"
             out.mkdir(parents=True, exist_ok=True)
             atomic_write_text(out / "friction.json", dumps(res) + "\n")
         md = render(res, out, res.get("command"))
