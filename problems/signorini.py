@@ -1,4 +1,4 @@
-"""Signorini contact: an elastic rectangle pressed onto a rigid foundation (frictionless).
+"""Signorini contact: an elastic rectangle pressed onto a rigid foundation (frictionless, or with friction).
 
 Body: the rectangle (0, width) x (0, height), isotropic linear elasticity (E, nu, plane strain or
 stress), P1 elements on an ``N x round(N height / width)`` grid of squares cut by the (1, 1)
@@ -28,6 +28,11 @@ recover the displacement ``u = x + x_shift`` and the potential energy
 forces (>= 0, force per unit thickness); the contact pressure is ``mu / weights`` with trapezoid
 weights along the bottom side.
 
+Friction on the foundation (docs/friction.md): ``friction`` = "none" (default) | "tresca" | "coulomb",
+``friction_bound`` (Tresca's threshold, a stress: a number or an expression in x, y, evaluated at the bottom
+nodes) or ``friction_coefficient`` (Coulomb's mu_f): one more constraint block whose row j is ``u1`` of bottom
+node j (the foundation does not move along x), weighted like B's rows (:mod:`._friction_keys`).
+
 Checkable physics (tests/test_signorini.py):
 
 * ``obstacle = "0"``: the exact solution is homogeneous uniaxial compression, reproduced exactly
@@ -48,6 +53,8 @@ from dualfem.errors import InputError, check_int, check_open_interval, check_pos
 from dualfem.problem import Problem, UnitMap
 from dualfem.qp import QP, GeometryPart, MaterialPart, ShiftPart, UnitsPart
 from dualfem.registry import register_problem
+
+from . import _friction_keys as fk
 
 #: the most grid squares a scene may have (N = 4096 on a square body; the N range's top): checked in validate,
 #: before anything is allocated, since height / width multiplies the rows of the grid
@@ -77,7 +84,7 @@ class Signorini(Problem):
     dim = 2
     #: the stress grid's units axis: the gap obstacle(x) is a length, length * g(x / length)
     unit_map = UnitMap({"E": "stress", "width": "length", "height": "length", "indent": "length",
-                        "obstacle": "length_field"})
+                        "obstacle": "length_field", "friction_bound": "stress_value"})
     defaults = {
         "N": 32,
         "E": 69000.0,
@@ -87,6 +94,7 @@ class Signorini(Problem):
         "height": 0.5,
         "indent": 0.005,
         "obstacle": "0.05*(x-0.5)**2",
+        **fk.DEFAULTS,
     }
     presets = {"signorini": {}, "signorini_flat": {"obstacle": "0"}}
     requires = ("skfem",)
@@ -106,6 +114,7 @@ class Signorini(Problem):
                              f"body): lower N or height / width")
         if p["plane"] not in PLANES:
             raise InputError(f"plane must be one of {', '.join(PLANES)}, got {p['plane']!r}")
+        (self._friction,) = fk.parse_friction(p, [{}], 2, (p["width"], p["height"]))
         self._gap = gap_function(p["obstacle"])
         xs = np.linspace(0.0, p["width"], 9)
         try:
@@ -182,12 +191,18 @@ class Signorini(Problem):
             "contact_nodes": bottom, "contact_x": xb, "gap": gap, "normal": np.array([0.0, -1.0]),
             "top_nodes": top, "pin_node": np.array(pin),
         }
-        params = {k: (v if isinstance(v, (int, float, str)) else str(v)) for k, v in p.items()}
-        return QP(K=K, F=F, B=B, weights=weights, K_fixed=K, local_dofs=local,
-                  name=f"signorini[{'flat' if not np.any(gap) else 'obstacle'}]", params=params, maps=maps,
-                  shift=ShiftPart.make(shift, offset), geometry=GeometryPart.make(X, mesh.t, node_dofs),
-                  units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
-                  material=MaterialPart(float(p["E"]), float(p["nu"]), str(p["plane"])))
+        params = {k: (v if isinstance(v, (int, float, str)) else str(v)) for k, v in p.items() if k not in fk.KEYS}
+        if self._friction.kind != "none":
+            params["friction"] = fk.params_label([self._friction])
+        qp = QP(K=K, F=F, B=B, weights=weights, K_fixed=K, local_dofs=local,
+                name=f"signorini[{'flat' if not np.any(gap) else 'obstacle'}]", params=params, maps=maps,
+                shift=ShiftPart.make(shift, offset), geometry=GeometryPart.make(X, mesh.t, node_dofs),
+                units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
+                material=MaterialPart(float(p["E"]), float(p["nu"]), str(p["plane"])))
+        # friction on the foundation: the tangential displacement u1 of each bottom node (the foundation does not
+        # move along x in the punch's frame), weighted like B's rows
+        G_t = sp.csr_matrix((np.ones(m), (np.arange(m), node_dofs[0, bottom])), shape=(m, free.size))
+        return fk.boundary_friction(qp, self._friction, G_t, weights, X[:, bottom])
 
     def displacement(self, x: np.ndarray) -> np.ndarray:
         """The displacement of the free dofs, ``u = x + x_shift`` (call :meth:`build` first)."""

@@ -8,8 +8,11 @@ contact set it hands over can be wrong and the polish is refused; measured: docs
 asks for ``tol = 1e-8`` with the polish at every tier.
 
 Clarabel's KKT condition is ``Px + q + A'z = 0`` with ``z >= 0``; with ``A = -B`` and
-``q = -F`` this is ``Kx - F = B'z``, so our nodal contact force is ``mu = z``. Only the upper
-triangle of K is passed. Clarabel's own residuals are not trusted (Clarabel.cpp issue 36): the
+``q = -F`` this is ``Kx - F = B'z``, so our nodal contact force is ``mu = z``. Tresca friction: the conic
+program of :mod:`dualfem.numerics.epigraph` (epigraph variables t_j >= ||s_j||, second-order cones in 3D, two
+linear rows per node in 2D, ``+ sum_j r_j t_j`` in the objective), the friction forces from the cones' duals,
+and the polish is the exact face polish of :mod:`dualfem.numerics.face_polish` (kept only if it helps).
+Only the upper triangle of K is passed. Clarabel's own residuals are not trusted (Clarabel.cpp issue 36): the
 evaluator recomputes them.
 
 With ``scale=True`` (default) the QP is normalised first (:mod:`dualfem.numerics.scaling`). The declared
@@ -26,6 +29,10 @@ import scipy.sparse as sp
 
 from dualfem.errors import InputError
 from dualfem.laws import conic_rows
+from dualfem.numerics.coulomb import coulomb_blocks
+from dualfem.numerics.coulomb_run import coulomb_by_tresca
+from dualfem.numerics.epigraph import epigraph, norm_blocks
+from dualfem.numerics.face_polish import polish_if_better as face_polish_if_better
 from dualfem.numerics.polish import polish_if_better
 from dualfem.numerics.scaling import scale
 from dualfem.registry import register_solver
@@ -52,8 +59,10 @@ class ClarabelSolver(Solver):
 
     name = "clarabel"
     family = "interior point"
-    #: the bilateral law (G x = 0, mu free) through Clarabel's zero cone (conic_rows); tested in tests/plugin_laws
-    accepts = ("signorini", "bilateral")
+    #: the bilateral law (G x = 0, mu free) through Clarabel's zero cone (conic_rows; tested in tests/plugin_laws);
+    #: Tresca friction through epigraph variables (second-order cones in 3D, two linear rows per node in 2D:
+    #: dualfem.numerics.epigraph); Coulomb by the fixed point over those Tresca solves (dualfem.numerics.coulomb_run)
+    accepts = ("signorini", "bilateral", "tresca", "coulomb")
     description = "Clarabel (interior point, Rust) via its Python interface"
     requires = ("clarabel",)
     #: relative energy-norm error of an unpolished 'Solved' answer (docs/measurements.md)
@@ -73,11 +82,13 @@ class ClarabelSolver(Solver):
         "verbose": False,
         "scale": True,
         "polish": True,           # dualfem's active-set polish (numerics.polish), kept only if it helps
+        "coulomb_tol": 1e-10,     # Coulomb: relative change of the threshold that stops the fixed point
+        "coulomb_max_iter": 50,   # Coulomb: most Tresca solves
     }
 
     renamed = {"tol_gap_abs": "tol", "tol_gap_rel": "tol", "tol_feas": "tol"}
     ranges = {"tol_ktratio": "(0, inf)", "equilibrate_enable": bool, "direct_solve_method": None,
-              "scale": bool, "polish": bool}
+              "scale": bool, "polish": bool, "coulomb_tol": "(0, 1)", "coulomb_max_iter": "[1, 1000]"}
 
     def validate(self) -> None:
         if self.missing() is None:
@@ -103,24 +114,63 @@ class ClarabelSolver(Solver):
         self.qp = qp
         settings = clarabel.DefaultSettings()
         for k, v in self.params.items():
-            if k in ("scale", "polish", "tol"):
+            if k in ("scale", "polish", "tol", "coulomb_tol", "coulomb_max_iter"):
                 continue
             setattr(settings, k, v)
         for k in ("tol_gap_abs", "tol_gap_rel", "tol_feas"):
             setattr(settings, k, self.params["tol"])
+        self._settings = settings
+        if not coulomb_blocks(qp):      # Coulomb: built per Tresca problem of the fixed point (solve)
+            self._build(qp)
+
+    def _build(self, qp) -> None:
+        """Clarabel's solver for ``qp`` (``self._solver``; ``self._epi`` the epigraph of a frictional QP)."""
+        import clarabel
+
+        self._qp_now = qp
+        settings = self._settings
+        cone = {"nonneg": clarabel.NonnegativeConeT, "zero": clarabel.ZeroConeT, "soc": clarabel.SecondOrderConeT}
+        self._epi = None
+        if norm_blocks(qp):         # friction: the conic program over [y, t] (dualfem.numerics.epigraph)
+            self._epi = e = epigraph(qp, self.params["scale"])
+            self._solver = clarabel.DefaultSolver(sp.triu(e.P, format="csc"), e.q, (-e.A).tocsc(),
+                                                  np.zeros(e.A.shape[0]), [cone[k](m) for k, m in e.cones], settings)
+            return
         self._scaled = s = scale(qp, self.params["scale"])
-        cone = {"nonneg": clarabel.NonnegativeConeT, "zero": clarabel.ZeroConeT}
         self._solver = clarabel.DefaultSolver(sp.triu(s.P, format="csc"), s.q, (-s.A).tocsc(), np.zeros(qp.m_total),
                                               [cone[kind](m) for kind, m in conic_rows(qp.constraints)], settings)
 
     def solve(self) -> Solution:
+        if coulomb_blocks(self.qp):
+            return self._coulomb()
+        return self._run()
+
+    def _coulomb(self) -> Solution:
+        """Coulomb by the fixed point over this solver's Tresca solves (:mod:`dualfem.numerics.coulomb_run`)."""
+        def tresca(tq):
+            self._build(tq)
+            return self._run()
+
+        c = coulomb_by_tresca(self.qp, tresca, float(self.params["coulomb_tol"]),
+                              int(self.params["coulomb_max_iter"]), "clarabel")
+        return Solution(solver=self.name, status=c.status, x=c.x, multipliers=c.mu, iterations=c.iterations,
+                        message=f"clarabel: {c.message}", info=c.info)
+
+    def _run(self) -> Solution:
+        """Clarabel on the QP of the last :meth:`_build`, unscaled and polished."""
+        qp = self._qp_now
         sol = self._solver.solve()
         name = str(sol.status).split(".")[-1]
         status = _STATUS.get(name, Status.ERROR)
-        x, z = self._scaled.unscale(np.array(sol.x), np.array(sol.z))
+        if self._epi is not None:
+            x, z = self._epi.unscale(np.array(sol.x), np.array(sol.z))
+        else:
+            x, z = self._scaled.unscale(np.array(sol.x), np.array(sol.z))
         info = {}
-        if self.params["polish"] and status == Status.SOLVED and not self.qp.blocks:   # the polish is Signorini's
-            x, z, info = polish_if_better(self.qp, x, z)
+        if self.params["polish"] and status == Status.SOLVED and not qp.blocks:   # the polish is Signorini's
+            x, z, info = polish_if_better(qp, x, z)
+        elif self.params["polish"] and status == Status.SOLVED and self._epi is not None:     # friction's
+            x, z, info = face_polish_if_better(qp, x, z)
         return Solution(
             solver=self.name, status=status, x=x, multipliers=z,
             iterations={"ipm": int(sol.iterations)}, message=f"clarabel: {name}",

@@ -22,7 +22,9 @@ the active set from the backend's (x, mu), solves the equality-constrained probl
 and keeps the result only if it is consistent (mu >= 0, open gaps >= 0); ``info["polish"]`` says
 what happened (how much it gains: docs/measurements.md). With polishing the instance promises
 1e-8; when the polish is inconsistent a ``solved`` status is downgraded to ``inaccurate`` (the
-backend's answer is then only as good as the backend's own tolerance, which the evaluator shows).
+backend's answer is then only as good as the backend's own tolerance, which the evaluator shows). On a QP
+with Tresca friction the polish is the exact face polish (:mod:`dualfem.numerics.face_polish`), downgraded
+the same way when it does not hold.
 """
 from __future__ import annotations
 
@@ -34,6 +36,10 @@ import numpy as np
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.errors import InputError
 from dualfem.laws import conic_rows
+from dualfem.numerics.coulomb import coulomb_blocks
+from dualfem.numerics.coulomb_run import coulomb_by_tresca
+from dualfem.numerics.epigraph import norm_blocks, uniform_scaling
+from dualfem.numerics.face_polish import polish_if_better as face_polish_if_better
 from dualfem.numerics.polish import active_set_polish
 from dualfem.numerics.scaling import scale
 from dualfem.registry import register_solver
@@ -95,8 +101,9 @@ class CvxpySolver(Solver):
     family = "interior point"
     #: the bilateral law (G x = 0, mu free) as cvxpy equality rows (conic_rows), with the default backend
     #: CLARABEL only (tests/plugin_laws; the Signorini polish does not apply, so an instance with another
-    #: backend accepts Signorini only: :meth:`validate`)
-    accepts = ("signorini", "bilateral")
+    #: backend accepts Signorini only: :meth:`validate`); Tresca friction as norm terms of the objective
+    #: (:meth:`_setup_friction`), Coulomb by the fixed point over those (dualfem.numerics.coulomb_run), CLARABEL only
+    accepts = ("signorini", "bilateral", "tresca", "coulomb")
     description = "cvxpy with a chosen backend (CLARABEL, OSQP, SCS, ... as installed)"
     requires = ("cvxpy",)
     tolerance = BACKEND_TOLERANCE["CLARABEL"]
@@ -109,10 +116,13 @@ class CvxpySolver(Solver):
         "scale": True,
         "polish": True,
         "verbose": False,
+        "coulomb_tol": 1e-10,     # Coulomb: relative change of the threshold that stops the fixed point
+        "coulomb_max_iter": 50,   # Coulomb: most Tresca solves
     }
 
     renamed = {"eps": "tol"}
-    ranges = {"solver": None, "scale": bool, "polish": bool}   # solver: an installed backend (validate)
+    ranges = {"solver": None, "scale": bool, "polish": bool,   # solver: an installed backend (validate)
+              "coulomb_tol": "(0, 1)", "coulomb_max_iter": "[1, 1000]"}
 
     @classmethod
     def variant_family(cls, variant: str) -> str:
@@ -159,7 +169,13 @@ class CvxpySolver(Solver):
         import cvxpy as cp
         import scipy.sparse as sp
 
-        self.qp = qp
+        self.qp = self._qp_now = qp
+        self._friction = None
+        if coulomb_blocks(qp):      # built per Tresca problem of the fixed point (solve)
+            return
+        if norm_blocks(qp):
+            self._setup_friction(qp)
+            return
         self._scaled = s = scale(qp, self.params["scale"])
         y = cp.Variable(qp.n)
         P = sp.csc_matrix(0.5 * (s.P + s.P.T))
@@ -172,7 +188,61 @@ class CvxpySolver(Solver):
         self._prob = cp.Problem(cp.Minimize(0.5 * cp.quad_form(y, cp.psd_wrap(P)) + s.q @ y), self._cons)
         self._y = y
 
+    def _setup_friction(self, qp) -> None:
+        """Tresca blocks as ``sum_j rt_j ||s_j||`` with slip variables ``s == A_k y`` (their duals are the friction
+        forces: cvxpy's Lagrangian ``f + d'(s - A_k y)`` gives ``P y + q = A_k' d``, so nu = d); cone blocks as in
+        :meth:`setup`. The scaling shares one factor per friction node
+        (:func:`dualfem.numerics.epigraph.uniform_scaling`)."""
+        import cvxpy as cp
+        import scipy.sparse as sp
+
+        self._qp_now = qp
+        self._scaled = s = uniform_scaling(qp, self.params["scale"])
+        o = np.cumsum([0, *(b.m for b in qp.constraints)])
+        y = cp.Variable(qp.n)
+        objective = 0.5 * cp.quad_form(y, cp.psd_wrap(sp.csc_matrix(0.5 * (s.P + s.P.T)))) + s.q @ y
+        cons, kinds = [], []
+        for k, b in enumerate(qp.constraints):
+            A = s.A[o[k]:o[k + 1]]
+            radius = b.law.norm_term(b.weights)
+            if radius is None:
+                kinds.append(b.law.conic())
+                cons.append(A @ y == 0 if kinds[-1] == "zero" else A @ y >= 0)
+                continue
+            c = b.law.components
+            slip = cp.Variable(b.m)
+            rt = np.asarray(radius, float) / (s.c * s.r[o[k]:o[k + 1]:c])
+            norms = cp.abs(slip) if c == 1 else cp.norm(cp.reshape(slip, (b.m // c, c), order="C"), 2, axis=1)
+            objective = objective + rt @ norms
+            kinds.append("slip")
+            cons.append(slip == A @ y)
+        self._prob = cp.Problem(cp.Minimize(objective), cons)
+        self._cons, self._y, self._friction, self._eq = cons, y, kinds, None
+
+    def _friction_multipliers(self) -> np.ndarray | None:
+        """The scaled multipliers of every block from the duals (``zero`` rows: cvxpy's ``-d``, see _stacked)."""
+        parts = []
+        for kind, con in zip(self._friction, self._cons):
+            d = con.dual_value
+            if d is None:
+                return None
+            d = np.asarray(d, float).ravel()
+            parts.append(-d if kind == "zero" else d)
+        return np.concatenate(parts)
+
     def solve(self) -> Solution:
+        if coulomb_blocks(self.qp):
+            def tresca(tq):
+                self._setup_friction(tq)
+                return self._solve_built()
+
+            c = coulomb_by_tresca(self.qp, tresca, float(self.params["coulomb_tol"]),
+                                  int(self.params["coulomb_max_iter"]), "cvxpy")
+            return Solution(solver=self.name, status=c.status, x=c.x, multipliers=c.mu, iterations=c.iterations,
+                            message=f"cvxpy: {c.message}", info=c.info)
+        return self._solve_built()
+
+    def _solve_built(self) -> Solution:
         import cvxpy as cp
 
         backend = self.params["solver"]
@@ -193,6 +263,8 @@ class CvxpySolver(Solver):
         yv, nu = self._y.value, self._cons[0].dual_value
         if self._eq is not None:
             nu = _stacked(self._eq, self._cons)
+        elif self._friction is not None:
+            nu = self._friction_multipliers()
         stats = self._prob.solver_stats
         iters = {"backend": int(stats.num_iters)} if stats is not None and stats.num_iters is not None else {}
         info = {"backend": backend, "cvxpy_status": text,
@@ -202,10 +274,18 @@ class CvxpySolver(Solver):
                             iterations=iters, message=f"cvxpy/{backend}: {text} (no solution returned)", info=info)
         x, mu = self._scaled.unscale(np.asarray(yv, float).ravel(), np.asarray(nu, float).ravel())
         msg = f"cvxpy/{backend}: {text}"
-        if self.params["polish"] and status in (Status.SOLVED, Status.INACCURATE) and self._eq is None:
+        if self.params["polish"] and status in (Status.SOLVED, Status.INACCURATE) and self._friction is not None:
+            x, mu, pinfo = face_polish_if_better(self._qp_now, x, mu)
+            info["polish"] = {"applied": pinfo.pop("polished"), **pinfo}
+            if not info["polish"]["applied"]:
+                status = Status.INACCURATE if status == Status.SOLVED else status
+                msg += "; exact face polish did not hold: unpolished backend answer kept"
+            else:
+                msg += f"; polished on its exact face ({pinfo['face_steps']} Newton step(s))"
+        elif self.params["polish"] and status in (Status.SOLVED, Status.INACCURATE) and self._eq is None:
 
             try:
-                pol = active_set_polish(self.qp, x, mu)
+                pol = active_set_polish(self._qp_now, x, mu)
             except Exception as exc:  # noqa: BLE001 - the polish is optional; say why it failed
                 pol = None
                 info["polish_error"] = f"{type(exc).__name__}: {exc}"

@@ -18,6 +18,9 @@ import scipy.sparse as sp
 
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.laws import upper_bounds
+from dualfem.numerics.coulomb import coulomb_blocks
+from dualfem.numerics.coulomb_run import coulomb_by_tresca
+from dualfem.numerics.epigraph import epigraph, norm_blocks, not_linear
 from dualfem.numerics.scaling import scale
 from dualfem.registry import register_solver
 from dualfem.solution import Solution, Status
@@ -42,8 +45,10 @@ class OSQPSolver(Solver):
 
     name = "osqp"
     family = "first-order"
-    #: the bilateral law (G x = 0, mu free) as rows with l = u = 0 (upper_bounds); tested in tests/plugin_laws
-    accepts = ("signorini", "bilateral")
+    #: the bilateral law (G x = 0, mu free) as rows with l = u = 0 (upper_bounds; tested in tests/plugin_laws);
+    #: Tresca friction in 2D as the linear epigraph of dualfem.numerics.epigraph (3D discs: skipped, :meth:`skip`);
+    #: Coulomb in 2D by the fixed point over those Tresca solves (dualfem.numerics.coulomb_run)
+    accepts = ("signorini", "bilateral", "tresca", "coulomb")
     description = "OSQP 1.x (ADMM) via its Python interface"
     requires = ("osqp",)
     tolerance = 1e-3
@@ -57,10 +62,12 @@ class OSQPSolver(Solver):
         "time_limit": 600.0,      # seconds
         "verbose": False,
         "scale": True,
+        "coulomb_tol": 1e-8,      # Coulomb: relative change of the threshold that stops the fixed point
+        "coulomb_max_iter": 50,   # Coulomb: most Tresca solves
     }
     renamed = {"eps_abs": "tol", "eps_rel": "tol", "polishing": "polish"}
     ranges = {"polish": bool, "polish_refine_iter": "[0, 1000]", "scaling": "[0, 100]", "adaptive_rho": bool,
-              "scale": bool}   # scaling: OSQP's iterations
+              "scale": bool, "coulomb_tol": "(0, 1)", "coulomb_max_iter": "[1, 1000]"}   # scaling: OSQP's iterations
 
     @classmethod
     def tolerance_params(cls, tol: float) -> dict:
@@ -75,26 +82,53 @@ class OSQPSolver(Solver):
 
         return osqp_options()
 
+    def skip(self, qp) -> str | None:
+        return not_linear(qp)
+
     def setup(self, qp) -> None:
+        self.qp = qp
+        if not coulomb_blocks(qp):      # Coulomb: built per Tresca problem of the fixed point (solve)
+            self._build(qp)
+
+    def _build(self, qp) -> None:
         import osqp
 
-        self.qp = qp
-        self._scaled = s = scale(qp, self.params["scale"])
         settings = {k: v for k, v in self.params.items()
-                    if k not in ("scale", "tol", "polish")}
+                    if k not in ("scale", "tol", "polish", "coulomb_tol", "coulomb_max_iter")}
         settings.update(eps_abs=self.params["tol"], eps_rel=self.params["tol"], polishing=self.params["polish"])
         self._solver = osqp.OSQP()
+        self._epi = None
+        if norm_blocks(qp):         # 2D friction: the linear epigraph over [y, t] (dualfem.numerics.epigraph)
+            self._epi = e = epigraph(qp, self.params["scale"])
+            P, q, A = e.P, e.q, e.A
+            u = np.concatenate([np.full(m, np.inf if kind == "nonneg" else 0.0) for kind, m in e.cones])
+        else:
+            self._scaled = s = scale(qp, self.params["scale"])
+            P, q, A, u = s.P, s.q, s.A, upper_bounds(qp.constraints)
         with c_stdout_to_stderr():
-            self._solver.setup(P=sp.triu(s.P, format="csc"), q=s.q, A=s.A.tocsc(), l=np.zeros(qp.m_total),
-                               u=upper_bounds(qp.constraints), **settings)
+            self._solver.setup(P=sp.triu(P, format="csc"), q=q, A=A.tocsc(), l=np.zeros(A.shape[0]), u=u,
+                               **settings)
 
     def solve(self) -> Solution:
+        if coulomb_blocks(self.qp):
+            def tresca(tq):
+                self._build(tq)
+                return self._run()
+
+            c = coulomb_by_tresca(self.qp, tresca, float(self.params["coulomb_tol"]),
+                                  int(self.params["coulomb_max_iter"]), "osqp")
+            return Solution(solver=self.name, status=c.status, x=c.x, multipliers=c.mu, iterations=c.iterations,
+                            message=f"osqp: {c.message}", info=c.info)
+        return self._run()
+
+    def _run(self) -> Solution:
         with c_stdout_to_stderr():
             res = self._solver.solve(raise_error=False) if _accepts_raise(self._solver) else self._solver.solve()
         text = str(res.info.status).lower()
         status = _STATUS.get(text, Status.ERROR)
         ok = res.x is not None and np.all(np.isfinite(res.x))
-        x, mu = self._scaled.unscale(np.array(res.x), -np.array(res.y)) if ok else (None, None)
+        unscale = self._epi.unscale if self._epi is not None else self._scaled.unscale
+        x, mu = unscale(np.array(res.x), -np.array(res.y)) if ok else (None, None)
         return Solution(
             solver=self.name, status=status if ok or status != Status.SOLVED else Status.NUMERICAL_ERROR,
             x=x, multipliers=mu,

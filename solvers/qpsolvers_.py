@@ -46,6 +46,8 @@ import numpy as np
 
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.laws import conic_rows
+from dualfem.numerics.epigraph import epigraph, norm_blocks, not_linear
+from dualfem.numerics.face_polish import polish_if_better as face_polish_if_better
 from dualfem.numerics.polish import polish_if_better
 from dualfem.numerics.scaling import scale
 from dualfem.registry import register_solver
@@ -199,6 +201,8 @@ class QpsolversSolver(Solver):
         return DENSE_MAX_N if self.info().dense else 10 ** 9
 
     def skip(self, qp) -> str | None:
+        if getattr(qp, "blocks", ()) and not_linear(qp):
+            return not_linear(qp)
         if qp.n > self._max_n():
             return (f"{self.backend} works on dense matrices: n = {qp.n} unknowns > max_n = {self._max_n()} "
                     f"(set -p max_n=... to try anyway)")
@@ -228,19 +232,26 @@ class QpsolversSolver(Solver):
 
             jax.config.update("jax_enable_x64", True)    # float32 (jax's default) stops at ~1e-6
         self.qp = qp
-        self._scaled = s = scale(qp, self.params["scale"])
-        G = -s.A.tocsc()
-        P = (0.5 * (s.P + s.P.T)).tocsc()     # exactly symmetric (some backends test it)
+        self._epi = None
+        if norm_blocks(qp):       # 2D friction: the linear epigraph over [y, t] (dualfem.numerics.epigraph)
+            self._epi = e = epigraph(qp, self.params["scale"])
+            Pq, Aall, q, cones = e.P, e.A, e.q, e.cones
+        else:
+            self._scaled = s = scale(qp, self.params["scale"])
+            Pq, Aall, q, cones = s.P, s.A, s.q, conic_rows(qp.constraints)
+        G = -Aall.tocsc()
+        P = (0.5 * (Pq + Pq.T)).tocsc()     # exactly symmetric (some backends test it)
         if self.info().dense:
             P, G = P.toarray(), G.toarray()
         self._eq = None
         if qp.blocks:       # further blocks: 'nonneg' rows as G x <= 0, 'zero' rows as A x = 0 (conic_rows)
-            self._eq = eq = np.concatenate([np.full(m, kind == "zero") for kind, m in conic_rows(qp.constraints)])
-            G, A = G[np.flatnonzero(~eq)], s.A.tocsc()[np.flatnonzero(eq)]
+            self._eq = eq = np.concatenate([np.full(m, kind == "zero") for kind, m in cones])
+            G, A = G[np.flatnonzero(~eq)], Aall.tocsc()[np.flatnonzero(eq)]
             if self.info().dense:
                 A = A.toarray()
-            self._problem = qpsolvers.Problem(P, s.q, G if (~eq).any() else None,
-                                              np.zeros(G.shape[0]) if (~eq).any() else None, A, np.zeros(A.shape[0]))
+            self._problem = qpsolvers.Problem(P, q, G if (~eq).any() else None,
+                                              np.zeros(G.shape[0]) if (~eq).any() else None,
+                                              A if eq.any() else None, np.zeros(A.shape[0]) if eq.any() else None)
             return
         # no constraint (m = 0, an uncracked body): quadprog takes no G at all (it fails on a 0-row G)
         self._problem = qpsolvers.Problem(P, s.q) if qp.m == 0 and self.backend == "quadprog" else \
@@ -258,7 +269,8 @@ class QpsolversSolver(Solver):
             res = qpsolvers.solve_problem(self._problem, solver=self.backend,
                                           verbose=bool(self.params["verbose"]), **self.settings())
         x = None if res.x is None else np.asarray(res.x, float)
-        ok = x is not None and x.shape == (self.qp.n,) and np.all(np.isfinite(x))
+        nz = self.qp.n if self._epi is None else self._epi.P.shape[0]
+        ok = x is not None and x.shape == (nz,) and np.all(np.isfinite(x))
         z = res.z if res.z is not None and np.shape(res.z) == (self.qp.m,) else np.zeros(self.qp.m)
         if self._eq is not None:
             z = _stacked(self._eq, res)
@@ -266,13 +278,18 @@ class QpsolversSolver(Solver):
         if not ok:
             return Solution(solver=self.name, status=Status.NUMERICAL_ERROR,
                             message=f"{self.backend}: no finite solution returned ({text})")
-        x, mu = self._scaled.unscale(x, np.nan_to_num(np.asarray(z, float)))
+        unscale = self._epi.unscale if self._epi is not None else self._scaled.unscale
+        x, mu = unscale(x, np.nan_to_num(np.asarray(z, float)))
         status = Status.SOLVED if res.found else Status.INACCURATE
         msg = f"{self.backend}: {text}" if res.found else f"{self.backend}: not found ({text})"
         iters = _iterations(res)
         info = {"backend_solve_time_s": getattr(res, "solve_time", None),
                 "backend_build_time_s": getattr(res, "build_time", None)}
-        if self.params["polish"] and status == Status.SOLVED and self._eq is None:   # the polish is Signorini's
+        if self.params["polish"] and status == Status.SOLVED and self._epi is not None:   # friction's exact face
+            x, mu, pinfo = face_polish_if_better(self.qp, x, mu)
+            info.update(pinfo)
+            msg += "; polished on its exact face" if pinfo["polished"] else "; face polish refused"
+        elif self.params["polish"] and status == Status.SOLVED and self._eq is None:   # the polish is Signorini's
             x, mu, pinfo = polish_if_better(self.qp, x, mu)
             info.update(pinfo)
             msg += "; polished" if pinfo["polished"] else "; polish refused (inconsistent or no better)"
@@ -340,7 +357,7 @@ def _make(backend: str) -> type[QpsolversSolver]:
     cls = type(f"Qp_{backend}", (QpsolversSolver,),
                {"name": f"qp_{backend}", "backend": backend, "description": desc, "tolerance": b.tolerance,
                 "family": b.family if backend in _BACKENDS else "other",
-                "accepts": ("signorini", "bilateral") if backend in BILATERAL else ("signorini",),
+                "accepts": ("signorini", "bilateral", "tresca") if backend in BILATERAL else ("signorini",),
                 "__doc__": f"qpsolvers backend {backend!r}; declared tolerance {b.tolerance:g}. {b.notes}",
                 "__module__": __name__})
     return register_solver(cls)

@@ -172,7 +172,11 @@ def _plugin_info(describe: Callable[[Any], dict], cls: Any) -> dict:
 # ------------------------------------------------------------------------- export
 def _cfg_export(p):
     add_scene_args(p)
-    p.add_argument("-o", "--output", required=True, metavar="FILE", help="output .npz or .mat file")
+    p.add_argument("-o", "--output", required=True, metavar="FILE", help="output .npz or .mat file (--format fclib: "
+                                                                        ".hdf5 or .h5)")
+    p.add_argument("--format", choices=("qp", "fclib"), default="qp",
+                   help="qp: the QP's arrays (default); fclib: a Coulomb-frictional scene as FCLIB's global problem "
+                        "(HDF5: M, H, f, w, mu; docs/friction.md)")
     p.add_argument("--convention", choices=("dualfem", "qpsolvers"), default="dualfem",
                    help="array names: dualfem's own K, F, B (B x >= 0) with the mesh maps (default), or "
                         "qpsolvers' P, q, G, h (G x <= h), the QP alone (docs/export.md)")
@@ -185,6 +189,10 @@ def cmd_export(args) -> int:
     from dualfem.core.io import check_output_path
     from dualfem.core.scene import build_qp
 
+    if args.format == "fclib":
+        from dualfem.cli.export_fclib import export_fclib
+
+        return export_fclib(args)
     if Path(args.output).suffix not in (".npz", ".mat"):
         raise InputError(f"-o must name a .npz or .mat file, got {args.output!r}")
     check_output_path(args.output, "-o")
@@ -320,6 +328,9 @@ def human_summary(rec: dict, scene: str | None = None) -> str:
         r = rec["residuals"]
         lines.append(f"energy {rec['energy']:.10g}  max jump {rec['max_jump']:.4g}  "
                      f"contact nodes {rec['n_contact']}/{rec['n_defect_nodes']}")
+        for f in rec.get("friction", ()):
+            lines.append(f"friction ({f['law']}): {f['slipping']}/{f['nodes']} nodes slip, "
+                         f"max slip {f['max_slip']:.4g}")
         lines.append("residuals (evaluator): " + "  ".join(f"{k} {v:.2e}" for k, v in r.items()))
     if rec.get("sif"):
         lines.append(_sif_line(rec["sif"]))

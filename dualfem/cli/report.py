@@ -48,6 +48,7 @@ def _cfg(p):
 DEFAULT_OUTPUT = {"bench": "dualfem-results/reports/benchmark.md", "html": "dualfem-results/reports/dashboard",
                   "paper": "dualfem-results/reports/paper_tables.md", "figures": "dualfem-results/reports",
                   "plugins": "dualfem-results/reports", "convergence": "dualfem-results/reports",
+                  "friction": "dualfem-results/reports",
                   "stability": "reports/stability.md", "robustness": "--out DIR (required)"}
 
 

@@ -219,6 +219,21 @@ def contact_set(qp: QP, x: np.ndarray, rtol: float = CONTACT_RTOL) -> np.ndarray
     return gap <= rtol * max(np.abs(x).max(initial=0.0), TINY)
 
 
+def friction_summary(qp: QP, x: np.ndarray) -> list[dict]:
+    """Per friction block (a law with ``components``): its law, nodes, slipping nodes (slip ``||s_j||`` above
+    ``CONTACT_RTOL |x|_inf``, the contact set's tolerance) and the largest slip (length)."""
+    out = []
+    tol = CONTACT_RTOL * max(float(np.abs(x).max(initial=0.0)), TINY)
+    for b in qp.blocks:
+        c = getattr(b.law, "components", None)
+        if not c:
+            continue
+        slip = np.linalg.norm((b.G @ x).reshape(-1, c), axis=1)
+        out.append({"law": b.law.name, "nodes": int(slip.size), "slipping": int(np.sum(slip > tol)),
+                    "max_slip": float(slip.max(initial=0.0))})
+    return out
+
+
 def energy_norm(qp: QP, v: np.ndarray, Kv: np.ndarray | None = None) -> float:
     """sqrt(v' K v) (``Kv``: the product K v, if known)."""
     return float(np.sqrt(max(v @ (qp.K @ v if Kv is None else Kv), 0.0)))

@@ -90,7 +90,18 @@ class Law:
     def conic(self) -> str | None:
         """The cone (one of :data:`CONES`) that ``G x`` must lie in, or None when the law is not a
         constraint ``G x in cone`` with fixed data (friction: a term of the objective); a conic backend
-        handles a block only through this description."""
+        handles a block only through this description (or :meth:`norm_term`)."""
+        return None
+
+    def certificate_note(self) -> str:
+        """What the certificate of a QP with this law measures, when it is not plainly the QP's own error (a
+        note in ``info["certificate"]["notes"]``); "" for a convex law."""
+        return ""
+
+    def norm_term(self, weights: np.ndarray) -> np.ndarray | None:
+        """Per node j, the radius r_j (force) of an objective term ``sum_j r_j ||s_j||`` with fixed data (``s_j``
+        the ``components`` rows of node j), for the conic backends' epigraph (:mod:`dualfem.numerics.epigraph`);
+        None when the law is no such term (Signorini: a cone; Coulomb: its radius depends on the answer)."""
         return None
 
     def __repr__(self) -> str:
@@ -226,10 +237,10 @@ class Friction(Law):
         return out.ravel() if m.size else np.zeros(0)
 
     def face_holds(self, mu1, gap1, face, mu_margin, gap_margin, weights=None, mus=()):
-        """Stick nodes strictly inside their discs (by ``mu_margin``); slipping nodes held at ``-r_j d_j`` (d_j the
-        unit direction of their force) sliding along ``d_j``'s opposite by more than ``gap_margin`` and with no
-        slip across it beyond rounding (in 3D the held direction must be the exact one: otherwise the step is
-        not onto the solution and no value is claimed)."""
+        """Stick nodes strictly inside their discs (by ``mu_margin``); nodes of radius 0 at mu_j = 0; slipping
+        nodes held at ``-r_j d_j`` (d_j the unit direction of their force) sliding along ``d_j``'s opposite by more
+        than ``gap_margin`` and with no slip across it beyond rounding (in 3D the held direction must be the exact
+        one: otherwise the step is not onto the solution and no value is claimed)."""
         m, s = self.nodes(mu1), self.nodes(gap1)
         stick = np.asarray(face, bool)[::self.components]
         if weights is None:
@@ -237,7 +248,10 @@ class Friction(Law):
         r = self.radius(weights, mus)
         if np.any(np.linalg.norm(m[stick], axis=1) >= r[stick] - mu_margin):
             return False
-        ms, ss = m[~stick], s[~stick]
+        free = ~stick & (r <= 0)          # radius 0 (no friction there): held at mu_j = 0, any slip
+        if np.any(m[free] != 0):
+            return False
+        ms, ss = m[~stick & ~free], s[~stick & ~free]
         mn = np.linalg.norm(ms, axis=1)
         if np.any(mn <= 0):
             return False
@@ -269,6 +283,10 @@ class Tresca(Friction):
 
     def energy(self, gap, weights):
         return float(self.radius(weights) @ np.linalg.norm(self.nodes(gap), axis=1))
+
+    def norm_term(self, weights):
+        """The radii ``g_j w_j`` (forces): Tresca's objective term is ``sum_j g_j w_j ||s_j||``."""
+        return self.radius(weights)
 
     def __repr__(self) -> str:
         b = self.bound if np.ndim(self.bound) == 0 else _digest(self.bound)
@@ -307,6 +325,11 @@ class Coulomb(Friction):
 
     def energy(self, gap, weights):
         return 0.0
+
+    def certificate_note(self) -> str:
+        return ("coulomb: certified as the Tresca problem whose threshold is the answer's own mu_f max(lambda, 0) "
+                "(Coulomb friction is quasi-variational: no duality gap of its own; the bound is that Tresca "
+                "problem's error)")
 
     def __repr__(self) -> str:
         c = self.coefficient if np.ndim(self.coefficient) == 0 else _digest(self.coefficient)

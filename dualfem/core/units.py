@@ -27,6 +27,9 @@ A change of units multiplies stresses by ``stress`` (new stress units per old on
 * ``"length_field"``: an expression in x of a length: ``length * g(x / length)``;
 * ``"file"``: a file of lengths (e.g. ``defects_file``) that cannot be converted: a scene that sets
   it has no units axis (InputError).
+* ``"stress_value"``: a stress given as a number (x ``stress``) or an expression in x, y (``stress *
+  (g(x / length, y / length))``), left out when not set (None): Tresca's ``friction_bound``, also in
+  ``[[defects]]`` tables.
 
 Under such a change the solution maps exactly: x by ``length``, the nodal forces mu by
 ``stress * length``. A field given as a Python function cannot be converted (InputError).
@@ -44,7 +47,7 @@ from dualfem.core.errors import InputError
 
 #: the kinds of quantity a unit map knows (module docstring)
 KINDS = ("stress", "length", "length_if_set", "length/stress", "points", "defect_tables", "body_force",
-         "traction_tables", "stress_field", "length_field", "file")
+         "traction_tables", "stress_field", "length_field", "file", "stress_value")
 
 
 @dataclass(frozen=True)
@@ -99,6 +102,9 @@ class UnitMap:
                 if base.get(k):
                     raise InputError(f"scene_in_units: {k} = {base[k]!r} holds lengths in a file that cannot be "
                                      f"converted to other units; write its defects as [[defects]] tables")
+            elif kind == "stress_value":
+                if d.get(k) is not None:
+                    out[k] = scaled_stress(d[k], length, stress)
             else:   # "length_field"
                 g = _not_callable(k, d[k])
                 out[k] = f"{float(length)!r} * ({scaled_expression(str(g).strip(), length)})" if length != 1 else g
@@ -131,8 +137,18 @@ def scaled_defects(tables, length: float, stress: float) -> list[dict]:
             t["delta"] = float(t["delta"]) * length / stress
         if isinstance(t.get("face_pressure"), str) and length != 1:
             t["face_pressure"] = scaled_expression(t["face_pressure"], length)
+        if t.get("friction_bound") is not None:
+            t["friction_bound"] = scaled_stress(t["friction_bound"], length, stress)
         out.append(t)
     return out
+
+
+def scaled_stress(v: Any, length: float, stress: float) -> Any:
+    """A stress given as a number or an expression in x, y, for units ``stress`` times and coordinates
+    ``length`` times the old ones (kind ``"stress_value"``)."""
+    if isinstance(v, str):
+        return f"{float(stress)!r} * ({scaled_expression(v.strip(), length) if length != 1 else v.strip()})"
+    return float(v) * stress
 
 
 def _value(v: Any) -> Any:

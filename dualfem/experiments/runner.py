@@ -481,11 +481,14 @@ def summary(qp: QP, sol: Solution) -> dict:
             "residuals": evaluator.kkt_residuals(sol.residuals),
             "stationarity_raw": sol.residuals.get("stationarity_raw"),
         })
+        friction = evaluator.friction_summary(qp, sol.x)
+        if friction:
+            out["friction"] = friction
         cert = sol.info.get("certificate")
         if cert:
             out["certificate"] = {k: v for k, v in cert.items()
                                   if k in ("value", "bound", "active_set", "infeasible", "multipliers",
-                                           "multipliers_floor", "path")}
+                                           "multipliers_floor", "path", "notes")}
     else:
         out.update({"energy": None, "max_jump": None, "n_contact": None, "residuals": None})
     return out

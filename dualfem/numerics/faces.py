@@ -11,6 +11,8 @@ block's law deciding its face (:meth:`dualfem.core.laws.Law.face`), the multipli
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.linalg as sla
 
@@ -23,42 +25,72 @@ from dualfem.numerics.linalg import step_size
 MAX_ROWS = 2000
 
 
-def delassus(G, ksolve, n: int) -> np.ndarray:
-    """The dense ``D = G K^-1 G'`` (symmetrized). With a local reduction whose interface unknowns I hold every
-    column G touches (the defects' node pairs: every block of a cut mesh), ``G_I S^-1 G_I'`` from the reduction's
-    Cholesky factor of the Schur complement S (``(K^-1)_II = S^-1``): no K-solve; otherwise one K-solve per row."""
-    red = getattr(ksolve, "red", None)
-    cols = np.unique(G.indices)
-    I = getattr(red, "I", None)
-    S_cho = getattr(red, "S_cho", None)
-    if I is not None and S_cho is not None and np.isin(cols, I).all():
-        pos = np.full(n, -1, np.int64)
-        pos[I] = np.arange(len(I))
-        GI = np.zeros((G.shape[0], len(I)))
-        coo = G.tocoo()
-        np.add.at(GI, (coo.row, pos[coo.col]), coo.data)
-        D = GI @ sla.cho_solve(S_cho, GI.T)
-    else:
-        Z = np.column_stack([ksolve(G[j].toarray().ravel()) for j in range(G.shape[0])]) if G.shape[0] else \
-            np.zeros((n, 0))
+@dataclass
+class FaceStep:
+    """One exact step onto the face ``A`` the laws guess from (x, mu): the face point's multipliers ``mu1`` and
+    gaps ``gap1``, the step's pieces (``z = K^-1 r``, ``rKr``, ``Gz``, ``dmu``, ``Ddmu``) and its sizes
+    ``step_mu`` (forces) and ``step_gap`` (lengths); :meth:`x1` the face point itself."""
+
+    A: np.ndarray
+    mu1: np.ndarray
+    gap1: np.ndarray
+    z: np.ndarray
+    rKr: float
+    Gz: np.ndarray
+    dmu: np.ndarray
+    Ddmu: np.ndarray
+    step_mu: float
+    step_gap: float
+
+    def x1(self, qp: QP, x: np.ndarray, ksolve) -> np.ndarray:
+        """The face point ``x - K^-1 r + K^-1 G' dmu`` (one more K-solve)."""
+        return x - self.z + (ksolve(qp.G.T @ self.dmu) if self.dmu.any() else 0.0)
+
+    def holds(self, qp: QP, margin: float) -> bool:
+        """Whether every block's law holds at the face point with ``margin`` times the step
+        (:meth:`dualfem.core.laws.Law.face_holds`): then the face point is the solution."""
+        blocks = qp.constraints
+        mus1 = tuple(constraints.split(blocks, self.mu1))
+        parts = zip(blocks, mus1, constraints.split(blocks, self.gap1), constraints.split(blocks, self.A))
+        return all(constraints.call_law(b.law.face_holds, m1, g1, a, margin * self.step_mu, margin * self.step_gap,
+                                        weights=b.weights, mus=mus1) for b, m1, g1, a in parts)
+
+
+def delassus(qp: QP, ksolve) -> tuple[np.ndarray, float]:
+    """(the dense Delassus matrix ``D = G K^-1 G'``, ``c = 1 / mean diag D``): from the exact local reduction of
+    ``ksolve`` when every row of G acts on its local unknowns I (``D = G_I S^-1 G_I'``, S the Schur complement of
+    K onto I: one dense solve), else from ``m_total`` K-solves."""
+    G = qp.G
+    D = _local_delassus(qp, ksolve)
+    if D is None:
+        Z = np.column_stack([ksolve(G[j].toarray().ravel()) for j in range(qp.m_total)]) if qp.m_total else \
+            np.zeros((qp.n, 0))
         D = np.asarray(G @ Z)
-    return 0.5 * (D + D.T)
+    D = 0.5 * (D + D.T)
+    dD = np.diag(D)
+    return D, (1.0 / dD.mean() if dD.size and dD.mean() > 0 else 1.0)
 
 
-def blocks_active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, margin: float = 10.0,
-                            Kx: np.ndarray | None = None) -> tuple[float, float]:
-    """(error of x relative to :func:`size_energy`, error of mu relative to :func:`force_scale`) through the
-    verified face of every block's law; (nan, nan) when the face is not verified or the step cannot be taken
-    (AMG K-solves, more than :data:`MAX_ROWS` rows, a singular D on the face)."""
-    nan = (float("nan"), float("nan"))
-    if getattr(ksolve, "amg", False) or qp.m_total > MAX_ROWS:
-        return nan
+def _local_delassus(qp: QP, ksolve) -> np.ndarray | None:
+    """``G_I S^-1 G_I'`` from the K-solver's exact local reduction (None without one, or when G reaches beyond I)."""
+    red = getattr(ksolve, "red", None)
+    if red is None or getattr(red, "qp", None) is not qp:
+        return None
+    G = qp.G.tocsc()
+    outside = np.ones(qp.n, bool)
+    outside[red.I] = False
+    if G[:, outside].nnz:
+        return None
+    GI = G[:, red.I].toarray()
+    return GI @ sla.cho_solve(red.S_cho, GI.T)
+
+
+def face_step(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, D: np.ndarray, c: float,
+              Kx: np.ndarray | None = None) -> FaceStep | None:
+    """The exact step onto the face the laws guess from (x, mu) (module docstring); None when D is singular on it."""
     blocks, G = qp.constraints, qp.G
     mu = np.asarray(mu, float)
     gap = G @ x
-    D = delassus(G, ksolve, qp.n)
-    dD = np.diag(D)
-    c = 1.0 / dD.mean() if dD.size and dD.mean() > 0 else 1.0
     A = constraints.face(blocks, mu, gap, c)
     mus, gaps = tuple(constraints.split(blocks, mu)), constraints.split(blocks, gap)
     held = [b.law.complementary(mk, gk, b.weights, mus) for b, mk, gk in zip(blocks, mus, gaps)]
@@ -71,18 +103,27 @@ def blocks_active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, margi
         try:
             dmu[A] = sla.cho_solve(sla.cho_factor(D[np.ix_(A, A)]), -(gap[A] - Gz[A]))
         except (np.linalg.LinAlgError, ValueError):
-            return nan
+            return None
     Ddmu = D @ dmu
-    gap1, mu1 = gap - Gz + Ddmu, mu_A + dmu
-    step_mu = max(np.abs(dmu).max(initial=0.0), np.abs(mu - mu_A).max(initial=0.0))
-    step_gap = np.abs(Ddmu - Gz).max(initial=0.0)
-    mus1 = tuple(constraints.split(blocks, mu1))
-    parts = zip(blocks, mus1, constraints.split(blocks, gap1), constraints.split(blocks, A))
-    if not all(constraints.call_law(b.law.face_holds, m1, g1, a, margin * step_mu, margin * step_gap,
-                                    weights=b.weights, mus=mus1) for b, m1, g1, a in parts):
+    return FaceStep(A, mu_A + dmu, gap - Gz + Ddmu, z, rKr, Gz, dmu, Ddmu,
+                    max(np.abs(dmu).max(initial=0.0), np.abs(mu - mu_A).max(initial=0.0)),
+                    float(np.abs(Ddmu - Gz).max(initial=0.0)))
+
+
+def blocks_active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, margin: float = 10.0,
+                            Kx: np.ndarray | None = None) -> tuple[float, float]:
+    """(error of x relative to :func:`size_energy`, error of mu relative to :func:`force_scale`) through the
+    verified face of every block's law; (nan, nan) when the face is not verified or the step cannot be taken
+    (AMG K-solves, more than :data:`MAX_ROWS` rows, a singular D on the face)."""
+    nan = (float("nan"), float("nan"))
+    if getattr(ksolve, "amg", False) or qp.m_total > MAX_ROWS:
+        return nan
+    D, c = delassus(qp, ksolve)
+    st = face_step(qp, x, mu, ksolve, D, c, Kx)
+    if st is None or not st.holds(qp, margin):
         return nan
     nx = size_energy(qp, x, Kx)
-    err_mu = float(np.abs(mu - mu1).max(initial=0.0)) / force_scale(qp, mu1)
+    err_mu = float(np.abs(np.asarray(mu, float) - st.mu1).max(initial=0.0)) / force_scale(qp, st.mu1)
     if nx == 0.0:
         return float("nan"), err_mu
-    return step_size(rKr, Gz, dmu, Ddmu) / nx, err_mu
+    return step_size(st.rKr, st.Gz, st.dmu, st.Ddmu) / nx, err_mu

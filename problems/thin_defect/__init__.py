@@ -65,6 +65,7 @@ from dualfem.registry import register_problem
 
 from .. import _boundary as bd
 from .._defect_geometry import check_growth
+from .. import _friction_keys as fk
 from .._interface import delta_free_part, interface, local_unknowns, with_delta
 from ..adaptive import Adaptive
 from ..adaptive import check_keys as check_adaptive
@@ -101,7 +102,8 @@ class ThinDefect(Adaptive, Problem):
     unit_map = UnitMap({"E": "stress", "width": "length", "height": "length", "load_scale": "stress",
                         "delta": "length/stress", "mesh_size": "length_if_set", "tip_size": "length_if_set",
                         "defect": "points", "defects": "defect_tables", "body_force": "body_force",
-                        "boundary": "traction_tables", "load": "stress_field", "defects_file": "file"},
+                        "boundary": "traction_tables", "load": "stress_field", "defects_file": "file",
+                        "friction_bound": "stress_value"},
                        scaling_names=("f1", "f2", "f3"))   # the paper's loads scale with width by themselves
     defaults = {
         "N": 64,
@@ -127,6 +129,7 @@ class ThinDefect(Adaptive, Problem):
         "refine": "none",
         "target_error": None,
         "max_unknowns": None,
+        **fk.DEFAULTS,
     }
     #: scene keys naming files, relative to the scene file (:attr:`dualfem.problem.Problem.path_keys`)
     path_keys = ("defects_file",)
@@ -198,6 +201,8 @@ class ThinDefect(Adaptive, Problem):
                                  f"size: delta * E / max(width, height) = {ratio:.1e} must be "
                                  f">= {MIN_DELTA_E_OVER_L:g} "
                                  f"(below it the defect is glued to double precision)")
+        self._friction = fk.parse_friction(p, [d.get("friction", {}) for d in self._defects], 2,
+                                           (p["width"], p["height"]))
         self._loads: bd.LoadSpec | None = bd.parse_loads(p, 2)
         self._traction = None
         if self._loads is None:
@@ -479,7 +484,10 @@ class ThinDefect(Adaptive, Problem):
             tau = (pb - pa) / np.linalg.norm(pb - pa)
             maps["normal"], maps["tangent"] = R @ np.array([-tau[1], tau[0]]), R @ tau
         params = {k: (v if isinstance(v, (int, float, str)) else str(np.asarray(v).tolist()))
-                  for k, v in p.items() if not callable(v) and k != "defects" and k not in bd.KEYS}
+                  for k, v in p.items() if not callable(v) and k != "defects" and k not in bd.KEYS
+                  and k not in fk.KEYS}
+        if fk.frictional(self._friction):
+            params["friction"] = fk.params_label(self._friction)
         if isinstance(p["defects"], (list, tuple)) and len(p["defects"]):
             params["defects"] = defects_label(self._defects)
         if self._loads is not None:
@@ -491,9 +499,10 @@ class ThinDefect(Adaptive, Problem):
         self.adaptive_params(params)
         self.jump_operators = J
         geometry = GeometryPart(2, maps.pop("nodes"), maps.pop("triangles"), maps.pop("node_dofs"))
-        return QP(K=K, F=self._load_vector(a), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],
-                  name=self._qp_name(),
-                  params=params, maps=maps, geometry=geometry, interface=iface,
-                  units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
-                  material=MaterialPart(float(p["E"]), float(p["nu"]), str(p["plane"])))
+        qp = QP(K=K, F=self._load_vector(a), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],
+                name=self._qp_name(),
+                params=params, maps=maps, geometry=geometry, interface=iface,
+                units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
+                material=MaterialPart(float(p["E"]), float(p["nu"]), str(p["plane"])))
+        return fk.add_friction(qp, self._friction, c.points[:, c.lower])
 

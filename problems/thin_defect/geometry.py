@@ -7,6 +7,8 @@ from dualfem.errors import InputError, check_positive
 
 from .._boundary import parse_scalar
 from ..defects_file import MAX_DEFECTS, read_defects
+from .._friction_keys import KEYS as FRICTION_KEYS
+from .._friction_keys import table_keys
 
 CURVES = ("polyline", "spline")
 #: points of one defect. The number of defects is bounded by the mesh they need (the gmsh triangle
@@ -93,7 +95,8 @@ def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height
     Checks: each table has ``points`` (>= 2 distinct consecutive points strictly inside the body),
     ``curve`` in CURVES (``"spline"`` needs ``mesh = "gmsh"``), ``delta`` > 0, optional ``face_pressure``
     (a number or an expression in x, y, finite in the body: :func:`dualfem.problems._boundary.parse_scalar`;
-    None when not given); unknown keys refused.
+    None when not given), the friction keys as given (``"friction"``: checked by
+    :func:`dualfem.problems._friction_keys.parse_friction`); unknown keys refused.
     Whether defects touch or cross is checked by the mesher (gmsh) or on the grid (structured).
     """
     if isinstance(tables, (list, tuple)) and len(tables) == 0:
@@ -109,9 +112,10 @@ def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height
     out = []
     for k, tab in enumerate(tables):
         key = f"defects[{k}]"
-        unknown = sorted(set(tab) - {"points", "curve", "delta", "face_pressure"})
+        allowed = ("points", "curve", "delta", "face_pressure", *FRICTION_KEYS)
+        unknown = sorted(set(tab) - set(allowed))
         if unknown:
-            raise InputError(f"{key}: unknown key {unknown[0]!r}; allowed: points, curve, delta, face_pressure")
+            raise InputError(f"{key}: unknown key {unknown[0]!r}; allowed: {', '.join(allowed)}")
         if "points" not in tab:
             raise InputError(f"{key}.points is missing: give points = [[x, y], ...]")
         pts = _points(f"{key}.points", tab["points"])
@@ -129,7 +133,7 @@ def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height
         _check_inside(f"{key}.points", pts, width, height)
         fp = tab.get("face_pressure")
         pressure = None if fp is None else parse_scalar(fp, f"{key}.face_pressure", 2, (width, height))
-        out.append({"points": pts, "curve": curve, "delta": d, "face_pressure": pressure})
+        out.append({"points": pts, "curve": curve, "delta": d, "face_pressure": pressure, "friction": table_keys(tab)})
     return out
 
 

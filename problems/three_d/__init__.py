@@ -56,6 +56,7 @@ from dualfem.registry import register_problem
 
 from .. import _boundary as bd
 from .._defect_geometry import check_growth
+from .. import _friction_keys as fk
 from .._interface import delta_free_part, interface, local_unknowns, with_delta
 from ..adaptive import Adaptive
 from ..adaptive import check_keys as check_adaptive
@@ -139,6 +140,7 @@ class ThreeD(Adaptive, Problem):
         "refine": "none",
         "target_error": None,
         "max_unknowns": None,
+        **fk.DEFAULTS,
     }
     #: scene keys naming files, relative to the scene file (:attr:`dualfem.problem.Problem.path_keys`)
     path_keys = ("defects_file",)
@@ -220,6 +222,7 @@ class ThreeD(Adaptive, Problem):
                 raise InputError(f"delta of defect {i} ({s.delta:g}) is too small for E = {p['E']:g} and the box: "
                                  f"delta * E / max(width, depth, height) = {ratio:.1e} must be "
                                  f">= {MIN_DELTA_E_OVER_L:g}")
+        self._friction = fk.parse_friction(p, [s.friction for s in self._surfaces], 3, box)
         self._loads = bd.parse_loads(p, 3)
         if self._loads is None:
             check_load_model(self, [s.face_pressure is not None for s in self._surfaces])
@@ -372,19 +375,22 @@ class ThreeD(Adaptive, Problem):
         F = np.zeros(a["n"])
         F[nd[nd >= 0]] = Fn[nd >= 0]
         params = {k: (v if isinstance(v, (int, float, str)) else str(np.asarray(v).tolist()))
-                  for k, v in p.items() if not callable(v) and k != "defects"}
+                  for k, v in p.items() if not callable(v) and k != "defects" and k not in fk.KEYS}
         params["defects"] = "; ".join(_label(s) for s in self._surfaces)
         # the QP's parameters as before these keys, at their defaults
         for k in ("defects_file", "size_growth", "refine", "target_error", "max_unknowns"):
             if p[k] == self.defaults[k]:
                 params.pop(k, None)
         self.adaptive_params(params)
+        if fk.frictional(self._friction):
+            params["friction"] = fk.params_label(self._friction)
         geometry = GeometryPart(3, a["points"], c.tets, nd)
         iface = dataclasses.replace(iface, weights=c.weights.copy())       # each QP its own weights
-        return QP(K=K, F=F, B=B, weights=iface.weights, K_fixed=a["K_el"], local_dofs=a["local"],
-                  name=f"three_d[{self._load_label()}]", params=params, geometry=geometry, interface=iface,
-                  units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
-                  material=MaterialPart(float(p["E"]), float(p["nu"]), "strain"))
+        qp = QP(K=K, F=F, B=B, weights=iface.weights, K_fixed=a["K_el"], local_dofs=a["local"],
+                name=f"three_d[{self._load_label()}]", params=params, geometry=geometry, interface=iface,
+                units=UnitsPart(E=float(p["E"]), length=float(p["width"])),
+                material=MaterialPart(float(p["E"]), float(p["nu"]), "strain"))
+        return fk.add_friction(qp, self._friction, c.points[:, c.lower])
 
 
 def _label(s: Surface) -> str:

@@ -33,6 +33,8 @@ import numpy as np
 from dualfem.errors import InputError
 
 from ..defects_file import MAX_DEFECTS
+from .._friction_keys import KEYS as FRICTION_KEYS
+from .._friction_keys import table_keys
 
 SHAPES = ("disk", "ellipse", "polygon", "cap")
 #: vertices of one polygon (its sampling and edge checks are bounded by it). The number of defects is
@@ -64,6 +66,7 @@ class Surface:
     R: float = 0.0
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     face_pressure: object = None
+    friction: dict = field(default_factory=dict)
 
     @property
     def half_angle(self) -> float:
@@ -186,7 +189,7 @@ def parse_surface(i: int, table, default_delta: float) -> Surface:
     shape = table["shape"]
     if shape not in SHAPES:
         raise InputError(f"defects[{i}].shape must be one of {', '.join(SHAPES)}, got {shape!r}")
-    allowed = {"shape", "delta", "face_pressure", *_KEYS[shape]}
+    allowed = {"shape", "delta", "face_pressure", *FRICTION_KEYS, *_KEYS[shape]}
     extra = sorted(set(table) - allowed)
     if extra:
         raise InputError(f"defects[{i}]: unknown key {extra[0]!r} for shape {shape!r}; allowed: "
@@ -198,6 +201,7 @@ def parse_surface(i: int, table, default_delta: float) -> Surface:
     delta = _positive(key + "delta", table.get("delta", default_delta))
     s = _parse_shape(i, table, shape, delta)
     s.face_pressure = table.get("face_pressure")
+    s.friction = table_keys(table)
     return s
 
 
