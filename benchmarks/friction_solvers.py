@@ -2,7 +2,8 @@
 
     python benchmarks/friction_solvers.py --out benchmarks/results/friction_solvers --report reports
 
-writes ``DIR/friction_solvers.json`` (every run) and ``reports/friction_cost.md`` with ``reports/friction_cost/ratios.png``
+writes ``DIR/friction_solvers.json`` (every run) and ``reports/friction_cost.md`` with
+``reports/friction_cost/ratios.png``
 (``--render-only``: re-render from the JSON; ``--quick``: small meshes, for a smoke run). Scenes: a 2D inclined
 closed crack (thin_defect on a gmsh mesh, remote stress [[-1, 0.3], [0.3, -1]], delta 1e3) and the 3D penny crack
 under compression and shear (remote sigma_zz = -1, sigma_xz = 0.3), friction on every defect node pair: Tresca
@@ -141,7 +142,8 @@ def render(data: dict, report: Path) -> Path:
                      f"{r['median_s']:.2f} | {r.get('solve_s', float('nan')):.2f} | {ratio:.2f} | {r['kkt']:.1e} | "
                      f"{r['diff_to_pdas']:.1e} | {it} | "
                      f"{r['applications']} | {sets} |")
-    lines += ["", "![time ratio to the frictionless solve](friction_cost/ratios.png)", "", *_targets(rows, base), "", NOTES]
+    lines += ["", "![time ratio to the frictionless solve](friction_cost/ratios.png)", "", *_targets(rows, base), "",
+              NOTES]
     _figure(rows, base, figdir / "ratios.png")
     out = report / "friction_cost.md"
     out.write_text("\n".join(lines) + "\n")

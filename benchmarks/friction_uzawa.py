@@ -2,9 +2,9 @@
 (uzawa, uzawa_auto, penalty), Coulomb in the Uzawa loop against the fixed point over Tresca solves, fixed-point
 counts against mu_f, and the 2D slip against the closed form (reports/friction_uzawa.md).
 
-    python benchmarks/friction_uzawa.py --out benchmarks/results/friction_uzawa --report reports      (~20 min on 2 loaded cores)
+    python benchmarks/friction_uzawa.py --out benchmarks/results/friction_uzawa --report reports   (~20 min, 2 cores)
     python benchmarks/friction_uzawa.py --render-only --out benchmarks/results/friction_uzawa --report reports
-    python benchmarks/friction_uzawa.py --quick --out /tmp/friction_uzawa_quick --report /tmp/friction_uzawa_quick   (smoke test, ~1 min)
+    python benchmarks/friction_uzawa.py --quick --out /tmp/fu_quick --report /tmp/fu_quick   (smoke test, ~1 min)
 
 Scenes: a closed straight crack (2D plane strain, half-length a = 0.05 in the unit square, gmsh mesh_size 0.005,
 tip_size 0.0005; remote sigma_yy = sigma_xx = -1, tau_xy = 0.3; E = 1000, nu = 0.3, delta = 1e3) and the library's

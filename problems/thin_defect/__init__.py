@@ -64,8 +64,8 @@ from dualfem.qp import QP, GeometryPart, MaterialPart, UnitsPart
 from dualfem.registry import register_problem
 
 from .. import _boundary as bd
-from .._defect_geometry import check_growth
 from .. import _friction_keys as fk
+from .._defect_geometry import check_growth
 from .._interface import delta_free_part, interface, local_unknowns, with_delta
 from ..adaptive import Adaptive
 from ..adaptive import check_keys as check_adaptive

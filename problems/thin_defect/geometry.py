@@ -6,9 +6,9 @@ import numpy as np
 from dualfem.errors import InputError, check_positive
 
 from .._boundary import parse_scalar
-from ..defects_file import MAX_DEFECTS, read_defects
 from .._friction_keys import KEYS as FRICTION_KEYS
 from .._friction_keys import table_keys
+from ..defects_file import MAX_DEFECTS, read_defects
 
 CURVES = ("polyline", "spline")
 #: points of one defect. The number of defects is bounded by the mesh they need (the gmsh triangle

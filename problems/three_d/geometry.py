@@ -32,9 +32,9 @@ import numpy as np
 
 from dualfem.errors import InputError
 
-from ..defects_file import MAX_DEFECTS
 from .._friction_keys import KEYS as FRICTION_KEYS
 from .._friction_keys import table_keys
+from ..defects_file import MAX_DEFECTS
 
 SHAPES = ("disk", "ellipse", "polygon", "cap")
 #: vertices of one polygon (its sampling and edge checks are bounded by it). The number of defects is
