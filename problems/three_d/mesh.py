@@ -153,14 +153,15 @@ def _surface(gmsh, s: Surface) -> int:
 
 
 def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | None,
-             surface_size: float | None = None) -> BoxMesh:
-    """The tetrahedral mesh of the box with every surface embedded (see the module docstring)."""
+             surface_size: float | None = None, options: dict | None = None) -> BoxMesh:
+    """The tetrahedral mesh of the box with every surface embedded (see the module docstring); ``options``:
+    gmsh options set over the fixed ones (e.g. ``{"Mesh.Algorithm3D": 10}``, HXT)."""
     gmsh = _import_gmsh()
     owner = not gmsh.isInitialized()
     if owner:
         gmsh.initialize(readConfigFiles=False, interruptible=False)
     try:
-        for k, v in _OPTIONS.items():
+        for k, v in {**_OPTIONS, **(options or {})}.items():
             gmsh.option.setNumber(k, v)
         gmsh.model.add("dualfem_three_d")
         occ = gmsh.model.occ
