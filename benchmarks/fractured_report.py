@@ -135,11 +135,39 @@ def render(runs: list[dict], meta: dict, report: Path, name: str = "fractured") 
                "unknowns with a growing number of cracks (`python benchmarks/operator_crossover.py --out "
                "benchmarks/results/operator_crossover.md`); `auto` takes the dense path while |I|^2 <= 32 n.", "",
                cross.read_text().strip(), ""]
+    if name == "fractured3d":
+        md[header:header] = _target_3d(floors, table, "200 disks", ranked_solvers)
     if name == "fractured":
         md += ["MPRGP's iterations against h with and without its preconditioners: "
                "`benchmarks/results/mprgp_precond/mprgp_precond.md`.", ""]
     _figure(labels, floors, table, report / name / "work_precision.png")
     (report / f"{name}.md").write_text("\n".join(md) + "\n")
+
+
+def _target_3d(floors: dict, table: dict, label: str, solvers: tuple) -> list[str]:
+    """Issue 35's 3D target on the scene ``label``: every dual method certified, the fastest <= 10 x the
+    floor, <= 12 GB (each process's peak RSS), as measured (runs that did not finish are named)."""
+    fl = floors.get(label, {})
+    runs = {e: r["result"] for (lab, e), r in table.items() if lab == label}
+    if "floor" not in fl or not runs:
+        return ["## Target (200 random disks)", "", f"The scene {label!r} did not run (or has no floor).", ""]
+    dual = [e for e in runs if e.split(":")[0] in solvers and e != "clarabel"]
+    ok = [e for e in dual if runs[e].get("status") == "solved"]
+    other = [f"{e} ({runs[e].get('status') or runs[e].get('error', '')[:60]})" for e in dual if e not in ok]
+    best = min(ok, key=lambda e: _setup_solve(runs[e])) if ok else None
+    peaks = [runs[e].get("peak_rss_mb") for e in runs if runs[e].get("peak_rss_mb")]
+    lines = ["## Target (200 random disks)", "",
+             f"Issue 35: 200 random disks, ~300 k unknowns, every dual method certified, the fastest <= 10 x the "
+             f"floor, <= 12 GB. Measured on {label!r}: {fl['n']:,} unknowns, {fl['m']:,} defect nodes; "
+             f"{len(ok)} of {len(dual)} dual solvers solved and certified"
+             + (f" (not: {', '.join(other)})" if other else "") + "; "]
+    if best:
+        lines[-1] += (f"the fastest, {best}, {_setup_solve(runs[best]):.2f} s setup + solve = "
+                      f"{_setup_solve(runs[best]) / fl['floor']:.1f} x the floor ({fl['floor']:.2f} s); ")
+    if peaks:
+        lines[-1] += (f"the largest process peak {max(peaks) / 1024:.2f} GB (floor process "
+                      f"{fl['peak_rss_mb'] / 1024:.2f} GB).")
+    return [*lines, ""]
 
 
 def _short(label: str) -> str:

@@ -193,3 +193,31 @@ def test_a_sweep_over_delta_reuses_the_mesh():
     assert other.shared is pr.shared
     other.build()
     assert pr.shared.assemblies == 1
+
+
+def test_the_3d_report_states_the_target_from_the_runs(tmp_path, monkeypatch):
+    """benchmarks/fractured_report.py with name fractured3d: the target line counts the certified dual
+    solvers of the 200-disk scene, names the ones that failed, and gives the fastest's ratio to the floor."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location("fractured_report", Path(__file__).resolve().parents[1]
+                                                  / "benchmarks" / "fractured_report.py")
+    fr = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(fr)
+    monkeypatch.setattr("matplotlib.figure.Figure.savefig", lambda fig, path, **kw: None)
+    floor = {"floor": 10.0, "n": 300000, "m": 9000, "n_local": 54000, "assembly": 4.0, "peak_rss_mb": 2048}
+
+    def run(entry, status, t, peak):
+        return {"label": "200 disks", "entry": entry, "wall": 2 * t,
+                "result": {"status": status, "time_s": {"setup": t / 2, "solve": t / 2}, "peak_rss_mb": peak,
+                           "certificate": {"value": 1e-12}, "energy": -1.0}}
+
+    runs = [{"label": "200 disks", "entry": "floor", "wall": 12.0, "result": floor},
+            run("pdas", "solved", 40.0, 3072), run("mprgp", "solved", 25.0, 4096), run("uzawa", "failed", 99.0, 1024)]
+    fr.render(runs, {}, tmp_path, name="fractured3d")
+    text = (tmp_path / "fractured3d.md").read_text()
+    assert "2 of 3 dual solvers solved and certified (not: uzawa (failed))" in text
+    assert "the fastest, mprgp, 25.00 s setup + solve = 2.5 x the floor (10.00 s)" in text
+    assert "the largest process peak 4.00 GB" in text and "# 3D fractured bodies" in text
+    assert not (tmp_path / "fractured.md").exists()
