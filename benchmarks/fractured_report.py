@@ -160,7 +160,10 @@ def _target_3d(floors: dict, table: dict, label: str, solvers: tuple) -> list[st
              f"Issue 35: 200 random disks, ~300 k unknowns, every dual method certified, the fastest <= 10 x the "
              f"floor, <= 12 GB. Measured on {label!r}: {fl['n']:,} unknowns, {fl['m']:,} defect nodes; "
              f"{len(ok)} of {len(dual)} dual solvers solved and certified"
-             + (f" (not: {', '.join(other)})" if other else "") + "; "]
+             + (f" (not: {', '.join(other)})" if other else "")
+             + (f"; not run on it: {', '.join(s for s in solvers if s not in runs and s != 'clarabel')} "
+                "(see the smaller scenes)" if any(s not in runs and s != "clarabel" for s in solvers) else "")
+             + "; "]
     if best:
         lines[-1] += (f"the fastest, {best}, {_setup_solve(runs[best]):.2f} s setup + solve = "
                       f"{_setup_solve(runs[best]) / fl['floor']:.1f} x the floor ({fl['floor']:.2f} s); ")

@@ -217,7 +217,8 @@ def test_the_3d_report_states_the_target_from_the_runs(tmp_path, monkeypatch):
             run("pdas", "solved", 40.0, 3072), run("mprgp", "solved", 25.0, 4096), run("uzawa", "failed", 99.0, 1024)]
     fr.render(runs, {}, tmp_path, name="fractured3d")
     text = (tmp_path / "fractured3d.md").read_text()
-    assert "2 of 3 dual solvers solved and certified (not: uzawa (failed))" in text
+    assert "2 of 3 dual solvers solved and certified (not: uzawa (failed)); not run on it: uzawa_auto, penalty, "\
+           "newton_amg, dual_gradient (see the smaller scenes)" in text
     assert "the fastest, mprgp, 25.00 s setup + solve = 2.5 x the floor (10.00 s)" in text
     assert "the largest process peak 4.00 GB" in text and "# 3D fractured bodies" in text
     assert not (tmp_path / "fractured.md").exists()
