@@ -222,3 +222,24 @@ def test_the_3d_report_states_the_target_from_the_runs(tmp_path, monkeypatch):
     assert "the fastest, mprgp, 25.00 s setup + solve = 2.5 x the floor (10.00 s)" in text
     assert "the largest process peak 4.00 GB" in text and "# 3D fractured bodies" in text
     assert not (tmp_path / "fractured.md").exists()
+
+
+@pytest.mark.parametrize("sigma", [-1.0, 1.0])
+def test_parallel_disks_close_under_compression_and_open_under_tension(sigma):
+    """Horizontal disks (crack_normal_spread = 0) under a remote stress sigma_zz: compression closes every
+    constrained node and each carries the remote pressure (contact force / nodal area = 1: the uncracked
+    body's stress, transmitted by the closed disks); tension opens every node, no contact force remains."""
+    pr = load_scene("fractured", {"dim": 3, "cracks": 4, "crack_radius": 0.12, "crack_normal_spread": 0,
+                                  "mesh_size": 0.12, "tip_size": 0.04, "seed": 2, "delta": 1e-9,
+                                  "remote_stress": [[0, 0, 0], [0, 0, 0], [0, 0, sigma]]})
+    qp = pr.build()
+    assert np.allclose(qp.interface.normals, [0, 0, 1])
+    sol = run("pdas", qp)
+    assert sol.status == Status.SOLVED, sol.message
+    jump, mu = qp.B @ sol.x, sol.multipliers
+    scale = np.abs(sol.x).max()
+    if sigma < 0:
+        assert np.all(jump <= 1e-9 * scale) and np.all(mu > 0)
+        assert np.allclose(mu / qp.weights, -sigma, rtol=1e-3)
+    else:
+        assert np.all(jump > 1e-9 * scale) and np.all(mu == 0)
