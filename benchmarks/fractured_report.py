@@ -140,7 +140,9 @@ def render(runs: list[dict], meta: dict, report: Path, name: str = "fractured") 
     if name == "fractured":
         md += ["MPRGP's iterations against h with and without its preconditioners: "
                "`benchmarks/results/mprgp_precond/mprgp_precond.md`.", ""]
-    _figure(labels, floors, table, report / name / "work_precision.png")
+    _figure(labels, floors, table, report / name / "work_precision.png",
+            None if name == "fractured" else f"{title}\none point per (scene, solver), tagged with the scene's "
+            "defect count; a solver's points joined in scene order")
     (report / f"{name}.md").write_text("\n".join(md) + "\n")
 
 
@@ -180,7 +182,7 @@ def _short(label: str) -> str:
     return ("1" if m.group(1) == "one" else m.group(1)) if m else label
 
 
-def _figure(labels, floors, table, path: Path) -> None:
+def _figure(labels, floors, table, path: Path, title: str | None = None) -> None:
     """One point per (scene, solver), tagged with the scene's crack count; each solver's points of the
     many-crack scenes joined in the order of the scenes (thin line)."""
     import matplotlib
@@ -217,9 +219,9 @@ def _figure(labels, floors, table, path: Path) -> None:
     ax.set_yscale("log")
     ax.set_xlabel("setup + solve time / floor (PARDISO factor + solve of K)")
     ax.set_ylabel("certified relative energy-norm error")
-    ax.set_title("fractured bodies: one point per (scene, solver); the number at a point is the scene's crack "
-                 "count\n(1 = one crack, N = 2048); a solver's points of the fractured scenes joined in crack order",
-                 fontsize=10)
+    ax.set_title(title or "fractured bodies: one point per (scene, solver); the number at a point is the scene's "
+                 "crack count\n(1 = one crack, N = 2048); a solver's points of the fractured scenes joined in "
+                 "crack order", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False, title="solver")
     fig.tight_layout()
