@@ -86,7 +86,9 @@ def main() -> int:
     ap.add_argument("--solvers", nargs="*", default=None, help="solver entries to run (default: the spec's)")
     ap.add_argument("--resume", action="store_true", help="keep finished runs of --out")
     ap.add_argument("--render-only", action="store_true")
-    ap.add_argument("--report", default=None, metavar="DIR", help="write DIR/fractured.md and its figure")
+    ap.add_argument("--report", default=None, metavar="DIR", help="write DIR/NAME.md and its figure")
+    ap.add_argument("--name", default="fractured", help="the report's name: DIR/NAME.md, figure DIR/NAME/ "
+                    "(fractured3d: the 3D report of benchmarks/fractured3d.toml)")
     a = ap.parse_args()
     out = Path(a.out)
     runs = out / "runs.jsonl"
@@ -125,7 +127,7 @@ def main() -> int:
     if a.report:
         from fractured_report import render  # benchmarks/fractured_report.py
 
-        render(_load(runs), json.loads((out / "meta.json").read_text()), Path(a.report))
+        render(_load(runs), json.loads((out / "meta.json").read_text()), Path(a.report), name=a.name)
     return 0
 
 

@@ -275,6 +275,17 @@ def _place(cracks, crack_length, crack_angle, min_gap, seed, region, width, heig
 
 
 # --------------------------------------------------------------------------- the problem plugin
+def _dim(value: Any) -> int | None:
+    """2 or 3 from a scene value (an integer, or its text from ``--set``); None for anything else."""
+    if isinstance(value, bool):
+        return None
+    try:
+        f = float(value)
+    except (TypeError, ValueError):
+        return None
+    return int(f) if f in (2.0, 3.0) else None
+
+
 _OWN = ("cracks", "crack_length", "crack_angle", "min_gap", "seed", "region")
 _HIDDEN = ("mesh", "defect", "defects")
 
@@ -289,6 +300,7 @@ class Fractured(ThinDefect):
     unit_map = None             # crack_length, min_gap, region have no unit map yet: no units axis
     defaults = {
         **{k: v for k, v in ThinDefect.defaults.items() if k not in _HIDDEN},
+        "dim": 2,                    # 3: the 3D body with random disks (problems/three_d/fractured.py)
         "load": "f1",
         "mesh_size": 0.01,
         "tip_size": 0.01,
@@ -307,11 +319,24 @@ class Fractured(ThinDefect):
     gmsh_algorithm = "frontal_unsmoothed"
     gmsh_refine = 1
 
+    def __new__(cls, **params: Any):
+        """``dim = 3`` (a number or, from ``--set``, text) makes the 3D fractured body instead
+        (:class:`dualfem.problems.three_d.fractured.Fractured3D`, not a subclass: its own keys)."""
+        dim = _dim(params.get("dim", 2))
+        if dim is None:
+            raise InputError(f"dim must be 2 or 3 for the fractured problem, got {params['dim']!r}")
+        if cls is Fractured and dim == 3:
+            from .three_d.fractured import Fractured3D
+
+            return Fractured3D(**params)
+        return super().__new__(cls)
+
     def validate(self) -> None:
         p = self.params
         # what with_params starts from: the keys the scene gave (the defaults follow; a given generator key
         # is refused beside defects_file)
         self._user = {k: p[k] for k in getattr(self, "given", p)}
+        p.pop("dim")
         if p["defects_file"]:
             self._validate_file()
             return

@@ -148,6 +148,8 @@ class ThreeD(Adaptive, Problem):
     #: keys a sweep changes without re-meshing (Workspace.update, with_params): the loads change F only, the
     #: supports (``boundary``'s fixed sides) the elastic stiffness too (:meth:`with_params`)
     update_keys = ("delta", "load", "load_scale", "boundary", "body_force", "remote_stress")
+    #: gmsh options over :mod:`.mesh`'s fixed ones (a subclass may choose another algorithm)
+    gmsh_options: dict = {}
 
     def _support_key(self) -> tuple | None:
         """What the fixed unknowns depend on beyond the mesh: None (the legacy bottom clamp) or the supports."""
@@ -283,7 +285,7 @@ class ThreeD(Adaptive, Problem):
         self.adapt_mesh()
         if shared.get("cut") is None:
             m = mesh_box(self.box, self._surfaces, self.mesh_size, self.tip_size, self.surface_size,
-                         self.params["size_growth"], self._size_view)
+                         self.params["size_growth"], self._size_view, options=self.gmsh_options)
             c = cut(m.points, m.tets, m.faces, self._surfaces)
             from .assemble import boundary_faces
 

@@ -157,17 +157,19 @@ def _surface(gmsh, s: Surface) -> int:
 
 def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | None,
              surface_size: float | None = None, grade: float = GRADE,
-             size_view: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> BoxMesh:
+             size_view: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+             options: dict | None = None) -> BoxMesh:
     """The tetrahedral mesh of the box with every surface embedded (see the module docstring); ``grade``:
     the size fields' slope. ``size_view``: (points (3, n), tetrahedra (4, nt), sizes (nt,)) a per-tetrahedron
     size on an earlier mesh of the box, gmsh's background mesh in place of the size fields (adaptive
-    refinement, :mod:`dualfem.problems.adaptive`; sizes above ``mesh_size`` are cut to it)."""
+    refinement, :mod:`dualfem.problems.adaptive`; sizes above ``mesh_size`` are cut to it). ``options``: gmsh
+    options set over the fixed ones (e.g. ``{"Mesh.Algorithm3D": 10}``, HXT)."""
     gmsh = _import_gmsh()
     owner = not gmsh.isInitialized()
     if owner:
         gmsh.initialize(readConfigFiles=False, interruptible=False)
     try:
-        for k, v in _OPTIONS.items():
+        for k, v in {**_OPTIONS, **(options or {})}.items():
             gmsh.option.setNumber(k, v)
         gmsh.model.add("dualfem_three_d")
         occ = gmsh.model.occ
