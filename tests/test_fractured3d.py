@@ -243,3 +243,17 @@ def test_parallel_disks_close_under_compression_and_open_under_tension(sigma):
         assert np.allclose(mu / qp.weights, -sigma, rtol=1e-3)
     else:
         assert np.all(jump > 1e-9 * scale) and np.all(mu == 0)
+
+
+def test_friction_keys_act_on_every_disk():
+    """friction = "tresca" at the top level of a 3D fractured scene: one friction node per constrained disk node
+    (two tangential rows each), the same QP otherwise; a disk under compression and shear slips."""
+    from dualfem.core.laws import Tresca
+    from dualfem.problems.fractured import Fractured
+
+    load = {"remote_stress": [[0, 0, 0.3], [0, 0, 0], [0.3, 0, -1.0]], "crack_normal_spread": 0.0}
+    plain = Fractured(**TINY, **load).build()
+    qp = Fractured(**TINY, **load, friction="tresca", friction_bound=0.1).build()
+    (block,) = qp.blocks
+    assert isinstance(block.law, Tresca) and block.m == 2 * qp.m and qp.m == plain.m
+    assert abs(qp.K - plain.K).max() == 0 and np.array_equal(qp.F, plain.F) and not plain.blocks

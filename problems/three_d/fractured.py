@@ -40,6 +40,7 @@ from dualfem.errors import InputError, check_int, check_positive
 from dualfem.qp import QP
 
 from .. import _boundary as bd
+from .. import _friction_keys as fk
 from . import ThreeD
 from .disks import MAX_DISKS, parse_normal, parse_radius, parse_region, place_disks
 from .geometry import Surface, _frame
@@ -83,8 +84,10 @@ class Fractured3D(ThreeD):
         p = self.params
         self._user = dict(p)                      # what with_params starts from
         own = {k: p.pop(k) for k in _OWN}
+        friction = {k: p.pop(k) for k in fk.KEYS}  # they act on the disks, placed below
         p["defects"] = []                         # the body, its loads and sizes checked by three_d, uncracked
         super().validate()
+        p.update(friction)
         n = check_int("cracks", own["cracks"], 1, MAX_DISKS)
         radius = parse_radius(DEFAULT_RADIUS if own["crack_radius"] is None else own["crack_radius"])
         axis, spread = parse_normal(own["crack_normal"], own["crack_normal_spread"])
@@ -111,6 +114,7 @@ class Fractured3D(ThreeD):
         pressure = None if fp is None else bd.parse_scalar(fp, "face_pressure", 3, box)
         self._face_pressure = [pressure] * n
         self.disks = (C, N, R)                     # centres (n, 3), unit "+" normals (n, 3), radii (n,)
+        self._friction = fk.parse_friction(p, [{} for _ in range(n)], 3, box)     # the top-level keys, every disk
         # the values used (QP.params shows them)
         p.update(cracks=n, crack_radius=radius[0] if radius[0] == radius[1] else list(radius),
                  crack_normal=tuple(float(c) for c in axis), crack_normal_spread=spread, min_gap=gap,
