@@ -74,6 +74,7 @@ from dualfem.errors import InputError, check_int, check_positive
 from dualfem.registry import register_problem
 
 from ._boundary import parse_scalar
+from ._placement import first_fit
 from ._segments import near_segment_pairs
 from .thin_defect import ThinDefect
 from .thin_defect.geometry import parse_defects, read_file_tables
@@ -255,18 +256,7 @@ def _place(cracks, crack_length, crack_angle, min_gap, seed, region, width, heig
         ok[i] = False
         cand = np.flatnonzero(ok)                                  # the candidates clear of the placed cracks
         i, j = _conflicts(seg[cand], None, gap)                    # i < j: j conflicts with an earlier i
-        later = np.argsort(j, kind="stable")
-        i, j = i[later], j[later]
-        starts = np.searchsorted(j, np.arange(len(cand) + 1))
-        accepted = np.zeros(len(cand), dtype=bool)
-        need = n - len(placed)
-        for k in range(len(cand)):
-            if not accepted[i[starts[k]:starts[k + 1]]].any():
-                accepted[k] = True
-                need -= 1
-                if need == 0:
-                    break
-        placed = np.concatenate([placed, seg[cand[accepted]]])
+        placed = np.concatenate([placed, seg[cand[first_fit(i, j, len(cand), n - len(placed))]]])
     if len(placed) < n:
         raise InputError(f"cracks = {n}: only {len(placed)} cracks could be placed in {budget:,} attempts "
                          f"(crack_length {l0:g}..{l1:g}, min_gap {gap:g}, region {box.tolist()}); ask for fewer "

@@ -43,6 +43,8 @@ import numpy as np
 
 from dualfem.errors import InputError, check_int, check_positive
 
+from .._placement import first_fit
+
 #: largest disk count accepted (the mesh size guard refuses most large counts before meshing)
 MAX_DISKS = 20_000
 #: candidates drawn per disk asked for before giving up
@@ -231,18 +233,7 @@ def place_disks(cracks: int, crack_radius: Any, crack_normal: Any, crack_normal_
         ok[i] = False
         cand = np.flatnonzero(ok)
         i, j = _conflicts((c[cand], n[cand], r[cand]), None, gap, reach)      # i < j: j conflicts with earlier i
-        order = np.argsort(j, kind="stable")
-        i, j = i[order], j[order]
-        starts = np.searchsorted(j, np.arange(len(cand) + 1))
-        accepted = np.zeros(len(cand), dtype=bool)
-        need = n_want - len(R)
-        for k in range(len(cand)):
-            if not accepted[i[starts[k]:starts[k + 1]]].any():
-                accepted[k] = True
-                need -= 1
-                if need == 0:
-                    break
-        take = cand[accepted]
+        take = cand[first_fit(i, j, len(cand), n_want - len(R))]
         C, N, R = np.concatenate([C, c[take]]), np.concatenate([N, n[take]]), np.concatenate([R, r[take]])
     if len(R) < n_want:
         raise InputError(f"cracks = {n_want}: only {len(R)} disks could be placed in {budget:,} attempts "
