@@ -205,3 +205,23 @@ def test_friction_law_parameters_enter_the_qp_key_and_are_validated():
         Tresca(-1.0)
     with pytest.raises(ValueError, match="components"):
         Coulomb(0.3, components=3)
+
+
+@pytest.mark.parametrize("law,radius", [(Tresca(0.5, components=2), 0.5), (Coulomb(0.5, components=2), 1.0)],
+                         ids=["tresca", "coulomb"])
+def test_an_infeasible_frictional_answer_gets_a_bound_above_its_error(law, radius):
+    """certify.infeasible_bound with friction blocks: an answer penetrating by 1e-3 (beyond rounding: the
+    duality-gap bound does not apply) is bounded, and the bound holds its true energy-norm error."""
+    from dualfem.core import evaluator
+    from dualfem.numerics.certify import certified_error
+
+    qp = _disc_qp(law)
+    f = np.array([3.0, 4.0])
+    exact = np.array([0.0, *(f / 5.0 * (5.0 - radius))])
+    mu = np.array([2.0, *(-radius * f / 5.0)])
+    x = exact + np.array([-1e-3, 2e-4, -1e-4])
+    cert = certified_error(qp, x, mu)
+    d = x - exact
+    true = np.sqrt(d @ (qp.K @ d)) / evaluator.size_energy(qp, x)
+    assert np.isnan(cert["bound"]) and np.isfinite(cert["infeasible"])
+    assert true <= cert["infeasible"] * (1 + 1e-12) and cert["infeasible"] < 20 * true     # K = I: tight
