@@ -66,7 +66,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from dualfem.core import constraints
-from dualfem.core.evaluator import force_scale, size_energy, size_max
+from dualfem.core.evaluator import ROUNDING_C, abs_product, force_scale, size_energy, size_max
 from dualfem.core.laws import SIGNORINI
 from dualfem.core.qp import QP
 from dualfem.numerics.dependent_rows import (  # noqa: F401 (parallel_rows: public here, as before)
@@ -200,11 +200,24 @@ def error_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve=None, _quad=None, 
         return float("nan")
     mu = constraints.project(blocks, np.asarray(mu, float))
     t1 = (_quad or _residual_solve(qp, x, mu, ksolve or solver_for(qp), _Kx))[0]
-    t2 = 2.0 * max(0.0, constraints.support(blocks, mu, gap))
+    floor = _support_floor(qp, mu, abs_product(qp.G, np.abs(x))) if qp.blocks else 0.0
+    t2 = 2.0 * max(0.0, constraints.support(blocks, mu, gap) - floor)
     nx = size_energy(qp, x, _Kx)      # |x|_K (or the load's size); shifted QP: the smaller of both frames
     if nx == 0.0:
         return float("nan")
     return float(np.sqrt(max(t1, 0.0) + t2) / nx)
+
+
+def _support_floor(qp: QP, mu: np.ndarray, gap_scale: np.ndarray) -> float:
+    """The rounding floor of the duality-gap support term of a QP with friction blocks (0 for Signorini alone,
+    whose exact answers the face step certifies at any size): ``ROUNDING_C eps`` times the support term of
+    ``|mu|`` and ``gap_scale = |G| |x|``, the size of each computed gap (a stick node's slip ``G x`` is known only
+    to ``eps (|G||x|)_j``: its term ``r_j |s_j| + mu_j . s_j`` is rounding up to ``(r_j + |mu_j|) eps (|G||x|)_j``).
+    Above the face step's size limit (``faces.MAX_ROWS``) an exact frictional answer (residuals at rounding) would
+    otherwise keep a bound sqrt(rounding) ~ 1e-8 and be demoted for rounding."""
+    if not qp.blocks:
+        return 0.0
+    return ROUNDING_C * EPS * max(0.0, constraints.support(qp.constraints, np.abs(mu), gap_scale))
 
 
 def active_set_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None,
