@@ -333,20 +333,10 @@ def human_summary(rec: dict, scene: str | None = None) -> str:
                          f"max slip {f['max_slip']:.4g}")
         lines.append("residuals (evaluator): " + "  ".join(f"{k} {v:.2e}" for k, v in r.items()))
     if rec.get("sif"):
-        lines.append(_sif_line(rec["sif"]))
+        from dualfem.post.sif_outputs import summary_line
+
+        lines.append(summary_line(rec["sif"]))
     return "\n".join(lines)
-
-
-def _sif_line(sif: dict) -> str:
-    """One line of stress intensity factors: each 2D tip's K_I, K_II; a 3D front's ranges."""
-    if "error" in sif:
-        return f"stress intensity factors: not computed ({sif['error']})"
-    modes = [k for k in ("K_I", "K_II", "K_III") if k in sif]
-    if "K_III" not in sif:
-        return f"stress intensity factors ({sif['method']}): " + "; ".join(
-            f"tip {i}: " + " ".join(f"{k} {sif[k][i]:.4g}" for k in modes) for i in range(len(sif["K_I"])))
-    return f"stress intensity factors ({sif['method']}, {len(sif['K_I'])} front nodes): " + "  ".join(
-        f"{k} in [{min(sif[k]):.4g}, {max(sif[k]):.4g}]" for k in modes)
 
 
 def _times(t: dict) -> str:

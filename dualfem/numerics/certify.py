@@ -422,7 +422,9 @@ def infeasible_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver, _qu
     if not _finite(x, mu):
         return float("nan")
     if qp.blocks:
-        return _infeasible_blocks(qp, x, mu, ksolve, _Kx)
+        from dualfem.numerics.faces import blocks_infeasible_bound
+
+        return blocks_infeasible_bound(qp, x, mu, ksolve, _Kx)
     D = ksolve.delassus() if qp.m else np.zeros((0, 0))
     if D is None:
         return float("nan")
@@ -442,50 +444,6 @@ def infeasible_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver, _qu
     if nx == 0.0:
         return float("nan")
     second = 2.0 * float(mu @ np.maximum(g, 0.0)) + pDp
-    return float((np.sqrt(max(rKr, 0.0)) + np.sqrt(max(second, 0.0))) / nx)
-
-
-def _infeasible_blocks(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, Kx=None) -> float:
-    """:func:`infeasible_bound` for a QP with friction blocks beside the Signorini one (Tresca; Coulomb as the
-    Tresca problem of the answer's own threshold, as the rest of the certificate). With mu projected onto every
-    law's set, z = K^-1 (F + G'mu), g = G z: for the tangential rows the linear term of the dual is bounded by
-    the law's support term ``sum_j r_j |g_j| + mu_j . g_j`` (any nu_j in the disc), for the normal rows as in the
-    Signorini case, and the quadratic maximum over the normal rows by ``1/2 p'D^+ p`` (p the penetration of z on
-    the normal rows, 0 elsewhere; D = G K^-1 G' dense from the reduction, up to ``faces.MAX_ROWS`` rows):
-
-        |x - x*|_K  <=  sqrt(r'K^-1 r) + sqrt(2 mu+'g+ + 2 sum_friction support + p'D^+ p).
-
-    nan for AMG K-solves, more rows, another law, or p not in D's range."""
-    from dualfem.core.laws import Friction, Signorini
-    from dualfem.numerics import faces
-
-    blocks = qp.constraints
-    if getattr(ksolve, "amg", False) or qp.m_total > faces.MAX_ROWS or \
-            not all(isinstance(b.law, (Signorini, Friction)) for b in blocks):
-        return float("nan")
-    mu = constraints.project(blocks, np.asarray(mu, float))
-    r = (qp.K @ x if Kx is None else Kx) - qp.F - qp.G.T @ mu
-    z = ksolve(r)
-    rKr, g = float(r @ z), qp.G @ (x - z)
-    mus, gaps = tuple(constraints.split(blocks, mu)), constraints.split(blocks, g)
-    second, p = 0.0, np.zeros_like(g)
-    for b, mk, gk, pk in zip(blocks, mus, gaps, constraints.split(blocks, p)):
-        if isinstance(b.law, Signorini):
-            second += 2.0 * float(mk @ np.maximum(gk, 0.0))
-            pk[:] = np.maximum(-gk, 0.0)
-        else:
-            second += 2.0 * max(0.0, b.law.support(mk, gk, b.weights, mus))
-    if p.any():
-        D, _ = faces.delassus(qp, ksolve)
-        w, V = np.linalg.eigh(D)
-        keep = w > EPS * qp.m_total * max(w.max(initial=0.0), 0.0)
-        c = V.T @ p
-        if np.linalg.norm(c[~keep]) > 1e-10 * np.linalg.norm(p):
-            return float("nan")
-        second += float(np.sum(c[keep] ** 2 / w[keep]))
-    nx = size_energy(qp, x, Kx)
-    if nx == 0.0:
-        return float("nan")
     return float((np.sqrt(max(rKr, 0.0)) + np.sqrt(max(second, 0.0))) / nx)
 
 

@@ -7,7 +7,8 @@ block's law deciding its face (:meth:`dualfem.core.laws.Law.face`), the multipli
 (:meth:`dualfem.core.laws.Law.complementary`) and whether the exact point holds
 (:meth:`dualfem.core.laws.Law.face_holds`). The Delassus matrix ``D = G K^-1 G'`` is formed densely from
 ``m_total`` K-solves (exact factorizations only: with AMG K-solves no value is claimed), up to
-:data:`MAX_ROWS` rows.
+:data:`MAX_ROWS` rows. :func:`blocks_infeasible_bound`: the bound of an answer that penetrates, with friction
+blocks (:func:`dualfem.numerics.certify.infeasible_bound`'s multi-block case).
 """
 from __future__ import annotations
 
@@ -17,7 +18,8 @@ import numpy as np
 import scipy.linalg as sla
 
 from dualfem.core import constraints
-from dualfem.core.evaluator import force_scale, size_energy
+from dualfem.core.evaluator import EPS, force_scale, size_energy
+from dualfem.core.laws import Friction, Signorini
 from dualfem.core.qp import QP
 from dualfem.numerics.linalg import step_size
 
@@ -127,3 +129,45 @@ def blocks_active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, margi
     if nx == 0.0:
         return float("nan"), err_mu
     return step_size(st.rKr, st.Gz, st.dmu, st.Ddmu) / nx, err_mu
+
+
+def blocks_infeasible_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, Kx=None) -> float:
+    """:func:`dualfem.numerics.certify.infeasible_bound` for a QP with friction blocks beside the Signorini one
+    (Tresca; Coulomb as the Tresca problem of the answer's own threshold, as the rest of the certificate). With mu
+    projected onto every law's set, z = K^-1 (F + G'mu), g = G z: for the tangential rows the linear term of the
+    dual is bounded by the law's support term ``sum_j r_j |g_j| + mu_j . g_j`` (any nu_j in the disc), for the
+    normal rows as in the Signorini case, and the quadratic maximum over the normal rows by ``1/2 p'D^+ p`` (p the
+    penetration of z on the normal rows, 0 elsewhere; D = G K^-1 G' dense from the reduction, up to :data:`MAX_ROWS`
+    rows):
+
+        |x - x*|_K  <=  sqrt(r'K^-1 r) + sqrt(2 mu+'g+ + 2 sum_friction support + p'D^+ p).
+
+    nan for AMG K-solves, more rows, another law, or p not in D's range."""
+    blocks = qp.constraints
+    if getattr(ksolve, "amg", False) or qp.m_total > MAX_ROWS or \
+            not all(isinstance(b.law, (Signorini, Friction)) for b in blocks):
+        return float("nan")
+    mu = constraints.project(blocks, np.asarray(mu, float))
+    r = (qp.K @ x if Kx is None else Kx) - qp.F - qp.G.T @ mu
+    z = ksolve(r)
+    rKr, g = float(r @ z), qp.G @ (x - z)
+    mus, gaps = tuple(constraints.split(blocks, mu)), constraints.split(blocks, g)
+    second, p = 0.0, np.zeros_like(g)
+    for b, mk, gk, pk in zip(blocks, mus, gaps, constraints.split(blocks, p)):
+        if isinstance(b.law, Signorini):
+            second += 2.0 * float(mk @ np.maximum(gk, 0.0))
+            pk[:] = np.maximum(-gk, 0.0)
+        else:
+            second += 2.0 * max(0.0, b.law.support(mk, gk, b.weights, mus))
+    if p.any():
+        D, _ = delassus(qp, ksolve)
+        w, V = np.linalg.eigh(D)
+        keep = w > EPS * qp.m_total * max(w.max(initial=0.0), 0.0)
+        c = V.T @ p
+        if np.linalg.norm(c[~keep]) > 1e-10 * np.linalg.norm(p):
+            return float("nan")
+        second += float(np.sum(c[keep] ** 2 / w[keep]))
+    nx = size_energy(qp, x, Kx)
+    if nx == 0.0:
+        return float("nan")
+    return float((np.sqrt(max(rKr, 0.0)) + np.sqrt(max(second, 0.0))) / nx)

@@ -67,3 +67,16 @@ def front_point_data(qp, sif: StressIntensity, n_points: int) -> dict[str, np.nd
             a[sif.node] = v
             out[k] = a
     return out
+
+
+def summary_line(sif: dict) -> str:
+    """One line of ``dualfem solve --sif``'s summary from the ``sif`` record (:func:`sif_result`): each 2D tip's
+    K_I, K_II; a 3D front's ranges."""
+    if "error" in sif:
+        return f"stress intensity factors: not computed ({sif['error']})"
+    modes = [k for k in ("K_I", "K_II", "K_III") if k in sif]
+    if "K_III" not in sif:
+        return f"stress intensity factors ({sif['method']}): " + "; ".join(
+            f"tip {i}: " + " ".join(f"{k} {sif[k][i]:.4g}" for k in modes) for i in range(len(sif["K_I"])))
+    return f"stress intensity factors ({sif['method']}, {len(sif['K_I'])} front nodes): " + "  ".join(
+        f"{k} in [{min(sif[k]):.4g}, {max(sif[k]):.4g}]" for k in modes)
