@@ -146,6 +146,11 @@ def _next(pr, qp: QP, est: Estimate, target: float, max_unknowns: int, mesh_size
     return None
 
 
+#: scene keys of thin_defect and three_d added after their QPs' parameters were first keyed (networks, size
+#: growth, adaptive refinement): left out of a QP's parameters at their defaults
+LATER_KEYS = ("defects_file", "size_growth", "refine", "target_error", "max_unknowns")
+
+
 class Adaptive:
     """The scene option ``refine = "adaptive"`` for a gmsh problem (mixed into ThinDefect and ThreeD): the
     loop runs once per :class:`~dualfem.core.problem.Shared`, inside ``cut()``, and the last mesh is kept."""
@@ -177,6 +182,14 @@ class Adaptive:
     def size_of_mesh(self) -> int:
         """dim times the nodes of the cut mesh (meshing it): the unknowns before supports are removed."""
         return int(self.dim) * int(self.cut()[0].points.shape[1])  # type: ignore[attr-defined]
+
+    def later_params(self, params: dict, given: dict, defaults: dict) -> None:
+        """A QP's parameters as before the keys added since (:data:`LATER_KEYS`): each dropped at its default
+        (so a scene's QP key does not change), then :meth:`adaptive_params`."""
+        for k in LATER_KEYS:
+            if given[k] == defaults[k]:
+                params.pop(k, None)
+        self.adaptive_params(params)
 
     def adaptive_params(self, params: dict) -> None:
         """``adaptive_steps`` and ``adaptive_estimate`` (the last relative estimate) into a QP's parameters."""

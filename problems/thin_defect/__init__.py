@@ -492,11 +492,7 @@ class ThinDefect(Adaptive, Problem):
             params["defects"] = defects_label(self._defects)
         if self._loads is not None:
             params["loads"] = self._loads.label()
-        # the QP's parameters as before these keys, at their defaults
-        for k in ("defects_file", "size_growth", "refine", "target_error", "max_unknowns"):
-            if p[k] == ThinDefect.defaults[k]:
-                params.pop(k, None)
-        self.adaptive_params(params)
+        self.later_params(params, p, ThinDefect.defaults)
         self.jump_operators = J
         geometry = GeometryPart(2, maps.pop("nodes"), maps.pop("triangles"), maps.pop("node_dofs"))
         qp = QP(K=K, F=self._load_vector(a), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],

@@ -379,11 +379,7 @@ class ThreeD(Adaptive, Problem):
         params = {k: (v if isinstance(v, (int, float, str)) else str(np.asarray(v).tolist()))
                   for k, v in p.items() if not callable(v) and k != "defects" and k not in fk.KEYS}
         params["defects"] = "; ".join(_label(s) for s in self._surfaces)
-        # the QP's parameters as before these keys, at their defaults
-        for k in ("defects_file", "size_growth", "refine", "target_error", "max_unknowns"):
-            if p[k] == self.defaults[k]:
-                params.pop(k, None)
-        self.adaptive_params(params)
+        self.later_params(params, p, self.defaults)
         if fk.frictional(self._friction):
             params["friction"] = fk.params_label(self._friction)
         geometry = GeometryPart(3, a["points"], c.tets, nd)
