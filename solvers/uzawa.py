@@ -126,6 +126,7 @@ from dualfem.numerics.friction_uzawa import FrictionRun, outer
 from dualfem.numerics.newton_spaces import FullSpace as _FullSpace
 from dualfem.numerics.newton_spaces import ReducedSpace as _ReducedSpace
 from dualfem.numerics.newton_spaces import SparseSpace as _SparseSpace
+from dualfem.numerics.newton_spaces import armijo_step
 from dualfem.qp import UnitsPart
 from dualfem.registry import register_solver
 from dualfem.solution import Solution, Status
@@ -357,16 +358,14 @@ class Uzawa(DualOperatorSolver):
                 # the penalty's linearization D_j = ((lam_j + s r Bd_j)^+)^2 - (lam_j^+)^2 - 2 s r Bd_j lam_j^+
                 # evaluated in a cancellation-free form, so a Newton step at round-off level is
                 # accepted or refused the same way whatever the linear algebra.
-                for _ in range(int(p["max_backtracks"])):
-                    eps = s * rBd
+                def rem(t, lam=lam, lp=lp, rBd=rBd):
+                    eps = t * rBd
                     lps = lam + eps
-                    rem = np.where((lam > 0) & (lps > 0), eps * eps,
-                                   np.maximum(lps, 0.0) ** 2 - lp * lp - 2.0 * eps * lp)
-                    dM = -s * Gd + 0.5 * s * s * dQd + float(w @ rem) / (2.0 * r)
-                    if dM <= -p["armijo_c"] * s * Gd:
-                        break
-                    s /= p["step_factor"]
-                else:
+                    return np.where((lam > 0) & (lps > 0), eps * eps,
+                                    np.maximum(lps, 0.0) ** 2 - lp * lp - 2.0 * eps * lp)
+
+                s = armijo_step(Gd, dQd, rem, w, r, p)
+                if s is None:
                     return z, steps, False, "Armijo backtracking failed"
             # Gd <= 0 only happens when G is at round-off level: the full step is taken and the
             # stop test below ends the inner loop.

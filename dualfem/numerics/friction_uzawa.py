@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dualfem.numerics.friction_spaces import Layout, newton_terms, project, remainder
+from dualfem.numerics.newton_spaces import armijo_step
 
 
 @dataclass
@@ -53,13 +54,8 @@ def inner(space, lay: Layout, z, y, g, r: float, p: dict, floor2: float, deadlin
         Gd, dQd, rGd = float(grad @ d), space.qform(d), r * (G @ d)
         s = 1.0
         if Gd > 0:
-            for _ in range(int(p["max_backtracks"])):
-                rem = remainder(lay, a, s * rGd, g)
-                dM = -s * Gd + 0.5 * s * s * dQd + float(w @ rem) / (2.0 * r)
-                if dM <= -p["armijo_c"] * s * Gd:
-                    break
-                s /= p["step_factor"]
-            else:
+            s = armijo_step(Gd, dQd, lambda t, a=a, rGd=rGd: remainder(lay, a, t * rGd, g), w, r, p)
+            if s is None:
                 return z, steps, False, "Armijo backtracking failed"
         z = z - s * d
         steps.append(s)

@@ -32,6 +32,21 @@ EPS = float(np.finfo(float).eps)
 DENSE_EIG_MAX = 32
 
 
+def armijo_step(Gd: float, dQd: float, remainder, w: np.ndarray, r: float, p: dict) -> float | None:
+    """The Armijo step along a generalized Newton direction d of the modified Lagrangian M (the paper's inner loop,
+    with or without friction): s = 1, divided by ``p["step_factor"]`` until M(x - s d) - M(x) = -s Gd + s^2/2 dQd +
+    w'remainder(s) / (2 r) <= -armijo_c s Gd, at most ``p["max_backtracks"]`` times; None when none was accepted.
+    ``Gd`` = grad'd (> 0), ``dQd`` = d'Qd, ``remainder(s)`` the per-row remainder of the penalty's linearization at
+    step s (a law's own, in a cancellation-free form)."""
+    s = 1.0
+    for _ in range(int(p["max_backtracks"])):
+        dM = -s * Gd + 0.5 * s * s * dQd + float(w @ remainder(s)) / (2.0 * r)
+        if dM <= -p["armijo_c"] * s * Gd:
+            return s
+        s /= p["step_factor"]
+    return None
+
+
 class ReducedSpace:
     """Dense linear algebra on the local unknowns I (exact reduction).
 
