@@ -86,6 +86,9 @@ def parts(qp):
     it = qp.interface
     if it.front.size == 0:
         raise InputError("stress intensity factors need crack tips or fronts (interface.front is empty)")
+    if qp.geometry.element != "P1":
+        raise InputError(f"stress intensity factors are computed from P1 fields only; this QP has element = "
+                         f"{qp.geometry.element!r} (use element = 'P1' for --sif)")
     return it, qp.geometry, qp.material
 
 
