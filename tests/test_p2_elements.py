@@ -199,3 +199,12 @@ def test_p2_loads_have_the_p1_resultants(keys):
         F, X = pr.nodal_load(), pr.cut()[1] if el == "P1" else pr._delta_free()["maps"]["nodes"]
         out.append(np.r_[F.sum(axis=1), np.sum(X[0] * F[1] - X[1] * F[0])])
     assert np.allclose(out[0], out[1], rtol=1e-9, atol=1e-12 * np.abs(out[0]).max()), out
+
+
+def test_a_p2_qp_file_keeps_its_element(tmp_path):
+    from dualfem.qp import QP
+
+    qp = load_scene("f2", {"N": 4, "element": "P2-quarter-point"}).build()
+    back = QP.load(qp.save(tmp_path / "p2.npz"))
+    assert back.geometry.element == "P2-quarter-point" and back.geometry.nodes.shape == qp.geometry.nodes.shape
+    assert QP.load(load_scene("f2", {"N": 4}).build().save(tmp_path / "p1.npz")).geometry.element == "P1"
