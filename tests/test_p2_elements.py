@@ -116,7 +116,6 @@ def test_crack_edge_weights_and_pairs():
 
 @pytest.mark.parametrize("extra, words", [
     ({"element": "P3"}, "element must be one of 'P1', 'P2', 'P2-quarter-point'"),
-    ({"element": "P2", "friction": "tresca", "friction_bound": 1.0}, "friction is not supported"),
     ({"element": "P2", "mesh": "gmsh", "refine": "adaptive", "target_error": 0.1, "max_unknowns": 5000},
      "refine = 'adaptive' is not supported"),
     ({"element": "P2", "load": "f2", "defects": [{"points": [[0.25, 0.5], [0.75, 0.5]], "face_pressure": 1.0}]},
@@ -208,3 +207,23 @@ def test_a_p2_qp_file_keeps_its_element(tmp_path):
     back = QP.load(qp.save(tmp_path / "p2.npz"))
     assert back.geometry.element == "P2-quarter-point" and back.geometry.nodes.shape == qp.geometry.nodes.shape
     assert QP.load(load_scene("f2", {"N": 4}).build().save(tmp_path / "p1.npz")).geometry.element == "P1"
+
+
+def test_p2_friction_scales_the_slip():
+    """A closed crack at 30 degrees under compression and shear, all of it slipping: Coulomb's slip is the
+    frictionless one times (|tau| - mu sigma_n) / |tau| (the closed forms' ratio; the box's bias cancels)."""
+    stress = [[0.0, 0.5], [0.5, -1.0]]
+    crack = [{"points": [[9.1339746, 9.5], [10.8660254, 10.5]]}]
+    slips = []
+    for fr in ({}, {"friction": "coulomb", "friction_coefficient": 0.1}):
+        qp = _box("P2-quarter-point", stress, crack, L=20.0, h=2.0, tip=0.1, **fr).build()
+        sol = run("pdas", qp)
+        assert str(sol.status) == "solved" and len(qp.blocks) == int(bool(fr))
+        it = qp.interface
+        u = _nodal(qp, sol.x).T
+        slips.append(np.sum((u[it.upper] - u[it.lower]) * it.tangents[:, 0, :], axis=1))
+    t, n = np.array([np.cos(np.pi / 6), 0.5]), np.array([-0.5, np.cos(np.pi / 6)])
+    tau, sn = t @ np.array(stress) @ n, n @ np.array(stress) @ n
+    ratio = (abs(tau) + 0.1 * sn) / abs(tau)
+    k = np.abs(slips[0]) > 0.2 * np.abs(slips[0]).max()
+    assert 0 < ratio < 1 and np.allclose(slips[1][k], ratio * slips[0][k], rtol=2e-3)

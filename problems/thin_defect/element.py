@@ -15,8 +15,8 @@ their normals, the isoparametric row-sum weights); pairs are ordered defect by d
 Supports and loads as P1 does, on the P2 nodes: the legacy bottom clamp fixes every node on x2 = 0 (mid-edge
 nodes included), ``[[boundary]]`` clamps / rollers the nodes of a side's edges, the rigid-body removal picks
 P2 nodes; side tractions and ``remote_stress`` are integrated with the quadratic edge functions (5-point Gauss
-per edge), ``body_force`` with scikit-fem on the (isoparametric) cells. Refused on P2 (one InputError line
-each): ``face_pressure``, friction blocks, ``refine = "adaptive"``.
+per edge), ``body_force`` with scikit-fem on the (isoparametric) cells. Friction (Tresca, Coulomb) acts on every
+P2 pair as on P1's. Refused on P2 (one InputError line each): ``face_pressure``, ``refine = "adaptive"``.
 
 The QP's ``geometry`` holds every P2 node (``nodes`` (2, nv + ne)), the linear triangles as ``cells`` (vertex
 ids only) and ``element``: post-processing that assumes P1 (SIF, the estimator) refuses such a QP; the vertex
@@ -30,7 +30,6 @@ import scipy.sparse as sp
 from dualfem.errors import InputError
 
 from .. import _boundary as bd
-from .. import _friction_keys as fk
 from .._interface import DoubledNodes, delta_free_part, local_unknowns
 from .._quadratic import edge_index, edge_table, edge_weights, mid_edge_pairs, quadratic_interface
 from .cut import Cut
@@ -48,15 +47,14 @@ def check_element(value) -> str:
     return value
 
 
-def check_scene(params: dict, defects: list[dict], friction) -> None:
-    """What a quadratic scene refuses (InputError): face pressures, friction, adaptive refinement."""
+def check_scene(params: dict, defects: list[dict]) -> None:
+    """What a quadratic scene refuses (InputError): face pressures, adaptive refinement. (Friction blocks take the
+    P2 pairs as they are: one Tresca or Coulomb row per pair, with its weight.)"""
     el = params["element"]
     if el == "P1":
         return
     if any(d.get("face_pressure") is not None for d in defects):
         raise InputError(f"element = {el!r}: face_pressure is not supported on quadratic elements; use element = 'P1'")
-    if fk.frictional(friction):
-        raise InputError(f"element = {el!r}: friction is not supported on quadratic elements; use element = 'P1'")
     if params["refine"] != "none":
         raise InputError(f"element = {el!r}: refine = {params['refine']!r} is not supported on quadratic elements "
                          f"(its estimator is P1's); use element = 'P1' or refine = 'none'")
