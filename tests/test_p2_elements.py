@@ -118,8 +118,6 @@ def test_crack_edge_weights_and_pairs():
     ({"element": "P3"}, "element must be one of 'P1', 'P2', 'P2-quarter-point'"),
     ({"element": "P2", "mesh": "gmsh", "refine": "adaptive", "target_error": 0.1, "max_unknowns": 5000},
      "refine = 'adaptive' is not supported"),
-    ({"element": "P2", "load": "f2", "defects": [{"points": [[0.25, 0.5], [0.75, 0.5]], "face_pressure": 1.0}]},
-     "face_pressure is not supported"),
 ])
 def test_refusals(extra, words):
     with pytest.raises(InputError, match=words.replace("(", r"\(")):
@@ -227,3 +225,14 @@ def test_p2_friction_scales_the_slip():
     ratio = (abs(tau) + 0.1 * sn) / abs(tau)
     k = np.abs(slips[0]) > 0.2 * np.abs(slips[0]).max()
     assert 0 < ratio < 1 and np.allclose(slips[1][k], ratio * slips[0][k], rtol=2e-3)
+
+
+def test_p2_face_pressure_is_remote_tension_by_superposition():
+    """A crack under face pressure p in an unloaded free box opens as under the remote tension p (the uniform
+    field has no jump): the same openings at every pair, vertex and mid-edge."""
+    crack = [[1.2, 2.1], [2.8, 1.9]]
+    qa = _box("P2-quarter-point", [[0.0, 0.0], [0.0, 0.0]], [{"points": crack, "face_pressure": 3.0}]).build()
+    n = np.array([0.2, 1.6]) / np.hypot(0.2, 1.6)                 # the crack's normal
+    qb = _box("P2-quarter-point", (3.0 * np.outer(n, n)).tolist(), [{"points": crack}]).build()
+    oa, ob = qa.B @ run("pdas", qa).x, qb.B @ run("pdas", qb).x
+    assert oa.min() > 0 and np.allclose(oa, ob, rtol=1e-8, atol=1e-10 * oa.max())

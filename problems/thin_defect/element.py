@@ -15,8 +15,9 @@ their normals, the isoparametric row-sum weights); pairs are ordered defect by d
 Supports and loads as P1 does, on the P2 nodes: the legacy bottom clamp fixes every node on x2 = 0 (mid-edge
 nodes included), ``[[boundary]]`` clamps / rollers the nodes of a side's edges, the rigid-body removal picks
 P2 nodes; side tractions and ``remote_stress`` are integrated with the quadratic edge functions (5-point Gauss
-per edge), ``body_force`` with scikit-fem on the (isoparametric) cells. Friction (Tresca, Coulomb) acts on every
-P2 pair as on P1's. Refused on P2 (one InputError line each): ``face_pressure``, ``refine = "adaptive"``.
+per edge), ``body_force`` with scikit-fem on the (isoparametric) cells, a defect's ``face_pressure`` p as
+``p w_j nu_j`` at each pair (the consistent P2 load of a constant pressure: w_j are the edge row sums). Friction
+(Tresca, Coulomb) acts on every P2 pair as on P1's. Refused on P2 (one InputError line): ``refine = "adaptive"``.
 
 The QP's ``geometry`` holds every P2 node (``nodes`` (2, nv + ne)), the linear triangles as ``cells`` (vertex
 ids only) and ``element``: post-processing that assumes P1 (SIF, the estimator) refuses such a QP; the vertex
@@ -48,13 +49,11 @@ def check_element(value) -> str:
 
 
 def check_scene(params: dict, defects: list[dict]) -> None:
-    """What a quadratic scene refuses (InputError): face pressures, adaptive refinement. (Friction blocks take the
-    P2 pairs as they are: one Tresca or Coulomb row per pair, with its weight.)"""
+    """What a quadratic scene refuses (InputError): adaptive refinement. (Friction blocks take the P2 pairs as they
+    are, one Tresca or Coulomb row per pair with its weight; a face pressure p gives p w_j nu_j at each pair.)"""
     el = params["element"]
     if el == "P1":
         return
-    if any(d.get("face_pressure") is not None for d in defects):
-        raise InputError(f"element = {el!r}: face_pressure is not supported on quadratic elements; use element = 'P1'")
     if params["refine"] != "none":
         raise InputError(f"element = {el!r}: refine = {params['refine']!r} is not supported on quadratic elements "
                          f"(its estimator is P1's); use element = 'P1' or refine = 'none'")
@@ -250,8 +249,13 @@ def nodal_load(problem, a: dict) -> np.ndarray:
                                  f"on the {side} side")
             if spec.body_force is not None:
                 _body_forces(F, a, a["maps"]["triangles"], spec.body_force, scale)
+    R = rotation(float(p["rotate_deg"]))
     if p["rotate_deg"] != 0:
-        F = rotation(float(p["rotate_deg"])) @ F
+        F = R @ F
+    if any(d.get("face_pressure") is not None for d in problem._defects):    # p w_j nu_j: exact for constant p
+        q = a["cut"]
+        F = F + bd.face_pressure_forces(q.upper, q.lower, R @ q.normals, q.weights, scale * problem._pressures(q),
+                                        F.shape[1])
     if spec is not None:
         bd.check_balance(spec, a["maps"]["nodes"], sides, F)
     return F
