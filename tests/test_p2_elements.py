@@ -236,3 +236,15 @@ def test_p2_face_pressure_is_remote_tension_by_superposition():
     qb = _box("P2-quarter-point", (3.0 * np.outer(n, n)).tolist(), [{"points": crack}]).build()
     oa, ob = qa.B @ run("pdas", qa).x, qb.B @ run("pdas", qb).x
     assert oa.min() > 0 and np.allclose(oa, ob, rtol=1e-8, atol=1e-10 * oa.max())
+
+
+def test_p2_vtu_and_figure_show_the_vertex_values(tmp_path):
+    from dualfem.post.vtk import to_meshio
+
+    qp = load_scene("f2", {"N": 4, "element": "P2"}).build()
+    sol = run("pdas", qp)
+    m = to_meshio(qp, sol)
+    tri = m.cells[0].data
+    nv = int(qp.geometry.cells.max()) + 1
+    assert tri.max() < nv and m.points.shape[0] == qp.geometry.nodes.shape[1]
+    assert np.allclose(m.point_data["displacement"][:nv, :2], _nodal(qp, sol.x).T[:nv])
