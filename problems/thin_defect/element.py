@@ -112,16 +112,18 @@ def basis(points: np.ndarray, triangles: np.ndarray, quarter: bool, intorder: in
     return Basis(mesh, ElementVector(ElementTriP2()), intorder=intorder)
 
 
-def stiffness(points: np.ndarray, triangles: np.ndarray, quarter: bool, lam: float, mu: float,
+def stiffness(points: np.ndarray, triangles: np.ndarray, edges: np.ndarray, quarter: bool, lam: float, mu: float,
               node_dofs: np.ndarray) -> sp.csc_matrix:
     """P2 plane elasticity stiffness on the free unknowns ``node_dofs`` (2, n_nodes; -1 fixed), canonical CSC.
-    scikit-fem's default quadrature (degree 4: exact on straight P2 triangles)."""
+    scikit-fem's default quadrature (degree 4: exact on straight P2 triangles). RuntimeError unless scikit-fem's
+    facets are ``edges`` (node nv + k = edge k) and its DOFs the nodes' components."""
     from skfem import asm
     from skfem.models.elasticity import linear_elasticity
 
     b = basis(points, triangles, quarter)
-    if b.N != node_dofs.size:
-        raise RuntimeError(f"the P2 basis has {b.N} DOFs, the nodes {node_dofs.size} components")
+    if b.N != node_dofs.size or not np.array_equal(b.mesh.facets, edges):
+        raise RuntimeError(f"the P2 basis ({b.N} DOFs) does not number the nodes' {node_dofs.size} components as "
+                           f"problems/_quadratic.edge_table does")
     free = node_dofs.T.ravel()
     keep = np.flatnonzero(free >= 0)          # basis DOF 2 i + c in (node, component) order: unknowns ascending
     K = asm(linear_elasticity(lam, mu), b).tocsr()[keep][:, keep].tocsc()
@@ -148,7 +150,7 @@ def delta_free(problem, lam: float, mu: float, R: np.ndarray) -> dict:
     else:
         node_dofs = bd.dof_numbering(bd.fixed_mask(problem._loads, P, sides))
     n = int(node_dofs.max()) + 1
-    K_el = stiffness(P, c.triangles, quarter, lam, mu, node_dofs)
+    K_el = stiffness(P, c.triangles, edges, quarter, lam, mu, node_dofs)
     q, tangents, s = p2_interface(c, P_ref, edges)
     part = delta_free_part(node_dofs, q, (R @ q.normals).T, tangents=(R @ tangents).T[:, None, :], front=c.tips, s=s)
     maps = {"nodes": P, "triangles": c.triangles, "node_dofs": node_dofs}
