@@ -248,3 +248,17 @@ def test_p2_vtu_and_figure_show_the_vertex_values(tmp_path):
     nv = int(qp.geometry.cells.max()) + 1
     assert tri.max() < nv and m.points.shape[0] == qp.geometry.nodes.shape[1]
     assert np.allclose(m.point_data["displacement"][:nv, :2], _nodal(qp, sol.x).T[:nv])
+
+
+def test_mid_edge_pairs_take_a_repeated_edge_once():
+    """The generic pairing (3D gives each interior crack edge twice, once per face): the same pairs either way,
+    and an edge whose two vertices are tips / front nodes is not a pair."""
+    pr = load_scene("f2", {"N": 8})
+    c, _ = pr.cut()
+    edges, _ = q2.edge_table(c.triangles)
+    from dualfem.problems.thin_defect.element import crack_edges
+    ce = crack_edges(c)
+    once, twice = q2.mid_edge_pairs(c, edges, ce), q2.mid_edge_pairs(c, edges, np.hstack([ce, ce[::-1]]))
+    assert np.array_equal(once.lower, twice.lower) and np.array_equal(once.upper, twice.upper)
+    assert np.array_equal(once.edge, twice.edge) and once.lower.size == ce.shape[1]
+    assert q2.mid_edge_pairs(c, edges, c.tips[:2].reshape(2, 1)).lower.size == 0       # both ends single
