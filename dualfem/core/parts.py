@@ -123,17 +123,25 @@ class ShiftPart:
             _finite(self.rhs, "shift.rhs")
 
 
+#: the finite elements a :class:`GeometryPart` may carry
+ELEMENTS = ("P1", "P2", "P2-quarter-point")
+
+
 @dataclass(frozen=True)
 class GeometryPart:
     """The mesh of a finite-element QP; ``node_dofs[c, i]`` is the unknown of component c of node i (-1: fixed).
 
     ``node_dofs`` has one row per field component: ``dim`` rows for displacements, one for a
-    scalar field (a membrane's deflection)."""
+    scalar field (a membrane's deflection). ``element``: ``"P1"`` (default: the field is linear on each cell,
+    every node a vertex of ``cells``) or a quadratic element (``"P2"``, ``"P2-quarter-point"``: the nodes beyond
+    the cells' vertices are mid-edge nodes, the field is quadratic on each cell; post-processing that assumes P1
+    gradients refuses it, what shows vertex values on the linear cells may use it)."""
 
     dim: int
     nodes: np.ndarray
     cells: np.ndarray
     node_dofs: np.ndarray
+    element: str = "P1"
 
     @classmethod
     def make(cls, nodes, cells, node_dofs, dim: int | None = None) -> GeometryPart:
@@ -153,6 +161,8 @@ class GeometryPart:
             raise InputError(f"geometry.node_dofs must have shape (components, {nn}), got {nd.shape}")
         if t.ndim != 2 or t.shape[0] != self.dim + 1:
             raise InputError(f"geometry.cells must have shape ({self.dim + 1}, n_cells), got {t.shape}")
+        if self.element not in ELEMENTS:
+            raise InputError(f"geometry.element must be one of {', '.join(ELEMENTS)}, got {self.element!r}")
         if t.size and (t.min() < 0 or t.max() >= nn):
             raise InputError(f"geometry.cells must hold node indices in [0, {nn}), got [{t.min()}, {t.max()}]")
         free = nd[nd >= 0]
