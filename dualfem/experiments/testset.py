@@ -11,7 +11,10 @@ and writes, in the formats of :mod:`dualfem.experiments.testset_files`:
 * ``DIR/reference/NAME.npz``: x, the multipliers ``z = mu >= 0`` (qpsolvers' z of ``G x <= h``:
   ``P x + q + G'z = 0``), the objective ``1/2 x'Px + q'x`` and the certificate;
 * ``DIR/dualfem_contact.py``: a qpbenchmark ``TestSet`` (class ``DualfemContact``) that loads them;
-* ``DIR/manifest.json`` and ``DIR/README.md``: sizes, conventions, units, provenance.
+* ``DIR/manifest.json`` and ``DIR/README.md``: sizes, conventions, units, provenance;
+* ``DIR/friction/``: the frictional problems of the chosen classes (Tresca and Coulomb, 2D and 3D: not QPs of
+  qpsolvers' form, so outside the qpbenchmark TestSet), with certified references and FCLIB files for Coulomb
+  (:mod:`dualfem.experiments.testset_friction`; ``friction=False`` leaves them out).
 
 Adding a scene is one line of :data:`DECLARED` (a scene of ``dualfem list``, a scene of the library or
 a ``.toml`` file, with overrides). Problem names are the declared names: never renamed.
