@@ -31,6 +31,14 @@ when consistent and better, ``info["polished"]``) brings them to rounding once t
 1e-8)`` with the polish. ``polish`` is off by default: ``qp_<backend>`` alone is the backend's answer.
 A backend's own options pass through as parameters where its option list can be read from the
 installed library (clarabel, osqp, piqp: :meth:`QpsolversSolver.backend_options`).
+
+**Friction** (the backends of :data:`BILATERAL`): 2D Tresca as the linear epigraph of
+:mod:`dualfem.numerics.epigraph` (boxes: two linear rows per node); 2D Coulomb by the fixed point
+``g <- mu_f lambda`` over those Tresca solves (:mod:`dualfem.numerics.coulomb_run`, parameters ``coulomb_tol``,
+``coulomb_max_iter``): ``iterations["coulomb"]`` Tresca solves, ``info["coulomb"]`` the changes and the
+observed contraction, status ``max_iter`` (never ``solved``) when it stalls or reaches its cap. 3D friction
+(discs: second-order cones) is skipped with the reason, and so is friction for the backends that need a
+positive definite P (:data:`NEEDS_DEFINITE_P`: the epigraph variables have none).
 """
 from __future__ import annotations
 
@@ -46,6 +54,8 @@ import numpy as np
 
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.laws import conic_rows
+from dualfem.numerics.coulomb import coulomb_blocks
+from dualfem.numerics.coulomb_run import coulomb_by_tresca
 from dualfem.numerics.epigraph import epigraph, norm_blocks, not_linear
 from dualfem.numerics.face_polish import polish_if_better as face_polish_if_better
 from dualfem.numerics.polish import polish_if_better
@@ -59,6 +69,9 @@ from dualfem.solver import Solver
 DENSE_MAX_N = 3000
 #: backends that refuse a QP without constraints (SCS: "m must be a positive integer"): skipped with the reason
 NEEDS_A_CONSTRAINT = ("scs",)
+#: backends that need a positive definite P (qpsolvers' ProblemError "matrix P is not positive definite"): the
+#: epigraph of a frictional QP has a zero block for its variables t, so they skip friction with the reason
+NEEDS_DEFINITE_P = ("ecos", "quadprog")
 
 
 def _tols(*names: str) -> Callable[[float], dict]:
@@ -159,9 +172,12 @@ class QpsolversSolver(Solver):
     requires = ("qpsolvers",)
     extra = "qp"
     defaults = {"tol": 1e-9, "max_iter": 100000, "time_limit": 600.0, "verbose": False,
-                "scale": True, "max_n": 0, "polish": False}
+                "scale": True, "max_n": 0, "polish": False,
+                "coulomb_tol": 1e-8,      # Coulomb: relative change of the threshold that stops the fixed point
+                "coulomb_max_iter": 50}   # Coulomb: most Tresca solves
 
-    ranges = {"scale": bool, "max_n": "[0, inf)", "polish": bool}     # max_n = 0: the backend's default
+    ranges = {"scale": bool, "max_n": "[0, inf)", "polish": bool,     # max_n = 0: the backend's default
+              "coulomb_tol": "(0, 1)", "coulomb_max_iter": "[1, 1000]"}
 
     @classmethod
     def info(cls) -> Backend:
@@ -203,6 +219,9 @@ class QpsolversSolver(Solver):
     def skip(self, qp) -> str | None:
         if getattr(qp, "blocks", ()) and not_linear(qp):
             return not_linear(qp)
+        if self.backend in NEEDS_DEFINITE_P and getattr(qp, "blocks", ()) and (norm_blocks(qp) or coulomb_blocks(qp)):
+            return (f"{self.backend} needs a positive definite P; friction's epigraph variables (one per friction "
+                    f"node, dualfem.numerics.epigraph) have none")
         if qp.n > self._max_n():
             return (f"{self.backend} works on dense matrices: n = {qp.n} unknowns > max_n = {self._max_n()} "
                     f"(set -p max_n=... to try anyway)")
@@ -225,13 +244,19 @@ class QpsolversSolver(Solver):
         return out
 
     def setup(self, qp) -> None:
-        import qpsolvers
-
         if self.info().module in ("jax", "jaxopt", "qpax"):
             import jax
 
             jax.config.update("jax_enable_x64", True)    # float32 (jax's default) stops at ~1e-6
         self.qp = qp
+        if not coulomb_blocks(qp):      # Coulomb: built per Tresca problem of the fixed point (solve)
+            self._build(qp)
+
+    def _build(self, qp) -> None:
+        """The qpsolvers Problem of ``qp`` (``self._problem``; ``self._epi`` the epigraph of a frictional QP)."""
+        import qpsolvers
+
+        self._qp_now = qp
         self._epi = None
         if norm_blocks(qp):       # 2D friction: the linear epigraph over [y, t] (dualfem.numerics.epigraph)
             self._epi = e = epigraph(qp, self.params["scale"])
@@ -258,20 +283,39 @@ class QpsolversSolver(Solver):
             qpsolvers.Problem(P, s.q, G, np.zeros(qp.m))
 
     def solve(self) -> Solution:
-        import qpsolvers
-
         if self.qp.m == 0 and self.backend in NEEDS_A_CONSTRAINT:
             return Solution(solver=self.name, status=Status.SKIPPED,
                             message=f"{self.backend} needs at least one constraint; this QP has none (m = 0)")
+        if coulomb_blocks(self.qp):
+            return self._coulomb()
+        return self._run()
 
+    def _coulomb(self) -> Solution:
+        """2D Coulomb by the fixed point over this backend's Tresca solves (:mod:`dualfem.numerics.coulomb_run`):
+        the iteration counts and the observed contraction in ``iterations`` / ``info["coulomb"]``; ``max_iter``
+        (never ``solved``) when the fixed point stalls or reaches ``coulomb_max_iter``."""
+        def tresca(tq):
+            self._build(tq)
+            return self._run()
+
+        c = coulomb_by_tresca(self.qp, tresca, float(self.params["coulomb_tol"]),
+                              int(self.params["coulomb_max_iter"]), self.name)
+        return Solution(solver=self.name, status=c.status, x=c.x, multipliers=c.mu, iterations=c.iterations,
+                        message=f"{self.backend}: {c.message}", info=c.info)
+
+    def _run(self) -> Solution:
+        """The backend on the Problem of the last :meth:`_build`, unscaled (and polished on request)."""
+        import qpsolvers
+
+        qp = self._qp_now
         with warnings.catch_warnings(), c_stdout_to_stderr():
             warnings.simplefilter("ignore")
             res = qpsolvers.solve_problem(self._problem, solver=self.backend,
                                           verbose=bool(self.params["verbose"]), **self.settings())
         x = None if res.x is None else np.asarray(res.x, float)
-        nz = self.qp.n if self._epi is None else self._epi.P.shape[0]
+        nz = qp.n if self._epi is None else self._epi.P.shape[0]
         ok = x is not None and x.shape == (nz,) and np.all(np.isfinite(x))
-        z = res.z if res.z is not None and np.shape(res.z) == (self.qp.m,) else np.zeros(self.qp.m)
+        z = res.z if res.z is not None and np.shape(res.z) == (qp.m,) else np.zeros(qp.m)
         if self._eq is not None:
             z = _stacked(self._eq, res)
         text = _status_text(res)
@@ -286,11 +330,11 @@ class QpsolversSolver(Solver):
         info = {"backend_solve_time_s": getattr(res, "solve_time", None),
                 "backend_build_time_s": getattr(res, "build_time", None)}
         if self.params["polish"] and status == Status.SOLVED and self._epi is not None:   # friction's exact face
-            x, mu, pinfo = face_polish_if_better(self.qp, x, mu)
+            x, mu, pinfo = face_polish_if_better(qp, x, mu)
             info.update(pinfo)
             msg += "; polished on its exact face" if pinfo["polished"] else "; face polish refused"
         elif self.params["polish"] and status == Status.SOLVED and self._eq is None:   # the polish is Signorini's
-            x, mu, pinfo = polish_if_better(self.qp, x, mu)
+            x, mu, pinfo = polish_if_better(qp, x, mu)
             info.update(pinfo)
             msg += "; polished" if pinfo["polished"] else "; polish refused (inconsistent or no better)"
         return Solution(solver=self.name, status=status, x=x, multipliers=mu,
@@ -357,7 +401,7 @@ def _make(backend: str) -> type[QpsolversSolver]:
     cls = type(f"Qp_{backend}", (QpsolversSolver,),
                {"name": f"qp_{backend}", "backend": backend, "description": desc, "tolerance": b.tolerance,
                 "family": b.family if backend in _BACKENDS else "other",
-                "accepts": ("signorini", "bilateral", "tresca") if backend in BILATERAL else ("signorini",),
+                "accepts": ("signorini", "bilateral", "tresca", "coulomb") if backend in BILATERAL else ("signorini",),
                 "__doc__": f"qpsolvers backend {backend!r}; declared tolerance {b.tolerance:g}. {b.notes}",
                 "__module__": __name__})
     return register_solver(cls)

@@ -81,10 +81,10 @@ def test_epigraph_soc_and_linear_forms_give_the_same_multipliers():
 def test_coulomb_is_skipped_by_a_backend_without_it_with_a_reason():
     from dualfem.core.registry import solvers
 
-    if "qp_proxqp" not in solvers() or solvers()["qp_proxqp"].missing():
-        pytest.skip("qp_proxqp is not installed")
+    if "qp_pyqpmad" not in solvers() or solvers()["qp_pyqpmad"].missing():
+        pytest.skip("qp_pyqpmad is not installed")
     qp = load_scene("f2", {"N": 16, "friction": "coulomb", "friction_coefficient": 0.3}).build()
-    sol = run("qp_proxqp", qp)
+    sol = run("qp_pyqpmad", qp)        # the other qp_ backends take 2D Coulomb (tests/test_qpsolvers_coulomb.py)
     assert sol.status == Status.SKIPPED and "coulomb" in sol.message
 
 

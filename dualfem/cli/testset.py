@@ -1,10 +1,11 @@
-"""``dualfem testset --out DIR [--sizes tiny,small,medium,large] [--force]``: a public qpbenchmark test set.
+"""``dualfem testset --out DIR [--sizes tiny,small,medium,large] [--force] [--no-friction]``: a public test set.
 
 Writes the declared contact QPs (:data:`dualfem.experiments.testset.DECLARED`) of the chosen size classes in
 qpsolvers' convention ``G x <= h``, each with its certified reference, the qpbenchmark ``TestSet`` module,
-``manifest.json`` and ``README.md`` (see :mod:`dualfem.experiments.testset`). Everything is validated
-before anything is written; a non-empty ``DIR`` is refused unless ``--force``. One progress line per
-problem on stderr once the command has run longer than 2 s (``--quiet`` silences them).
+``manifest.json`` and ``README.md`` (see :mod:`dualfem.experiments.testset`), and, unless ``--no-friction``, the
+frictional problems of those classes under ``friction/`` (:mod:`dualfem.experiments.testset_friction`).
+Everything is validated before anything is written; a non-empty ``DIR`` is refused unless ``--force``. One
+progress line per problem on stderr once the command has run longer than 2 s (``--quiet`` silences them).
 """
 from __future__ import annotations
 
@@ -27,6 +28,8 @@ def _cfg(p):
                         "previous set that this one lacks removed, nothing else touched")
     p.add_argument("--max-memory", type=float_in(0, MAX_MEMORY_GB, "GB"), default=None, metavar="GB",
                    help="memory a scene may use (default: what the machine has available)")
+    p.add_argument("--no-friction", action="store_true",
+                   help="leave out the frictional problems (friction/: Tresca, Coulomb, 2D, 3D; small, medium)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     add_factor_arg(p)
 
@@ -46,9 +49,11 @@ def cmd_testset(args) -> int:
     stages = Stages("testset", quiet=args.quiet)
     with c_stdout_to_stderr():
         man = write_testset(args.out, sizes, force=args.force, max_bytes=None if mm is None else mm * 1e9,
-                            progress=stages)
+                            progress=stages, friction=not args.no_friction)
     print(size_markdown(man))
-    print(f"wrote {len(man['problems'])} problems to {args.out} ({TESTSET_PY}, {MANIFEST}, README.md); run: "
+    nf = len(man.get("friction", {}).get("problems", []))
+    print(f"wrote {len(man['problems'])} problems{f' and {nf} frictional ones (friction/)' if nf else ''} to "
+          f"{args.out} ({TESTSET_PY}, {MANIFEST}, README.md); run: "
           f"python {args.out}/{TESTSET_PY} run --solver clarabel --author NAME",
           file=sys.stderr)
     return 0

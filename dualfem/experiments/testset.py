@@ -11,7 +11,10 @@ and writes, in the formats of :mod:`dualfem.experiments.testset_files`:
 * ``DIR/reference/NAME.npz``: x, the multipliers ``z = mu >= 0`` (qpsolvers' z of ``G x <= h``:
   ``P x + q + G'z = 0``), the objective ``1/2 x'Px + q'x`` and the certificate;
 * ``DIR/dualfem_contact.py``: a qpbenchmark ``TestSet`` (class ``DualfemContact``) that loads them;
-* ``DIR/manifest.json`` and ``DIR/README.md``: sizes, conventions, units, provenance.
+* ``DIR/manifest.json`` and ``DIR/README.md``: sizes, conventions, units, provenance;
+* ``DIR/friction/``: the frictional problems of the chosen classes (Tresca and Coulomb, 2D and 3D: not QPs of
+  qpsolvers' form, so outside the qpbenchmark TestSet), with certified references and FCLIB files for Coulomb
+  (:mod:`dualfem.experiments.testset_friction`; ``friction=False`` leaves them out).
 
 Adding a scene is one line of :data:`DECLARED` (a scene of ``dualfem list``, a scene of the library or
 a ``.toml`` file, with overrides). Problem names are the declared names: never renamed.
@@ -245,12 +248,17 @@ def build_entry(d: Declared, problem, out: Path) -> Entry:
 
 def write_testset(out: str | Path, sizes: tuple[str, ...] = DEFAULT_SIZES, *, force: bool = False,
                   declared: tuple[Declared, ...] = DECLARED, max_bytes: float | None = None,
-                  progress: Callable[[str, float], None] | None = None) -> dict:
+                  progress: Callable[[str, float], None] | None = None, friction: bool = True,
+                  declared_friction: tuple[Declared, ...] | None = None) -> dict:
     """Write the test set of the size classes ``sizes`` into ``out`` (see the module docstring); the manifest.
 
     Everything is validated first (the size classes, ``out``, every scene and its size); each file is
     written atomically and the manifest last, so a folder without ``manifest.json`` is an unfinished set.
-    ``progress(stage, seconds)`` hears of each written problem."""
+    ``progress(stage, seconds)`` hears of each written problem. ``friction``: also write the frictional
+    problems of those size classes (``declared_friction``, default
+    :func:`dualfem.experiments.testset_friction.declared`) with their references (manifest ``friction``)."""
+    from dualfem.experiments import testset_friction as fr
+
     out = Path(out)
     unknown = [s for s in sizes if s not in SIZES]
     if unknown:
@@ -258,18 +266,27 @@ def write_testset(out: str | Path, sizes: tuple[str, ...] = DEFAULT_SIZES, *, fo
     chosen = select(sizes, declared)
     if not chosen:
         raise InputError(f"no declared problem in the size classes {', '.join(sizes)}")
+    chosen_f = select(sizes, fr.declared() if declared_friction is None else declared_friction) if friction else []
     check_out(out, force)
     problems = check_sizes(chosen, max_bytes)
-    stale = _stale_files(out, {d.name for d in chosen}) if force else []
+    problems_f = check_sizes(chosen_f, max_bytes)
+    stale = _stale_files(out, {d.name for d in chosen}, {d.name for d in chosen_f}) if force else []
     (out / files.MANIFEST).unlink(missing_ok=True)     # the folder is an unfinished set until the new one is written
-    entries = []
+    entries, total = [], len(chosen) + len(chosen_f)
     for i, (d, problem) in enumerate(zip(chosen, problems)):
         e = build_entry(d, problem, out)
         entries.append(e)
         if progress:
-            progress(f"[{i + 1}/{len(chosen)}] {d.name} ({d.size}, n = {e.n}, m = {e.m}, certified error "
+            progress(f"[{i + 1}/{total}] {d.name} ({d.size}, n = {e.n}, m = {e.m}, certified error "
                      f"{e.reference['certified_error']:.1e})", e.seconds)
-    manifest = render.manifest(entries, sizes, bound_max=REF_BOUND_MAX, kkt_max=REF_KKT_MAX)
+    entries_f = []
+    for i, (d, problem) in enumerate(zip(chosen_f, problems_f)):
+        f = fr.build_entry(d, problem, out)
+        entries_f.append(f)
+        if progress:
+            progress(f"[{len(chosen) + i + 1}/{total}] {d.name} ({d.size}, {f.dim}D {f.law}, n = {f.n}, "
+                     f"certified error {f.reference['certified_error']:.1e})", f.seconds)
+    manifest = render.manifest(entries, sizes, bound_max=REF_BOUND_MAX, kkt_max=REF_KKT_MAX, friction=entries_f)
     atomic_write_text(out / files.TESTSET_PY, render.testset_source(manifest))
     atomic_write_text(out / files.README, render.readme(manifest))
     atomic_write_text(out / files.MANIFEST, json.dumps(json.loads(dumps(manifest)), indent=1) + "\n")
@@ -278,13 +295,17 @@ def write_testset(out: str | Path, sizes: tuple[str, ...] = DEFAULT_SIZES, *, fo
     return manifest
 
 
-def _stale_files(out: Path, names: set[str]) -> list[Path]:
+def _stale_files(out: Path, names: set[str], friction_names: set[str] | frozenset[str] = frozenset()) -> list[Path]:
     """The problem and reference files a previous test set in ``out`` lists (its manifest) and the new one
-    will not rewrite; nothing else in ``out`` is ever removed. An unreadable old manifest lists nothing."""
+    will not rewrite (frictional ones: ``friction_names``); nothing else in ``out`` is ever removed. An
+    unreadable old manifest lists nothing."""
+    from dualfem.experiments.testset_friction import stale_files
+
     try:
         old = json.loads((out / files.MANIFEST).read_text(encoding="utf-8"))
         listed = [p["name"] for p in old["problems"]]
     except (OSError, ValueError, KeyError, TypeError):
         return []
     return [out / sub / f"{n}.npz" for n in listed if isinstance(n, str) and n not in names
-            for sub in (files.QP_DIR, files.REF_DIR) if files.NAME_PATTERN.fullmatch(n)]
+            for sub in (files.QP_DIR, files.REF_DIR) if files.NAME_PATTERN.fullmatch(n)] + \
+        stale_files(out, old, set(friction_names))

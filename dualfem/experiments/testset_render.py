@@ -29,9 +29,11 @@ def size_table(problems: list[dict]) -> list[dict]:
     return rows
 
 
-def manifest(entries: list, sizes: tuple[str, ...], *, bound_max: float, kkt_max: float) -> dict:
+def manifest(entries: list, sizes: tuple[str, ...], *, bound_max: float, kkt_max: float,
+             friction: list | None = None) -> dict:
     """The manifest of a written test set (``entries``: :class:`dualfem.experiments.testset.Entry`; each
-    reference's certified error was at most ``bound_max``, its evaluator KKT error at most ``kkt_max``)."""
+    reference's certified error was at most ``bound_max``, its evaluator KKT error at most ``kkt_max``;
+    ``friction``: the :class:`dualfem.experiments.testset_friction.FrictionEntry` of its frictional problems)."""
     import dataclasses
     import time
     from importlib.metadata import PackageNotFoundError, version
@@ -69,7 +71,37 @@ def manifest(entries: list, sizes: tuple[str, ...], *, bound_max: float, kkt_max
         "testset": {"file": TESTSET_PY, "class": TESTSET_CLASS, "runtime_s": RUNTIME[largest]},
         "size_table": size_table(problems),
         "problems": problems,
+        **({"friction": friction_manifest(friction, bound_max, kkt_max)} if friction else {}),
     }
+
+
+def friction_manifest(entries: list, bound_max: float, kkt_max: float) -> dict:
+    """The ``friction`` section of the manifest: the frictional problems' format, convention and entries."""
+    import dataclasses
+
+    from dualfem.experiments.testset_friction import CONVENTION as FRICTION_CONVENTION
+    from dualfem.experiments.testset_friction import FRICTION_DIR
+
+    return {"folder": FRICTION_DIR, "format": "dualfem-friction-testset/1", "convention": FRICTION_CONVENTION,
+            "certification": f"as the QPs' (certified error <= {bound_max:g}, KKT error <= {kkt_max:g}); a Coulomb "
+                             "answer is certified as the Tresca problem whose threshold is its own mu_f lambda",
+            "fclib": "Coulomb problems also as FCLIB global problems (HDF5: /fclib_global M, H, f, w, mu), the "
+                     "reference in /solution (v = x, u = H'v + w, r per contact: normal force, friction forces)",
+            "problems": [dataclasses.asdict(e) for e in entries]}
+
+
+def friction_markdown(man: dict) -> str:
+    """One line per frictional problem: dimension, law, sizes, slipping nodes, the reference's certificate."""
+    lines = ["| problem | size | scene | law | n | normal rows | friction nodes (slipping) | certified error | "
+             "reference | files |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for p in man.get("friction", {}).get("problems", []):
+        v = p["values"]
+        value = f"{v[0]:g}" if v[0] == v[1] else f"{v[0]:g}-{v[1]:g}"
+        what = f"{p['dim']}D {p['law']} ({'g' if p['law'] == 'tresca' else 'mu_f'} = {value})"
+        lines.append(f"| {p['name']} | {p['size']} | {p['scene']} | {what} | {p['n']:,} | {p['m']:,} | "
+                     f"{p['friction_nodes']:,} ({p['slipping_nodes']:,}) | {p['reference']['certified_error']:.1e} | "
+                     f"{p['reference']['solver']} | {_mb(p['bytes'])} |")
+    return "\n".join(lines)
 
 
 def _mb(b: float) -> str:
@@ -169,6 +201,26 @@ solver of qpsolvers runs.
 ## Problems
 
 {problems_markdown(man)}
+{_friction_readme(man)}"""
+
+
+def _friction_readme(man: dict) -> str:
+    if "friction" not in man:
+        return ""
+    f = man["friction"]
+    return f"""
+## Frictional problems (`{f['folder']}/`, not part of the qpbenchmark TestSet)
+
+{f['convention']}.
+
+Files: `{f['folder']}/qp/NAME.npz` (K, F, B, weights and per friction block k `b{{k}}_G`, `b{{k}}_weights`,
+`b{{k}}_law`, `b{{k}}_components`, `b{{k}}_value`, `b{{k}}_normal_rows`; read with
+`dualfem.experiments.testset_friction.read_problem`), `{f['folder']}/reference/NAME.npz` (`x`, `mu`,
+`certified_error`, `kkt_error`, `solver`), and for Coulomb `{f['folder']}/fclib/NAME.hdf5`: {f['fclib']}.
+References: {f['certification']}. Score an answer with `dualfem.experiments.testset_friction.score` (the judge of
+`dualfem solve`: the laws' residuals, the certificate, the distance to the reference).
+
+{friction_markdown(man)}
 """
 
 

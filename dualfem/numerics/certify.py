@@ -76,6 +76,7 @@ from dualfem.numerics.dependent_rows import (  # noqa: F401 (parallel_rows: publ
     nonnegative_forces,
     parallel_rows,
 )
+from dualfem.numerics.feasible_bound import correction_bound
 from dualfem.numerics.ksolver import CERT_K_RTOL, KSolver, OperatorHints, solver_for  # noqa: F401 (public here)
 from dualfem.numerics.linalg import step_size
 
@@ -449,7 +450,9 @@ def infeasible_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver, _qu
 
 def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None = None) -> dict:
     """{"bound": duality-gap bound, "active_set": first-order estimate, "infeasible": the bound of
-    :func:`infeasible_bound` (computed only where "bound" does not apply: x infeasible beyond rounding),
+    :func:`infeasible_bound` (computed only where "bound" does not apply: x infeasible beyond rounding; for a QP
+    with friction blocks where it gives none, the feasible correction's bound of
+    :func:`dualfem.numerics.feasible_bound.correction_bound`, which needs no Delassus matrix),
     "value": the smallest, "multipliers": the error of mu against the exact multipliers of the verified
     active set (nan when the set is not verified; :func:`active_set_check`)}.
 
@@ -466,6 +469,10 @@ def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | Non
     b = error_bound(qp, x, mu, ksolve, _quad=quad, _Kx=Kx)
     a, m = active_set_check(qp, x, mu, ksolve, _quad=quad, _Kx=Kx)
     f = infeasible_bound(qp, x, mu, ksolve, _quad=quad, _Kx=Kx) if np.isnan(b) and not ksolve.amg else float("nan")
+    if np.isnan(b) and np.isnan(f) and qp.blocks and quad is not None:
+        # friction blocks, no dense D (above faces.MAX_ROWS, AMG) or p not in its range: the feasible correction
+        f = correction_bound(qp, x, constraints.project(qp.constraints, mu), quad[0],
+                             lambda m, s: _support_floor(qp, m, s), FEAS_RTOL, Kx, ksolve)
     vals = [v for v in (b, a, f) if np.isfinite(v)]
     return {"bound": b, "active_set": a, "infeasible": f, "value": min(vals) if vals else float("nan"),
             "multipliers": m}

@@ -31,6 +31,7 @@ import numpy as np
 
 from dualfem.core.evaluator import RESIDUALS
 from dualfem.core.evaluator import compare as measure
+from dualfem.core.laws import Friction
 from dualfem.core.qp import QP
 from dualfem.core.solution import Solution, Status
 from dualfem.numerics.certify import KSolver, certified_error, multiplier_floor
@@ -119,8 +120,16 @@ def _certificate(qp: QP, sol: Solution, tol: float, reduction: Any) -> dict:
                 "error": f"{type(exc).__name__}: {exc}"}
 
 
-def _why(cert: dict, tol: float, exact: bool, multipliers: bool) -> tuple[str, str]:
-    """(why the claim is demoted or "", a non-demoting note or "") from a certificate."""
+#: why a frictional answer without an error bound is not certified (also appended to the certificate's notes)
+NO_FRICTION_BOUND = ("no error bound applies to this answer of a QP with friction (no bound of the duality gap, "
+                     "the face step or a feasible correction holds for it): residuals alone do not certify a "
+                     "frictional answer")
+
+
+def _why(cert: dict, tol: float, exact: bool, multipliers: bool, friction: bool = False) -> tuple[str, str]:
+    """(why the claim is demoted or "", a non-demoting note or "") from a certificate. ``friction``: the QP has
+    friction blocks, whose answers need a finite bound whatever solver gave them (an exact solver's Signorini
+    answer without one stands on its residuals)."""
     value = cert["value"]
     cmu = cert.get("multipliers", float("nan"))
     cfloor = cert.get("multipliers_floor", 0.0)
@@ -131,6 +140,8 @@ def _why(cert: dict, tol: float, exact: bool, multipliers: bool) -> tuple[str, s
     if not exact and not np.isfinite(value):
         return ("no error bound applies to this answer of an inexact solver (residuals alone do not bound "
                 "the error of x)"), ""
+    if friction and not np.isfinite(value):
+        return NO_FRICTION_BOUND, ""
     if np.isfinite(cmu) and cmu > tol and not multipliers:
         return "", f"certified multiplier error {cmu:.1e} exceeds {tol:g} (not graded: x only)"
     if np.isfinite(cmu) and cmu > tol:
@@ -161,7 +172,10 @@ def certify(qp: QP, sol: Solution, tol: float, exact: bool, reduction: Any = Non
         why = f"evaluator residual {worst} = {res[worst]:.1e} exceeds the declared tolerance {tol:g}"
         return _graded(replace(v, status=str(Status.INACCURATE), why=why))
     cert = _certificate(qp, sol, tol, reduction)
-    why, note = _why(cert, tol, exact, multipliers)
+    friction = any(isinstance(b.law, Friction) for b in qp.blocks)
+    why, note = _why(cert, tol, exact, multipliers, friction)
+    if why == NO_FRICTION_BOUND:
+        cert["notes"] = "; ".join(n for n in (cert.get("notes", ""), why) if n)
     cert_x, cert_mu = cert_facts(cert)
     v = replace(v, status=str(Status.INACCURATE) if why else status, certificate=cert, cert_x=cert_x,
                 cert_mu=cert_mu, why=why, note=note)
