@@ -150,3 +150,20 @@ def test_bound_stays_near_the_error_of_an_iterative_answer(no_dense_d):
     true = _true(qp, x, ref)
     assert np.isnan(cert["bound"]) and cert["value"] >= true
     assert cert["value"] < 10 * (true + ref.info["certificate"]["value"]), (cert, true)
+
+
+def test_frictionless_penetrating_answer_without_dense_d_gets_the_correction_bound(monkeypatch):
+    """A Signorini answer above the Delassus matrix's size (delassus() None, as at scale) that penetrates beyond
+    rounding had no bound (it stood on its residuals); the feasible correction bounds it, and the bound holds."""
+    qp = load_scene("f2", {"N": 16}).build()
+    ref = run("pdas", qp)
+    assert ref.status == Status.SOLVED and not qp.blocks
+    monkeypatch.setattr(certify.KSolver, "delassus", lambda self: None)
+    rng = np.random.default_rng(6)
+    for size in (1e-10, 1e-7, 1e-4):
+        x = _penetrating(qp, ref, size, rng)
+        cert = certified_error(qp, x, ref.multipliers)
+        assert np.isnan(cert["bound"])
+        true = _true(qp, x, ref)
+        assert np.isfinite(cert["value"]) and cert["value"] >= true, (size, cert, true)
+        assert cert["value"] < 100 * true + 1e-12

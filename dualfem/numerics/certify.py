@@ -469,10 +469,14 @@ def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | Non
     b = error_bound(qp, x, mu, ksolve, _quad=quad, _Kx=Kx)
     a, m = active_set_check(qp, x, mu, ksolve, _quad=quad, _Kx=Kx)
     f = infeasible_bound(qp, x, mu, ksolve, _quad=quad, _Kx=Kx) if np.isnan(b) and not ksolve.amg else float("nan")
-    if np.isnan(b) and np.isnan(f) and qp.blocks and quad is not None:
-        # friction blocks, no dense D (above faces.MAX_ROWS, AMG) or p not in its range: the feasible correction
-        f = correction_bound(qp, x, constraints.project(qp.constraints, mu), quad[0],
-                             lambda m, s: _support_floor(qp, m, s), FEAS_RTOL, Kx, ksolve)
+    if np.isnan(b) and quad is not None:
+        # x infeasible beyond rounding: the feasible correction's bound needs no Delassus matrix (above
+        # faces.MAX_ROWS, AMG, p not in D's range); both bounds are rigorous, so the smaller one is kept. Where
+        # the dense bound exists the correction's candidates that need further K-solves are not tried
+        c = correction_bound(qp, x, constraints.project(qp.constraints, mu), quad[0],
+                             lambda m, s: _support_floor(qp, m, s), FEAS_RTOL, Kx,
+                             ksolve if np.isnan(f) else None)
+        f = float(np.nanmin([f, c])) if np.isfinite(c) or np.isfinite(f) else float("nan")
     vals = [v for v in (b, a, f) if np.isfinite(v)]
     return {"bound": b, "active_set": a, "infeasible": f, "value": min(vals) if vals else float("nan"),
             "multipliers": m}

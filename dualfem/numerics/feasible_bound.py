@@ -4,7 +4,10 @@
 :func:`dualfem.numerics.faces.blocks_infeasible_bound`) bounds the error of an answer x that penetrates beyond
 rounding through ``p'D^+ p``, with the dense ``D = G K^-1 G'``: above :data:`dualfem.numerics.faces.MAX_ROWS` rows,
 matrix-free, or where p is not in D's range it gives no bound. This one needs no D, only products with K and G and
-the residual solve ``r'K^-1 r`` the certificate already has.
+the residual solve ``r'K^-1 r`` the certificate already has. The certificate
+(:func:`dualfem.numerics.certify.certified_error`) computes it for every answer that penetrates beyond rounding,
+frictional or not, and keeps the smaller of it and the dense bound (both rigorous); where the dense bound
+exists only the candidates that need no further K-solve are tried.
 
 **The bound.** Move x by a correction dx onto the feasible set, ``x_f = x + dx`` with every Signorini row
 ``(G x_f)_j >= 0`` (friction rows carry no primal constraint). With mu projected onto every law's set,
