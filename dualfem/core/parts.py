@@ -123,12 +123,19 @@ class ShiftPart:
             _finite(self.rhs, "shift.rhs")
 
 
+#: nodes of a quadratic simplex per dimension (vertices and mid-edge nodes)
+QUADRATIC_NODES = {2: 6, 3: 10}
+
+
 @dataclass(frozen=True)
 class GeometryPart:
     """The mesh of a finite-element QP; ``node_dofs[c, i]`` is the unknown of component c of node i (-1: fixed).
 
     ``node_dofs`` has one row per field component: ``dim`` rows for displacements, one for a
-    scalar field (a membrane's deflection)."""
+    scalar field (a membrane's deflection). ``cells`` (k, n_cells): linear simplices (k = dim + 1) or
+    quadratic ones (k = 6 in 2D, 10 in 3D: the vertices, then the mid-edge nodes in VTK's order
+    (0,1), (1,2), (0,2)(, (0,3), (1,3), (2,3)), as scikit-fem's P2 elements number them); a reader
+    of linear cells checks :attr:`quadratic` (``cells[:dim + 1]`` are the vertex cells)."""
 
     dim: int
     nodes: np.ndarray
@@ -141,6 +148,11 @@ class GeometryPart:
         d = int(X.shape[0]) if dim is None and X.ndim == 2 else int(dim or 0)
         return cls(d, X, _int_array(cells, "geometry.cells"), _int_array(node_dofs, "geometry.node_dofs"))
 
+    @property
+    def quadratic(self) -> bool:
+        """Quadratic (P2) cells: 6 nodes per triangle, 10 per tetrahedron."""
+        return self.cells.ndim == 2 and self.cells.shape[0] == QUADRATIC_NODES.get(self.dim, -1)
+
     def validate(self, n: int) -> None:
         if self.dim not in (2, 3):
             raise InputError(f"geometry.dim must be 2 or 3, got {self.dim}")
@@ -151,8 +163,9 @@ class GeometryPart:
         nn = X.shape[1]
         if nd.ndim != 2 or nd.shape[1] != nn or nd.shape[0] < 1:
             raise InputError(f"geometry.node_dofs must have shape (components, {nn}), got {nd.shape}")
-        if t.ndim != 2 or t.shape[0] != self.dim + 1:
-            raise InputError(f"geometry.cells must have shape ({self.dim + 1}, n_cells), got {t.shape}")
+        if t.ndim != 2 or t.shape[0] not in (self.dim + 1, QUADRATIC_NODES[self.dim]):
+            raise InputError(f"geometry.cells must have shape ({self.dim + 1}, n_cells) (linear) or "
+                             f"({QUADRATIC_NODES[self.dim]}, n_cells) (quadratic), got {t.shape}")
         if t.size and (t.min() < 0 or t.max() >= nn):
             raise InputError(f"geometry.cells must hold node indices in [0, {nn}), got [{t.min()}, {t.max()}]")
         free = nd[nd >= 0]

@@ -7,11 +7,12 @@ defect nodes) and the defect maps ``defect_upper``/``defect_lower`` (node ids of
 defect node j, row j of B), ``defect_normals`` (the unit normal nu_j pointing to the "+" face; stored
 (3, m) or (m, 3)) and ``defect_id``.
 
-Conventions (as in 2D, :mod:`dualfem.post.fields`): strains and stresses are constant per
-tetrahedron, in the units of E, tensor components (not engineering shear), Voigt order 11, 22,
-33, 23, 13, 12. On a defect: ``jump = u+ - u-`` (3-vector), ``opening = jump . nu`` (>= 0 is
-admissible), ``slip = |jump - opening nu|`` (the tangential jump's length), ``pressure = mu / w``
-(contact pressure, stress units; mu >= 0 the nodal contact force of row j).
+Conventions (as in 2D, :mod:`dualfem.post.fields`): strains and stresses are constant per tetrahedron (quadratic
+tetrahedra, ``cells`` (10, n): their mean over the tetrahedron, the value at its centroid, where the linear P2
+strain of a straight tetrahedron takes its mean), in the units of E, tensor components (not engineering shear),
+Voigt order 11, 22, 33, 23, 13, 12. On a defect: ``jump = u+ - u-`` (3-vector), ``opening = jump . nu`` (>= 0 is
+admissible), ``slip = |jump - opening nu|`` (the tangential jump's length), ``pressure = mu / w`` (contact
+pressure, stress units; mu >= 0 the nodal contact force of row j).
 """
 from __future__ import annotations
 
@@ -27,9 +28,14 @@ VOIGT = ("s11", "s22", "s33", "s23", "s13", "s12")
 
 def _geometry3d(qp):
     g = getattr(qp, "geometry", None)
-    if g is None or g.dim != 3 or g.cells.shape[0] != 4:
-        raise InputError("3D post-processing needs a tetrahedral mesh (qp.geometry with dim 3 and cells (4, n))")
+    if g is None or g.dim != 3 or g.cells.shape[0] not in (4, 10):
+        raise InputError("3D post-processing needs a tetrahedral mesh (qp.geometry with dim 3 and cells (4, n), "
+                         "or (10, n) quadratic)")
     return g
+
+
+#: the mid-edge nodes of a quadratic tetrahedron (rows 4..9 of its cell): VTK's tetra10 order
+_TET10_EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
 
 
 def tet_gradients(nodes: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -47,8 +53,12 @@ def strains3d(qp, x: np.ndarray) -> np.ndarray:
     """Strain tensor per tetrahedron, shape (nt, 3, 3) (symmetric, dimensionless)."""
     g = _geometry3d(qp)
     u = nodal_displacement(qp, x)            # (n_nodes, 3)
-    grads, _ = tet_gradients(g.nodes, g.cells)
-    Ue = u[g.cells.T]                        # (nt, 4, 3)
+    grads, _ = tet_gradients(g.nodes, g.cells[:4])
+    if g.cells.shape[0] == 10:               # P2 at the centroid: corners 0, mid-edge node (i, j): g_i + g_j
+        grads = np.stack([grads[:, i] + grads[:, j] for i, j in _TET10_EDGES], axis=1)
+        Ue = u[g.cells[4:].T]                # (nt, 6, 3)
+    else:
+        Ue = u[g.cells.T]                    # (nt, 4, 3)
     Du = np.einsum("tai,taj->tij", Ue, grads)    # du_i/dx_j
     return 0.5 * (Du + np.transpose(Du, (0, 2, 1)))
 
