@@ -135,4 +135,15 @@ def test_outputs_on_p2(tmp_path):
     m = meshio.read(path)
     assert m.cells[0].type == "tetra10" and m.point_data["displacement"].shape == (qp.geometry.nodes.shape[1], 3)
     sif, record = sif_result(qp, sol)
-    assert sif is None and "quadratic" in record["error"]
+    assert sif is None and "P1 fields only" in record["error"]
+
+
+def test_geometry_part_quadratic_cells_need_a_quadratic_element():
+    from dualfem.core.parts import GeometryPart
+
+    qp = load_scene("penny", {"mesh_size": 2.5, "tip_size": 0.5, "element": "P2"}).build()
+    g = qp.geometry
+    assert g.element == "P2" and g.quadratic
+    g.validate(qp.n)
+    with pytest.raises(InputError, match="geometry.cells must have shape"):
+        GeometryPart(3, g.nodes, g.cells, g.node_dofs).validate(qp.n)       # 10-node cells, element P1

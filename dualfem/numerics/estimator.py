@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from dualfem.core.errors import InputError
+
 #: sqrt(3) / 4: the area of the equilateral triangle of edge 1 (sizes are equilateral edge lengths)
 _EQUILATERAL = np.sqrt(3.0) / 4.0
 
@@ -191,6 +193,9 @@ def estimate(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> Estima
     if g is None or mat is None or g.cells.shape[0] != g.dim + 1:
         raise ValueError("the estimator needs a P1 triangle or tetrahedron mesh and the material (qp.geometry, "
                          "qp.material)")
+    if g.element != "P1":
+        raise InputError(f"the estimator is P1's (ZZ recovery of piecewise constant stresses); this QP has "
+                         f"element = {g.element!r}")
     u = nodal_u(qp, x)
     if g.dim == 3:
         lam3, mu3 = _lame3(mat.E, mat.nu)

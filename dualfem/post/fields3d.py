@@ -31,6 +31,8 @@ def _geometry3d(qp):
     if g is None or g.dim != 3 or g.cells.shape[0] not in (4, 10):
         raise InputError("3D post-processing needs a tetrahedral mesh (qp.geometry with dim 3 and cells (4, n), "
                          "or (10, n) quadratic)")
+    if getattr(g, "element", "P1") != "P1" and g.cells.shape[0] != 10:
+        raise InputError(f"3D post-processing of element {g.element!r} needs its quadratic cells (10, n)")
     return g
 
 

@@ -42,8 +42,9 @@ Load model: a scene without ``boundary``, ``body_force`` and ``remote_stress`` i
 clamped, ``load`` on top); one whose only load is a defect's ``face_pressure`` must say so: give those
 keys, or ``load`` explicitly for the paper's model (docs/loads.md). Otherwise it is refused.
 
-P1 elements; nodes strictly inside a defect are doubled (tips not); the interface integral uses
-the trapezoid rule. Units are whatever the inputs use (paper: MPa and a unit length). The QP and
+P1 elements by default (``element = "P2"`` or ``"P2-quarter-point"``: quadratic triangles, :mod:`.element`);
+nodes strictly inside a defect are doubled (tips not); the P1 interface integral uses the trapezoid rule.
+Units are whatever the inputs use (paper: MPa and a unit length). The QP and
 its multiplier convention are described in :mod:`dualfem.qp`. ``QP.maps``: ``nodes`` (2, n),
 ``triangles`` (3, nt), ``node_dofs`` (2, n; -1 = fixed: clamped, a roller's normal component or a
 rigid-body removal), per constrained defect node j (row j of B) ``defect_lower``/``defect_upper``
@@ -70,6 +71,7 @@ from .._interface import delta_free_part, interface, local_unknowns, with_delta
 from ..adaptive import Adaptive
 from ..adaptive import check_keys as check_adaptive
 from ..loads import check_load_model, resolve_load
+from . import element
 from .assemble import boundary_edges_on, free_dofs, stiffness, traction_vector
 from .cut import Cut, cut
 from .geometry import defects_label, parse_defect, parse_defects, read_file_tables
@@ -129,6 +131,7 @@ class ThinDefect(Adaptive, Problem):
         "refine": "none",
         "target_error": None,
         "max_unknowns": None,
+        "element": "P1",
         **fk.DEFAULTS,
     }
     #: scene keys naming files, relative to the scene file (:attr:`dualfem.problem.Problem.path_keys`)
@@ -152,12 +155,14 @@ class ThinDefect(Adaptive, Problem):
         except InputError as exc:
             raise InputError(f"{where}: {exc}" if p["defects_file"] else str(exc)) from None
         self._check_defects_and_load()
+        element.check_scene(p, self._defects, self._friction)
 
     def _check_keys(self, n_defects: int) -> None:
         """Every key but the defects; with a gmsh mesh every size-driving key (mesh_size, tip_size, N, width,
         height) is bounded for ``n_defects`` defects (2 tips each) before any defect is parsed or placed."""
         p = self.params
         p["N"] = check_int("N", p["N"], 2, 4096)
+        p["element"] = element.check_element(p["element"])
         p["delta"] = check_positive("delta", p["delta"])
         p["E"] = check_positive("E", p["E"])
         p["nu"] = check_open_interval("nu", p["nu"], -1.0, 0.5)
@@ -241,8 +246,8 @@ class ThinDefect(Adaptive, Problem):
     def size_estimate(self) -> tuple[int, str]:
         """Unknowns before assembly: 2 per grid node (structured), or from the gmsh element size."""
         p = self.params
-        if p["mesh"] == "structured":
-            return 2 * (p["N"] + 1) ** 2, f"N={p['N']}"
+        if p["mesh"] == "structured":     # P2: a node per vertex and per edge (about 3 per vertex)
+            return 2 * (p["N"] + 1) ** 2 * (1 if p["element"] == "P1" else 4), f"N={p['N']}"
         if p["refine"] == "adaptive":
             return int(p["max_unknowns"]), f"refine='adaptive', max_unknowns={p['max_unknowns']}"
         from dualfem.problems.gmsh_mesh import estimate_triangles
@@ -252,6 +257,7 @@ class ThinDefect(Adaptive, Problem):
         tri = estimate_triangles(p["width"], p["height"], h, tip, 2 * len(getattr(self, "_defects", ())),
                                  p["size_growth"])
         nodes = 1.2 * tri / 2 + 1          # about 2 triangles per node, 20 % margin (doubled defect nodes)
+        nodes *= 1 if p["element"] == "P1" else 4
         return int(2 * nodes), f"mesh_size={h:g}" + (f", tip_size={tip:g}" if tip else "")
 
     # ----------------------------------------------------------------- mesh
@@ -325,6 +331,8 @@ class ThinDefect(Adaptive, Problem):
         tractions, ``remote_stress`` and ``body_force``; the defects' ``face_pressure``), times
         ``load_scale``, in the rotated frame."""
         p = self.params
+        if p["element"] != "P1":
+            return element.nodal_load(self, self._delta_free())
         c, pts = self.cut()
         R = rotation(float(p["rotate_deg"]))
         if self._loads is None:
@@ -402,6 +410,12 @@ class ThinDefect(Adaptive, Problem):
         p = self.params
         c, pts = self.cut()
         lam, mu = lame(p["E"], p["nu"], p["plane"])
+        if p["element"] != "P1":
+            a = element.delta_free(self, lam, mu, rotation(float(p["rotate_deg"])))
+            freeze(a["K_el"].data, a["K_el"].indices, a["K_el"].indptr, a["local"], *a["maps"].values())
+            shared.data["delta_free"] = a
+            shared.assemblies += 1
+            return a
         if self._loads is None:
             node_dofs = free_dofs(self._sides(c)[0], pts.shape[1])
         else:
@@ -493,8 +507,10 @@ class ThinDefect(Adaptive, Problem):
         if self._loads is not None:
             params["loads"] = self._loads.label()
         self.later_params(params, p, ThinDefect.defaults)
+        if p["element"] == "P1":
+            params.pop("element")
         self.jump_operators = J
-        geometry = GeometryPart(2, maps.pop("nodes"), maps.pop("triangles"), maps.pop("node_dofs"))
+        geometry = GeometryPart(2, maps.pop("nodes"), maps.pop("triangles"), maps.pop("node_dofs"), p["element"])
         qp = QP(K=K, F=self._load_vector(a), B=B, weights=c.weights, K_fixed=a["K_el"], local_dofs=a["local"],
                 name=self._qp_name(),
                 params=params, maps=maps, geometry=geometry, interface=iface,

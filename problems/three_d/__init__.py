@@ -434,7 +434,7 @@ class ThreeD(Adaptive, Problem):
             params.pop("element")           # today's QP key unchanged
         if fk.frictional(self._friction):
             params["friction"] = fk.params_label(self._friction)
-        geometry = GeometryPart(3, a["points"], a["cells"], nd)
+        geometry = GeometryPart(3, a["points"], a["cells"], nd, p["element"])
         iface = dataclasses.replace(iface, weights=c.weights.copy())       # each QP its own weights
         qp = QP(K=K, F=F, B=B, weights=iface.weights, K_fixed=a["K_el"], local_dofs=a["local"],
                 name=f"three_d[{self._load_label()}]", params=params, geometry=geometry, interface=iface,

@@ -1,0 +1,138 @@
+"""Quadratic thin-defect elements (scene key ``element``; problems/_quadratic.py, problems/thin_defect/element.py)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dualfem.errors import InputError
+from dualfem.experiments.runner import run
+from dualfem.problems import _quadratic as q2
+from dualfem.scene import load_scene
+
+E, NU = 1000.0, 0.3
+
+
+def _nodal(qp, x):
+    nd = qp.geometry.node_dofs
+    u = np.zeros(nd.shape)
+    u[nd >= 0] = np.asarray(x)[nd[nd >= 0]]
+    return u
+
+
+def _box(element, stress, defects, L=4.0, h=1.0, tip=0.5, **extra):
+    return load_scene("f2", {"mesh": "gmsh", "width": L, "height": L, "E": E, "nu": NU, "delta": 1e3,
+                             "defects": defects, "remote_stress": stress, "mesh_size": h, "tip_size": tip,
+                             "element": element, **extra})
+
+
+def test_p1_default_is_the_same_qp():
+    a, b = load_scene("f2", {"N": 8}).build(), load_scene("f2", {"N": 8, "element": "P1"}).build()
+    assert (a.K != b.K).nnz == 0 and np.array_equal(a.F, b.F) and (a.B != b.B).nnz == 0
+    assert "element" not in a.params and "element" not in b.params and a.geometry.element == "P1"
+
+
+@pytest.mark.parametrize("el", ["P2", "P2-quarter-point"])
+@pytest.mark.parametrize("stress, defects", [([[0.3, 0.2], [0.2, -0.5]], []),                 # no crack
+                                             ([[-1.0, 0.0], [0.0, -1.0]], [{"points": [[1.2, 2.1], [2.8, 1.9]]}])])
+def test_patch_uniform_stress_is_reproduced(el, stress, defects):
+    """A remote stress on a free box (a closed crack under pure compression): the linear displacement of the
+    uniform stress is in the P2 (and isoparametric) space, so the answer is it, up to a rigid motion."""
+    qp = _box(el, stress, defects).build()
+    sol = run("pdas", qp)
+    assert str(sol.status) == "solved"
+    u, X = _nodal(qp, sol.x), qp.geometry.nodes
+    lam, mu = E * NU / ((1 + NU) * (1 - 2 * NU)), E / (2 * (1 + NU))
+    s = np.asarray(stress, float)
+    eps = (s - lam / (2 * (lam + mu)) * np.trace(s) * np.eye(2)) / (2 * mu)       # plane strain
+    r = u - eps @ X
+    rigid = np.column_stack([np.tile([1.0, 0.0], X.shape[1]), np.tile([0.0, 1.0], X.shape[1]),
+                             np.column_stack([-X[1], X[0]]).ravel()])
+    coef = np.linalg.lstsq(rigid, r.T.ravel(), rcond=None)[0]
+    assert np.abs(r.T.ravel() - rigid @ coef).max() <= 1e-10 * np.abs(eps @ X).max()
+    if defects:     # every pair (vertex and mid-edge) closed, the contact pressure = 1 (the compression)
+        assert qp.m > 0 and np.abs(qp.B @ sol.x).max() <= 1e-12
+        assert np.allclose(qp.pressure(sol.multipliers), 1.0, rtol=1e-8)
+
+
+def _opening_error(el: str) -> float:
+    """Relative L2 error of the Griffith opening's shape over |s| <= 0.8 a (a = 1, box 20 a): against the closed
+    form times the factor fitted to the opening (the finite box's bias, about 1 %, is such a factor)."""
+    qp = _box(el, [[0.0, 0.0], [0.0, 1.0]], [{"points": [[9.0, 10.0], [11.0, 10.0]]}], L=20.0, h=2.0,
+              tip=0.2).build()
+    sol = run("pdas", qp)
+    it = qp.interface
+    u = _nodal(qp, sol.x).T
+    op = np.sum((u[it.upper] - u[it.lower]) * it.normals, axis=1)
+    s = it.s - 1.0
+    ex = 4 * (1 - NU ** 2) / E * np.sqrt(np.maximum(1 - s * s, 0))
+    k, w = np.abs(s) <= 0.8, qp.weights
+    ex *= np.sum(w[k] * op[k] * ex[k]) / np.sum(w[k] * ex[k] ** 2)     # the box's bias: a factor on the opening
+    return float(np.sqrt(np.sum(w[k] * (op[k] - ex[k]) ** 2) / np.sum(w[k] * ex[k] ** 2)))
+
+
+def test_griffith_opening_p2_beats_p1_on_the_same_mesh():
+    p1, p2, qp2 = _opening_error("P1"), _opening_error("P2"), _opening_error("P2-quarter-point")
+    assert p2 < 0.7 * p1 and qp2 < 0.5 * p2, (p1, p2, qp2)
+
+
+def test_quarter_point_mapping():
+    pr = _box("P2-quarter-point", [[0.0, 0.0], [0.0, 1.0]], [{"points": [[1.0, 2.0], [3.0, 2.0]]}])
+    qp = pr.build()
+    from dualfem.problems.thin_defect.element import basis
+    b = basis(qp.geometry.nodes, qp.geometry.cells, True)
+    lin = basis(qp.geometry.nodes, qp.geometry.cells, False)
+    det, det1 = b.mesh.mapping().detDF(b.quadrature[0]), lin.mesh.mapping().detDF(lin.quadrature[0])
+    # det J of the isoparametric map keeps the sign of the straight cell's (cells are stored with sorted ids,
+    # either orientation) at every quadrature point: the quarter-point cells are not folded
+    assert np.all(det * np.sign(det1) > 0) and np.any(det != det1)
+    X, nv = qp.geometry.nodes, int(qp.geometry.cells.max()) + 1
+    edges, _ = q2.edge_table(qp.geometry.cells)
+    tips = qp.interface.front
+    moved = 0
+    for t in tips:
+        for e in np.flatnonzero((edges == t).any(axis=0)):
+            other = edges[0, e] + edges[1, e] - t
+            assert np.allclose(X[:, nv + e], 0.75 * X[:, t] + 0.25 * X[:, other])   # at L/4 from the tip
+            moved += 1
+    assert moved >= 8
+    far = ~np.isin(edges, tips).any(axis=0)
+    assert np.allclose(X[:, nv:][:, far], 0.5 * (X[:, edges[0, far]] + X[:, edges[1, far]]))
+
+
+def test_crack_edge_weights_and_pairs():
+    P = np.array([[0.0, 1.0, 0.5], [0.0, 0.0, 0.0]])
+    assert np.allclose(q2.edge_weights(P, np.array([[0], [2], [1]]), 3), [1 / 6, 1 / 6, 2 / 3])
+    P[0, 2] = 0.25                                                        # quarter point, the tip first
+    assert np.allclose(q2.edge_weights(P, np.array([[0], [2], [1]]), 3), [0.0, 1 / 3, 2 / 3])
+    F = np.array([[0.0, 1, 0, 0.5, 0.5, 0], [0, 0, 1, 0, 0.5, 0.5], [0, 0, 0, 0, 0, 0]])
+    w = q2.face_weights(F, np.arange(6).reshape(6, 1), 6)
+    assert np.allclose(w, [1 / 24] * 3 + [1 / 8] * 3) and np.isclose(w.sum(), 0.5)
+    qp = load_scene("f2", {"N": 8, "element": "P2"}).build()
+    it = qp.interface
+    assert qp.m == 2 * 3 + 1 and np.all(it.weights > 0) and np.isclose(it.weights.sum(), 0.5 - 2 * 0.125 / 6)
+    assert np.all(np.diff(it.s) > 0) and not np.isin(it.front, np.r_[it.upper, it.lower]).any()
+    assert np.allclose(it.normals, [0.0, 1.0])
+
+
+@pytest.mark.parametrize("extra, words", [
+    ({"element": "P3"}, "element must be one of 'P1', 'P2', 'P2-quarter-point'"),
+    ({"element": "P2", "friction": "tresca", "friction_bound": 1.0}, "friction is not supported"),
+    ({"element": "P2", "mesh": "gmsh", "refine": "adaptive", "target_error": 0.1, "max_unknowns": 5000},
+     "refine = 'adaptive' is not supported"),
+    ({"element": "P2", "load": "f2", "defects": [{"points": [[0.25, 0.5], [0.75, 0.5]], "face_pressure": 1.0}]},
+     "face_pressure is not supported"),
+])
+def test_refusals(extra, words):
+    with pytest.raises(InputError, match=words.replace("(", r"\(")):
+        load_scene("f2", {"N": 8, **extra}).build()
+
+
+def test_p1_post_processing_refuses_p2():
+    from dualfem.numerics.estimator import estimate
+    from dualfem.post.sif import parts
+
+    qp = load_scene("f2", {"N": 8, "element": "P2"}).build()
+    with pytest.raises(InputError, match="P1 fields only"):
+        parts(qp)
+    with pytest.raises(InputError, match="estimator is P1's"):
+        estimate(qp, np.zeros(qp.n))
