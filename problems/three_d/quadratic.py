@@ -28,8 +28,9 @@ from .cut import Cut3
 
 #: the values of the scene key ``element`` in 3D
 ELEMENTS = ("P1", "P2")
-#: about how many P2 nodes per tetrahedron of a gmsh mesh (vertices + edges; measured on the penny: 1.33-1.40)
-P2_NODES_PER_TET = 1.45
+#: about how many P2 nodes per tetrahedron of a gmsh mesh (vertices + edges; measured on penny meshes of 8-18 k
+#: tetrahedra: 1.41-1.45)
+P2_NODES_PER_TET = 1.5
 
 
 def check_element(value) -> str:
