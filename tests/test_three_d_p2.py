@@ -147,3 +147,17 @@ def test_geometry_part_quadratic_cells_need_a_quadratic_element():
     g.validate(qp.n)
     with pytest.raises(InputError, match="geometry.cells must have shape"):
         GeometryPart(3, g.nodes, g.cells, g.node_dofs).validate(qp.n)       # 10-node cells, element P1
+
+
+def test_p2_rotation_leaves_the_energy_and_contact_set():
+    """A closed inclined penny under compression and shear, rotated with its loads: the same energy and contact
+    set (the P2 nodes, supports and consistent loads rotate with the body)."""
+    out = []
+    for rot in (0.0, 30.0):
+        qp = box([[0, 0, 0.3], [0, 0, 0], [0.3, 0, -1]], [{**DISK, "normal": [0.0, 0.3, 1.0]}], delta=1.0,
+                 rotate_deg=rot, rotate_axis=[1, 1, 0]).build()
+        sol = run("pdas", qp)
+        assert str(sol.status) == "solved"
+        out.append((float(0.5 * sol.x @ (qp.K @ sol.x) - qp.F @ sol.x), int(np.sum(sol.multipliers > 0))))
+    assert out[0][1] == out[1][1] > 0
+    assert out[1][0] == pytest.approx(out[0][0], rel=1e-10)
