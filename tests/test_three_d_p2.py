@@ -161,3 +161,17 @@ def test_p2_rotation_leaves_the_energy_and_contact_set():
         out.append((float(0.5 * sol.x @ (qp.K @ sol.x) - qp.F @ sol.x), int(np.sum(sol.multipliers > 0))))
     assert out[0][1] == out[1][1] > 0
     assert out[1][0] == pytest.approx(out[0][0], rel=1e-10)
+
+
+def test_size_guard_knows_p2_before_meshing():
+    """The memory check reads the P2 estimate before anything is meshed: a tip size that P1 affords is refused
+    for P2 on one line naming the element (no gmsh call: the scene is never meshed here)."""
+    from dualfem.numerics.memory import check_fits
+
+    keys = {"tip_size": 0.02}
+    p1, quad = load_scene("penny", keys), load_scene("penny", {**keys, "element": "P2"})
+    assert quad.size_estimate()[0] > 7 * p1.size_estimate()[0]
+    check_fits(p1, max_bytes=4e9, backend="pardiso")
+    with pytest.raises(InputError, match="element='P2'.*needs about"):
+        check_fits(quad, max_bytes=4e9, backend="pardiso")
+    assert "cut" not in quad.shared.data
