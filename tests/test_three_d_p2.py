@@ -69,6 +69,7 @@ def test_patch_uniform_stress_is_exact(defects):
         assert corner.any() and (~corner).any() and mu.min() >= -1e-12
         assert np.abs(mu[corner]).max() < 1e-9 * mu.max()      # the consistent P2 force of a uniform pressure
         assert mu[~corner].min() > 0.1 * mu.max()               # is 0 at the corners, A/3 per face at mid-edges
+        assert np.allclose(d["pressure"], 2.0, rtol=1e-9)       # the recovered pressure: -sigma_zz at every pair
 
 
 def opening_error(qp, x) -> float:
