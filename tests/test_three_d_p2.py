@@ -176,3 +176,11 @@ def test_size_guard_knows_p2_before_meshing():
     with pytest.raises(InputError, match="element='P2'.*needs about"):
         check_fits(quad, max_bytes=4e9, backend="pardiso")
     assert "cut" not in quad.shared.data
+
+
+def test_estimator_refuses_p2():
+    from dualfem.numerics.estimator import estimate
+
+    qp = box(SIGMA, []).build()
+    with pytest.raises(InputError, match="the estimator is P1's"):
+        estimate(qp, np.zeros(qp.n))
