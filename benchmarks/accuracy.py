@@ -1,6 +1,6 @@
 """Error against unknowns and against time, per discretization (reports/accuracy.md): Griffith, penny, ellipse.
 
-    python benchmarks/accuracy.py --report reports            # ~5 min on 2 shared cores (nice -n 10)
+    python benchmarks/accuracy.py --report reports            # 4-17 min on 2 shared cores (nice -n 10)
     python benchmarks/accuracy.py --report reports --render-only
 
 Two crack problems of half-length a = 1 in a square box of side L under a remote stress on every side (no
@@ -21,7 +21,13 @@ error is taken against s_L / s_200 times the closed form (and W times it). The e
 Discretizations: ``uniform`` (mesh_size = tip_size = h, box 10 a: a larger box is out of reach uniformly),
 ``graded 0.3`` (box 100 a, mesh_size 5 a, tip_size halved, size_growth 0.3: today's default), ``graded 0.05``
 (the same with size_growth 0.05), ``adaptive`` (box 100 a, each step of :func:`dualfem.experiments.adaptive.adapt`
-from mesh_size 5 a, tip_size 0.5 a; time = the steps so far). Each answer by pdas, certified by the runner.
+from mesh_size 5 a, tip_size 0.5 a; time = the steps so far). Quadratic elements (scene key ``element``,
+docs/elements.md): ``P2 graded 0.3`` and ``P2-qp graded 0.3`` (P2 and P2-quarter-point on the graded 0.3 meshes,
+tip_size a/10 down to a/40), ``P2-qp graded 0.1`` (size_growth 0.1); their errors are taken against the bias
+measured with P2-quarter-point elements (``bias_p2``: mesh_size min(5 a, L/4), tip_size a/20, size_growth 0.1),
+whose s_L is smooth in L (about 1 + 5 (a/L)^2); no estimator on P2 (it is P1's). On P2 rows the stress intensity
+factors (series fit; quarter-point correlation on quarter-point meshes) against sigma sqrt(pi a) times s_100/s_200.
+Each answer by pdas, certified by the runner.
 3D (the penny and an elliptic crack under tension, uniform and graded meshes): benchmarks/accuracy_3d.py.
 """
 from __future__ import annotations
@@ -103,20 +109,47 @@ def solve_row(case: str, L: float, pr, scale: float, label: str) -> dict:
     qp = pr.build()
     t1 = time.perf_counter()
     sol = run("pdas", qp)
-    est = estimate(qp, sol.x, sol.multipliers)
+    p1 = qp.geometry.element == "P1"            # the estimator is P1's
+    est = estimate(qp, sol.x, sol.multipliers) if p1 else None
     row = {"case": case, "disc": label, "L": L, "unknowns": int(qp.n), "status": str(sol.status),
            "build_s": t1 - t0, "solve_s": sol.time_s.get("setup", 0) + sol.time_s.get("solve", 0),
-           "eta": est.eta, "eta_rel": est.relative, **errors(case, L, qp, sol.x, scale)}
+           "eta": est.eta if est else float("nan"), "eta_rel": est.relative if est else float("nan"),
+           **errors(case, L, qp, sol.x, scale)}
     row["time_s"] = row["build_s"] + row["solve_s"]
     row["effectivity"] = row["eta"] / row["energy_error"]
+    if not p1:
+        row.update(sif_errors(case, qp, sol.x, scale))
     return row
 
 
-def bias(case: str) -> dict[float, float]:
+def sif_errors(case: str, qp, x, scale: float) -> dict:
+    """P2 rows: the stress intensity factors against the closed form times the box's factor ``scale``:
+    max over both tips of |K / K_0 - 1| for the mode the load drives (open: K_I = sigma_n sqrt(pi a); slip: |K_II|
+    = |tau| sqrt(pi a)) and |K_other| / K_0 for the other, by the series fit and (quarter-point) the classic
+    quarter-point correlation (:mod:`dualfem.post.sif_quarter`)."""
+    from dualfem.post.sif_quarter import quarter_point, series_fit
+
+    sn, tau = resolved(case)
+    k0 = scale * np.sqrt(np.pi * A) * (sn if case == "open" else abs(tau))
+    out = {}
+    methods = [("series", series_fit)]
+    if qp.geometry.element == "P2-quarter-point":
+        methods.append(("qp", quarter_point))
+    for name, f in methods:
+        s = f(qp, x)
+        main, other = (s.K_I, s.K_II) if case == "open" else (np.abs(s.K_II), s.K_I)
+        out[f"sif_{name}"] = float(np.abs(main / k0 - 1).max())
+        out[f"sif_{name}_other"] = float(np.abs(other / k0).max())
+    return out
+
+
+def bias(case: str, element: str = "P1") -> dict[float, float]:
     """s_L: the fitted factor between the computed and the closed-form jump, one near-crack mesh, per box."""
     out = {}
     for L in BOXES:
-        pr = scene(case, L, mesh_size=1.0, tip_size=A / 20, size_growth=0.1)
+        mesh = {"mesh_size": 1.0, "tip_size": A / 20, "size_growth": 0.1} if element == "P1" else \
+            {"mesh_size": min(5.0, L / 4), "tip_size": A / 20, "size_growth": 0.1, "element": element}
+        pr = scene(case, L, **mesh)
         row = solve_row(case, L, pr, 1.0, "bias")
         out[L] = row["fit"]
         print(f"bias {case} L={L:g}: s_L = {row['fit']:.5f} ({row['unknowns']} unknowns)", flush=True)
@@ -148,6 +181,21 @@ def curves(case: str, s: dict[float, float], quick: bool) -> list[dict]:
     return rows
 
 
+def curves_p2(case: str, s: dict[float, float], quick: bool) -> list[dict]:
+    """The quadratic rows (box 100 a, mesh_size 5 a), their errors against ``s`` (the P2 bias) at L = 100 a."""
+    rows, ref = [], s[100.0] / s[BOXES[-1]]
+    n = 3 if quick else 4
+    for element, growth, label in (("P2", 0.3, "P2 graded 0.3"), ("P2-quarter-point", 0.3, "P2-qp graded 0.3"),
+                                   ("P2-quarter-point", 0.1, "P2-qp graded 0.1")):
+        for tip in [A / 10 / 2 ** k for k in range(n)]:
+            pr = scene(case, 100.0, mesh_size=5.0, tip_size=tip, size_growth=growth, element=element)
+            rows.append(solve_row(case, 100.0, pr, ref, label))
+    for r in rows:
+        print(f"{case} {r['disc']:>16} n={r['unknowns']:>7} jump={r['jump_error']:.2e} energy={r['energy_rel']:.2e} "
+              f"t={r['time_s']:.1f}s", flush=True)
+    return rows
+
+
 def _step_row(case: str, step, scale: float) -> dict:
     err = errors(case, 100.0, step.qp, step.x, scale)
     return {"case": case, "disc": "adaptive", "L": 100.0, "unknowns": step.unknowns,
@@ -174,11 +222,14 @@ def main(argv: list[str] | None = None) -> int:
     path = args.report / "accuracy.json"
     if not args.render_only:
         t0 = time.perf_counter()
-        res: dict = {"bias": {}, "rows": []}
+        res: dict = {"bias": {}, "bias_p2": {}, "rows": []}
         for case in ("open", "slip"):
             b = bias(case)
             res["bias"][case] = {str(k): v for k, v in b.items()}
             res["rows"] += curves(case, b, args.quick)
+            b2 = bias(case, "P2-quarter-point")
+            res["bias_p2"][case] = {str(k): v for k, v in b2.items()}
+            res["rows"] += curves_p2(case, b2, args.quick)
         sys.path.insert(0, str(Path(__file__).resolve().parent))
         from accuracy_3d import CRACKS, study3
 

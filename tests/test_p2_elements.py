@@ -132,7 +132,79 @@ def test_p1_post_processing_refuses_p2():
     from dualfem.post.sif import parts
 
     qp = load_scene("f2", {"N": 8, "element": "P2"}).build()
-    with pytest.raises(InputError, match="P1 fields only"):
+    with pytest.raises(InputError, match="need element = 'P1'"):
         parts(qp)
     with pytest.raises(InputError, match="estimator is P1's"):
         estimate(qp, np.zeros(qp.n))
+
+
+def _griffith_field(qp, sigma=1.0):
+    """x with the closed-form Griffith opening 4 (1 - nu^2) sigma / E sqrt(a^2 - s^2) split over the two faces of
+    every crack pair (a = 1, plane strain), every other unknown 0."""
+    it = qp.interface
+    s = it.s - 1.0
+    op = 4 * (1 - NU ** 2) * sigma / E * np.sqrt(np.maximum(1 - s * s, 0))
+    x = np.zeros(qp.n)
+    for c in range(2):
+        x[it.plus_dofs[:, c]] = 0.5 * op * it.normals[:, c]
+        x[it.minus_dofs[:, c]] = -0.5 * op * it.normals[:, c]
+    return x
+
+
+def test_p2_sif_formulas_on_the_closed_form_jumps():
+    """K from the exact Griffith jumps at the pairs of a quarter-point mesh: the series fit within 2e-3 of
+    sigma sqrt(pi a), the quarter-point formula within its truncation L / (8 a); K_II = 0; stress_intensity picks
+    the series fit."""
+    from dualfem.post.sif_outputs import stress_intensity
+    from dualfem.post.sif_quarter import quarter_point, series_fit
+
+    qp = _box("P2-quarter-point", [[0.0, 0.0], [0.0, 1.0]], [{"points": [[9.0, 10.0], [11.0, 10.0]]}], L=20.0,
+              h=2.0, tip=0.1).build()
+    x = _griffith_field(qp)
+    k0 = np.sqrt(np.pi)
+    s, q = series_fit(qp, x), quarter_point(qp, x)
+    assert np.abs(s.K_I / k0 - 1).max() < 2e-3 and np.abs(s.K_II).max() < 1e-9
+    assert np.abs(q.K_I / k0 - 1).max() < 0.15 * q.radius.max()       # its truncation: + L / (8 a)
+    assert np.abs(q.K_II).max() < 1e-9
+    assert stress_intensity(qp, x).method == "series"
+    with pytest.raises(InputError, match="reach must be"):
+        series_fit(qp, x, reach=0.9)
+
+
+def test_p2_sif_refusals():
+    from dualfem.post.sif_outputs import stress_intensity
+
+    p2 = load_scene("f2", {"N": 8, "element": "P2"}).build()
+    with pytest.raises(InputError, match="need element = 'P2-quarter-point'"):
+        stress_intensity(p2, np.zeros(p2.n), method="quarter-point")
+    with pytest.raises(InputError, match="need element = 'P1'"):
+        stress_intensity(p2, np.zeros(p2.n), method="interaction")
+    p1 = load_scene("f2", {"N": 8}).build()
+    with pytest.raises(InputError, match="need element = 'P2' or 'P2-quarter-point'"):
+        stress_intensity(p1, np.zeros(p1.n), method="series")
+
+
+@pytest.mark.parametrize("keys", [
+    {"load": "f1"}, {"load": "f3", "rotate_deg": 30.0},
+    {"boundary": [{"side": "bottom", "support": "clamp"}, {"side": "top", "traction": ["0.5 * x", "1 + y * x"]},
+                  {"side": "left", "traction": [1.0, "y * y"]}], "body_force": ["x * y", -2.0]},
+])
+def test_p2_loads_have_the_p1_resultants(keys):
+    """Consistent nodal forces integrate the same tractions and body force: the P2 load's net force and moment
+    (about the origin) equal P1's on the same mesh (both exact for these polynomials, up to the Gauss rules)."""
+    out = []
+    for el in ("P1", "P2-quarter-point"):
+        pr = load_scene("f2", {"N": 4, "element": el, **keys})
+        pr.build()
+        F, X = pr.nodal_load(), pr.cut()[1] if el == "P1" else pr._delta_free()["maps"]["nodes"]
+        out.append(np.r_[F.sum(axis=1), np.sum(X[0] * F[1] - X[1] * F[0])])
+    assert np.allclose(out[0], out[1], rtol=1e-9, atol=1e-12 * np.abs(out[0]).max()), out
+
+
+def test_a_p2_qp_file_keeps_its_element(tmp_path):
+    from dualfem.qp import QP
+
+    qp = load_scene("f2", {"N": 4, "element": "P2-quarter-point"}).build()
+    back = QP.load(qp.save(tmp_path / "p2.npz"))
+    assert back.geometry.element == "P2-quarter-point" and back.geometry.nodes.shape == qp.geometry.nodes.shape
+    assert QP.load(load_scene("f2", {"N": 4}).build().save(tmp_path / "p1.npz")).geometry.element == "P1"

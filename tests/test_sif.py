@@ -119,7 +119,7 @@ def test_closed_crack_under_compression_and_shear():
 def test_bad_options(tension):
     qp, sol = tension
     with pytest.raises(InputError, match="method must be one of"):
-        stress_intensity(qp, sol.x, "quarter-point")
+        stress_intensity(qp, sol.x, "bogus")
     with pytest.raises(InputError, match=r"rings must be a number in \[1, 100\]"):
         correlation(qp, sol.x, rings=0.5)
     with pytest.raises(InputError, match="r_out must be in"):

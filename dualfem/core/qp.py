@@ -23,6 +23,7 @@ across all of them.
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import warnings
 from dataclasses import InitVar, dataclass, field
@@ -388,6 +389,8 @@ class QP:
             parts["material"] = MaterialPart(float(params["E"]), float(params["nu"]),
                                              str(params.get("plane", "strain")))
         g = parts.get("geometry")
+        if g is not None and params.get("element", "P1") != "P1":      # a quadratic mesh (scene key element)
+            parts["geometry"] = g = dataclasses.replace(g, element=str(params["element"]))
         if g is not None:       # the defect maps, checked before the interface part is made from them
             check_maps(rest, B.shape[0], g.nodes.shape[1], where, dim=g.dim)
         qp = cls(K=K, F=F, B=B, weights=w, name=path.stem, maps=Maps(rest), params=params, **parts)

@@ -78,17 +78,19 @@ def kolosov(nu: float, plane: str, dim: int) -> float:
     return (3 - nu) / (1 + nu) if dim == 2 and plane == "stress" else 3 - 4 * nu
 
 
-def parts(qp):
-    """(interface, geometry, material) of the QP; InputError naming what is missing."""
+def parts(qp, elements: tuple[str, ...] = ("P1",)):
+    """(interface, geometry, material) of the QP; InputError naming what is missing, or when its element
+    (``geometry.element``) is not one of ``elements``."""
     for k in ("interface", "geometry", "material"):
         if getattr(qp, k, None) is None:
             raise InputError(f"stress intensity factors need the QP's {k} part (build the QP from a scene)")
     it = qp.interface
     if it.front.size == 0:
         raise InputError("stress intensity factors need crack tips or fronts (interface.front is empty)")
-    if qp.geometry.element != "P1":
-        raise InputError(f"stress intensity factors are computed from P1 fields only; this QP has element = "
-                         f"{qp.geometry.element!r} (use element = 'P1' for --sif)")
+    if qp.geometry.element not in elements:
+        raise InputError(f"stress intensity factors by this method need element = {' or '.join(map(repr, elements))}; "
+                         f"this QP has element = {qp.geometry.element!r} (--sif: use element = 'P1' or "
+                         f"'P2-quarter-point')")
     return it, qp.geometry, qp.material
 
 

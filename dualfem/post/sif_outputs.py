@@ -3,7 +3,9 @@ VTU point fields of 3D fronts (the figure of K along a front: benchmarks/sif_rep
 
 ``method="auto"`` (and ``"interaction"``): the interaction integral, at 2D tips (:mod:`dualfem.post.sif_integral`)
 and along 3D fronts (:mod:`dualfem.post.sif_integral3d`), the more accurate on P1 meshes; ``"fit"`` and
-``"extrapolate"``: the displacement correlation (:mod:`dualfem.post.sif`).
+``"extrapolate"``: the displacement correlation (:mod:`dualfem.post.sif`). On a ``P2`` or ``P2-quarter-point`` QP
+``"auto"`` (and ``"series"``) is the two-term Williams fit of the jumps, ``"quarter-point"`` the classic
+quarter-point correlation (:mod:`dualfem.post.sif_quarter`); the other methods need P1.
 """
 from __future__ import annotations
 
@@ -13,9 +15,10 @@ from dualfem.core.errors import InputError
 from dualfem.post.sif import METHODS, StressIntensity, correlation
 from dualfem.post.sif_integral import interaction
 from dualfem.post.sif_integral3d import interaction3d
+from dualfem.post.sif_quarter import P2_ELEMENTS, quarter_point, series_fit
 
 #: every method :func:`stress_intensity` accepts
-ALL_METHODS = ("auto", "interaction", *METHODS)
+ALL_METHODS = ("auto", "interaction", *METHODS, "series", "quarter-point")
 
 
 def stress_intensity(qp, x, method: str = "auto", **options) -> StressIntensity:
@@ -23,6 +26,11 @@ def stress_intensity(qp, x, method: str = "auto", **options) -> StressIntensity:
     docstring; ``options``: ``r_out`` of the interaction integral, ``rings`` of the correlation)."""
     if method not in ALL_METHODS:
         raise InputError(f"method must be one of {', '.join(ALL_METHODS)}, got {method!r}")
+    g = getattr(qp, "geometry", None)
+    if method == "quarter-point":
+        return quarter_point(qp, x)
+    if method == "series" or (method == "auto" and g is not None and g.element in P2_ELEMENTS):
+        return series_fit(qp, x, **options)
     if method in ("auto", "interaction"):
         dim = getattr(getattr(qp, "interface", None), "dim", None)
         return (interaction3d if dim == 3 else interaction)(qp, x, **options)

@@ -104,14 +104,15 @@ def p2_interface(c: Cut, points: np.ndarray, edges: np.ndarray) -> tuple[Doubled
     return q, tangents[:, order], s[order]
 
 
-def basis(points: np.ndarray, triangles: np.ndarray, quarter: bool):
-    """scikit-fem's P2 vector basis on the nodes ``points`` (2, nv + ne) (isoparametric when ``quarter``)."""
+def basis(points: np.ndarray, triangles: np.ndarray, quarter: bool, intorder: int | None = None):
+    """scikit-fem's P2 vector basis on the nodes ``points`` (2, nv + ne) (isoparametric when ``quarter``); its
+    quadrature of degree ``intorder`` (None: scikit-fem's default, 4)."""
     from skfem import Basis, ElementTriP2, ElementVector, MeshTri, MeshTri2
 
     nv = int(triangles.max()) + 1
     pts = np.ascontiguousarray(points if quarter else points[:, :nv])
     mesh = MeshTri2(pts, np.ascontiguousarray(triangles)) if quarter else MeshTri(pts, np.ascontiguousarray(triangles))
-    return Basis(mesh, ElementVector(ElementTriP2()))
+    return Basis(mesh, ElementVector(ElementTriP2()), intorder=intorder)
 
 
 def stiffness(points: np.ndarray, triangles: np.ndarray, quarter: bool, lam: float, mu: float,
@@ -194,11 +195,13 @@ def _edge_forces(F: np.ndarray, P: np.ndarray, triples: np.ndarray, fn, scale: f
 
 
 def _body_forces(F: np.ndarray, a: dict, triangles: np.ndarray, field, scale: float) -> None:
-    """Add the consistent P2 nodal forces of the body force ``field`` (reference frame) to ``F`` (2, n)."""
+    """Add the consistent P2 nodal forces of the body force ``field`` (reference frame) to ``F`` (2, n): degree-6
+    quadrature, exact for quadratic data times P2 functions on straight cells (and for the resultant of quadratic
+    data on a quarter-point cell, whose Jacobian is quadratic)."""
     from skfem import LinearForm, asm
 
     info = a["p2"]
-    b = basis(info["points_ref"], triangles, info["quarter"])
+    b = basis(info["points_ref"], triangles, info["quarter"], intorder=6)    # exact for data of degree 2
 
     @LinearForm
     def form(v, w):
