@@ -399,15 +399,17 @@ class ThreeD(Adaptive, Problem):
             a = self._delta_free()
             pairs, ref = a["pairs"], a["reference"]
             normals = a["interface"].normals.T
-            pressure = np.zeros(pairs.lower.size)
-            for k, f in enumerate(self._face_pressure):
-                j = np.flatnonzero(pairs.defect_id == k)
-                if f is not None and j.size:
-                    pressure[j] = f(ref[:, pairs.lower[j]])[0]
-            if not np.all(np.isfinite(pressure)):
+            if q is not None:           # P2: the consistent forces (pressure-weighted integrals of the shape functions)
+                weights, pressure = p2.face_pressure_weights(q, pairs, c.faces, self._face_pressure), 1.0
+            else:
+                weights, pressure = pairs.weights, np.zeros(pairs.lower.size)
+                for k, f in enumerate(self._face_pressure):
+                    j = np.flatnonzero(pairs.defect_id == k)
+                    if f is not None and j.size:
+                        pressure[j] = f(ref[:, pairs.lower[j]])[0]
+            if not np.all(np.isfinite(pressure * weights)):
                 raise InputError("face_pressure gives NaN or infinite values on a defect; it must be finite there")
-            F += bd.face_pressure_forces(pairs.upper, pairs.lower, normals, pairs.weights, scale * pressure,
-                                         pts.shape[1])
+            F += bd.face_pressure_forces(pairs.upper, pairs.lower, normals, weights, scale * pressure, pts.shape[1])
         if self._loads is not None:
             bd.check_balance(self._loads, pts, sides, F)
         return F

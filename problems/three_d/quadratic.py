@@ -11,8 +11,10 @@
   every P2 node at z = 0; the rigid-body completion picks among all P2 nodes.
 * Loads: consistent P2 nodal forces (the six P2 shape functions of each side triangle, the ten of each
   tetrahedron for a body force) with the Gauss rules of :func:`dualfem.problems._boundary.simplex_rule`
-  (exact for constants and for linear data); a defect's ``face_pressure`` lumped with the pairs' weights, as the
-  delta term (and as P1 does).
+  (exact for constants and for linear data); a defect's ``face_pressure`` as consistent P2 forces too
+  (:func:`face_pressure_weights`: the lumped weights of the delta term would give a uniform pressure's corners
+  A/12 and mid-edge nodes A/4 per face instead of 0 and A/3, and measured a 4.2 % opening error on a penny where
+  tension gives 3.5 %).
 """
 from __future__ import annotations
 
@@ -163,6 +165,38 @@ def nodal_forces(spec, q: QuadraticTets, sides1: dict[str, np.ndarray], scale: f
         if spec.body_force is not None:
             integrate(F, q, q.tets, spec.body_force, scale, "in the body")
     return F
+
+
+def face_pressure_weights(q: QuadraticTets, pairs, faces: np.ndarray, fields: list) -> np.ndarray:
+    """Per defect pair j: int over the defect of N_j p (the consistent P2 force of the pressure p of its defect,
+    a Field of the reference frame, None: 0), from the "-" triangles ``faces`` (3, nf) and their mid-edge nodes;
+    nodes that are no pair (the front) take none. With these as weights and pressure 1,
+    :func:`dualfem.problems._boundary.face_pressure_forces` gives the consistent forces."""
+    f = np.asarray(faces, dtype=np.int64)
+    nn = q.points.shape[1]
+    row_of = np.full(nn, -1, np.int64)
+    row_of[pairs.lower] = np.arange(pairs.lower.size)
+    ids = np.vstack([f, q.simplex_midnodes(f)])                           # (6, nf) "-" nodes
+    rows = np.where(ids >= 0, row_of[ids], -1)
+    owner = rows[:3].max(axis=0)                                          # a doubled corner: the face's defect
+    defect = np.where(owner >= 0, np.asarray(pairs.defect_id)[np.maximum(owner, 0)], -1)
+    lam, w = bd.simplex_rule(2)
+    N = shape_values(lam)                                                 # (nq, 6)
+    V = q.points[:, f]                                                    # (3, 3, nf)
+    X = np.einsum("dkf,qk->dfq", V, lam)
+    area = bd._measure(V)
+    out = np.zeros(pairs.lower.size)
+    for k, field in enumerate(fields):
+        sel = np.flatnonzero(defect == k)
+        if field is None or sel.size == 0:
+            continue
+        with np.errstate(all="ignore"):
+            p = np.asarray(field(X[:, sel]), dtype=float)[0]             # (ns, nq)
+        c = np.einsum("fq,q,qa->af", p, w, N) * area[sel]                 # (6, ns)
+        r = rows[:, sel]
+        ok = r >= 0
+        out += np.bincount(r[ok], weights=c[ok], minlength=out.size)
+    return out
 
 
 class _Traction:
