@@ -78,13 +78,16 @@ def mid_edge_pairs(cut: DoubledNodes, edges: np.ndarray, crack_edges: np.ndarray
 
     ``edges`` (2, ne): every edge of the cut mesh as sorted vertex pairs (:func:`edge_table`; edge k is P2 node
     ``nv + k``, nv = ``cut.points.shape[1]``); ``crack_edges`` (2, k): the crack's edges on the "-" face
-    (vertex ids of the cut mesh: doubled vertices by their ``lower`` id), each once. ValueError when an edge
-    or its "+" copy is not an edge of the mesh (the cut is at fault).
+    (vertex ids of the cut mesh: doubled vertices by their ``lower`` id); an edge given twice (3D: the edge of two
+    crack faces) is taken once, as first given. ValueError when an edge or its "+" copy is not an edge of the
+    mesh (the cut is at fault).
     """
     nv = cut.points.shape[1]
     pair_of = np.full(nv, -1, np.int64)
     pair_of[cut.lower] = np.arange(cut.lower.size)
     ce = np.asarray(crack_edges, dtype=np.int64).reshape(2, -1)
+    _, first = np.unique(np.minimum(ce[0], ce[1]) * nv + np.maximum(ce[0], ce[1]), return_index=True)
+    ce = ce[:, np.sort(first)]
     vp = pair_of[ce]
     doubled = (vp >= 0).any(axis=0)
     ce, vp = ce[:, doubled], vp[:, doubled]

@@ -116,11 +116,8 @@ def test_crack_edge_weights_and_pairs():
 
 @pytest.mark.parametrize("extra, words", [
     ({"element": "P3"}, "element must be one of 'P1', 'P2', 'P2-quarter-point'"),
-    ({"element": "P2", "friction": "tresca", "friction_bound": 1.0}, "friction is not supported"),
     ({"element": "P2", "mesh": "gmsh", "refine": "adaptive", "target_error": 0.1, "max_unknowns": 5000},
      "refine = 'adaptive' is not supported"),
-    ({"element": "P2", "load": "f2", "defects": [{"points": [[0.25, 0.5], [0.75, 0.5]], "face_pressure": 1.0}]},
-     "face_pressure is not supported"),
 ])
 def test_refusals(extra, words):
     with pytest.raises(InputError, match=words.replace("(", r"\(")):
@@ -208,3 +205,60 @@ def test_a_p2_qp_file_keeps_its_element(tmp_path):
     back = QP.load(qp.save(tmp_path / "p2.npz"))
     assert back.geometry.element == "P2-quarter-point" and back.geometry.nodes.shape == qp.geometry.nodes.shape
     assert QP.load(load_scene("f2", {"N": 4}).build().save(tmp_path / "p1.npz")).geometry.element == "P1"
+
+
+def test_p2_friction_scales_the_slip():
+    """A closed crack at 30 degrees under compression and shear, all of it slipping: Coulomb's slip is the
+    frictionless one times (|tau| - mu sigma_n) / |tau| (the closed forms' ratio; the box's bias cancels)."""
+    stress = [[0.0, 0.5], [0.5, -1.0]]
+    crack = [{"points": [[9.1339746, 9.5], [10.8660254, 10.5]]}]
+    slips = []
+    for fr in ({}, {"friction": "coulomb", "friction_coefficient": 0.1}):
+        qp = _box("P2-quarter-point", stress, crack, L=20.0, h=2.0, tip=0.1, **fr).build()
+        sol = run("pdas", qp)
+        assert str(sol.status) == "solved" and len(qp.blocks) == int(bool(fr))
+        it = qp.interface
+        u = _nodal(qp, sol.x).T
+        slips.append(np.sum((u[it.upper] - u[it.lower]) * it.tangents[:, 0, :], axis=1))
+    t, n = np.array([np.cos(np.pi / 6), 0.5]), np.array([-0.5, np.cos(np.pi / 6)])
+    tau, sn = t @ np.array(stress) @ n, n @ np.array(stress) @ n
+    ratio = (abs(tau) + 0.1 * sn) / abs(tau)
+    k = np.abs(slips[0]) > 0.2 * np.abs(slips[0]).max()
+    assert 0 < ratio < 1 and np.allclose(slips[1][k], ratio * slips[0][k], rtol=2e-3)
+
+
+def test_p2_face_pressure_is_remote_tension_by_superposition():
+    """A crack under face pressure p in an unloaded free box opens as under the remote tension p (the uniform
+    field has no jump): the same openings at every pair, vertex and mid-edge."""
+    crack = [[1.2, 2.1], [2.8, 1.9]]
+    qa = _box("P2-quarter-point", [[0.0, 0.0], [0.0, 0.0]], [{"points": crack, "face_pressure": 3.0}]).build()
+    n = np.array([0.2, 1.6]) / np.hypot(0.2, 1.6)                 # the crack's normal
+    qb = _box("P2-quarter-point", (3.0 * np.outer(n, n)).tolist(), [{"points": crack}]).build()
+    oa, ob = qa.B @ run("pdas", qa).x, qb.B @ run("pdas", qb).x
+    assert oa.min() > 0 and np.allclose(oa, ob, rtol=1e-8, atol=1e-10 * oa.max())
+
+
+def test_p2_vtu_and_figure_show_the_vertex_values(tmp_path):
+    from dualfem.post.vtk import to_meshio
+
+    qp = load_scene("f2", {"N": 4, "element": "P2"}).build()
+    sol = run("pdas", qp)
+    m = to_meshio(qp, sol)
+    tri = m.cells[0].data
+    nv = int(qp.geometry.cells.max()) + 1
+    assert tri.max() < nv and m.points.shape[0] == qp.geometry.nodes.shape[1]
+    assert np.allclose(m.point_data["displacement"][:nv, :2], _nodal(qp, sol.x).T[:nv])
+
+
+def test_mid_edge_pairs_take_a_repeated_edge_once():
+    """The generic pairing (3D gives each interior crack edge twice, once per face): the same pairs either way,
+    and an edge whose two vertices are tips / front nodes is not a pair."""
+    pr = load_scene("f2", {"N": 8})
+    c, _ = pr.cut()
+    edges, _ = q2.edge_table(c.triangles)
+    from dualfem.problems.thin_defect.element import crack_edges
+    ce = crack_edges(c)
+    once, twice = q2.mid_edge_pairs(c, edges, ce), q2.mid_edge_pairs(c, edges, np.hstack([ce, ce[::-1]]))
+    assert np.array_equal(once.lower, twice.lower) and np.array_equal(once.upper, twice.upper)
+    assert np.array_equal(once.edge, twice.edge) and once.lower.size == ce.shape[1]
+    assert q2.mid_edge_pairs(c, edges, c.tips[:2].reshape(2, 1)).lower.size == 0       # both ends single

@@ -15,8 +15,9 @@ their normals, the isoparametric row-sum weights); pairs are ordered defect by d
 Supports and loads as P1 does, on the P2 nodes: the legacy bottom clamp fixes every node on x2 = 0 (mid-edge
 nodes included), ``[[boundary]]`` clamps / rollers the nodes of a side's edges, the rigid-body removal picks
 P2 nodes; side tractions and ``remote_stress`` are integrated with the quadratic edge functions (5-point Gauss
-per edge), ``body_force`` with scikit-fem on the (isoparametric) cells. Refused on P2 (one InputError line
-each): ``face_pressure``, friction blocks, ``refine = "adaptive"``.
+per edge), ``body_force`` with scikit-fem on the (isoparametric) cells, a defect's ``face_pressure`` p as
+``p w_j nu_j`` at each pair (the consistent P2 load of a constant pressure: w_j are the edge row sums). Friction
+(Tresca, Coulomb) acts on every P2 pair as on P1's. Refused on P2 (one InputError line): ``refine = "adaptive"``.
 
 The QP's ``geometry`` holds every P2 node (``nodes`` (2, nv + ne)), the linear triangles as ``cells`` (vertex
 ids only) and ``element``: post-processing that assumes P1 (SIF, the estimator) refuses such a QP; the vertex
@@ -30,7 +31,6 @@ import scipy.sparse as sp
 from dualfem.errors import InputError
 
 from .. import _boundary as bd
-from .. import _friction_keys as fk
 from .._interface import DoubledNodes, delta_free_part, local_unknowns
 from .._quadratic import edge_index, edge_table, edge_weights, mid_edge_pairs, quadratic_interface
 from .cut import Cut
@@ -48,15 +48,12 @@ def check_element(value) -> str:
     return value
 
 
-def check_scene(params: dict, defects: list[dict], friction) -> None:
-    """What a quadratic scene refuses (InputError): face pressures, friction, adaptive refinement."""
+def check_scene(params: dict, defects: list[dict]) -> None:
+    """What a quadratic scene refuses (InputError): adaptive refinement. (Friction blocks take the P2 pairs as they
+    are, one Tresca or Coulomb row per pair with its weight; a face pressure p gives p w_j nu_j at each pair.)"""
     el = params["element"]
     if el == "P1":
         return
-    if any(d.get("face_pressure") is not None for d in defects):
-        raise InputError(f"element = {el!r}: face_pressure is not supported on quadratic elements; use element = 'P1'")
-    if fk.frictional(friction):
-        raise InputError(f"element = {el!r}: friction is not supported on quadratic elements; use element = 'P1'")
     if params["refine"] != "none":
         raise InputError(f"element = {el!r}: refine = {params['refine']!r} is not supported on quadratic elements "
                          f"(its estimator is P1's); use element = 'P1' or refine = 'none'")
@@ -115,16 +112,18 @@ def basis(points: np.ndarray, triangles: np.ndarray, quarter: bool, intorder: in
     return Basis(mesh, ElementVector(ElementTriP2()), intorder=intorder)
 
 
-def stiffness(points: np.ndarray, triangles: np.ndarray, quarter: bool, lam: float, mu: float,
+def stiffness(points: np.ndarray, triangles: np.ndarray, edges: np.ndarray, quarter: bool, lam: float, mu: float,
               node_dofs: np.ndarray) -> sp.csc_matrix:
     """P2 plane elasticity stiffness on the free unknowns ``node_dofs`` (2, n_nodes; -1 fixed), canonical CSC.
-    scikit-fem's default quadrature (degree 4: exact on straight P2 triangles)."""
+    scikit-fem's default quadrature (degree 4: exact on straight P2 triangles). RuntimeError unless scikit-fem's
+    facets are ``edges`` (node nv + k = edge k) and its DOFs the nodes' components."""
     from skfem import asm
     from skfem.models.elasticity import linear_elasticity
 
     b = basis(points, triangles, quarter)
-    if b.N != node_dofs.size:
-        raise RuntimeError(f"the P2 basis has {b.N} DOFs, the nodes {node_dofs.size} components")
+    if b.N != node_dofs.size or not np.array_equal(b.mesh.facets, edges):
+        raise RuntimeError(f"the P2 basis ({b.N} DOFs) does not number the nodes' {node_dofs.size} components as "
+                           f"problems/_quadratic.edge_table does")
     free = node_dofs.T.ravel()
     keep = np.flatnonzero(free >= 0)          # basis DOF 2 i + c in (node, component) order: unknowns ascending
     K = asm(linear_elasticity(lam, mu), b).tocsr()[keep][:, keep].tocsc()
@@ -151,7 +150,7 @@ def delta_free(problem, lam: float, mu: float, R: np.ndarray) -> dict:
     else:
         node_dofs = bd.dof_numbering(bd.fixed_mask(problem._loads, P, sides))
     n = int(node_dofs.max()) + 1
-    K_el = stiffness(P, c.triangles, quarter, lam, mu, node_dofs)
+    K_el = stiffness(P, c.triangles, edges, quarter, lam, mu, node_dofs)
     q, tangents, s = p2_interface(c, P_ref, edges)
     part = delta_free_part(node_dofs, q, (R @ q.normals).T, tangents=(R @ tangents).T[:, None, :], front=c.tips, s=s)
     maps = {"nodes": P, "triangles": c.triangles, "node_dofs": node_dofs}
@@ -252,8 +251,13 @@ def nodal_load(problem, a: dict) -> np.ndarray:
                                  f"on the {side} side")
             if spec.body_force is not None:
                 _body_forces(F, a, a["maps"]["triangles"], spec.body_force, scale)
+    R = rotation(float(p["rotate_deg"]))
     if p["rotate_deg"] != 0:
-        F = rotation(float(p["rotate_deg"])) @ F
+        F = R @ F
+    if any(d.get("face_pressure") is not None for d in problem._defects):    # p w_j nu_j: exact for constant p
+        q = a["cut"]
+        F = F + bd.face_pressure_forces(q.upper, q.lower, R @ q.normals, q.weights, scale * problem._pressures(q),
+                                        F.shape[1])
     if spec is not None:
         bd.check_balance(spec, a["maps"]["nodes"], sides, F)
     return F
