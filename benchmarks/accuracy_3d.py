@@ -15,6 +15,7 @@ and mid-edge nodes, with their weights). Time: meshing, assembly, factorization 
 ``total_s`` adds the certification.
 
     python benchmarks/accuracy_3d.py --report reports     # the 3D rows only, the 2D rows of accuracy.json kept
+    python benchmarks/accuracy_3d.py --report reports --p2-only       # the P2 rows alone, the rest kept
     python benchmarks/accuracy_3d.py --report reports --merge-only    # reports/accuracy/three_d.json into it
 """
 from __future__ import annotations
@@ -127,43 +128,42 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--merge-only", action="store_true", help="no run: merge the last 3D results "
                     "(accuracy/three_d.json) into accuracy.json and render")
     ap.add_argument("--p2-only", action="store_true", help="run the P2 rows alone (the box bias and the P1 rows "
-                    "of accuracy/three_d.json kept)")
+                    "of accuracy.json kept)")
     args = ap.parse_args(argv)
     path, own = args.report / "accuracy.json", args.report / "accuracy" / "three_d.json"
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from accuracy import machine
     from accuracy_report import render
 
+    res = json.loads(path.read_text(encoding="utf-8"))
+    t0 = time.perf_counter()
     if args.merge_only:
         three = json.loads(own.read_text(encoding="utf-8"))
     elif args.p2_only:
-        three = json.loads(own.read_text(encoding="utf-8"))
-        t0 = time.perf_counter()
-        three["rows"] = [r for r in three["rows"] if not r["disc"].startswith("P2")]
+        three = {"bias3": res["bias3"], "wall_s": 0.0,
+                 "rows": [r for r in res["rows"] if r["case"] in CRACKS and not r["disc"].startswith("P2")]}
         for crack in CRACKS:
-            bias = {float(k): v for k, v in three["bias3"][crack].items()}
+            bias = {float(k): v for k, v in res["bias3"][crack].items()}
             three["rows"] += study3(crack, args.quick, p2_only=True, bias=bias)[1]
-        first = three["machine"].split("; P2 rows")[0]
-        three["machine"] = f"{first}; P2 rows (--p2-only) {time.perf_counter() - t0:.0f} s on {machine()}"
-        three["wall_s"] = three.get("wall_s", 0.0)
-        own.write_text(json.dumps(three, indent=1), encoding="utf-8")
+        base = res.get("machine3") or \
+            f"P1 rows and the bias: {res['machine']} (whole accuracy run {res['wall_s']:.0f} s)"
+        three["machine"] = f"{base.split('; P2 rows')[0]}; P2 rows (--p2-only) {time.perf_counter() - t0:.0f} s " \
+                           f"on {machine()}"
     else:
-        t0 = time.perf_counter()
         three = {"bias3": {}, "rows": []}
         for crack in CRACKS:
             three["bias3"][crack], rows = study3(crack, args.quick)
             three["rows"] += rows
         three["wall_s"], three["machine"] = time.perf_counter() - t0, machine()
+    if not args.merge_only:
         own.parent.mkdir(parents=True, exist_ok=True)
         own.write_text(json.dumps(three, indent=1), encoding="utf-8")
-    res = json.loads(path.read_text(encoding="utf-8"))
     res["rows"] = [r for r in res["rows"] if r["case"] not in CRACKS] + three["rows"]
     res["bias3"], res["machine3"] = three["bias3"], f"{three['machine']}; 3D part {three['wall_s']:.0f} s" \
         if three["wall_s"] else three["machine"]
     path.write_text(json.dumps(res, indent=1), encoding="utf-8")
     render(res, args.report / "accuracy.md")
     return 0
-
 
 if __name__ == "__main__":
     raise SystemExit(main())
