@@ -9,11 +9,22 @@ bias: the fitted factor s_L on one mesh (mesh_size 2 a, tip_size 0.1 a, size_gro
 40 a; errors against s_L / s_40 times the closed form. Discretizations: uniform (mesh_size = tip_size = h),
 graded (mesh_size 2 a, tip_size halved from 0.2 a) with size_growth 0.3 and 0.1, adaptive (the steps of
 :func:`dualfem.experiments.adaptive.adapt` from mesh_size 2 a, tip_size 0.25 a, step_growth 3; time: the steps
-so far, each with its estimate and certification).
+so far, each with its estimate and certification), ``P2 graded 0.3`` (quadratic tetrahedra, ``element = "P2"``:
+mesh_size 2 a, tip_size halved from 0.4 a, size_growth 0.3; the opening's error at every defect pair, vertices
+and mid-edge nodes, with their weights). Time: meshing, assembly, factorization and solve (``time_s``);
+``total_s`` adds the certification.
+
+    python benchmarks/accuracy_3d.py --report reports     # the 3D rows only, the 2D rows of accuracy.json kept
+    python benchmarks/accuracy_3d.py --report reports --p2-only       # the P2 rows alone, the rest kept
+    python benchmarks/accuracy_3d.py --report reports --merge-only    # reports/accuracy/three_d.json into it
 """
 from __future__ import annotations
 
+import argparse
+import json
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 from scipy.special import ellipe
@@ -21,6 +32,7 @@ from scipy.special import ellipe
 E, NU = 1000.0, 0.3
 CRACKS = {"penny": 1.0, "ellipse": 0.5}          # b / a
 BOXES3 = (10.0, 20.0, 40.0)
+P2_TIPS = (0.4, 0.2, 0.1, 0.05)
 
 
 def scene3(crack: str, L: float, **mesh):
@@ -60,24 +72,37 @@ def row3(crack: str, L: float, pr, scale: float, label: str) -> dict:
     err, fit = opening(crack, L, qp, np.asarray(sol.x) / scale)
     return {"case": crack, "disc": label, "L": L, "unknowns": int(qp.n), "status": str(sol.status),
             "time_s": t1 - t0 + sol.time_s.get("setup", 0) + sol.time_s.get("solve", 0),
-            "jump_error": err, "fit": fit}
+            "total_s": time.perf_counter() - t0, "jump_error": err, "fit": fit}
 
 
-def study3(crack: str, quick: bool) -> tuple[dict, list[dict]]:
-    """The bias per box and the rows of every discretization."""
-    bias = {}
-    for L in BOXES3:
-        bias[L] = row3(crack, L, scene3(crack, L, mesh_size=2.0, tip_size=0.1), 1.0, "bias")["fit"]
-        print(f"bias {crack} L={L:g}: s_L = {bias[L]:.5f}", flush=True)
+def study3(crack: str, quick: bool, p2_only: bool = False, bias: dict | None = None) -> tuple[dict, list[dict]]:
+    """The bias per box (measured, or ``bias`` {L: s_L} as given) and the rows of every discretization (``p2_only``:
+    of P2 alone)."""
+    if bias is None:
+        bias = {}
+        for L in BOXES3:
+            bias[L] = row3(crack, L, scene3(crack, L, mesh_size=2.0, tip_size=0.1), 1.0, "bias")["fit"]
+            print(f"bias {crack} L={L:g}: s_L = {bias[L]:.5f}", flush=True)
     ref = bias[10.0] / bias[BOXES3[-1]]
     rows = []
     n = 2 if quick else 4
+    if p2_only:
+        for tip in P2_TIPS[:n]:
+            rows.append(row3(crack, 10.0, scene3(crack, 10.0, mesh_size=2.0, tip_size=tip, element="P2"), ref,
+                             "P2 graded 0.3"))
+            r = rows[-1]
+            print(f"{crack} {r['disc']} n={r['unknowns']} opening={r['jump_error']:.2e} t={r['time_s']:.1f}s "
+                  f"total={r['total_s']:.1f}s", flush=True)
+        return {str(k): v for k, v in bias.items()}, rows
     for h in (1.0, 0.7, 0.5, 0.35)[:n]:
         rows.append(row3(crack, 10.0, scene3(crack, 10.0, mesh_size=h, tip_size=h), ref, "uniform"))
     for growth, tips in ((0.3, (0.2, 0.1, 0.05, 0.025)[:n]), (0.1, (0.2, 0.1, 0.05)[:n - 1])):
         for tip in tips:
             rows.append(row3(crack, 10.0, scene3(crack, 10.0, mesh_size=2.0, tip_size=tip, size_growth=growth),
                              ref, f"graded {growth:g}"))
+    for tip in P2_TIPS[:n]:
+        rows.append(row3(crack, 10.0, scene3(crack, 10.0, mesh_size=2.0, tip_size=tip, element="P2"), ref,
+                         "P2 graded 0.3"))
     from dualfem.experiments.adaptive import adapt
 
     t0 = time.perf_counter()
@@ -92,3 +117,53 @@ def study3(crack: str, quick: bool) -> tuple[dict, list[dict]]:
         print(f"{crack} {r['disc']:>11} n={r['unknowns']:>7} opening={r['jump_error']:.2e} t={r['time_s']:.1f}s",
               flush=True)
     return {str(k): v for k, v in bias.items()}, rows
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Re-run the 3D part of reports/accuracy.md: its rows and box bias replaced in accuracy.json, the 2D rows
+    kept, the report rendered again (benchmarks/accuracy_report.py)."""
+    ap = argparse.ArgumentParser(description="the 3D rows of reports/accuracy.md")
+    ap.add_argument("--report", type=Path, default=Path("dualfem-results/reports"))
+    ap.add_argument("--quick", action="store_true", help="the coarse levels only")
+    ap.add_argument("--merge-only", action="store_true", help="no run: merge the last 3D results "
+                    "(accuracy/three_d.json) into accuracy.json and render")
+    ap.add_argument("--p2-only", action="store_true", help="run the P2 rows alone (the box bias and the P1 rows "
+                    "of accuracy.json kept)")
+    args = ap.parse_args(argv)
+    path, own = args.report / "accuracy.json", args.report / "accuracy" / "three_d.json"
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from accuracy import machine
+    from accuracy_report import render
+
+    res = json.loads(path.read_text(encoding="utf-8"))
+    t0 = time.perf_counter()
+    if args.merge_only:
+        three = json.loads(own.read_text(encoding="utf-8"))
+    elif args.p2_only:
+        three = {"bias3": res["bias3"], "wall_s": 0.0,
+                 "rows": [r for r in res["rows"] if r["case"] in CRACKS and not r["disc"].startswith("P2")]}
+        for crack in CRACKS:
+            bias = {float(k): v for k, v in res["bias3"][crack].items()}
+            three["rows"] += study3(crack, args.quick, p2_only=True, bias=bias)[1]
+        base = res.get("machine3") or \
+            f"P1 rows and the bias: {res['machine']} (whole accuracy run {res['wall_s']:.0f} s)"
+        three["machine"] = f"{base.split('; P2 rows')[0]}; P2 rows (--p2-only) {time.perf_counter() - t0:.0f} s " \
+                           f"on {machine()}"
+    else:
+        three = {"bias3": {}, "rows": []}
+        for crack in CRACKS:
+            three["bias3"][crack], rows = study3(crack, args.quick)
+            three["rows"] += rows
+        three["wall_s"], three["machine"] = time.perf_counter() - t0, machine()
+    if not args.merge_only:
+        own.parent.mkdir(parents=True, exist_ok=True)
+        own.write_text(json.dumps(three, indent=1), encoding="utf-8")
+    res["rows"] = [r for r in res["rows"] if r["case"] not in CRACKS] + three["rows"]
+    res["bias3"], res["machine3"] = three["bias3"], f"{three['machine']}; 3D part {three['wall_s']:.0f} s" \
+        if three["wall_s"] else three["machine"]
+    path.write_text(json.dumps(res, indent=1), encoding="utf-8")
+    render(res, args.report / "accuracy.md")
+    return 0
+
+if __name__ == "__main__":
+    raise SystemExit(main())

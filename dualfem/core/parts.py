@@ -125,6 +125,8 @@ class ShiftPart:
 
 #: the finite elements a :class:`GeometryPart` may carry
 ELEMENTS = ("P1", "P2", "P2-quarter-point")
+#: nodes of a quadratic simplex per dimension (vertices and mid-edge nodes)
+QUADRATIC_NODES = {2: 6, 3: 10}
 
 
 @dataclass(frozen=True)
@@ -135,7 +137,11 @@ class GeometryPart:
     scalar field (a membrane's deflection). ``element``: ``"P1"`` (default: the field is linear on each cell,
     every node a vertex of ``cells``) or a quadratic element (``"P2"``, ``"P2-quarter-point"``: the nodes beyond
     the cells' vertices are mid-edge nodes, the field is quadratic on each cell; post-processing that assumes P1
-    gradients refuses it, what shows vertex values on the linear cells may use it)."""
+    gradients refuses it, what shows vertex values on the linear cells may use it). ``cells`` (k, n_cells): the
+    linear cells (k = dim + 1), or, with a quadratic element, the quadratic cells (k = 6 in 2D, 10 in 3D:
+    the vertices, then the mid-edge nodes in VTK's order (0,1), (1,2), (0,2)(, (0,3), (1,3), (2,3)), as
+    scikit-fem's P2 elements number them; :attr:`quadratic`), whose rows ``cells[:dim + 1]`` are the linear
+    cells."""
 
     dim: int
     nodes: np.ndarray
@@ -149,6 +155,11 @@ class GeometryPart:
         d = int(X.shape[0]) if dim is None and X.ndim == 2 else int(dim or 0)
         return cls(d, X, _int_array(cells, "geometry.cells"), _int_array(node_dofs, "geometry.node_dofs"))
 
+    @property
+    def quadratic(self) -> bool:
+        """The cells are quadratic (6 nodes per triangle, 10 per tetrahedron; a quadratic element only)."""
+        return self.cells.ndim == 2 and self.cells.shape[0] == QUADRATIC_NODES.get(self.dim, -1)
+
     def validate(self, n: int) -> None:
         if self.dim not in (2, 3):
             raise InputError(f"geometry.dim must be 2 or 3, got {self.dim}")
@@ -159,10 +170,12 @@ class GeometryPart:
         nn = X.shape[1]
         if nd.ndim != 2 or nd.shape[1] != nn or nd.shape[0] < 1:
             raise InputError(f"geometry.node_dofs must have shape (components, {nn}), got {nd.shape}")
-        if t.ndim != 2 or t.shape[0] != self.dim + 1:
-            raise InputError(f"geometry.cells must have shape ({self.dim + 1}, n_cells), got {t.shape}")
         if self.element not in ELEMENTS:
             raise InputError(f"geometry.element must be one of {', '.join(ELEMENTS)}, got {self.element!r}")
+        rows = (self.dim + 1,) if self.element == "P1" else (self.dim + 1, QUADRATIC_NODES[self.dim])
+        if t.ndim != 2 or t.shape[0] not in rows:
+            raise InputError(f"geometry.cells must have shape ({' or '.join(map(str, rows))}, n_cells) for element "
+                             f"{self.element!r}, got {t.shape}")
         if t.size and (t.min() < 0 or t.max() >= nn):
             raise InputError(f"geometry.cells must hold node indices in [0, {nn}), got [{t.min()}, {t.max()}]")
         free = nd[nd >= 0]

@@ -190,12 +190,12 @@ def estimate(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> Estima
     from dualfem.core.elasticity import lame
 
     g, mat = qp.geometry, qp.material
+    if g is not None and g.element != "P1":         # first: a 3D P2 QP's cells are quadratic (10 rows)
+        raise InputError(f"the estimator is P1's (ZZ recovery of piecewise constant stresses); this QP has "
+                         f"element = {g.element!r}")
     if g is None or mat is None or g.cells.shape[0] != g.dim + 1:
         raise ValueError("the estimator needs a P1 triangle or tetrahedron mesh and the material (qp.geometry, "
                          "qp.material)")
-    if g.element != "P1":
-        raise InputError(f"the estimator is P1's (ZZ recovery of piecewise constant stresses); this QP has "
-                         f"element = {g.element!r}")
     u = nodal_u(qp, x)
     if g.dim == 3:
         lam3, mu3 = _lame3(mat.E, mat.nu)

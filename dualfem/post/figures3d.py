@@ -165,12 +165,12 @@ def plot_cut(qp, sol, *, origin=None, normal=None, ax=None, scale: float = 0.0):
         normal = np.asarray(normal, float) / np.linalg.norm(normal)
         a1, a2 = plane_basis(normal)
     origin = c if origin is None else np.asarray(origin, float)
-    polys, tets, bary = plane_cut(g.nodes, g.cells, origin, normal)
+    polys, tets, bary = plane_cut(g.nodes, g.cells[:4], origin, normal)      # quadratic cells: their corners
     if scale:
         from dualfem.post.fields import nodal_displacement
 
         u = nodal_displacement(qp, sol.x)
-        polys = polys + scale * np.einsum("kva,aki->kvi", bary, u[g.cells[:, tets]])
+        polys = polys + scale * np.einsum("kva,aki->kvi", bary, u[g.cells[:4, tets]])
     nv = np.asarray(normal, float)
     xy = np.stack([(polys - origin) @ a1, (polys - origin) @ a2], axis=-1)
     vm = stresses3d(qp, sol.x)["von_mises"][tets]

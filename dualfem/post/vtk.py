@@ -69,8 +69,9 @@ def check_qp(qp) -> None:
     if g is None:
         raise InputError("--vtk/--xdmf need the mesh of the QP (qp.geometry: nodes, cells, node_dofs): "
                          "solve a scene, or a file exported with its map_ arrays")
-    if (g.dim, g.cells.shape[0]) not in ((2, 3), (3, 4)):
-        raise InputError(f"--vtk/--xdmf write triangle (2-D) or tetrahedron (3-D) meshes; the QP's geometry has "
+    if (g.dim, g.cells.shape[0]) not in ((2, 3), (3, 4), (3, 10)):
+        raise InputError(f"--vtk/--xdmf write triangle (2-D) or tetrahedron (3-D, 4 or 10 nodes) meshes; the QP's "
+                         f"geometry has "
                          f"dim {g.dim} and cells of {g.cells.shape[0]} nodes")
     if g.node_dofs.shape[0] != g.dim:
         raise InputError(f"--vtk/--xdmf write {g.dim}-D displacements: geometry.node_dofs (map_node_dofs) must have "

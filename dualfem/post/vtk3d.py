@@ -1,6 +1,7 @@
 """ParaView output of a 3D solution (VTU/XDMF via meshio): the tetrahedra and the defect surfaces.
 
-One unstructured grid holds the points (every node, both copies of a defect node), point data
+One unstructured grid holds the points (every node, both copies of a defect node; quadratic tetrahedra:
+``tetra10`` cells, their mid-edge nodes points like the others), point data
 ``displacement`` (3 components: *Warp By Vector*), ``opening``, ``slip``, ``pressure`` (``pressure`` only
 with multipliers; 0 away from the defects and at front nodes, which carry no constraint; both copies of
 a defect node carry its value; no point field holds NaN), ``defect_id`` (-1 elsewhere) and
@@ -35,7 +36,7 @@ def to_meshio3d(qp, sol, sif=None):
     u = nodal_displacement(qp, sol.x)
     st = stresses3d(qp, sol.x)
     ntet = g.cells.shape[1]
-    cells = [("tetra", g.cells.T.astype(np.int64))]
+    cells = [("tetra10" if g.cells.shape[0] == 10 else "tetra", g.cells.T.astype(np.int64))]
     cell_data = {k: [np.asarray(st[k], float)] for k in (*VOIGT, "von_mises")}
     point_data = {"displacement": u}
     face = [np.zeros(ntet, dtype=np.int32)]

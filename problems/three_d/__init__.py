@@ -62,6 +62,7 @@ from ..adaptive import Adaptive
 from ..adaptive import check_keys as check_adaptive
 from ..defects_file import read_defects
 from ..loads import check_load_model
+from . import quadratic as p2
 from .assemble import free_dofs, stiffness
 from .cut import Cut3, cut
 from .geometry import Surface, check_apart, parse_defects
@@ -140,6 +141,7 @@ class ThreeD(Adaptive, Problem):
         "refine": "none",
         "target_error": None,
         "max_unknowns": None,
+        "element": "P1",
         **fk.DEFAULTS,
     }
     #: scene keys naming files, relative to the scene file (:attr:`dualfem.problem.Problem.path_keys`)
@@ -225,6 +227,13 @@ class ThreeD(Adaptive, Problem):
                                  f"delta * E / max(width, depth, height) = {ratio:.1e} must be "
                                  f">= {MIN_DELTA_E_OVER_L:g}")
         self._friction = fk.parse_friction(p, [s.friction for s in self._surfaces], 3, box)
+        p["element"] = p2.check_element(p["element"])
+        if p["element"] == "P2" and p["refine"] == "adaptive":
+            raise InputError("element = 'P2' with refine = 'adaptive': the estimator and the adaptive loop are P1 "
+                             "only; use element = 'P1' or refine = 'none'")
+        if p["element"] == "P2" and fk.frictional(self._friction):
+            raise InputError("element = 'P2' with friction: the friction blocks are P1 only; use element = 'P1' or "
+                             "drop the friction keys")
         self._loads = bd.parse_loads(p, 3)
         if self._loads is None:
             check_load_model(self, [s.face_pressure is not None for s in self._surfaces])
@@ -266,12 +275,15 @@ class ThreeD(Adaptive, Problem):
 
     def size_estimate(self) -> tuple[int, str]:
         """Unknowns before meshing: 3 per node, about 5.5 tetrahedra per node (20 % margin for the doubling);
-        adaptive: the budget ``max_unknowns``."""
+        P2: about :data:`.quadratic.P2_NODES_PER_TET` nodes (vertices and edges) per tetrahedron; adaptive: the
+        budget ``max_unknowns``."""
         if self.params["refine"] == "adaptive":
             return int(self.params["max_unknowns"]), f"refine='adaptive', max_unknowns={self.params['max_unknowns']}"
         tets = estimate_tetrahedra(self.box, self.mesh_size, self.tip_size,
                                    sum(s.front_length() for s in self._surfaces), self.surface_size,
                                    sum(s.area() for s in self._surfaces), self.params["size_growth"])
+        if self.params["element"] == "P2":
+            return int(3 * 1.2 * tets * p2.P2_NODES_PER_TET) + 3, f"element='P2', {self._size_label()}"
         return int(3 * 1.2 * tets / 5.5) + 3, self._size_label()
 
     # ------------------------------------------------------------------ mesh
@@ -302,6 +314,11 @@ class ThreeD(Adaptive, Problem):
             return a
         p = self.params
         c, pts, _ = self.cut()
+        if p["element"] == "P2":
+            a = self._delta_free_p2(c)
+            self.shared.data["delta_free"] = a
+            self.shared.assemblies += 1
+            return a
         if self._loads is None:
             fixed = np.zeros((3, pts.shape[1]), bool)
             fixed[:, np.abs(c.points[2]) <= 1e-9 * max(self.box)] = True      # the bottom face, reference frame
@@ -315,11 +332,36 @@ class ThreeD(Adaptive, Problem):
         R = self.rotation()
         part = delta_free_part(node_dofs, c, np.ascontiguousarray((R @ c.normals).T), front=c.front,
                                front_id=c.front_id, faces=None if c.faces is None else c.faces.T)
-        a = {"cut": c, "points": pts, "node_dofs": node_dofs, "n": n, "K_el": K_el, "local": local, "interface": part}
+        a = {"cut": c, "points": pts, "node_dofs": node_dofs, "n": n, "K_el": K_el, "local": local, "interface": part,
+             "pairs": c, "cells": c.tets, "reference": c.points}
         freeze(K_el.data, K_el.indices, K_el.indptr, local, node_dofs, pts)
         self.shared.data["delta_free"] = a
         self.shared.assemblies += 1
         return a
+
+    def _delta_free_p2(self, c: Cut3) -> dict:
+        """:meth:`_delta_free` for ``element = "P2"`` (:mod:`.quadratic`): the P2 nodes (the cut's nodes, then
+        one per edge), their supports, the P2 stiffness and the defect pairs at vertices and mid-edge nodes."""
+        p = self.params
+        q, pairs = p2.mesh(c)
+        R = self.rotation()
+        centre = np.array(self.box)[:, None] / 2
+        pts = R @ (q.points - centre) + centre
+        if self._loads is None:
+            fixed = np.zeros((3, pts.shape[1]), bool)
+            fixed[:, np.abs(q.points[2]) <= 1e-9 * max(self.box)] = True      # the bottom face, reference frame
+        else:
+            fixed = bd.fixed_mask(self._loads, pts, p2.sides(q, self._sides()))
+        node_dofs = free_dofs(fixed)
+        n = int(node_dofs.max()) + 1
+        lam, mu = lame(p["E"], p["nu"], "strain")
+        K_el = p2.stiffness(pts, q.cells, lam, mu, node_dofs, n)
+        local = local_unknowns(node_dofs, pairs.lower, pairs.upper)
+        part = delta_free_part(node_dofs, pairs, np.ascontiguousarray((R @ pairs.normals).T), front=c.front,
+                               front_id=c.front_id, faces=None if c.faces is None else c.faces.T)
+        freeze(K_el.data, K_el.indices, K_el.indptr, local, node_dofs, pts)
+        return {"cut": c, "points": pts, "node_dofs": node_dofs, "n": n, "K_el": K_el, "local": local,
+                "interface": part, "pairs": pairs, "cells": q.cells, "reference": q.points, "p2": q}
 
     def _load_label(self) -> str:
         """The load in the QP's name: the ``load`` key (legacy), else the general keys given."""
@@ -343,23 +385,33 @@ class ThreeD(Adaptive, Problem):
         c, pts, top = self.cut()
         scale = float(self.params["load_scale"])
         R = self.rotation()
-        if self._loads is None:
+        q = self._delta_free()["p2"] if self.params["element"] == "P2" else None
+        sides = self._sides() if self._loads is None or q is None else p2.sides(q, self._sides())
+        if q is not None:           # element = "P2"
+            pts = self._delta_free()["points"]
+            F = R @ (p2.top_forces(q, top, self._traction, scale) if self._loads is None else
+                     p2.nodal_forces(self._loads, q, self._sides(), scale))
+        elif self._loads is None:
             F = R @ traction_forces(c.points, top, self._traction, scale)
         else:
-            F = R @ bd.nodal_forces(self._loads, c.points, c.tets, self._sides(), scale)
+            F = R @ bd.nodal_forces(self._loads, c.points, c.tets, sides, scale)
         if any(f is not None for f in self._face_pressure):
             a = self._delta_free()
+            pairs, ref = a["pairs"], a["reference"]
             normals = a["interface"].normals.T
-            pressure = np.zeros(c.lower.size)
-            for k, f in enumerate(self._face_pressure):
-                j = np.flatnonzero(c.defect_id == k)
-                if f is not None and j.size:
-                    pressure[j] = f(c.points[:, c.lower[j]])[0]
-            if not np.all(np.isfinite(pressure)):
+            if q is not None:           # P2: the consistent forces (pressure-weighted integrals of the shape functions)
+                weights, pressure = p2.face_pressure_weights(q, pairs, c.faces, self._face_pressure), 1.0
+            else:
+                weights, pressure = pairs.weights, np.zeros(pairs.lower.size)
+                for k, f in enumerate(self._face_pressure):
+                    j = np.flatnonzero(pairs.defect_id == k)
+                    if f is not None and j.size:
+                        pressure[j] = f(ref[:, pairs.lower[j]])[0]
+            if not np.all(np.isfinite(pressure * weights)):
                 raise InputError("face_pressure gives NaN or infinite values on a defect; it must be finite there")
-            F += bd.face_pressure_forces(c.upper, c.lower, normals, c.weights, scale * pressure, pts.shape[1])
+            F += bd.face_pressure_forces(pairs.upper, pairs.lower, normals, weights, scale * pressure, pts.shape[1])
         if self._loads is not None:
-            bd.check_balance(self._loads, pts, self._sides(), F)
+            bd.check_balance(self._loads, pts, sides, F)
         return F
 
     def build(self) -> QP:
@@ -368,7 +420,7 @@ class ThreeD(Adaptive, Problem):
         ``update_keys``."""
         p = self.params
         a = self._delta_free()
-        c = a["cut"]
+        c = a["pairs"]
         iface, coef = with_delta(a["interface"], [s.delta for s in self._surfaces])
         K_par, B, _ = interface(a["node_dofs"], c.lower, c.upper, iface.normals.T, coef, a["n"])
         K = (a["K_el"] + K_par).tocsc()
@@ -380,9 +432,11 @@ class ThreeD(Adaptive, Problem):
                   for k, v in p.items() if not callable(v) and k != "defects" and k not in fk.KEYS}
         params["defects"] = "; ".join(_label(s) for s in self._surfaces)
         self.later_params(params, p, self.defaults)
+        if p["element"] == "P1":
+            params.pop("element")           # today's QP key unchanged
         if fk.frictional(self._friction):
             params["friction"] = fk.params_label(self._friction)
-        geometry = GeometryPart(3, a["points"], c.tets, nd)
+        geometry = GeometryPart(3, a["points"], a["cells"], nd, p["element"])
         iface = dataclasses.replace(iface, weights=c.weights.copy())       # each QP its own weights
         qp = QP(K=K, F=F, B=B, weights=iface.weights, K_fixed=a["K_el"], local_dofs=a["local"],
                 name=f"three_d[{self._load_label()}]", params=params, geometry=geometry, interface=iface,
