@@ -159,6 +159,10 @@ class ThinDefect(SceneChecks, Adaptive, Problem):
         nodes *= 1 if p["element"] == "P1" else 4
         return int(2 * nodes), f"mesh_size={h:g}" + (f", tip_size={tip:g}" if tip else "")
 
+    def size_of_mesh(self) -> int:
+        """The unknowns of the mesh before supports are removed (the adaptive loop's budget): P2 counts the edges."""
+        return super().size_of_mesh() if self.params["element"] == "P1" else element.size_of_mesh(self)
+
     # ----------------------------------------------------------------- mesh
     def _gmsh_options(self) -> dict:
         """Keyword arguments of :func:`dualfem.problems.gmsh_mesh.mesh_with_defects` beyond the geometry

@@ -55,7 +55,6 @@ class SceneChecks:
         except InputError as exc:
             raise InputError(f"{where}: {exc}" if p["defects_file"] else str(exc)) from None
         self._check_defects_and_load()
-        element.check_scene(p, self._defects)
 
     def _check_keys(self, n_defects: int) -> None:
         """Every key but the defects; with a gmsh mesh every size-driving key (mesh_size, tip_size, N, width,
