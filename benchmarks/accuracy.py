@@ -2,6 +2,7 @@
 
     python benchmarks/accuracy.py --report reports            # 4-17 min on 2 shared cores (nice -n 10)
     python benchmarks/accuracy.py --report reports --render-only
+    python benchmarks/accuracy.py --report reports --p2-rows       # the 2D P2 rows only (graded, adaptive)
 
 Two crack problems of half-length a = 1 in a square box of side L under a remote stress on every side (no
 support: only the rigid-body motions removed), E = 1000, nu = 0.3, plane strain, delta = 1e3 (faces free):
@@ -23,9 +24,11 @@ Discretizations: ``uniform`` (mesh_size = tip_size = h, box 10 a: a larger box i
 (the same with size_growth 0.05), ``adaptive`` (box 100 a, each step of :func:`dualfem.experiments.adaptive.adapt`
 from mesh_size 5 a, tip_size 0.5 a; time = the steps so far). Quadratic elements (scene key ``element``,
 docs/elements.md): ``P2 graded 0.3`` and ``P2-qp graded 0.3`` (P2 and P2-quarter-point on the graded 0.3 meshes,
-tip_size a/10 down to a/40), ``P2-qp graded 0.1`` (size_growth 0.1); their errors are taken against the bias
-measured with P2-quarter-point elements (``bias_p2``: mesh_size min(5 a, L/4), tip_size a/20, size_growth 0.1),
-whose s_L is smooth in L (about 1 + 5 (a/L)^2); no estimator on P2 (it is P1's). On P2 rows the stress intensity
+tip_size a/10 down to a/40), ``P2-qp graded 0.1`` (size_growth 0.1), ``P2 adaptive`` and ``P2-qp adaptive`` (the
+adaptive loop on P2, the P2 estimator of :mod:`dualfem.numerics.estimator_p2`); their errors are taken against
+the bias measured with P2-quarter-point elements (``bias_p2``: mesh_size min(5 a, L/4), tip_size a/20, size_growth
+0.1), whose s_L is smooth in L (about 1 + 5 (a/L)^2). ``--p2-rows`` computes the 2D P2 rows again into an existing
+accuracy.json (the other rows kept) and renders the report. On P2 rows the stress intensity
 factors (series fit; quarter-point correlation on quarter-point meshes) against sigma sqrt(pi a) times s_100/s_200.
 Each answer by pdas, certified by the runner.
 3D (the penny and an elliptic crack under tension, uniform and graded meshes): benchmarks/accuracy_3d.py.
@@ -109,8 +112,8 @@ def solve_row(case: str, L: float, pr, scale: float, label: str) -> dict:
     qp = pr.build()
     t1 = time.perf_counter()
     sol = run("pdas", qp)
-    p1 = qp.geometry.element == "P1"            # the estimator is P1's
-    est = estimate(qp, sol.x, sol.multipliers) if p1 else None
+    p1 = qp.geometry.element == "P1"
+    est = estimate(qp, sol.x, sol.multipliers)  # P1 or P2 (numerics/estimator_p2.py)
     row = {"case": case, "disc": label, "L": L, "unknowns": int(qp.n), "status": str(sol.status),
            "build_s": t1 - t0, "solve_s": sol.time_s.get("setup", 0) + sol.time_s.get("solve", 0),
            "eta": est.eta if est else float("nan"), "eta_rel": est.relative if est else float("nan"),
@@ -190,18 +193,57 @@ def curves_p2(case: str, s: dict[float, float], quick: bool) -> list[dict]:
         for tip in [A / 10 / 2 ** k for k in range(n)]:
             pr = scene(case, 100.0, mesh_size=5.0, tip_size=tip, size_growth=growth, element=element)
             rows.append(solve_row(case, 100.0, pr, ref, label))
+    rows += adaptive_p2(case, ref, quick)
     for r in rows:
         print(f"{case} {r['disc']:>16} n={r['unknowns']:>7} jump={r['jump_error']:.2e} energy={r['energy_rel']:.2e} "
-              f"t={r['time_s']:.1f}s", flush=True)
+              f"eff={r['effectivity']:.2f} t={r['time_s']:.1f}s", flush=True)
     return rows
 
 
-def _step_row(case: str, step, scale: float) -> dict:
+def adaptive_p2(case: str, ref: float, quick: bool) -> list[dict]:
+    """``P2 adaptive`` and ``P2-qp adaptive``: the adaptive loop (P2 estimator, order 2) from mesh_size 5 a,
+    tip_size a/2 in the 100 a box, each step certified, its errors against ``ref`` (the P2 bias at 100 a)."""
+    from dualfem.errors import InputError
+    from dualfem.experiments.adaptive import adapt
+
+    rows = []
+    for element, label in (("P2", "P2 adaptive"), ("P2-quarter-point", "P2-qp adaptive")):
+        start = scene(case, 100.0, mesh_size=5.0, tip_size=0.5, element=element)
+        t0 = time.perf_counter()
+        for step in adapt(start, target_error=1e-4, max_unknowns=30_000 if quick else 150_000,
+                          max_steps=3 if quick else 6, step_growth=3.0):
+            row = {**_step_row(case, step, ref, label), "time_s": time.perf_counter() - t0}
+            try:                            # a coarse first mesh has too few pairs near a tip for the fit
+                row.update(sif_errors(case, step.qp, step.x, ref))
+            except InputError as exc:
+                print(f"{label} n={step.unknowns}: no stress intensity factors ({exc})", flush=True)
+            rows.append(row)
+    return rows
+
+
+def _step_row(case: str, step, scale: float, label: str = "adaptive") -> dict:
     err = errors(case, 100.0, step.qp, step.x, scale)
-    return {"case": case, "disc": "adaptive", "L": 100.0, "unknowns": step.unknowns,
+    return {"case": case, "disc": label, "L": 100.0, "unknowns": step.unknowns,
             "status": str(step.solution.status),
             "eta": step.estimate.eta, "eta_rel": step.estimate.relative, **err,
             "effectivity": step.estimate.eta / err["energy_error"]}
+
+
+def p2_rows(path: Path, quick: bool) -> None:
+    """``--p2-rows``: the 2D P2 rows of an existing accuracy.json computed again (graded and adaptive), the others
+    kept; the P2 bias kept when the file has it (the same meshes), else measured."""
+    from accuracy_report import P2_DISCS
+
+    res = json.loads(path.read_text(encoding="utf-8"))
+    res["rows"] = [r for r in res["rows"] if not (r["case"] in ANGLE and r["disc"] in P2_DISCS)]
+    res.setdefault("bias_p2", {})
+    t0 = time.perf_counter()
+    for case in ANGLE:
+        if case not in res["bias_p2"]:
+            res["bias_p2"][case] = {str(k): v for k, v in bias(case, "P2-quarter-point").items()}
+        res["rows"] += curves_p2(case, {float(k): v for k, v in res["bias_p2"][case].items()}, quick)
+    res["p2_rows"] = {"wall_s": time.perf_counter() - t0, "machine": machine()}
+    path.write_text(json.dumps(res, indent=1), encoding="utf-8")
 
 
 def machine() -> str:
@@ -217,10 +259,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--report", type=Path, default=Path("dualfem-results/reports"))
     ap.add_argument("--render-only", action="store_true")
     ap.add_argument("--quick", action="store_true", help="the coarse levels only")
+    ap.add_argument("--p2-rows", action="store_true", help="only the 2D P2 rows again, into the existing accuracy.json")
     args = ap.parse_args(argv)
     args.report.mkdir(parents=True, exist_ok=True)
     path = args.report / "accuracy.json"
-    if not args.render_only:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    if args.p2_rows:
+        p2_rows(path, args.quick)
+    elif not args.render_only:
         t0 = time.perf_counter()
         res: dict = {"bias": {}, "bias_p2": {}, "rows": []}
         for case in ("open", "slip"):
@@ -230,7 +276,6 @@ def main(argv: list[str] | None = None) -> int:
             b2 = bias(case, "P2-quarter-point")
             res["bias_p2"][case] = {str(k): v for k, v in b2.items()}
             res["rows"] += curves_p2(case, b2, args.quick)
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
         from accuracy_3d import CRACKS, study3
 
         res["bias3"] = {}
@@ -240,7 +285,6 @@ def main(argv: list[str] | None = None) -> int:
         res["wall_s"] = time.perf_counter() - t0
         res["machine"] = machine()
         path.write_text(json.dumps(res, indent=1), encoding="utf-8")
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     from accuracy_report import render
 
     render(json.loads(path.read_text(encoding="utf-8")), args.report / "accuracy.md")

@@ -6,12 +6,14 @@ from pathlib import Path
 import numpy as np
 
 DISCS = ("uniform", "graded 0.3", "graded 0.1", "graded 0.05", "adaptive", "P2 graded 0.3", "P2-qp graded 0.3",
-         "P2-qp graded 0.1")
+         "P2-qp graded 0.1", "P2 adaptive", "P2-qp adaptive")
 P2_DISCS = DISCS[5:]
 #: PALETTE index of each discretization (2D figures: "graded 0.1" is 3D only, so its green goes to a P2 curve
 #: instead of the palette's yellow, hard to see on white)
 COLOUR = {"uniform": 0, "graded 0.3": 1, "graded 0.1": 2, "graded 0.05": 3, "adaptive": 4, "P2 graded 0.3": 5,
-          "P2-qp graded 0.3": 6, "P2-qp graded 0.1": 2}
+          "P2-qp graded 0.3": 6, "P2-qp graded 0.1": 2, "P2 adaptive": 7, "P2-qp adaptive": 4}
+#: line style per discretization (the adaptive P2 curves dashed: "P2-qp adaptive" shares P1 adaptive's colour)
+DASHED = ("P2 adaptive", "P2-qp adaptive")
 #: the 3D discretizations (benchmarks/accuracy_3d.py): P1 and quadratic tetrahedra (no quarter-point in 3D)
 DISCS3 = ("uniform", "graded 0.3", "graded 0.1", "graded 0.05", "adaptive", "P2 graded 0.3")
 TITLES = {"open": "open crack under tension (opening)",
@@ -26,14 +28,14 @@ def figure(rows: list[dict], case: str, out: Path) -> None:
 
     from dualfem.post.style import PALETTE
 
-    marks = ("s", "o", "v", "D", "^", "P", "X", "*")
+    marks = ("s", "o", "v", "D", "^", "P", "X", "*", "h", "<")
     fig, ax = plt.subplots(1, 3, figsize=(13, 3.8))
     for i, d in enumerate(DISCS):
         r = [x for x in rows if x["case"] == case and x["disc"] == d]
         if not r:
             continue
         n = [x["unknowns"] for x in r]
-        kw = {"color": PALETTE[COLOUR[d]], "marker": marks[i], "label": d}
+        kw = {"color": PALETTE[COLOUR[d]], "marker": marks[i], "label": d, "ls": "--" if d in DASHED else "-"}
         ax[0].loglog(n, [x["jump_error"] for x in r], **kw)
         ax[1].loglog(n, [x["energy_rel"] for x in r], **kw)
         ax[2].loglog([x["time_s"] for x in r], [x["energy_rel"] for x in r], **kw)
@@ -104,14 +106,15 @@ def render(res: dict, md: Path) -> None:
                          f"{_fmt(r['energy_rel'])}{star} | {_fmt(r['eta_rel'])} | "
                          f"{_fmt(r['effectivity'], '.2f')}{star} | "
                          f"{r['time_s']:.2f} | {r['status']} |")
-        eff = [r["effectivity"] for r in rows if not r["floor"] and np.isfinite(r["effectivity"])]
+        eff = [r["effectivity"] for r in rows if not r["floor"] and np.isfinite(r["effectivity"])
+               and r["disc"] not in P2_DISCS]
         lines += ["", f"\\* below the bias noise n = {noise:.1e} of this case (the largest |s_L / s_200 - 1| for L >= "
                   f"50 a): a jump error under n or an energy error under sqrt(n) is not resolved, nor its "
-                  f"effectivity. Effectivity index where resolved: {min(eff):.2f} to {max(eff):.2f}."]
+                  f"effectivity. Effectivity index where resolved (P1): {min(eff):.2f} to {max(eff):.2f}."]
         if res.get("bias_p2"):
             lines += ["", f"P2 rows (errors against the P2 bias): n = {noise2:.1e}, the 200 a box's own bias "
                       "c (a/200)^2 plus the largest departure of s_L / s_200 - 1 from c ((a/L)^2 - (a/200)^2) for "
-                      "L >= 50 a (c fitted there); the estimator is P1's, so no effectivity on P2."]
+                      "L >= 50 a (c fitted there). " + _eff_p2(rows)]
         summary.append((case, rows))
         lines += _sif_p2(case, rows)
     if res.get("bias3"):
@@ -146,10 +149,22 @@ def render(res: dict, md: Path) -> None:
               "compression plus shear case in 3D. "
               "The estimate eta (rel.) is relative to the whole body's energy (the uniform "
               "field included), the scene key target_error's measure; the energy error column is relative to the "
-              "crack's part of the solution. Quadratic elements in 2D only here (no P2 tetrahedra), without "
-              "adaptive refinement or an estimator; their stress intensity factors by the jumps only (no "
-              "interaction integral with P2 gradients).", ""]
+              "crack's part of the solution. Quadratic elements in 2D only here (no P2 tetrahedra), graded and "
+              "adaptive (the P2 ZZ estimator, order 2 in the size rule); their stress intensity factors by the "
+              "jumps only (no interaction integral with P2 gradients).", ""]
     md.write_text("\n".join(lines), encoding="utf-8")
+
+
+def _eff_p2(rows: list[dict]) -> str:
+    """The P2 rows' effectivity range per element (the P2 estimator, dualfem/numerics/estimator_p2.py)."""
+    out = []
+    for name, pick in (("P2", lambda d: d.startswith("P2 ")), ("P2-quarter-point", lambda d: d.startswith("P2-qp"))):
+        eff = [r["effectivity"] for r in rows if r["disc"] in P2_DISCS and pick(r["disc"]) and not r["floor"]
+               and np.isfinite(r.get("effectivity", np.nan))]
+        if eff:
+            out.append(f"{name} {min(eff):.2f} to {max(eff):.2f}")
+    return ("Effectivity index of the P2 estimator where resolved: " + ", ".join(out) + ".") if out else \
+        "No P2 effectivity (rows computed before the P2 estimator)."
 
 
 def _sif_p2(case: str, rows: list[dict]) -> list[str]:

@@ -2,9 +2,10 @@
 
 One step: build the QP of the current mesh, solve it (``solve(qp) -> (x, multipliers)``, any solver), the
 Zienkiewicz-Zhu estimate of the answer (:func:`dualfem.numerics.estimator.estimate`: recovery on the cut mesh,
-the defect faces' tractions imposed), and, unless the relative estimate is at most ``target_error``, the
-next mesh: per triangle the size of the optimal-mesh rule (:func:`dualfem.numerics.estimator.optimal_sizes`,
-order 1, at most ``mesh_size``), given to gmsh as a background mesh (a ``PostView`` field,
+the defect faces' tractions imposed; P2: :mod:`dualfem.numerics.estimator_p2`), and, unless the relative
+estimate is at most ``target_error``, the next mesh: per triangle the size of the optimal-mesh rule
+(:func:`dualfem.numerics.estimator.optimal_sizes`, order ``Estimate.order``: 1 on P1, 2 on P2; at most
+``mesh_size``), given to gmsh as a background mesh (a ``PostView`` field,
 :func:`dualfem.problems.gmsh_mesh.mesh_with_defects` with ``size_view``), the triangle budget scaled so the
 mesh stays within ``max_unknowns``. The loop stops at the target, when the budget is reached (a step that
 could not refine by at least 20 % more unknowns), or after ``max_steps`` meshes.
@@ -131,7 +132,7 @@ def _next(pr, qp: QP, est: Estimate, target: float, max_unknowns: int, mesh_size
     per_element = qp.n / est.eta2.size                      # unknowns per triangle on this mesh
     budget = 0.9 * max_unknowns / per_element
     min_size = MIN_SIZE * max(float(pr.params[k]) for k in ("width", "height", "depth") if k in pr.params)
-    sizes = optimal_sizes(est, target, budget, order=1.0, max_size=mesh_size, min_size=min_size)
+    sizes = optimal_sizes(est, target, budget, order=est.order, max_size=mesh_size, min_size=min_size)
     predicted = float(np.sum((est.sizes / sizes) ** 2)) * per_element
     if predicted < 1.2 * qp.n and qp.n > 0.5 * max_unknowns:
         return None

@@ -116,8 +116,6 @@ def test_crack_edge_weights_and_pairs():
 
 @pytest.mark.parametrize("extra, words", [
     ({"element": "P3"}, "element must be one of 'P1', 'P2', 'P2-quarter-point'"),
-    ({"element": "P2", "mesh": "gmsh", "refine": "adaptive", "target_error": 0.1, "max_unknowns": 5000},
-     "refine = 'adaptive' is not supported"),
 ])
 def test_refusals(extra, words):
     with pytest.raises(InputError, match=words.replace("(", r"\(")):
@@ -125,14 +123,11 @@ def test_refusals(extra, words):
 
 
 def test_p1_post_processing_refuses_p2():
-    from dualfem.numerics.estimator import estimate
     from dualfem.post.sif import parts
 
     qp = load_scene("f2", {"N": 8, "element": "P2"}).build()
     with pytest.raises(InputError, match="need element = 'P1'"):
         parts(qp)
-    with pytest.raises(InputError, match="estimator is P1's"):
-        estimate(qp, np.zeros(qp.n))
 
 
 def _griffith_field(qp, sigma=1.0):
@@ -238,16 +233,42 @@ def test_p2_face_pressure_is_remote_tension_by_superposition():
     assert oa.min() > 0 and np.allclose(oa, ob, rtol=1e-8, atol=1e-10 * oa.max())
 
 
-def test_p2_vtu_and_figure_show_the_vertex_values(tmp_path):
-    from dualfem.post.vtk import to_meshio
+def test_p2_vtu_writes_quadratic_cells_with_the_quarter_points(tmp_path):
+    """VTU of a P2 scene: one ``triangle6`` cell per triangle over every P2 node (vertices, then the mid-edge nodes
+    of (0, 1), (1, 2), (2, 0) as VTK orders them), the quarter-point nodes where the QP has them, and the
+    displacement of every node; a QP whose mid-edge nodes are not on their edges is refused."""
+    import dataclasses
 
-    qp = load_scene("f2", {"N": 4, "element": "P2"}).build()
+    import meshio
+
+    from dualfem.post.vtk import to_meshio, write_vtu
+
+    qp = _box("P2-quarter-point", [[0.0, 0.0], [0.0, 1.0]], [{"points": [[1.0, 2.0], [3.0, 2.0]]}]).build()
     sol = run("pdas", qp)
     m = to_meshio(qp, sol)
-    tri = m.cells[0].data
-    nv = int(qp.geometry.cells.max()) + 1
-    assert tri.max() < nv and m.points.shape[0] == qp.geometry.nodes.shape[1]
-    assert np.allclose(m.point_data["displacement"][:nv, :2], _nodal(qp, sol.x).T[:nv])
+    tri = m.cells[0]
+    g = qp.geometry
+    assert tri.type == "triangle6" and tri.data.shape == (g.cells.shape[1], 6)
+    assert np.array_equal(tri.data[:, :3], g.cells.T)
+    assert np.array_equal(np.unique(tri.data), np.arange(g.nodes.shape[1]))
+    P = m.points[:, :2]
+    t = []
+    for k, (a, b) in enumerate(((0, 1), (1, 2), (2, 0))):
+        pa, pb, pm = P[tri.data[:, a]], P[tri.data[:, b]], P[tri.data[:, 3 + k]]
+        d = pb - pa
+        t.append(np.sum((pm - pa) * d, axis=1) / np.sum(d * d, axis=1))
+        assert np.allclose((pm - pa)[:, 0] * d[:, 1] - (pm - pa)[:, 1] * d[:, 0], 0, atol=1e-12)
+    t = np.concatenate(t)
+    assert np.isclose(t, 0.5).sum() > 0 and (np.isclose(t, 0.25) | np.isclose(t, 0.75)).sum() >= 2 * 4  # tip fans
+    assert np.allclose(m.point_data["displacement"][:, :2], _nodal(qp, sol.x).T)
+    back = meshio.read(write_vtu(tmp_path / "p2.vtu", qp, sol))
+    assert back.cells[0].type == "triangle6" and np.array_equal(back.cells[0].data, tri.data)
+    nv = g.cells.max() + 1
+    bad = g.nodes.copy()
+    bad[:, nv:] = bad[:, nv:][:, ::-1]                          # mid-edge nodes in the wrong order
+    qp.geometry = dataclasses.replace(g, nodes=bad)
+    with pytest.raises(InputError, match="not on their edges"):
+        to_meshio(qp, sol)
 
 
 def test_mid_edge_pairs_take_a_repeated_edge_once():

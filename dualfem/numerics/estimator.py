@@ -45,6 +45,8 @@ class Estimate:
     area: np.ndarray
     #: 2 (triangles; ``area`` their areas) or 3 (tetrahedra; ``area`` their volumes)
     dim: int = 2
+    #: the energy error's order p in h where the solution is smooth (the optimal-mesh rule): 1 P1, 2 P2
+    order: float = 1.0
 
     @property
     def eta(self) -> float:
@@ -185,14 +187,15 @@ def nodal_u(qp, x: np.ndarray) -> np.ndarray:
 
 
 def estimate(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> Estimate:
-    """:func:`zz_estimate` of a 2D P1 QP's answer (``qp.geometry``, ``qp.material``, ``qp.interface``):
+    """:func:`zz_estimate` (P2 triangles: :func:`dualfem.numerics.estimator_p2.zz_estimate_p2`; 3D P1:
+    :func:`zz_estimate3`) of a QP's answer (``qp.geometry``, ``qp.material``, ``qp.interface``):
     the defect faces' tractions from the interface term and, with ``multipliers``, the contact pressure."""
     from dualfem.core.elasticity import lame
 
     g, mat = qp.geometry, qp.material
-    if g is not None and g.element != "P1":         # first: a 3D P2 QP's cells are quadratic (10 rows)
-        raise InputError(f"the estimator is P1's (ZZ recovery of piecewise constant stresses); this QP has "
-                         f"element = {g.element!r}")
+    if g is not None and g.element != "P1" and g.dim != 2:   # first: a 3D P2 QP's cells are quadratic (10 rows)
+        raise InputError(f"the estimator takes P1 (2D, 3D) and P2 triangles; this QP has element = {g.element!r} in "
+                         f"{g.dim}D")
     if g is None or mat is None or g.cells.shape[0] != g.dim + 1:
         raise ValueError("the estimator needs a P1 triangle or tetrahedron mesh and the material (qp.geometry, "
                          "qp.material)")
@@ -207,6 +210,10 @@ def estimate(qp, x: np.ndarray, multipliers: np.ndarray | None = None) -> Estima
     faces = None
     if qp.interface is not None and qp.interface.dim == 2 and qp.m:
         faces = face_tractions(qp.interface, u, None if multipliers is None else qp.pressure(multipliers))
+    if g.element != "P1":                    # quadratic triangles: numerics/estimator_p2.py
+        from .estimator_p2 import zz_estimate_p2
+
+        return zz_estimate_p2(g.nodes, g.cells, u, lam, mu, faces)
     return zz_estimate(g.nodes, g.cells, u, lam, mu, faces)
 
 

@@ -14,9 +14,14 @@ One unstructured grid holds
   nu at its nodes, pointing to the "+" face, the tips taking their neighbour's; 0 elsewhere:
   use *Glyph* to draw them);
 * two cell blocks: the triangles, then the defects' ``line`` cells, defect by defect: its
-  upper-face edges followed by its lower-face edges (ordered along it from its first tip);
+  upper-face edges followed by its lower-face edges (ordered along it from its first tip); on a P2 QP
+  (``geometry.element`` ``"P2"`` or ``"P2-quarter-point"``) the triangles are quadratic ``triangle6`` cells
+  (vertices, then the mid-edge nodes, quarter-point nodes where they are:
+  :func:`dualfem.numerics.p2.quadratic_cells`), so ParaView interpolates the P2 displacement, and the
+  defect lines join consecutive P2 nodes (vertex and mid-edge) along the defect;
 * cell data ``von_mises``, ``s11``, ``s22``, ``s12``, ``s33`` (constant per P1 triangle, units
-  of E; NaN on the line cells), ``jump_normal``, ``jump_tangent``, ``pressure`` on the line
+  of E; on P2 those of the vertex values' linear interpolant, a coarser view; NaN on the line
+  cells), ``jump_normal``, ``jump_tangent``, ``pressure`` on the line
   cells (mean of the edge's two end nodes, ignoring the tips' undefined pressure; NaN on the
   triangles), ``defect_id`` (-1 on the triangles) and ``face`` (0 triangle, +1 upper face,
   -1 lower face) to threshold them.
@@ -100,7 +105,7 @@ def to_meshio(qp, sol=None, *, post: Post | None = None, sif=None):
     disp = np.zeros((npts, 3))
     disp[:, :2] = p.displacement
     ntri = p.triangles.shape[1]
-    cells = [("triangle", p.triangles.T.astype(np.int64))]
+    cells = [_triangle_cells(qp.geometry, p.triangles)]
     point_data = {"displacement": disp}
     st = p.stress
     cell_data = {k: [np.asarray(st[k], dtype=float)] for k in ("von_mises", "s11", "s22", "s12", "s33")}
@@ -129,6 +134,19 @@ def to_meshio(qp, sol=None, *, post: Post | None = None, sif=None):
         cell_data["defect_id"] = [np.full(ntri, -1, dtype=np.int32), edge_id]
     cell_data["face"] = face
     return meshio.Mesh(points, cells, point_data=point_data, cell_data=cell_data)
+
+
+def _triangle_cells(g, triangles: np.ndarray) -> tuple[str, np.ndarray]:
+    """The triangle cell block: ``triangle`` (P1) or ``triangle6`` (P2: :func:`dualfem.numerics.p2.quadratic_cells`;
+    InputError when the QP's nodes are not its P2 nodes)."""
+    if getattr(g, "element", "P1") == "P1":
+        return "triangle", triangles.T.astype(np.int64)
+    from dualfem.numerics.p2 import quadratic_cells
+
+    try:
+        return "triangle6", quadratic_cells(g.nodes, triangles).T
+    except ValueError as exc:
+        raise InputError(f"--vtk/--xdmf: element = {g.element!r}: {exc}") from None
 
 
 def _defect_edges(d: dict, nodal: dict) -> tuple[np.ndarray, dict, np.ndarray, np.ndarray]:

@@ -17,11 +17,12 @@ nodes included), ``[[boundary]]`` clamps / rollers the nodes of a side's edges, 
 P2 nodes; side tractions and ``remote_stress`` are integrated with the quadratic edge functions (5-point Gauss
 per edge), ``body_force`` with scikit-fem on the (isoparametric) cells, a defect's ``face_pressure`` p as
 ``p w_j nu_j`` at each pair (the consistent P2 load of a constant pressure: w_j are the edge row sums). Friction
-(Tresca, Coulomb) acts on every P2 pair as on P1's. Refused on P2 (one InputError line): ``refine = "adaptive"``.
+(Tresca, Coulomb) acts on every P2 pair as on P1's. ``refine = "adaptive"`` re-meshes as on P1, the estimator being
+:mod:`dualfem.numerics.estimator_p2` and the size rule's order 2 (docs/elements.md).
 
 The QP's ``geometry`` holds every P2 node (``nodes`` (2, nv + ne)), the linear triangles as ``cells`` (vertex
-ids only) and ``element``: post-processing that assumes P1 (SIF, the estimator) refuses such a QP; the vertex
-values (P2 vertex unknowns are nodal values) are what figures and VTU files show on the linear cells.
+ids only) and ``element``: post-processing that assumes P1 (the P1 SIF methods) refuses such a QP; VTU files
+rebuild the 6-node cells (:mod:`dualfem.numerics.p2`).
 """
 from __future__ import annotations
 
@@ -48,15 +49,11 @@ def check_element(value) -> str:
     return value
 
 
-def check_scene(params: dict, defects: list[dict]) -> None:
-    """What a quadratic scene refuses (InputError): adaptive refinement. (Friction blocks take the P2 pairs as they
-    are, one Tresca or Coulomb row per pair with its weight; a face pressure p gives p w_j nu_j at each pair.)"""
-    el = params["element"]
-    if el == "P1":
-        return
-    if params["refine"] != "none":
-        raise InputError(f"element = {el!r}: refine = {params['refine']!r} is not supported on quadratic elements "
-                         f"(its estimator is P1's); use element = 'P1' or refine = 'none'")
+def size_of_mesh(problem) -> int:
+    """2 x (vertices + edges) of the cut mesh (meshing it): the P2 unknowns before supports are removed (the adaptive
+    loop's budget check, :meth:`dualfem.problems.adaptive.Adaptive.size_of_mesh`)."""
+    c, _ = problem.cut()
+    return 2 * (int(c.points.shape[1]) + int(edge_table(c.triangles)[0].shape[1]))
 
 
 def crack_edges(c: Cut) -> np.ndarray:
