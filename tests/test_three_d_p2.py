@@ -182,7 +182,7 @@ def test_estimator_refuses_p2():
     from dualfem.numerics.estimator import estimate
 
     qp = box(SIGMA, []).build()
-    with pytest.raises(InputError, match="the estimator is P1's"):
+    with pytest.raises(InputError, match=r"the estimator takes P1 \(2D, 3D\) and P2 triangles"):
         estimate(qp, np.zeros(qp.n))
 
 
