@@ -136,13 +136,14 @@ def _next(pr, qp: QP, est: Estimate, target: float, max_unknowns: int, mesh_size
     room to refine. ``fill``: that ratio on the last step, the sizes asked of gmsh scaled by it beforehand."""
     per_element = qp.n / est.eta2.size                      # unknowns per element on this mesh
     budget = 0.9 * max_unknowns / per_element
-    min_size = MIN_SIZE * max(float(pr.params[k]) for k in ("width", "height", "depth") if k in pr.params)
+    min_size = MIN_SIZE * pr.extent()
     sizes = equidistributed_sizes(est, target, budget, order=1.0, max_size=mesh_size, min_size=min_size)
     predicted = float(np.sum((est.sizes / sizes) ** est.dim)) * per_element
     if predicted < 1.2 * qp.n and qp.n > 0.5 * max_unknowns:
         return None
     c = pr.cut()[0]
-    cells = c.tets if est.dim == 3 else c.triangles
+    cells = getattr(c, "tets" if est.dim == 3 else "triangles", None)
+    cells = c.cells if cells is None else cells                 # a body from a file: its cut's cells
     goal, kept = min(predicted, 0.9 * max_unknowns), None
     scale = min(fill, 1.0)                                  # the count asked of gmsh over the rule's, as sizes^-d
     for _ in range(3):                                      # the mesh may miss the prediction: rescale, re-mesh
@@ -166,7 +167,7 @@ LATER_KEYS = ("defects_file", "size_growth", "refine", "target_error", "max_unkn
 
 
 class Adaptive:
-    """The scene option ``refine = "adaptive"`` for a gmsh problem (mixed into ThinDefect and ThreeD): the
+    """The scene option ``refine = "adaptive"`` for a gmsh problem (mixed into ThinDefect, ThreeD, FileBody): the
     loop runs once per :class:`~dualfem.core.problem.Shared`, inside ``cut()``, and the last mesh is kept."""
 
     #: (points, cells, sizes): the background mesh of this instance's gmsh mesh (:meth:`on_sizes`), or None
@@ -179,7 +180,10 @@ class Adaptive:
         p = self.params                    # type: ignore[attr-defined]
         if shared.get("cut") is None and p["refine"] == "adaptive":
             steps = list(adapt(self.unrefined(), pdas_solve, p["target_error"], p["max_unknowns"]))
-            shared["cut"] = steps[-1].problem.cut()
+            last = steps[-1].problem
+            shared["cut"] = last.cut()
+            if "body" in last.shared.data:            # a body from a file: its uncut mesh goes with its cut
+                shared["body"] = last.shared.data["body"]
             shared["adaptive"] = [(s.unknowns, s.estimate.relative) for s in steps]
 
     def unrefined(self):
@@ -195,13 +199,19 @@ class Adaptive:
 
     def size_of_mesh(self) -> int:
         """dim times the nodes of the cut mesh (meshing it): the unknowns before supports are removed."""
-        return int(self.dim) * int(self.cut()[0].points.shape[1])  # type: ignore[attr-defined]
+        points = self.cut()[0].points  # type: ignore[attr-defined]
+        return int(points.shape[0]) * int(points.shape[1])
+
+    def extent(self) -> float:
+        """The body's largest side (``MIN_SIZE`` is relative to it)."""
+        p = self.params  # type: ignore[attr-defined]
+        return max(float(p[k]) for k in ("width", "height", "depth") if k in p)
 
     def later_params(self, params: dict, given: dict, defaults: dict) -> None:
         """A QP's parameters as before the keys added since (:data:`LATER_KEYS`): each dropped at its default
         (so a scene's QP key does not change), then :meth:`adaptive_params`."""
         for k in LATER_KEYS:
-            if given[k] == defaults[k]:
+            if k in given and given[k] == defaults[k]:
                 params.pop(k, None)
         self.adaptive_params(params)
 
