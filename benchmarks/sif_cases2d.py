@@ -6,7 +6,9 @@
   Analysis of Cracks Handbook (3rd ed., 2000), single edge notched strip in tension: K_I = F(a/b) sigma sqrt(pi a),
   F(s) = sqrt(2 / (pi s) tan(pi s / 2)) [0.752 + 2.02 s + 0.37 (1 - sin(pi s / 2))^3] / cos(pi s / 2) (stated
   accurate to 0.5 % for any a/b); K_II = 0 (its error against sigma sqrt(pi a)). The one tip is at x = a (the
-  mouth, on the boundary, has none).
+  mouth, on the boundary, has none). Tip-graded meshes (mesh_size:tip_size levels) and the adaptive loop's meshes
+  from the coarsest level (``refine = "adaptive"`` of a body from a geometry file; each step at most 3 x the
+  unknowns of the last, up to 40,000).
 * ``adaptive``: the centre cracks of benchmarks/sif.py (``griffith``, ``mixed30``, ``closed``) on the meshes of the
   adaptive loop (:func:`dualfem.experiments.adaptive.adapt`, first mesh mesh_size 0.5, tip_size 0.005, each step
   at most 3 x the unknowns of the last, up to 60,000), one row per step.
@@ -38,8 +40,9 @@ def tada_f(s: float) -> float:
     return math.sqrt(2 / (math.pi * s) * math.tan(c)) * (0.752 + 2.02 * s + 0.37 * (1 - math.sin(c)) ** 3) / math.cos(c)
 
 
-def edge_qp(s: float, h: float, tip: float, folder: Path):
-    """(qp, exact (K_I, K_II), the scale of a zero K: sigma sqrt(pi a)) of the edge crack a/b = s."""
+def edge_problem(s: float, h: float, tip: float, folder: Path):
+    """The edge crack a/b = s as a problem (a body from a file), its exact (K_I, K_II) and the scale of a zero K,
+    sigma sqrt(pi a)."""
     from dualfem.registry import get_problem
 
     geo = folder / f"edge_{s:g}.geo"
@@ -50,7 +53,7 @@ def edge_qp(s: float, h: float, tip: float, folder: Path):
                                  boundary=[{"group": "top", "traction": [0.0, 1.0]},
                                            {"group": "bottom", "traction": [0.0, -1.0]}])
     k0 = math.sqrt(math.pi * s)
-    return p.build(), (tada_f(s) * k0, 0.0), k0
+    return p, (tada_f(s) * k0, 0.0), k0
 
 
 def errors(k, exact, k0: float) -> dict:
@@ -84,7 +87,8 @@ def edge_rows(quick: bool, methods) -> list[dict]:
         for s in (RATIOS[1:2] if quick else RATIOS):
             for h, tip in (LEVELS_EDGE[:1] if quick else LEVELS_EDGE):
                 t0 = time.perf_counter()
-                qp, exact, k0 = edge_qp(s, h, tip, Path(tmp))
+                pr, exact, k0 = edge_problem(s, h, tip, Path(tmp))
+                qp = pr.build()
                 sol = run(make_solver("pdas", {}), qp)
                 row = {"dim": 2, "group": "edge", "case": f"edge{s:g}", "a_over_b": s, "mesh_size": h,
                        "tip_size": tip, "unknowns": qp.n, "status": str(sol.status), "exact": list(exact),
@@ -94,6 +98,25 @@ def edge_rows(quick: bool, methods) -> list[dict]:
                 rows.append(row)
                 print(f"edge a/b={s:g} {h:g}:{tip:g} n={qp.n}: interaction K_I "
                       f"{100 * row['methods'].get('interaction', {}).get('K_I_err', float('nan')):+.2f} %", flush=True)
+            rows += edge_adaptive(s, Path(tmp), quick, methods)
+    return rows
+
+
+def edge_adaptive(s: float, folder: Path, quick: bool, methods) -> list[dict]:
+    """The edge crack a/b = s on the adaptive loop's meshes from its coarsest level (each step at most 3 x)."""
+    from dualfem.experiments.adaptive import adapt
+
+    pr, exact, k0 = edge_problem(s, *LEVELS_EDGE[0], folder)
+    rows, t0 = [], time.perf_counter()
+    for step in adapt(pr, target_error=1e-4, max_unknowns=10_000 if quick else 40_000, max_steps=5, step_growth=3.0):
+        rows.append({"dim": 2, "group": "edge", "case": f"edge{s:g}", "a_over_b": s,
+                     "mesh": f"adaptive step {step.index}", "mesh_size": LEVELS_EDGE[0][0],
+                     "tip_size": LEVELS_EDGE[0][1], "unknowns": step.unknowns,
+                     "status": str(step.solution.status), "exact": list(exact),
+                     "wall_s": round(time.perf_counter() - t0, 2),
+                     "methods": sif_methods(step.qp, step.x, exact, k0, methods)})
+        print(f"edge a/b={s:g} adaptive n={step.unknowns}: interaction K_I "
+              f"{100 * rows[-1]['methods']['interaction']['K_I_err']:+.2f} %", flush=True)
     return rows
 
 

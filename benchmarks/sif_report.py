@@ -65,7 +65,9 @@ def _sections_2d(rows: list[dict]) -> list[str]:
                 "Single edge crack of length a in a strip of width b = 1 and height 6 (a body from a file: "
                 "examples/bodies/edge_crack.geo), tension 1 on both ends, plane strain; K_I against Tada's "
                 "F(a/b) sigma sqrt(pi a) (accurate to 0.5 %), K_II against 0 (relative to sigma sqrt(pi a)). One tip: "
-                "the mouth lies on the boundary and has no K. benchmarks/sif_cases2d.py.", "",
+                "the mouth lies on the boundary and has no K. Tip-graded meshes (mesh_size:tip_size) and the adaptive "
+                "loop's meshes from the coarsest (`refine = \"adaptive\"` of a geometry file; wall: the steps so "
+                "far). benchmarks/sif_cases2d.py; 2 cores shared with other engineers' jobs.", "",
                 *_table_2d(edge), ""]
     ad = [r for r in rows if _group(r) == "adaptive"]
     if ad:
