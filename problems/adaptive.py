@@ -146,6 +146,7 @@ def _next(pr, qp: QP, est: Estimate, target: float, max_unknowns: int, mesh_size
     cells = c.cells if cells is None else cells                 # a body from a file: its cut's cells
     goal, kept = min(predicted, 0.9 * max_unknowns), None
     scale = min(fill, 1.0)                                  # the count asked of gmsh over the rule's, as sizes^-d
+    last = 0
     for _ in range(3):                                      # the mesh may miss the prediction: rescale, re-mesh
         nxt = pr.on_sizes(c.points, cells, np.maximum(sizes * scale ** (1.0 / est.dim), min_size))
         n = nxt.size_of_mesh()
@@ -153,8 +154,9 @@ def _next(pr, qp: QP, est: Estimate, target: float, max_unknowns: int, mesh_size
             scale *= 1.05 * n / max_unknowns
             continue
         kept = (nxt, scale * n / goal)
-        if n >= UNDERSHOOT * goal:
+        if n >= UNDERSHOOT * goal or n <= 1.05 * last:      # met, or smaller sizes no longer add (MIN_SIZE binds)
             break
+        last = n
         # gmsh fills a strongly graded 3D size field with fewer tetrahedra than sum (h_T / h'_T)^3 (about 0.6
         # of it, measured on the penny): the budget would never be reached
         scale *= n / goal
