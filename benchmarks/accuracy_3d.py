@@ -6,10 +6,15 @@ Irwin's (Green & Sneddon's) opening: w = 4 (1 - nu^2) sigma b / (E E(k)) sqrt(1 
 E(k) the complete elliptic integral of the second kind, k^2 = 1 - b^2 / a^2 (Sneddon's penny for b = a). Error:
 the opening's relative L2 error over rho = sqrt(x^2/a^2 + y^2/b^2) <= 0.8 (the nodal areas as weights). The box's
 bias: the fitted factor s_L on one mesh (mesh_size 2 a, tip_size 0.1 a, size_growth 0.3) for L = 10 a, 20 a,
-40 a; errors against s_L / s_40 times the closed form. Discretizations: uniform (mesh_size = tip_size = h),
+40 a; errors against s_L / s_40 times the closed form. The energy-norm error ||u - u_h|| = sqrt(2 (Pi_h - Pi))
+relative to the crack's part sqrt(2 W): Pi = Pi_0 - W, Pi_0 the uncracked cube's energy (exact for P1),
+W = pi a b sigma w_0 / 3 the crack's energy (w_0 the closed-form opening at the centre; the penny's
+8 (1 - nu^2) sigma^2 a^3 / (3 E)) times s_L / s_40; the estimator's effectivity index eta / ||u - u_h|| on every
+mesh. Discretizations: uniform (mesh_size = tip_size = h),
 graded (mesh_size 2 a, tip_size halved from 0.2 a) with size_growth 0.3 and 0.1, adaptive (the steps of
 :func:`dualfem.experiments.adaptive.adapt` from mesh_size 2 a, tip_size 0.25 a, step_growth 3; time: the steps
-so far, each with its estimate and certification), ``P2 graded 0.3`` (quadratic tetrahedra, ``element = "P2"``:
+so far, each with its estimate and certification; full run: to 150 k unknowns), ``P2 graded 0.3`` (quadratic
+tetrahedra, ``element = "P2"``:
 mesh_size 2 a, tip_size halved from 0.4 a, size_growth 0.3; the opening's error at every defect pair, vertices
 and mid-edge nodes, with their weights). Time: meshing, assembly, factorization and solve (``time_s``);
 ``total_s`` adds the certification.
@@ -62,17 +67,41 @@ def opening(crack: str, L: float, qp, x) -> tuple[float, float]:
     return float(np.sqrt(np.sum(w * (jump[k] - exact[k]) ** 2) / np.sum(w * exact[k] ** 2))), fit
 
 
+def energy3(crack: str, L: float, qp, x, scale: float) -> tuple[float, float]:
+    """(||u - u_h|| in the energy norm, the same relative to the crack's part sqrt(2 W)), W times ``scale``."""
+    b = CRACKS[crack]
+    w0 = 4 * (1 - NU ** 2) * b / (E * ellipe(1 - b * b))            # the opening at the centre, sigma = 1
+    W = scale * np.pi * b * w0 / 3
+    pi_exact = -0.5 * L ** 3 / E - W                                  # sigma_zz = 1: sigma : C^-1 sigma = 1 / E
+    e2 = 2 * (-0.5 * float(qp.F @ x) - pi_exact)
+    e = float(np.sqrt(e2)) if e2 > 0 else float("nan")
+    return e, e / float(np.sqrt(2 * W))
+
+
+def errors3(crack: str, L: float, qp, x, eta: float, scale: float) -> dict:
+    """The row's errors: opening (relative L2), energy (absolute, relative), the effectivity eta / energy."""
+    err, fit = opening(crack, L, qp, np.asarray(x) / scale)
+    e, rel = energy3(crack, L, qp, x, scale)
+    return {"jump_error": err, "fit": fit, "energy_error": e, "energy_rel": rel, "effectivity": eta / e}
+
+
 def row3(crack: str, L: float, pr, scale: float, label: str) -> dict:
     from dualfem.experiments.runner import run
+    from dualfem.numerics.estimator import estimate
 
     t0 = time.perf_counter()
     qp = pr.build()
     t1 = time.perf_counter()
     sol = run("pdas", qp)
-    err, fit = opening(crack, L, qp, np.asarray(sol.x) / scale)
+    t_total = time.perf_counter() - t0
+    if qp.geometry.element == "P1":     # the estimator is P1's in 3D (P2 tetrahedra: no estimate, no effectivity)
+        est = estimate(qp, sol.x, sol.multipliers)
+        eta, eta_rel = est.eta, est.relative
+    else:
+        eta = eta_rel = float("nan")
     return {"case": crack, "disc": label, "L": L, "unknowns": int(qp.n), "status": str(sol.status),
             "time_s": t1 - t0 + sol.time_s.get("setup", 0) + sol.time_s.get("solve", 0),
-            "total_s": time.perf_counter() - t0, "jump_error": err, "fit": fit}
+            "total_s": t_total, "eta": eta, "eta_rel": eta_rel, **errors3(crack, L, qp, sol.x, eta, scale)}
 
 
 def study3(crack: str, quick: bool, p2_only: bool = False, bias: dict | None = None) -> tuple[dict, list[dict]]:
@@ -107,15 +136,15 @@ def study3(crack: str, quick: bool, p2_only: bool = False, bias: dict | None = N
 
     t0 = time.perf_counter()
     start = scene3(crack, 10.0, mesh_size=2.0, tip_size=0.25)
-    for step in adapt(start, target_error=1e-4, max_unknowns=15_000 if quick else 100_000, max_steps=6,
+    for step in adapt(start, target_error=1e-4, max_unknowns=15_000 if quick else 150_000, max_steps=7,
                       step_growth=3.0):
-        err, fit = opening(crack, 10.0, step.qp, step.x / ref)
         rows.append({"case": crack, "disc": "adaptive", "L": 10.0, "unknowns": step.unknowns,
-                     "status": str(step.solution.status), "time_s": time.perf_counter() - t0, "jump_error": err,
-                     "fit": fit, "eta_rel": step.estimate.relative})
+                     "status": str(step.solution.status), "time_s": time.perf_counter() - t0,
+                     "eta": step.estimate.eta, "eta_rel": step.estimate.relative,
+                     **errors3(crack, 10.0, step.qp, step.x, step.estimate.eta, ref)})
     for r in rows:
-        print(f"{crack} {r['disc']:>11} n={r['unknowns']:>7} opening={r['jump_error']:.2e} t={r['time_s']:.1f}s",
-              flush=True)
+        print(f"{crack} {r['disc']:>11} n={r['unknowns']:>7} opening={r['jump_error']:.2e} "
+              f"energy={r['energy_rel']:.2e} eff={r['effectivity']:.2f} t={r['time_s']:.1f}s", flush=True)
     return {str(k): v for k, v in bias.items()}, rows
 
 

@@ -1,8 +1,10 @@
 """Stress intensity factors against their closed forms (dualfem.post.sif): the validation table of docs/sif.md.
 
     python benchmarks/sif.py --out benchmarks/results/sif --report reports [--quick] [--render-only]
+    python benchmarks/sif.py --out benchmarks/results/sif --report reports --only edge,adaptive,rings
 
-Writes ``OUT/runs.jsonl`` (one line per case and mesh level) and renders ``REPORT/sif.md`` with
+Writes ``OUT/runs.jsonl`` (one line per case and mesh level; ``--only GROUPS`` reruns those row groups and keeps
+the others' rows: ``centre``, ``edge``, ``adaptive``, ``rings``, ``three_d``) and renders ``REPORT/sif.md`` with
 ``REPORT/sif/penny_front.png`` (K along the penny's front against Kassir and Sih) from it. Cases (E = 1000,
 nu = 0.3, delta = 1e3: the open crack of classical fracture mechanics; solver pdas):
 
@@ -15,6 +17,9 @@ nu = 0.3, delta = 1e3: the open crack of classical fracture mechanics; solver pd
   Sih's K_II = 4 tau sqrt(a/pi) cos(theta)/(2 - nu), K_III = 4 (1 - nu) tau sqrt(a/pi) sin(theta)/(2 - nu) (the
   sign of e3 = e1 x e2); an ellipse a = 1, b = 0.5 under tension, Irwin's K_I(phi) = sigma sqrt(pi b)/E(k)
   (sin^2 phi + (b/a)^2 cos^2 phi)^(1/4). The cube of side 10 a adds ~1-2 % (benchmarks/penny.py).
+
+* 2D, an edge crack in a strip against Tada (``edge``), the centre cracks on adaptive meshes (``adaptive``) and the
+  interaction integral's ring radius (``rings``): benchmarks/sif_cases2d.py.
 
 Errors: 2D, the signed relative error of the worse tip per mode; 3D, the amplitude's error (the least-squares
 multiple of the closed form's shape along the front, minus 1) and the largest pointwise error along the front
@@ -38,10 +43,8 @@ METHODS_2D = ("interaction", "fit", "extrapolate")
 METHODS_3D = ("interaction", "fit", "extrapolate")
 
 
-def case_2d(name: str, h: float, tip: float):
-    """(qp, exact (K_I, K_II)) of a 2D case."""
-    from dualfem.problems.thin_defect import ThinDefect
-
+def centre(name: str) -> tuple[dict, tuple[float, float], float]:
+    """(scene parameters, exact (K_I, K_II), the scale of a zero K: sigma sqrt(pi a)) of a 2D centre-crack case."""
     beta = {"griffith": 90.0, "griffith_stress": 90.0, "mixed30": 30.0, "mixed60": 60.0}.get(name)
     K0 = np.sqrt(np.pi * A2)
     if beta is None:
@@ -49,10 +52,18 @@ def case_2d(name: str, h: float, tip: float):
     else:
         c, s = np.cos(np.radians(beta)), np.sin(np.radians(beta))
         stress, exact = [[c * c, s * c], [s * c, s * s]], (s * s * K0, s * c * K0)
-    qp = ThinDefect(mesh="gmsh", width=W2, height=W2, mesh_size=h, tip_size=tip, E=E, nu=NU, delta=1e3,
-                    plane="stress" if name.endswith("_stress") else "strain",
-                    defects=[{"points": [[W2 / 2 - A2, W2 / 2], [W2 / 2 + A2, W2 / 2]]}], remote_stress=stress).build()
-    return qp, exact
+    params = {"mesh": "gmsh", "width": W2, "height": W2, "E": E, "nu": NU, "delta": 1e3,
+              "plane": "stress" if name.endswith("_stress") else "strain",
+              "defects": [{"points": [[W2 / 2 - A2, W2 / 2], [W2 / 2 + A2, W2 / 2]]}], "remote_stress": stress}
+    return params, exact, float(K0)
+
+
+def case_2d(name: str, h: float, tip: float):
+    """(qp, exact (K_I, K_II)) of a 2D case."""
+    from dualfem.problems.thin_defect import ThinDefect
+
+    params, exact, _ = centre(name)
+    return ThinDefect(**params, mesh_size=h, tip_size=tip).build(), exact
 
 
 def case_3d(name: str, h: float, tip: float):
@@ -125,27 +136,62 @@ def run_case(dim: int, name: str, h: float, tip: float) -> dict:
     return row
 
 
+GROUPS = ("centre", "edge", "adaptive", "rings", "three_d")
+
+
+def group_of(row: dict) -> str:
+    """The row group of a runs.jsonl row (rows written before the groups: centre in 2D, three_d in 3D)."""
+    return row.get("group") or ("centre" if row["dim"] == 2 else "three_d")
+
+
+def run_group(group: str, quick: bool):
+    """Yield the rows of one group."""
+    import sif_cases2d as more
+
+    if group in ("centre", "three_d"):
+        lv2, lv3 = (QUICK_2D, QUICK_3D) if quick else (LEVELS_2D, LEVELS_3D)
+        jobs = [(2, c, h, t) for c in ("griffith", "griffith_stress", "mixed30", "mixed60", "closed") for h, t in lv2] \
+            if group == "centre" else [(3, c, h, t) for c in ("penny", "shear", "ellipse") for h, t in lv3]
+        for job in jobs:
+            row = run_case(*job)
+            print(f"{job}: {row['unknowns']} unknowns, {row['wall_s']} s", file=sys.stderr)
+            yield row
+    elif group == "edge":
+        yield from more.edge_rows(quick, METHODS_2D)
+    elif group == "adaptive":
+        yield from more.adaptive_rows(quick, METHODS_2D, centre)
+    else:
+        yield from more.ring_rows(quick, case_2d, A2)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="benchmarks/results/sif")
     ap.add_argument("--report", default="reports")
-    ap.add_argument("--quick", action="store_true", help="the two coarsest 2D levels and the coarsest 3D one")
+    ap.add_argument("--quick", action="store_true", help="the coarse levels only")
     ap.add_argument("--render-only", action="store_true")
+    ap.add_argument("--only", default=",".join(GROUPS), help="comma-separated row groups to run (the others' rows "
+                    f"are kept from OUT/runs.jsonl): {', '.join(GROUPS)}")
     args = ap.parse_args(argv)
+    only = [g.strip() for g in args.only.split(",") if g.strip()]
+    bad = [g for g in only if g not in GROUPS]
+    if bad:
+        ap.error(f"--only: unknown group(s) {', '.join(bad)}; groups: {', '.join(GROUPS)}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     runs = out / "runs.jsonl"
-    if not args.render_only:
-        lv2, lv3 = (QUICK_2D, QUICK_3D) if args.quick else (LEVELS_2D, LEVELS_3D)
-        with runs.open("w") as fh:
-            jobs = [(2, c, h, t) for c in ("griffith", "griffith_stress", "mixed30", "mixed60", "closed")
-                    for h, t in lv2] + [(3, c, h, t) for c in ("penny", "shear", "ellipse") for h, t in lv3]
-            for job in jobs:
-                row = run_case(*job)
-                fh.write(json.dumps(row) + "\n")
-                fh.flush()
-                print(f"{job}: {row['unknowns']} unknowns, {row['wall_s']} s", file=sys.stderr)
     sys.path.insert(0, str(Path(__file__).resolve().parent))
+    if not args.render_only:
+        old = [json.loads(line) for line in runs.read_text().splitlines() if line.strip()] if runs.exists() else []
+        kept = [r for r in old if group_of(r) not in only]
+        with runs.open("w") as fh:
+            for row in kept:
+                fh.write(json.dumps(row) + "\n")
+            for g in GROUPS:
+                if g in only:
+                    for row in run_group(g, args.quick):
+                        fh.write(json.dumps(row) + "\n")
+                        fh.flush()
     from sif_report import render
 
     for path in render([json.loads(line) for line in runs.read_text().splitlines() if line.strip()],

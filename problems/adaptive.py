@@ -3,11 +3,13 @@
 One step: build the QP of the current mesh, solve it (``solve(qp) -> (x, multipliers)``, any solver), the
 Zienkiewicz-Zhu estimate of the answer (:func:`dualfem.numerics.estimator.estimate`: recovery on the cut mesh,
 the defect faces' tractions imposed; P2: :mod:`dualfem.numerics.estimator_p2`), and, unless the relative
-estimate is at most ``target_error``, the next mesh: per triangle the size of the optimal-mesh rule
-(:func:`dualfem.numerics.estimator.optimal_sizes`, order ``Estimate.order``: 1 on P1, 2 on P2; at most
-``mesh_size``), given to gmsh as a background mesh (a ``PostView`` field,
-:func:`dualfem.problems.gmsh_mesh.mesh_with_defects` with ``size_view``), the triangle budget scaled so the
-mesh stays within ``max_unknowns``. The loop stops at the target, when the budget is reached (a step that
+estimate is at most ``target_error``, the next mesh: per element the size that equidistributes the predicted
+error (:func:`dualfem.numerics.estimator.equidistributed_sizes`, order ``Estimate.order``: 1 on P1, 2 on P2; at
+most ``mesh_size``), given to gmsh as a background mesh (a ``PostView`` field,
+:func:`dualfem.problems.gmsh_mesh.mesh_with_defects` with ``size_view``), the element budget scaled so the mesh
+stays within ``max_unknowns``; a mesh gmsh fills with fewer than ``UNDERSHOOT`` of the predicted unknowns is
+re-meshed with smaller sizes, and the observed ratio is carried to the next step. The loop stops at the target,
+when the budget is reached (a step that
 could not refine by at least 20 % more unknowns), or after ``max_steps`` meshes.
 
 The scene option ``refine = "adaptive"`` (with ``target_error``, ``max_unknowns``) runs this loop inside the
@@ -23,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dualfem.errors import InputError
-from dualfem.numerics.estimator import Estimate, estimate, optimal_sizes
+from dualfem.numerics.estimator import Estimate, equidistributed_sizes, estimate
 from dualfem.qp import QP
 
 #: values of the scene key ``refine``
@@ -36,6 +38,8 @@ MAX_UNKNOWNS_DEFAULT, MAX_UNKNOWNS_RANGE = 200_000, (500, 5_000_000)
 MIN_SIZE = 2e-5
 #: meshes in one adaptive run at most (the scene option)
 MAX_STEPS = 8
+#: a mesh with fewer unknowns than this fraction of the predicted count is re-meshed with smaller sizes
+UNDERSHOOT = 0.75
 
 Solve = Callable[[QP], tuple[np.ndarray, np.ndarray]]
 
@@ -104,6 +108,7 @@ def adapt(problem, solve: Solve, target_error: float, max_unknowns: int, max_ste
     refinement study takes e.g. 3)."""
     pr = problem
     mesh_size = _largest_size(pr)
+    fill = 1.0                                  # gmsh's unknowns over the predicted count, from the last step
     for k in range(max_steps):
         qp = pr.build()
         x, mu = solve(qp)
@@ -112,10 +117,10 @@ def adapt(problem, solve: Solve, target_error: float, max_unknowns: int, max_ste
         if est.relative <= target_error or k == max_steps - 1:
             return
         budget = max_unknowns if step_growth is None else int(min(max_unknowns, step_growth * qp.n))
-        nxt = _next(pr, qp, est, target_error, budget, mesh_size)
+        nxt = _next(pr, qp, est, target_error, budget, mesh_size, fill)
         if nxt is None:
             return
-        pr = nxt
+        pr, fill = nxt
 
 
 def _largest_size(pr) -> float:
@@ -127,24 +132,36 @@ def _largest_size(pr) -> float:
     return float(p["mesh_size"] or min(p["width"], p["height"]) / p["N"])
 
 
-def _next(pr, qp: QP, est: Estimate, target: float, max_unknowns: int, mesh_size: float):
-    """The problem on the next mesh, or None when the budget leaves no room to refine."""
-    per_element = qp.n / est.eta2.size                      # unknowns per triangle on this mesh
+def _next(pr, qp: QP, est: Estimate, target: float, max_unknowns: int, mesh_size: float, fill: float = 1.0):
+    """(The problem on the next mesh, its unknowns over the predicted count), or None when the budget leaves no
+    room to refine. ``fill``: that ratio on the last step, the sizes asked of gmsh scaled by it beforehand."""
+    per_element = qp.n / est.eta2.size                      # unknowns per element on this mesh
     budget = 0.9 * max_unknowns / per_element
-    min_size = MIN_SIZE * max(float(pr.params[k]) for k in ("width", "height", "depth") if k in pr.params)
-    sizes = optimal_sizes(est, target, budget, order=est.order, max_size=mesh_size, min_size=min_size)
-    predicted = float(np.sum((est.sizes / sizes) ** 2)) * per_element
+    min_size = MIN_SIZE * pr.extent()
+    sizes = equidistributed_sizes(est, target, budget, order=est.order, max_size=mesh_size, min_size=min_size)
+    predicted = float(np.sum((est.sizes / sizes) ** est.dim)) * per_element
     if predicted < 1.2 * qp.n and qp.n > 0.5 * max_unknowns:
         return None
     c = pr.cut()[0]
-    cells = c.tets if est.dim == 3 else c.triangles
-    for _ in range(3):                                      # the mesh may overshoot the prediction: coarsen
-        nxt = pr.on_sizes(c.points, cells, sizes)
+    cells = getattr(c, "tets" if est.dim == 3 else "triangles", None)
+    cells = c.cells if cells is None else cells                 # a body from a file: its cut's cells
+    goal, kept = min(predicted, 0.9 * max_unknowns), None
+    scale = min(fill, 1.0)                                  # the count asked of gmsh over the rule's, as sizes^-d
+    last = 0
+    for _ in range(3):                                      # the mesh may miss the prediction: rescale, re-mesh
+        nxt = pr.on_sizes(c.points, cells, np.maximum(sizes * scale ** (1.0 / est.dim), min_size))
         n = nxt.size_of_mesh()
-        if n <= max_unknowns:
-            return nxt
-        sizes = sizes * (1.05 * n / max_unknowns) ** (1.0 / est.dim)
-    return None
+        if n > max_unknowns:
+            scale *= 1.05 * n / max_unknowns
+            continue
+        kept = (nxt, scale * n / goal)
+        if n >= UNDERSHOOT * goal or n <= 1.05 * last:      # met, or smaller sizes no longer add (MIN_SIZE binds)
+            break
+        last = n
+        # gmsh fills a strongly graded 3D size field with fewer tetrahedra than sum (h_T / h'_T)^3 (about 0.6
+        # of it, measured on the penny): the budget would never be reached
+        scale *= n / goal
+    return kept
 
 
 #: scene keys of thin_defect and three_d added after their QPs' parameters were first keyed (networks, size
@@ -153,7 +170,7 @@ LATER_KEYS = ("defects_file", "size_growth", "refine", "target_error", "max_unkn
 
 
 class Adaptive:
-    """The scene option ``refine = "adaptive"`` for a gmsh problem (mixed into ThinDefect and ThreeD): the
+    """The scene option ``refine = "adaptive"`` for a gmsh problem (mixed into ThinDefect, ThreeD, FileBody): the
     loop runs once per :class:`~dualfem.core.problem.Shared`, inside ``cut()``, and the last mesh is kept."""
 
     #: (points, cells, sizes): the background mesh of this instance's gmsh mesh (:meth:`on_sizes`), or None
@@ -166,7 +183,10 @@ class Adaptive:
         p = self.params                    # type: ignore[attr-defined]
         if shared.get("cut") is None and p["refine"] == "adaptive":
             steps = list(adapt(self.unrefined(), pdas_solve, p["target_error"], p["max_unknowns"]))
-            shared["cut"] = steps[-1].problem.cut()
+            last = steps[-1].problem
+            shared["cut"] = last.cut()
+            if "body" in last.shared.data:            # a body from a file: its uncut mesh goes with its cut
+                shared["body"] = last.shared.data["body"]
             shared["adaptive"] = [(s.unknowns, s.estimate.relative) for s in steps]
 
     def unrefined(self):
@@ -182,13 +202,19 @@ class Adaptive:
 
     def size_of_mesh(self) -> int:
         """dim times the nodes of the cut mesh (meshing it): the unknowns before supports are removed."""
-        return int(self.dim) * int(self.cut()[0].points.shape[1])  # type: ignore[attr-defined]
+        points = self.cut()[0].points  # type: ignore[attr-defined]
+        return int(points.shape[0]) * int(points.shape[1])
+
+    def extent(self) -> float:
+        """The body's largest side (``MIN_SIZE`` is relative to it)."""
+        p = self.params  # type: ignore[attr-defined]
+        return max(float(p[k]) for k in ("width", "height", "depth") if k in p)
 
     def later_params(self, params: dict, given: dict, defaults: dict) -> None:
         """A QP's parameters as before the keys added since (:data:`LATER_KEYS`): each dropped at its default
         (so a scene's QP key does not change), then :meth:`adaptive_params`."""
         for k in LATER_KEYS:
-            if given[k] == defaults[k]:
+            if k in given and given[k] == defaults[k]:
                 params.pop(k, None)
         self.adaptive_params(params)
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from dualfem.errors import InputError
-from dualfem.numerics.estimator import impose_traction, optimal_sizes, zz_estimate
+from dualfem.numerics.estimator import Estimate, equidistributed_sizes, impose_traction, optimal_sizes, zz_estimate
 from dualfem.problems.adaptive import adapt
 from dualfem.problems.adaptive import pdas_solve as _inner_solve
 from dualfem.scene import load_scene
@@ -72,6 +72,24 @@ def test_sizes_respect_the_budget():
     h = optimal_sizes(est, 1e-3, max_elements=2000.0)
     assert np.sum((est.sizes / h) ** 2) == pytest.approx(2000.0)
     assert h.min() < est.sizes[np.argmax(est.eta2)]       # the worst triangle is refined
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_equidistributed_sizes_follow_the_error_density(dim):
+    h = np.array([1.0, 1.0, 0.5, 2.0])
+    vol = np.sqrt(3.0) / 4 * h ** 2 if dim == 2 else h ** 3 / (6 * np.sqrt(2.0))      # sizes give back h
+    density = np.array([1.0, 2.0 ** (2 + dim), 1.0, 1.0])                        # c_T: the second 2^(2p+d) x
+    est = Estimate(eta2=density * h ** (2 + dim), energy2=np.full(4, 1e6), area=vol, dim=dim)
+    assert est.sizes == pytest.approx(h)
+    new = equidistributed_sizes(est, 1e-6, max_elements=40.0, steps=(1e-3, 1e3))
+    assert np.sum((h / new) ** dim) == pytest.approx(40.0)                        # the budget, met
+    # h' ~ c^(-1 / (2p + d)): equal densities, equal sizes, whatever the old size; 2^(2p+d) x the density, half
+    assert new[0] == pytest.approx(new[2]) and new[0] == pytest.approx(new[3])
+    assert new[1] == pytest.approx(0.5 * new[0])
+    # the target, when it needs fewer elements: the predicted error sum c h'^2 |T| is the allowed one
+    loose = equidistributed_sizes(est, 0.5, max_elements=1e9, steps=(1e-3, 1e3))
+    allowed2 = 0.25 * (est.energy2.sum() + est.eta2.sum())
+    assert np.sum(density * loose ** 2 * h ** dim) == pytest.approx(allowed2)
 
 
 def test_scene_option_refines_to_the_target():
@@ -149,7 +167,8 @@ def test_three_d_two_steps_reduce_the_estimate_and_the_opening_error():
         return float(np.sqrt(np.sum(w * (qp.B @ step.x - exact)[k] ** 2) / np.sum(w * exact[k] ** 2)))
 
     a, b = list(loop(penny(), _inner_solve, target_error=1e-4, max_unknowns=8000, max_steps=2, step_growth=3.0))
-    assert a.estimate.dim == 3 and b.unknowns > 1.3 * a.unknowns
+    # the budget of the step (3 x) is reached: gmsh's graded 3D meshes fall short of the predicted count
+    assert a.estimate.dim == 3 and 0.75 * 0.9 * 3 * a.unknowns <= b.unknowns <= 3 * a.unknowns
     assert b.estimate.eta < a.estimate.eta and opening_error(b) < 0.9 * opening_error(a)
     with pytest.raises(InputError, match="max_unknowns must be an integer"):
         penny(refine="adaptive", max_unknowns=3)

@@ -30,7 +30,8 @@ from .runner import run
 def adapt(scene, target_error: float = _loop.TARGET_DEFAULT, max_unknowns: int = _loop.MAX_UNKNOWNS_DEFAULT,
           solver: str = "pdas", params: dict[str, Any] | None = None,
           max_steps: int = _loop.MAX_STEPS, step_growth: float | None = None) -> Iterator[_loop.Step]:
-    """Yield the adaptive steps of ``scene`` (a 2D thin-defect or fractured problem, ``mesh = "gmsh"``), each
+    """Yield the adaptive steps of ``scene`` (a thin-defect or fractured problem with ``mesh = "gmsh"``, a 3D
+    three_d scene, a body from a ``geometry_file``), each
     solved by ``solver`` (with ``params``) and certified; stops at ``target_error`` (relative, energy norm),
     the ``max_unknowns`` budget or ``max_steps`` meshes; ``step_growth``: at most this many times the unknowns
     of one step in the next (None: as many as the target needs, within the budget). InputError for bad values
@@ -38,7 +39,10 @@ def adapt(scene, target_error: float = _loop.TARGET_DEFAULT, max_unknowns: int =
     p = getattr(scene, "params", {})
     if p.get("refine", "none") != "none":
         raise InputError("adapt() drives the loop itself: give it a scene with refine = \"none\"")
-    _loop.check_keys("adaptive", target_error, max_unknowns, p.get("mesh", ""))
+    if p.get("mesh_file"):
+        raise InputError("adapt() re-meshes the body with gmsh: a mesh_file body cannot be re-meshed (give its "
+                         "geometry_file)")
+    _loop.check_keys("adaptive", target_error, max_unknowns, "gmsh" if p.get("geometry_file") else p.get("mesh", ""))
     if isinstance(max_steps, bool) or not isinstance(max_steps, int) or not 1 <= max_steps <= 20:
         raise InputError(f"max_steps must be an integer in [1, 20], got {max_steps!r}")
     if step_growth is not None and (isinstance(step_growth, bool) or not isinstance(step_growth, (int, float))

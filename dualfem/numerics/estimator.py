@@ -17,10 +17,10 @@ Indicator of triangle T (energy units, the energy norm ``||v||^2 = a(v, v) = x' 
 integrated exactly (the integrand is quadratic: the three edge midpoints with weight |T| / 3).
 ``eta^2 = sum eta_T^2``; the relative estimate is ``eta / sqrt(||u_h||^2 + eta^2)``.
 
-The optimal-mesh rule (:func:`optimal_sizes`, Zienkiewicz & Zhu 1987): every triangle should carry the
-same share of the allowed error; the error of P1 scales as h^p (p = 1 where the solution is smooth), so
-triangle T of size h_T should get the size ``h_T (e_bar / eta_T)^(1/p)``, then the sizes are scaled up
-when the predicted count exceeds the budget.
+The next mesh's sizes (:func:`equidistributed_sizes`, the adaptive loop's rule): the error density
+c_T = eta_T^2 / h_T^(2p + d) per element, the sizes h'_T ~ c_T^(-1/(2p + d)) that give every element of the
+new mesh the same predicted error, scaled to the target or the budget. :func:`optimal_sizes` is Zienkiewicz
+& Zhu's 1987 rule ``h_T (e_bar / eta_T)^(1/p)`` (the loop's rule before: it over-refines the worst elements).
 """
 from __future__ import annotations
 
@@ -174,6 +174,29 @@ def optimal_sizes(est: Estimate, target: float, max_elements: float, order: floa
     if count > max_elements:
         h_new = h_new * (count / max_elements) ** (1.0 / est.dim)
     return h_new
+
+
+def equidistributed_sizes(est: Estimate, target: float, max_elements: float, order: float = 1.0,
+                          max_size: float = np.inf, steps: tuple[float, float] = (1 / 8, 2.0),
+                          min_size: float = 0.0) -> np.ndarray:
+    """Per-element sizes of the next mesh that equidistribute the predicted error (arguments as
+    :func:`optimal_sizes`).
+
+    The error density of element T is ``c_T = eta_T^2 / h_T^(2p + d)`` (eta_T^2 ~ c h^(2p) |T|, |T| ~ h^d);
+    the mesh of N elements minimizing sum c_T h'^(2p) |T| has ``h'_T = lam c_T^(-1 / (2p + d))``, i.e.
+    ``h'_T = lam h_T eta_T^(-2 / (2p + d))`` (exponent 0.4 in 3D, 0.5 in 2D for P1: the rule of
+    :func:`optimal_sizes`, exponent 1 / p, over-refines where eta_T is large and coarsens elsewhere, one step
+    over-correcting the next). ``lam``: the largest of the one meeting ``target`` (predicted error
+    sum c_T h'_T^(2p) h_T^d) and the one meeting ``max_elements`` (count sum (h_T / h'_T)^d)."""
+    h, d = est.sizes, est.dim
+    eta2 = np.maximum(est.eta2, 1e-300)
+    shape = h * eta2 ** (-1.0 / (2 * order + d))                         # h'_T at lam = 1
+    allowed2 = target ** 2 * (est.energy2.sum() + est.eta2.sum())
+    predicted2 = float(np.sum(eta2 * (shape / h) ** (2 * order)))       # c_T h'^(2p) h_T^d at lam = 1
+    lam_target = (allowed2 / predicted2) ** (0.5 / order)
+    lam_budget = (float(np.sum((h / shape) ** d)) / max_elements) ** (1.0 / d)
+    h_new = np.maximum(lam_target, lam_budget) * shape
+    return np.clip(np.clip(h_new / h, *steps) * h, min_size, max_size)
 
 
 def nodal_u(qp, x: np.ndarray) -> np.ndarray:

@@ -33,7 +33,7 @@ Conventions (the Williams fields of a straight front, Irwin's modes):
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -84,14 +84,25 @@ def parts(qp, elements: tuple[str, ...] = ("P1",)):
     for k in ("interface", "geometry", "material"):
         if getattr(qp, k, None) is None:
             raise InputError(f"stress intensity factors need the QP's {k} part (build the QP from a scene)")
-    it = qp.interface
+    it = tips_only(qp.interface)
     if it.front.size == 0:
-        raise InputError("stress intensity factors need crack tips or fronts (interface.front is empty)")
+        raise InputError("stress intensity factors need crack tips or fronts (interface.front is empty, or holds "
+                         "only the mouths of edge cracks)")
     if qp.geometry.element not in elements:
         raise InputError(f"stress intensity factors by this method need element = {' or '.join(map(repr, elements))}; "
                          f"this QP has element = {qp.geometry.element!r} (--sif: use element = 'P1' or "
                          f"'P2-quarter-point')")
     return it, qp.geometry, qp.material
+
+
+def tips_only(it):
+    """The interface with its front cut to the crack tips (2D) or front nodes (3D) inside the body: a front entry
+    that is a doubled node (in ``lower`` or ``upper``) is where a crack meets the body's boundary (an edge crack's
+    mouth: a body from a file lists it as a chain end), no tip, so no stress intensity factor there."""
+    mouth = np.isin(it.front, np.r_[it.lower, it.upper])
+    if not mouth.any():
+        return it
+    return replace(it, front=it.front[~mouth], front_id=it.front_id[~mouth])
 
 
 def check_x(qp, x) -> np.ndarray:

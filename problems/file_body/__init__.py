@@ -37,6 +37,8 @@ from dualfem.registry import register_problem
 
 from .. import _boundary as bd
 from .._interface import delta_free_part, interface, local_unknowns, with_delta
+from ..adaptive import Adaptive
+from ..adaptive import check_keys as check_adaptive
 from . import geometry as geo
 from . import supports as sup
 from .body import BodyMesh
@@ -60,7 +62,7 @@ def _cached(key: tuple, make) -> BodyMesh:
 
 
 @register_problem
-class FileBody(Problem):
+class FileBody(Adaptive, Problem):
     """An elastic body read from a mesh file or meshed from a geometry file, defects as named groups."""
 
     name = "file_body"
@@ -84,6 +86,9 @@ class FileBody(Problem):
         "boundary": (),
         "body_force": "",
         "remote_stress": "",
+        "refine": "none",
+        "target_error": None,
+        "max_unknowns": None,
     }
     update_keys = ("delta", "load_scale", "boundary", "body_force", "remote_stress")
 
@@ -118,6 +123,11 @@ class FileBody(Problem):
             if tip and not MIN_TIP_SIZE * max(self._box) <= tip <= top:
                 raise InputError(f"tip_size must be 0 or in [{MIN_TIP_SIZE * max(self._box):.3g}, {top:g}] "
                                  f"({MIN_TIP_SIZE:g} x the body's size, up to mesh_size), got {tip:g}")
+        if self._kind == "mesh_file" and p["refine"] == "adaptive":
+            raise InputError("refine = \"adaptive\" re-meshes the body with gmsh: it needs geometry_file (a "
+                             "mesh_file cannot be re-meshed)")
+        p["refine"], p["target_error"], p["max_unknowns"] = check_adaptive(
+            p["refine"], p["target_error"], p["max_unknowns"], "gmsh")
         if p["dim"] not in (0, self._dim):
             raise InputError(f"dim = {p['dim']} but {self._kind} {self._path.name!r} holds a {self._dim}D body")
         self._check_groups(groups)
@@ -223,6 +233,14 @@ class FileBody(Problem):
             new.shared = self.shared
         return new
 
+    @property
+    def mesh_size(self) -> float:
+        """The largest element size: ``mesh_size``, or (0) the body's largest side."""
+        return float(self.params["mesh_size"] or max(self._box))
+
+    def extent(self) -> float:
+        return float(max(self._box))
+
     def _support_key(self) -> tuple:
         return tuple(sorted((s.group, s.support) for s in self._loads.sides if s.support != "free"))
 
@@ -232,6 +250,10 @@ class FileBody(Problem):
         if self._body is not None:
             return self._body
         data = self.shared.data
+        if data.get("body") is None and self._size_view is not None:
+            p = self.params
+            data["body"] = geo.mesh_geometry(self._path, p["mesh_size"], p["tip_size"],
+                                             [t["group"] for t in self._tables], self._size_view)
         if data.get("body") is None:
             p = self.params
             st = os.stat(self._path)
@@ -244,6 +266,7 @@ class FileBody(Problem):
     def cut(self) -> tuple[FileCut, sup.Boundary]:
         """(the doubled mesh, the uncut mesh's boundary facets), once per :class:`~dualfem.core.problem.Shared`."""
         data = self.shared.data
+        self.adapt_mesh()
         if data.get("cut") is None:
             body = self.body()
             facets = []
@@ -324,6 +347,7 @@ class FileBody(Problem):
         self.jump_operators = J
         params = {k: (v if isinstance(v, (int, float, str)) else str(v)) for k, v in p.items()
                   if k not in ("defects", "boundary", "body_force", "remote_stress")}
+        self.later_params(params, p, FileBody.defaults)
         params["defects"] = "; ".join(f"{t['group']} delta {t['delta']:g}" for t in self._tables)
         params["loads"] = self._loads.label()
         geometry = GeometryPart(self._dim, c.points, c.cells, nd)

@@ -100,21 +100,45 @@ def inspect(path: Path) -> GeometryInfo:
         return _info(gmsh, path)
 
 
-def mesh_geometry(path: Path, mesh_size: float, tip_size: float, defect_groups: list[str]) -> BodyMesh:
+def mesh_geometry(path: Path, mesh_size: float, tip_size: float, defect_groups: list[str],
+                  size_view: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> BodyMesh:
     """Mesh the file (module docstring); ``defect_groups`` name the groups whose tips/fronts ``tip_size``
-    refines."""
+    refines. ``size_view``: (points (dim, n), cells (dim + 1, nc), sizes (nc,)) a per-element size on an earlier
+    mesh of the body, gmsh's background mesh in place of the tip field (adaptive refinement,
+    :mod:`dualfem.problems.adaptive`)."""
     with _opened(path) as gmsh:
         info = _info(gmsh, path)
         dim = info.dim
         if mesh_size > 0:
             gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
-        if tip_size > 0:
+        if size_view is not None:
+            _view(gmsh, dim, size_view)
+        elif tip_size > 0:
             _tip_field(gmsh, dim, tip_size, mesh_size or max(info.box), defect_groups)
         try:
             gmsh.model.mesh.generate(dim)
         except Exception as exc:                         # noqa: BLE001
             raise InputError(f"geometry_file {path.name!r}: gmsh could not mesh it: {exc}") from None
         return _extract(gmsh, dim, f"geometry_file {path.name!r}")
+
+
+def _view(gmsh, dim: int, view: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+    """A per-element size (list data "ST" on triangles, "SS" on tetrahedra, constant on each) as gmsh's
+    background mesh (a ``PostView`` field), the sizes of points and curves not taken from the geometry."""
+    pts, cells, sizes = (np.asarray(a) for a in view)
+    xyz = np.zeros((3, *cells.shape))
+    xyz[:dim] = pts[:, cells.astype(np.int64)]                            # (3, dim + 1, nc)
+    nc, nv = cells.shape[1], cells.shape[0]
+    data = np.concatenate([xyz[0].T, xyz[1].T, xyz[2].T, np.repeat(np.asarray(sizes, float)[:, None], nv, axis=1)],
+                          axis=1)
+    tag = gmsh.view.add("dualfem_size")
+    gmsh.view.addListData(tag, "ST" if dim == 2 else "SS", nc, data.ravel().tolist())
+    fld = gmsh.model.mesh.field
+    f = fld.add("PostView")
+    fld.setNumber(f, "ViewTag", tag)
+    fld.setAsBackgroundMesh(f)
+    for key in ("Mesh.MeshSizeExtendFromBoundary", "Mesh.MeshSizeFromPoints", "Mesh.MeshSizeFromCurvature"):
+        gmsh.option.setNumber(key, 0)
 
 
 def _tip_field(gmsh, dim: int, tip: float, size: float, names: list[str]) -> None:
