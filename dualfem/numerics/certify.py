@@ -262,9 +262,9 @@ def _face_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None, m
         return nan
     ksolve = ksolve or solver_for(qp)
     if qp.blocks:                   # several laws: the face step on the stacked G (dualfem.numerics.faces)
-        from dualfem.numerics.faces import blocks_active_set_check
+        from dualfem.numerics.faces import blocks_face_check
 
-        return (*blocks_active_set_check(qp, x, mu, ksolve, margin, _Kx), float("nan"))
+        return blocks_face_check(qp, x, mu, ksolve, margin, _Kx)
     mu = np.asarray(mu, float)
     st = _exact_step(qp, x, mu, ksolve, _quad, _Kx)
     if st is None:
@@ -299,9 +299,8 @@ def _face_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None, m
         rnd = MU_ROUNDING * max(EPS, rtol) * max(kappa, 1.0)
         deg = float("nan")
         if nx > 0.0 and e_K == 0.0 and (face is None or face.D is not None):
-            D_AA = st.D[np.ix_(A, A)] if face is not None and st.D is not None else None
-            deg = degenerate_bound(qp, x, A, mu1, gap1, step_size(st.rKr, st.Bz, st.dmu, st.Ddmu), D_AA,
-                                   rnd * step_gap, nx)
+            deg = degenerate_bound(qp, x, A, mu1, gap1, step_size(st.rKr, st.Bz, st.dmu, st.Ddmu),
+                                   st.D if face is not None else None, rnd * step_gap, nx, ksolve=ksolve)
         if _fails(A, mu1_g, open_, gap1, rnd * step_mu, rnd * step_gap):
             return float("nan"), float("nan"), deg
         return float("nan"), err_mu, deg

@@ -39,7 +39,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from dualfem.core import constraints
 from dualfem.core.evaluator import EPS, ROUNDING_C, abs_product
+from dualfem.core.laws import Signorini
 
 #: the certificate's note where the set is not verified but the bound through its exact point holds
 DEGENERATE_NOTE = ("active set not verified (degenerate rows: closed and without force, or margins below the "
@@ -47,27 +49,45 @@ DEGENERATE_NOTE = ("active set not verified (degenerate rows: closed and without
 
 
 def degenerate_bound(qp, x: np.ndarray, A: np.ndarray, mu1: np.ndarray, gap1: np.ndarray, dx_K: float,
-                     D_AA: np.ndarray | None, step_rounding: float, size: float) -> float:
-    """The energy-norm bound ``(|dx|_K + sqrt(n'D_AA n + 2 max(0, nu'B x1 - floor))) / size + ROUNDING_C eps``
-    of the module docstring, relative to ``size`` (> 0: the certificate's |x|_K), or nan where x1 penetrates
-    beyond rounding (the set A is wrong) or D_AA is not formed.
+                     D: np.ndarray | None, step_rounding: float, size: float, mus: tuple | None = None,
+                     ksolve=None) -> float:
+    """The energy-norm bound ``(|dx|_K + sqrt(n'D n + 2 max(0, support(nu, G x1) - floor))) / size + ROUNDING_C eps``
+    of the module docstring, relative to ``size`` (> 0: the certificate's |x|_K), or nan where x1 violates a law's
+    primal constraint beyond rounding (the face A is wrong) or D is not formed.
 
-    ``A``: the guessed set (bool, one per row of B); ``mu1``: the face point's forces (0 off A); ``gap1``: its
-    computed gaps ``B x1``; ``dx_K``: ``|x - x1|_K``; ``D_AA``: the dense A x A block of ``D = B K^-1 B'``
-    (None: not formed); ``step_rounding``: the rounding of the step's largest gap change (added to each row's
-    own rounding ``ROUNDING_C eps (|B||x|)_j``)."""
-    if D_AA is None and A.any():
+    Every block of ``qp.constraints`` (stacked rows of ``G``): ``A`` the guessed face (bool per row), ``mu1`` the
+    face point's forces (the step's on A, the laws' held values off it: 0 for Signorini, the slip force for
+    friction), ``gap1`` its computed ``G x1``, ``dx_K`` = ``|x - x1|_K``, ``D`` the dense ``G K^-1 G'`` (None: not
+    formed), ``step_rounding`` the rounding of the step's largest gap change (added to each row's own rounding
+    ``ROUNDING_C eps (|G||x|)_j``), ``mus`` the multipliers (split by block) that fix a Coulomb block's threshold
+    (the answer's own, as everywhere in the certificate; None: those of ``mu1``). ``nu`` is ``mu1`` projected by
+    each law and ``n = mu1 - nu``; a Signorini row off A may penetrate by its rounding only, any other law must
+    have no primal violation (friction has none). ``ksolve`` (r -> K^-1 r; None: not counted): adds each gap's
+    rounding through the step, ``|G K^-1 (ROUNDING_C eps (|K||x| + |F| + |G'||mu1|))|`` (the stationarity
+    residual's rounding floor carried to the gaps, as :func:`dualfem.numerics.certify.multiplier_floor` carries it
+    to the forces: a face point's gap of size 1e-17 on a unit displacement is rounding, not a wrong face)."""
+    blocks = qp.constraints
+    if D is None and (A.any() or len(blocks) > 1):
         return float("nan")
-    gap_scale = abs_product(qp.B, np.abs(x))
+    gap_scale = abs_product(qp.G, np.abs(x))
     tol = step_rounding + ROUNDING_C * EPS * gap_scale
-    off = ~A
-    if off.any() and bool(np.any(gap1[off] < -tol[off])):
-        return float("nan")
-    if not A.any():
-        return float(dx_K) / size + ROUNDING_C * EPS
-    neg = np.maximum(-mu1[A], 0.0)
-    nu = np.maximum(mu1[A], 0.0)
-    t1 = float(neg @ (D_AA @ neg)) if neg.any() else 0.0
-    support = float(nu @ gap1[A])
-    floor = ROUNDING_C * EPS * float(nu @ gap_scale[A])
-    return float(dx_K + np.sqrt(max(t1, 0.0) + 2.0 * max(0.0, support - floor))) / size + ROUNDING_C * EPS
+    if ksolve is not None:
+        floor_r = abs_product(qp.K, np.abs(x)) + np.abs(qp.F) + abs_product(qp.G.T, np.abs(mu1))
+        tol = tol + np.abs(qp.G @ ksolve(ROUNDING_C * EPS * floor_r))
+    mus = tuple(constraints.split(blocks, mu1)) if mus is None else mus
+    nu, support, floor = np.empty_like(mu1), 0.0, 0.0
+    parts = zip(blocks, constraints.split(blocks, np.arange(mu1.size)))
+    for b, rows in parts:
+        g1, a = gap1[rows], A[rows]
+        if isinstance(b.law, Signorini):
+            if bool(np.any(g1[~a] < -tol[rows][~a])):
+                return float("nan")
+        elif b.law.primal(g1) > 0.0:
+            return float("nan")
+        nu[rows] = b.law.project(mu1[rows], b.weights, mus)
+        support += b.law.support(nu[rows], g1, b.weights, mus)
+        floor += b.law.support(np.abs(nu[rows]), tol[rows], b.weights, mus)
+    n = mu1 - nu
+    t1 = float(n @ (D @ n)) if D is not None and n.any() else 0.0
+    second = max(t1, 0.0) + 2.0 * max(0.0, support - max(floor, 0.0))
+    return float(dx_K + np.sqrt(second)) / size + ROUNDING_C * EPS
