@@ -1,39 +1,44 @@
-"""A rigorous error bound for a Signorini answer whose active set holds except on degenerate rows.
+"""A rigorous error bound for an answer whose face (active set) holds except on degenerate rows.
 
 At a weakly degenerate solution some rows are closed *and* carry no force (gap_j = 0 and mu_j = 0: e.g. the
-corner pairs of a P2 crack under a uniform pressure, whose consistent force is 0 at the triangles' corners).
-Strict complementarity fails there, so the first-order check of
-:func:`dualfem.numerics.certify.active_set_check` (forces on A above ``margin`` times the step, gaps off A
-above it) cannot verify the set, and the duality-gap bound of the answer itself is only sqrt(rounding)
-(its term ``2 mu'Bx`` is rounding). This module bounds the error through the exact point of the guessed set
-instead of claiming that point is the solution.
+corner pairs of a P2 crack under a uniform pressure, whose consistent force is 0 at the triangles' corners; with
+friction, a node that sticks with its force on the disc's edge). Strict complementarity fails there, so the
+first-order check of :func:`dualfem.numerics.certify.active_set_check` (forces on A above ``margin`` times the
+step, gaps off A above it; :func:`dualfem.numerics.faces.blocks_active_set_check` with several laws) cannot
+verify the set, and the duality-gap bound of the answer itself is only sqrt(rounding) (its support term
+``2 mu'Gx`` is rounding). This module bounds the error through the exact point of the guessed face instead of
+claiming that point is the solution.
 
-**The bound.** Let A be the guessed set and (x1, mu1) the exact step's point on it
-(:func:`dualfem.numerics.certify.refinement_step`): ``K x1 - F - B_A' mu1_A = 0``, ``B_A x1 = 0``,
-mu1 = 0 off A, and ``|x - x1|_K = |dx|_K`` (computed without forming dx: :func:`dualfem.numerics.linalg.step_size`).
+**The bound** (Signorini notation; every law in :func:`degenerate_bound`). Let A be the guessed set and
+(x1, mu1) the exact step's point on it (:func:`dualfem.numerics.certify.refinement_step`):
+``K x1 - F - B' mu1 = 0``, ``B_A x1 = 0``, mu1 = 0 off A (friction: the law's held force off the face), and
+``|x - x1|_K = |dx|_K`` (computed without forming dx: :func:`dualfem.numerics.linalg.step_size`).
 
 1. x1 is feasible: closed on A, and every row off A has ``gap1_j >= -tol_j`` (its computed gap within the
-   rounding ``tol_j`` of that gap: a degenerate row off A is closed at the exact point, so its computed gap
-   is rounding of either sign; it is counted closed, as :func:`dualfem.numerics.certify.error_bound`
-   counts a penetration within ``FEAS_RTOL``). A row below ``-tol_j`` means the set is wrong: no bound (nan).
-2. nu = max(mu1, 0) >= 0 is dual feasible, with the residual ``r1 = K x1 - F - B'nu = -B_A' n`` where
-   ``n = max(-mu1_A, 0)`` (the negative part of the step's forces: rounding on degenerate rows), so
-   ``r1'K^-1 r1 = n' D_AA n``.
+   rounding ``tol_j`` of that gap: the rounding of the gap itself, ``ROUNDING_C eps (|B||x|)_j``, of the step,
+   and of the stationarity residual carried through K^-1; a degenerate row off A is closed at the exact point,
+   so its computed gap is rounding of either sign: it is counted closed, as
+   :func:`dualfem.numerics.certify.error_bound` counts a penetration within ``FEAS_RTOL``). A row below
+   ``-tol_j`` means the set is wrong: no bound (nan).
+2. nu = the laws' projection of mu1 (``max(mu1, 0)`` for Signorini) is dual feasible, with the residual
+   ``r1 = K x1 - F - B'nu = B'n``, ``n = mu1 - nu`` (the step's forces outside the law's set: rounding on
+   degenerate rows), so ``r1'K^-1 r1 = n' D n`` (D = B K^-1 B', dense).
 3. The duality-gap bound at (x1, nu) (module docstring of :mod:`dualfem.numerics.certify`):
-   ``|x1 - x*|_K <= sqrt(n' D_AA n + 2 nu'B x1)``; ``nu'B x1`` sums nu_j gap1_j over A, where the exact
-   gaps are 0, so the computed term is taken beyond its rounding floor ``ROUNDING_C eps nu'(|B||x|)``
-   (the floor that :func:`dualfem.numerics.certify._support_floor` removes for friction blocks).
-4. By the triangle inequality, ``|x - x*|_K <= |dx|_K + sqrt(n' D_AA n + 2 max(0, nu'B x1 - floor))``,
+   ``|x1 - x*|_K <= sqrt(n' D n + 2 support(nu, B x1))``; the support term sums nu_j gap1_j over A, where the
+   exact gaps are 0, so the computed term is taken beyond its rounding floor ``support(|nu|, tol)`` (friction
+   rows: ``r_j |s1_j| + nu_j . s1_j`` beyond ``(r_j + |nu_j|) tol_j``, as
+   :func:`dualfem.numerics.certify._support_floor` removes it).
+4. By the triangle inequality, ``|x - x*|_K <= |dx|_K + sqrt(n' D n + 2 max(0, support - floor))``,
    plus ``ROUNDING_C eps |x|_K``: the rounding of |dx|_K itself (x's entries are known to eps, so the computed
    distance of a nearly exact answer is off by about eps |x|_K; measured: without it the bound fell 5e-5 of
    itself below the true error at errors ~1e-12 on a hand-made degenerate QP, tests/test_degenerate_certificate.py).
 
-Every step holds for any A and any answer (a wrong set gives a large n or a penetrating gap1, never a small
-bound), so the bound holds against a hostile answer. It is applied only where the strict check fails and
-only on the dense path (a Cholesky factor or eigendecomposition of D_AA, K-solves by a factorization): with
-CG on D_AA or AMG K-solves the face point's gaps are known to the solvers' tolerances, not to rounding.
-No multiplier error is claimed by it: at a degenerate point the exact forces are not separated from 0 by
-more than the step's rounding.
+Every step holds for any A and any answer (a wrong set gives a large n, a penetrating gap1 or a slip against
+the held force, never a small bound), so the bound holds against a hostile answer up to the rounding floors
+above. It is applied only where the strict check fails and only on the dense path (a Cholesky factor or
+eigendecomposition of D_AA, K-solves by a factorization): with CG on D_AA or AMG K-solves the face point's
+gaps are known to the solvers' tolerances, not to rounding. No multiplier error is claimed by it: at a
+degenerate point the exact forces are not separated from the law's boundary by more than the step's rounding.
 """
 from __future__ import annotations
 
