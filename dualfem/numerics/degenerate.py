@@ -46,7 +46,7 @@ import numpy as np
 
 from dualfem.core import constraints
 from dualfem.core.evaluator import EPS, ROUNDING_C, abs_product
-from dualfem.core.laws import Signorini
+from dualfem.core.laws import Friction, Signorini
 
 #: the certificate's note where the set is not verified but the bound through its exact point holds
 DEGENERATE_NOTE = ("active set not verified (degenerate rows: closed and without force, or margins below the "
@@ -66,13 +66,15 @@ def degenerate_bound(qp, x: np.ndarray, A: np.ndarray, mu1: np.ndarray, gap1: np
     formed), ``step_rounding`` the rounding of the step's largest gap change (added to each row's own rounding
     ``ROUNDING_C eps (|G||x|)_j``), ``mus`` the multipliers (split by block) that fix a Coulomb block's threshold
     (the answer's own, as everywhere in the certificate; None: those of ``mu1``). ``nu`` is ``mu1`` projected by
-    each law and ``n = mu1 - nu``; a Signorini row off A may penetrate by its rounding only, any other law must
-    have no primal violation (friction has none). ``ksolve`` (r -> K^-1 r; None: not counted): adds each gap's
-    rounding through the step, ``|G K^-1 (ROUNDING_C eps (|K||x| + |F| + |G'||mu1|))|`` (the stationarity
-    residual's rounding floor carried to the gaps, as :func:`dualfem.numerics.certify.multiplier_floor` carries it
-    to the forces: a face point's gap of size 1e-17 on a unit displacement is rounding, not a wrong face)."""
+    each law and ``n = mu1 - nu``; a Signorini row off A may penetrate by its rounding only, friction rows have
+    no primal constraint, and a QP with another law (a plugin's) gets nan. ``ksolve`` (r -> K^-1 r; None: not
+    counted): adds each gap's rounding through the step, ``|G K^-1 (ROUNDING_C eps (|K||x| + |F| + |G'||mu1|))|``
+    (the stationarity residual's rounding floor carried to the gaps, as
+    :func:`dualfem.numerics.certify.multiplier_floor` carries it to the forces: a face point's gap of size 1e-17
+    on a unit displacement is rounding, not a wrong face)."""
     blocks = qp.constraints
-    if D is None and (A.any() or len(blocks) > 1):
+    if (D is None and (A.any() or len(blocks) > 1)) or \
+            not all(isinstance(b.law, (Signorini, Friction)) for b in blocks):
         return float("nan")
     gap_scale = abs_product(qp.G, np.abs(x))
     tol = step_rounding + ROUNDING_C * EPS * gap_scale
