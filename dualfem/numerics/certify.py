@@ -298,7 +298,7 @@ def _face_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None, m
         kappa, rtol = (face.kappa, face.rtol) if face is not None else (1.0, 0.0)
         rnd = MU_ROUNDING * max(EPS, rtol) * max(kappa, 1.0)
         deg = float("nan")
-        if nx > 0.0 and e_K == 0.0 and (face is None or face.D is not None):
+        if nx > 0.0 and e_K == 0.0 and not getattr(ksolve, "amg", False) and (face is None or face.D is not None):
             deg = degenerate_bound(qp, x, A, mu1, gap1, step_size(st.rKr, st.Bz, st.dmu, st.Ddmu),
                                    st.D if face is not None else None, rnd * step_gap, nx, ksolve=ksolve)
         if _fails(A, mu1_g, open_, gap1, rnd * step_mu, rnd * step_gap):
