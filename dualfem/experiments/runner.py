@@ -487,7 +487,7 @@ def summary(qp: QP, sol: Solution) -> dict:
         cert = sol.info.get("certificate")
         if cert:
             out["certificate"] = {k: v for k, v in cert.items()
-                                  if k in ("value", "bound", "active_set", "infeasible", "multipliers",
+                                  if k in ("value", "bound", "active_set", "infeasible", "degenerate", "multipliers",
                                            "multipliers_floor", "path", "notes")}
     else:
         out.update({"energy": None, "max_jump": None, "n_contact": None, "residuals": None})

@@ -69,6 +69,7 @@ from dualfem.core import constraints
 from dualfem.core.evaluator import ROUNDING_C, abs_product, force_scale, size_energy, size_max
 from dualfem.core.laws import SIGNORINI
 from dualfem.core.qp import QP
+from dualfem.numerics.degenerate import DEGENERATE_NOTE, degenerate_bound
 from dualfem.numerics.dependent_rows import (  # noqa: F401 (parallel_rows: public here, as before)
     group_forces,
     groups_explain,
@@ -248,14 +249,22 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
     |dx|_K^2 = r'K^-1 r - 2 (Bz)'dmu + dmu'D dmu: one solve (shared with :func:`error_bound`
     when mu is already 0 off A).
     """
-    nan = (float("nan"), float("nan"))
+    return _face_check(qp, x, mu, ksolve, margin, _quad, _Kx)[:2]
+
+
+def _face_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | None, margin: float, _quad,
+                _Kx) -> tuple[float, float, float]:
+    """:func:`active_set_check`'s (error of x, error of mu), and where the set is not verified the rigorous
+    bound through its exact point of :mod:`dualfem.numerics.degenerate` (relative like the error; nan where
+    the set is verified, or where that bound does not apply)."""
+    nan = (float("nan"), float("nan"), float("nan"))
     if not _finite(x, mu):
         return nan
     ksolve = ksolve or solver_for(qp)
     if qp.blocks:                   # several laws: the face step on the stacked G (dualfem.numerics.faces)
-        from dualfem.numerics.faces import blocks_active_set_check
+        from dualfem.numerics.faces import blocks_face_check
 
-        return blocks_active_set_check(qp, x, mu, ksolve, margin, _Kx)
+        return blocks_face_check(qp, x, mu, ksolve, margin, _Kx)
     mu = np.asarray(mu, float)
     st = _exact_step(qp, x, mu, ksolve, _quad, _Kx)
     if st is None:
@@ -279,20 +288,25 @@ def active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | No
             return nan
         mu1_g = np.where(A, np.inf, mu1_g)
         err_mu = float("nan")
+    nx = size_energy(qp, x, _Kx)
     if _fails(A, mu1_g, open_, gap1, margin * step_mu, margin * step_gap):
         # not verified to first order (x's error is not |dx|); the multipliers of the set are still the
         # exact ones if the exact point keeps the KKT signs beyond the rounding of the step itself
         # (far-off multipliers with a right set: a large step, signs kept), then mu* = mu1; with CG the
-        # step is known to its tolerance times the condition CG saw, not to rounding
+        # step is known to its tolerance times the condition CG saw, not to rounding. x: the bound through
+        # the exact point (degenerate rows: closed and without force), on the dense path only
         kappa, rtol = (face.kappa, face.rtol) if face is not None else (1.0, 0.0)
         rnd = MU_ROUNDING * max(EPS, rtol) * max(kappa, 1.0)
+        deg = float("nan")
+        if nx > 0.0 and e_K == 0.0 and not getattr(ksolve, "amg", False) and (face is None or face.D is not None):
+            deg = degenerate_bound(qp, x, A, mu1, gap1, step_size(st.rKr, st.Bz, st.dmu, st.Ddmu),
+                                   st.D if face is not None else None, rnd * step_gap, nx, ksolve=ksolve)
         if _fails(A, mu1_g, open_, gap1, rnd * step_mu, rnd * step_gap):
-            return nan
-        return float("nan"), err_mu
-    nx = size_energy(qp, x, _Kx)
+            return float("nan"), float("nan"), deg
+        return float("nan"), err_mu, deg
     if nx == 0.0:
-        return float("nan"), err_mu
-    return (step_size(st.rKr, st.Bz, st.dmu, st.Ddmu) + 2.0 * e_K + extra) / nx, err_mu
+        return float("nan"), err_mu, float("nan")
+    return (step_size(st.rKr, st.Bz, st.dmu, st.Ddmu) + 2.0 * e_K + extra) / nx, err_mu, float("nan")
 
 
 @dataclass
@@ -453,6 +467,8 @@ def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | Non
     :func:`infeasible_bound` (computed only where "bound" does not apply: x infeasible beyond rounding; for a QP
     with friction blocks where it gives none, the feasible correction's bound of
     :func:`dualfem.numerics.feasible_bound.correction_bound`, which needs no Delassus matrix),
+    "degenerate": where the set is not verified, the bound through its exact point
+    (:mod:`dualfem.numerics.degenerate`; a "notes" line says so when no multiplier error is claimed),
     "value": the smallest, "multipliers": the error of mu against the exact multipliers of the verified
     active set (nan when the set is not verified; :func:`active_set_check`)}.
 
@@ -467,7 +483,7 @@ def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | Non
         Kx = qp.K @ x
         quad = _residual_solve(qp, x, constraints.project(qp.constraints, mu), ksolve, Kx)
     b = error_bound(qp, x, mu, ksolve, _quad=quad, _Kx=Kx)
-    a, m = active_set_check(qp, x, mu, ksolve, _quad=quad, _Kx=Kx)
+    a, m, d = _face_check(qp, x, mu, ksolve, 10.0, quad, Kx)
     f = infeasible_bound(qp, x, mu, ksolve, _quad=quad, _Kx=Kx) if np.isnan(b) and not ksolve.amg else float("nan")
     if np.isnan(b) and quad is not None:
         # x infeasible beyond rounding: the feasible correction's bound needs no Delassus matrix (above
@@ -477,6 +493,9 @@ def certified_error(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve: KSolver | Non
                              lambda m, s: _support_floor(qp, m, s), FEAS_RTOL, Kx,
                              ksolve if np.isnan(f) else None)
         f = float(np.nanmin([f, c])) if np.isfinite(c) or np.isfinite(f) else float("nan")
-    vals = [v for v in (b, a, f) if np.isfinite(v)]
-    return {"bound": b, "active_set": a, "infeasible": f, "value": min(vals) if vals else float("nan"),
-            "multipliers": m}
+    vals = [v for v in (b, a, f, d) if np.isfinite(v)]
+    out: dict = {"bound": b, "active_set": a, "infeasible": f, "degenerate": d,
+                 "value": min(vals) if vals else float("nan"), "multipliers": m}
+    if np.isfinite(d) and np.isnan(m):
+        out["notes"] = DEGENERATE_NOTE
+    return out

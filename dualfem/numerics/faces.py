@@ -43,6 +43,7 @@ class FaceStep:
     Ddmu: np.ndarray
     step_mu: float
     step_gap: float
+    kappa: float = 1.0      #: a cheap estimate of cond(D_AA), from its Cholesky factor's diagonal
 
     def x1(self, qp: QP, x: np.ndarray, ksolve) -> np.ndarray:
         """The face point ``x - K^-1 r + K^-1 G' dmu`` (one more K-solve)."""
@@ -101,15 +102,19 @@ def face_step(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, D: np.ndarray, c: f
     z = ksolve(r)
     rKr, Gz = float(r @ z), G @ z
     dmu = np.zeros_like(mu)
+    kappa = 1.0
     if A.any():
         try:
-            dmu[A] = sla.cho_solve(sla.cho_factor(D[np.ix_(A, A)]), -(gap[A] - Gz[A]))
+            L = sla.cho_factor(D[np.ix_(A, A)])
+            dmu[A] = sla.cho_solve(L, -(gap[A] - Gz[A]))
         except (np.linalg.LinAlgError, ValueError):
             return None
+        dL = np.abs(np.diag(L[0]))
+        kappa = float((dL.max() / max(dL.min(), 1e-300)) ** 2)
     Ddmu = D @ dmu
     return FaceStep(A, mu_A + dmu, gap - Gz + Ddmu, z, rKr, Gz, dmu, Ddmu,
                     max(np.abs(dmu).max(initial=0.0), np.abs(mu - mu_A).max(initial=0.0)),
-                    float(np.abs(Ddmu - Gz).max(initial=0.0)))
+                    float(np.abs(Ddmu - Gz).max(initial=0.0)), kappa)
 
 
 def blocks_active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, margin: float = 10.0,
@@ -117,18 +122,37 @@ def blocks_active_set_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, margi
     """(error of x relative to :func:`size_energy`, error of mu relative to :func:`force_scale`) through the
     verified face of every block's law; (nan, nan) when the face is not verified or the step cannot be taken
     (AMG K-solves, more than :data:`MAX_ROWS` rows, a singular D on the face)."""
-    nan = (float("nan"), float("nan"))
+    return blocks_face_check(qp, x, mu, ksolve, margin, Kx)[:2]
+
+
+def blocks_face_check(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, margin: float = 10.0,
+                      Kx: np.ndarray | None = None) -> tuple[float, float, float]:
+    """:func:`blocks_active_set_check`'s pair, and where the face is not verified the rigorous bound through
+    its exact point (:func:`dualfem.numerics.degenerate.degenerate_bound`: degenerate rows, e.g. closed without
+    force or stick on the disc's edge; the Coulomb thresholds the answer's own); nan where the face is verified."""
+    from dualfem.numerics.certify import MU_ROUNDING
+    from dualfem.numerics.degenerate import degenerate_bound
+
+    nan = (float("nan"), float("nan"), float("nan"))
     if getattr(ksolve, "amg", False) or qp.m_total > MAX_ROWS:
         return nan
     D, c = delassus(qp, ksolve)
     st = face_step(qp, x, mu, ksolve, D, c, Kx)
-    if st is None or not st.holds(qp, margin):
+    if st is None:
         return nan
     nx = size_energy(qp, x, Kx)
+    dx_K = step_size(st.rKr, st.Gz, st.dmu, st.Ddmu)
+    if not st.holds(qp, margin):
+        if nx == 0.0:
+            return nan
+        mus = tuple(constraints.split(qp.constraints, np.asarray(mu, float)))
+        rnd = MU_ROUNDING * EPS * max(st.kappa, 1.0) * st.step_gap
+        deg = degenerate_bound(qp, x, st.A, st.mu1, st.gap1, dx_K, D, rnd, nx, mus, ksolve)
+        return float("nan"), float("nan"), deg
     err_mu = float(np.abs(np.asarray(mu, float) - st.mu1).max(initial=0.0)) / force_scale(qp, st.mu1)
     if nx == 0.0:
-        return float("nan"), err_mu
-    return step_size(st.rKr, st.Gz, st.dmu, st.Ddmu) / nx, err_mu
+        return float("nan"), err_mu, float("nan")
+    return dx_K / nx, err_mu, float("nan")
 
 
 def blocks_infeasible_bound(qp: QP, x: np.ndarray, mu: np.ndarray, ksolve, Kx=None) -> float:

@@ -110,7 +110,7 @@ def _certificate(qp: QP, sol: Solution, tol: float, reduction: Any) -> dict:
         cert["path"] = ks.path
         notes = sorted({b.law.certificate_note() for b in qp.blocks} - {""})
         if notes:
-            cert["notes"] = "; ".join(notes)
+            cert["notes"] = "; ".join([n for n in (cert.get("notes", ""),) if n] + notes)
         cm = cert.get("multipliers", float("nan"))
         if np.isfinite(cm) and cm > tol:      # only then: the rounding floor of mu* costs one more solve
             cert["multipliers_floor"] = multiplier_floor(qp, sol.x, sol.multipliers, ks)  # type: ignore[arg-type]
