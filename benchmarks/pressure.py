@@ -1,0 +1,231 @@
+"""The contact pressure of inclined closed cracks per mesh level, and what it costs the Coulomb slip (issues 36, 38).
+
+    python benchmarks/pressure.py --out benchmarks/results/pressure --report reports
+
+writes ``DIR/pressure.json`` (every run, dualfem.experiments.pressure.study) and ``reports/pressure.md`` with
+``reports/pressure/convergence.png`` and ``reports/pressure/profiles.png`` (``--render-only``: re-render from the
+JSON; ``--quick``: one angle and the coarsest level per dimension, for a smoke run). Cases, closed forms and
+error measures: the docstring of :mod:`dualfem.experiments.pressure`. Every answer is certified by the runner.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+
+def measure(quick: bool) -> dict:
+    from dualfem.experiments import pressure as P
+
+    t0 = time.perf_counter()
+    kw = dict(angles_2d=(30.0,), levels_2d=P.LEVELS_2D[:1], angles_3d=(30.0,), levels_3d=P.LEVELS_3D[:1]) \
+        if quick else {}
+    data = P.study(progress=lambda m: print(m, file=sys.stderr, flush=True), **kw)
+    data.update(quick=quick, machine=machine(), seconds=time.perf_counter() - t0)
+    return data
+
+
+def machine() -> dict:
+    import os
+
+    return {"platform": platform.platform(), "cpus": os.cpu_count(), "python": platform.python_version(),
+            "threads": {k: os.environ.get(k, "default") for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS")},
+            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+
+
+def _pct(v) -> str:
+    return "-" if v is None or not np.isfinite(v) else f"{100 * v:.2f} %"
+
+
+def _find(rows, r, law, value) -> dict | None:
+    keys = ("dim", "angle", "mesh_size", "tip_size")
+    return next((q for q in rows if all(q[k] == r[k] for k in keys) and q["law"] == law
+                 and abs(q["value"] - value) < 1e-12), None)
+
+
+def pressure_table(data: dict) -> list[str]:
+    """The frictionless pressure per dimension, angle and level, with the Coulomb rows' pressure errors."""
+    mus = data["coefficients"]
+    head = " | ".join(f"L2 Coulomb {m:g}" for m in mus)
+    lines = [f"| dim | angle | mesh_size / tip_size | unknowns | defect nodes (inner) | L2 | max | mean / sigma_n | "
+             f"max outside | lost contact | {head} | status |", "|---" * (10 + len(mus)) + "|"]
+    for r in (q for q in data["rows"] if q["law"] == "none"):
+        coul = " | ".join(_pct((_find(data["rows"], r, "coulomb", m) or {}).get("pressure_l2")) for m in mus)
+        lines.append(f"| {r['dim']}D | {r['angle']:g} | {r['mesh_size']:g} / {r['tip_size']:g} | {r['n']} | "
+                     f"{r['m']} ({r.get('inner', '-')}) | {_pct(r.get('pressure_l2'))} | "
+                     f"{_pct(r.get('pressure_max'))} | "
+                     f"{r.get('pressure_mean', np.nan):.4f} | "
+                     f"{_pct(r.get('pressure_outer_max'))} | {r.get('lost_contact', '-')} | {coul} | {r['status']} |")
+    return lines
+
+
+def slip_table(data: dict) -> list[str]:
+    """Coulomb's slip error against Tresca's with the exact pressure's threshold, per case."""
+    lines = ["| dim | angle | mesh_size / tip_size | unknowns | mu_f | slip L2 Coulomb | slip L2 Tresca g = mu_f "
+             "sigma_n | difference (points) | slip L2 frictionless | status C / T |", "|---" * 10 + "|"]
+    for r in (q for q in data["rows"] if q["law"] == "coulomb"):
+        t = _find(data["rows"], r, "tresca", r["value"] * data["sigma_n"]) or {}
+        f = _find(data["rows"], r, "none", 0.0) or {}
+        diff = 100 * (r.get("slip_l2", np.nan) - t.get("slip_l2", np.nan))
+        lines.append(f"| {r['dim']}D | {r['angle']:g} | {r['mesh_size']:g} / {r['tip_size']:g} | {r['n']} | "
+                     f"{r['value']:g} | {_pct(r.get('slip_l2'))} | {_pct(t.get('slip_l2'))} | {diff:+.3f} | "
+                     f"{_pct(f.get('slip_l2'))} | {r['status']} / {t.get('status', '-')} |")
+    return lines
+
+
+def scaling_lines(data: dict) -> list[str]:
+    """The pressure error per unit effective shear (TAU - tau_c) for each law on each mesh: constant means the
+    error is linear in the slip."""
+    out = []
+    for dim in (2, 3):
+        ratios: dict = {}
+        for r in data["rows"]:
+            if r["dim"] != dim or "pressure_l2" not in r:
+                continue
+            tau_c = r["value"] if r["law"] == "tresca" else r["value"] * data["sigma_n"] if r["law"] == "coulomb" \
+                else 0.0
+            eff = r["tau"] - tau_c
+            f = _find(data["rows"], r, "none", 0.0)
+            if f and eff > 0 and "pressure_l2" in f:
+                ratios.setdefault(r["law"], []).append((r["pressure_l2"] / eff) / (f["pressure_l2"] / f["tau"]))
+        if ratios:
+            parts = [f"{law} {min(v):.3f}-{max(v):.3f}" for law, v in ratios.items() if law != "none"]
+            out.append(f"* {dim}D: (pressure L2 / effective shear) / (frictionless pressure L2 / tau) on the same "
+                       f"mesh: " + "; ".join(parts))
+    return out
+
+
+def check_lines(data: dict) -> list[str]:
+    out = ["* tau = 0 (uniform compression of the closed inclined crack, coarsest level): pressure L2 error "
+           + ", ".join(f"{u['dim']}D {u['angle']:g} deg {u.get('pressure_l2', float('nan')):.1e} ({u['status']})"
+                       for u in data["uniform"])]
+    if data["checks"]:
+        out.append(f"* {data['check']} on the coarsest level against {data['solver']}: largest pressure difference "
+                   + ", ".join(f"{c['dim']}D {c['angle']:g} deg {c['law']} {c.get('pressure_difference', np.nan):.1e} "
+                               f"({c['status']})" for c in data["checks"]))
+    return out
+
+
+def render(data: dict, report: Path) -> Path:
+    """reports/pressure.md and its two figures from the measured data."""
+    figdir = report / "pressure"
+    figdir.mkdir(parents=True, exist_ok=True)
+    m = data["machine"]
+    lines = ["# The contact pressure of inclined closed cracks, and what it costs the Coulomb slip", "",
+             "Generated by `python benchmarks/pressure.py --out benchmarks/results/pressure --report reports` "
+             f"(issue 36 item 4, issue 38 item 5). Machine: {m['platform']}, {m['cpus']} cores shared with other "
+             f"jobs, threads {m['threads']}, {m['date']}; one run per case, {data['seconds'] / 60:.0f} min in all. "
+             f"Solver {data['solver']} (every answer certified), {data['check']} as a check.", "",
+             f"Cases (dualfem.experiments.pressure): E = {data['E']:g}, nu = {data['nu']:g}, "
+             f"delta = {data['delta']:g}; "
+             f"the remote stress puts the normal compression sigma_n = {data['sigma_n']:g} and the shear tau = "
+             f"{data['tau']:g} on the crack plane at every angle, so the closed forms do not depend on the angle: "
+             "the contact pressure is sigma_n all over the crack; the slip is the plane-strain (2D, a = "
+             f"{data['a_2d']:g} in the unit plate) or Segedin (3D penny of radius 1 in a cube of side 10, its normal "
+             "tilted from z towards x) closed form with the effective shear tau - tau_c. Pressure p_j = mu_j / w_j "
+             "(normal multiplier / nodal weight); errors over |x| <= 0.8 a (r <= 0.8), relative, weighted by the "
+             "nodal weights; \"max outside\": the largest error on the nodes nearer the tips / front; \"lost "
+             "contact\": nodes with p <= 0 (all nodes).", "",
+             "## The pressure per mesh level (frictionless; Coulomb columns: the same mesh with friction)", "",
+             *pressure_table(data), "", "![pressure error against unknowns](pressure/convergence.png)", "",
+             "![pressure along the crack, finest level](pressure/profiles.png)", "",
+             "## What the pressure's error costs the Coulomb slip", "",
+             "Coulomb (threshold mu_f p_j from the computed pressure) against Tresca with g = mu_f sigma_n (the exact "
+             "pressure's threshold) on the same mesh: the difference is what the pressure's error costs.", "",
+             *slip_table(data), "", "## Diagnosis", "", *check_lines(data), *scaling_lines(data), "", NOTES]
+    _figures(data, figdir)
+    out = report / "pressure.md"
+    out.write_text("\n".join(lines) + "\n")
+    return out
+
+
+NOTES = """Reading it:
+* Under uniform compression alone (tau = 0) the closed inclined crack's pressure is sigma_n to rounding in 2D and
+  3D: the nodal weights (trapezoid / a third of the triangles' areas, i.e. the integrals of the P1 hat functions,
+  which is also what a dual-basis (Wohlmuth) multiplier gives on these node-matching interfaces) and the nodal
+  normals (exact on a straight / flat crack) are not the source of the error.
+* With shear the pressure error is proportional to the effective shear tau - tau_c (the ratios above): it is the
+  normal force that the tangential slip induces through the discrete body. In the continuum a straight or flat
+  crack's shear slip puts no normal traction on its plane; on an unstructured mesh, not symmetric across the crack,
+  the normal-tangential block of the Delassus operator B K^-1 T' does not vanish, and the slip loads the nodes
+  normally by a few percent of the shear, node to node (an oscillation, not a bias: its mean is ~sigma_n). A
+  second solver gives the same pressure to rounding: it is the discretization, not a solver.
+* It falls with h (tables, figure), and Coulomb's slip error stays within a small fraction of a point of Tresca's
+  with the exact threshold: the slip integrates the threshold over the crack, and the node-to-node error averages
+  out. By the issue's rule (fix the discretization if the oscillation spoils the slip or the pressure does not
+  converge) no change of the contact weighting is made."""
+
+
+def _figures(data: dict, figdir: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from dualfem.post.style import PALETTE
+
+    free = [r for r in data["rows"] if r["law"] == "none" and "pressure_l2" in r]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    for ax, dim in zip(axes, (2, 3)):
+        for i, angle in enumerate(sorted({r["angle"] for r in free if r["dim"] == dim})):
+            sel = sorted((r for r in free if r["dim"] == dim and r["angle"] == angle), key=lambda r: r["n"])
+            n = [r["n"] for r in sel]
+            ax.loglog(n, [r["pressure_l2"] for r in sel], "-o", color=PALETTE[i], label=f"{angle:g} deg, L2")
+            ax.loglog(n, [r["pressure_max"] for r in sel], ":s", color=PALETTE[i], label=f"{angle:g} deg, max")
+        ax.set_xlabel("unknowns")
+        ax.set_ylabel("pressure error / sigma_n (inner part)")
+        ax.set_title(f"{dim}D, frictionless, tau / sigma_n = {data['tau'] / data['sigma_n']:g}")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(figdir / "convergence.png", dpi=120)
+    plt.close(fig)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharey=True)
+    markers = "os^Dv"
+    for ax, dim in zip(axes, (2, 3)):
+        rows = [r for r in free if r["dim"] == dim and "rho" in r]
+        if not rows:
+            continue
+        finest = min(r["mesh_size"] for r in rows)
+        for i, r in enumerate(sorted((r for r in rows if r["mesh_size"] == finest), key=lambda r: r["angle"])):
+            ax.plot(r["rho"], r["pressure"], markers[i % 5], ms=3, color=PALETTE[i], label=f"{r['angle']:g} deg")
+        ax.axhline(data["sigma_n"], color=PALETTE[4], lw=1, label="sigma_n (closed form)")
+        ax.axvline(0.8, color=PALETTE[4], ls=":", lw=1)
+        ax.set_xlabel("|x| / a" if dim == 2 else "r / a")
+        ax.set_title(f"{dim}D, finest level, frictionless")
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel("nodal pressure mu_j / w_j")
+    fig.tight_layout()
+    fig.savefig(figdir / "profiles.png", dpi=120)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="benchmarks/results/pressure")
+    ap.add_argument("--report", default="reports")
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--render-only", action="store_true")
+    a = ap.parse_args(argv)
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    js = out / "pressure.json"
+    if a.render_only:
+        data = json.loads(js.read_text())
+    else:
+        data = measure(a.quick)
+        js.write_text(json.dumps(data))
+    print(render(data, Path(a.report)))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
