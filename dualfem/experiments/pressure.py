@@ -38,7 +38,7 @@ SIGMA_N, TAU = 1.0, 0.5
 A_2D = 0.05
 #: the report's defaults: angles (degrees), mesh levels (mesh_size, tip_size), Coulomb coefficients
 ANGLES_2D = (20.0, 30.0, 60.0)
-LEVELS_2D = ((0.02, 0.002), (0.01, 0.001), (0.005, 0.0005), (0.0025, 0.00025))
+LEVELS_2D = ((0.02, 0.002), (0.01, 0.001), (0.005, 0.0005))
 ANGLES_3D = (30.0, 45.0, 60.0)
 LEVELS_3D = ((2.0, 0.25), (1.0, 0.1), (0.7, 0.07), (0.5, 0.05))
 COEFFICIENTS = (0.2, 0.3)
