@@ -81,6 +81,7 @@ def test_mirror_symmetric_mesh_leaves_the_pressure_exact_under_shear(dim):
     row = M.measure(case)
     assert row["status"] == "solved"
     assert row["pressure_all_max"] < 1e-11
+    assert row["coupling"] < 1e-12 < 1e-3 < row["coupling_gmsh"]      # B K^-1 T' vanishes on the mirror mesh only
     assert 0.01 < row["slip_l2"] < (0.1 if dim == 2 else 0.5)          # it slips, near the closed form
     pts, cells = M.mirror(np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]), np.array([[0], [1], [2]]), 1.0)
     assert pts.shape == (2, 5) and cells.tolist() == [[0, 4], [1, 3], [2, 2]]      # the node on the plane shared

@@ -129,7 +129,7 @@ def relative_l2(w: np.ndarray, value: np.ndarray, exact: np.ndarray) -> float:
 
 def pressure(qp, sol) -> np.ndarray:
     """The nodal contact pressure p_j = mu_j / w_j of the Signorini block (block 0), a stress."""
-    return np.asarray(sol.multipliers[:qp.m], dtype=float) / qp.weights
+    return qp.pressure(np.asarray(sol.multipliers[:qp.m], dtype=float))
 
 
 def slip_along(qp, sol, case: Case) -> np.ndarray:

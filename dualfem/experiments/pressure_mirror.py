@@ -20,10 +20,12 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
 
 from dualfem.core.scene import load_scene
 from dualfem.experiments import pressure as P
 from dualfem.experiments.runner import run
+from dualfem.problems._friction import tangential_operator
 from dualfem.problems.file_body.write import write_msh
 
 _BOX_3D, _RADIUS = 10.0, 1.0
@@ -134,6 +136,18 @@ def build(case: P.Case, folder: Path):
     return load_scene(str(scene)).build()
 
 
+def coupling(qp) -> float:
+    """The normal-tangential coupling of the discrete interface: max |B K^-1 T'| / max |T K^-1 T'| (B the normal
+    jumps, T the tangential jumps of every node pair, K the QP's stiffness): the normal opening that a unit
+    tangential force pair induces, relative to the slip it causes. Zero on a mesh mirror-symmetric across a
+    straight / flat crack; one sparse factorization of K and one solve per tangential row."""
+    from scipy.sparse.linalg import splu
+
+    T = tangential_operator(qp.interface, qp.n, np.arange(qp.m))
+    Z = splu(sp.csc_matrix(qp.K)).solve(T.T.toarray())
+    return float(np.abs(qp.B @ Z).max() / np.abs(T @ Z).max())
+
+
 def measure(case: P.Case, solver: str = "pdas") -> dict:
     """The frictionless ``case`` on the mirror-symmetric mesh: the pressure's errors (inner part and all nodes)
     and the slip's, as :func:`dualfem.experiments.pressure.measure` reports them."""
@@ -141,7 +155,8 @@ def measure(case: P.Case, solver: str = "pdas") -> dict:
         qp = build(case, Path(tmp))
     sol = run(solver, qp)
     out = {"dim": case.dim, "angle": case.angle, "mesh_size": case.mesh_size, "tip_size": case.tip_size,
-           "tau": case.tau, "n": qp.n, "m": qp.m, "status": str(sol.status)}
+           "tau": case.tau, "n": qp.n, "m": qp.m, "status": str(sol.status), "coupling": coupling(qp),
+           "coupling_gmsh": coupling(P.build(case))}
     if sol.x is None:
         return out
     centre = 0.5 if case.dim == 2 else _BOX_3D / 2
