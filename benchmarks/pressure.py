@@ -2,11 +2,12 @@
 
     python benchmarks/pressure.py --out benchmarks/results/pressure --report reports
 
-writes ``DIR/pressure.json`` (every run, dualfem.experiments.pressure.study) and ``reports/pressure.md`` with
-``reports/pressure/convergence.png`` and ``reports/pressure/profiles.png`` (``--render-only``: re-render from the
-JSON; ``--mirror-only``: rerun the mirror-symmetric meshes' cases into the stored JSON; ``--quick``: one angle and
-the coarsest level per dimension, for a smoke run). Cases, closed forms and
-error measures: the docstring of :mod:`dualfem.experiments.pressure`. Every answer is certified by the runner.
+writes ``DIR/pressure.json`` (every run: dualfem.experiments.pressure.study, then the mirror-symmetric meshes'
+and the uniaxial cases) and ``reports/pressure.md`` with ``reports/pressure/convergence.png`` and
+``reports/pressure/profiles.png`` (``--render-only``: re-render from the JSON; ``--extras-only``: rerun the
+mirror-symmetric meshes' and the uniaxial cases into the stored JSON; ``--quick``: one angle and the coarsest level
+per dimension, for a smoke run). Cases, closed forms and error measures: the docstring of
+:mod:`dualfem.experiments.pressure`. Every answer is certified by the runner.
 """
 from __future__ import annotations
 
@@ -36,18 +37,23 @@ def measure(quick: bool) -> dict:
         if quick else {}
     data = P.study(progress=_say, **kw)
     data.update(quick=quick, machine=machine(), seconds=time.perf_counter() - t0)
-    return mirror(data)
+    return extras(data)
 
 
-def mirror(data: dict) -> dict:
-    """``data`` with ``mirror``: the frictionless cases on meshes mirror-symmetric across the crack
-    (dualfem.experiments.pressure_mirror; --quick: the coarsest level per dimension)."""
+def extras(data: dict) -> dict:
+    """``data`` with ``mirror`` (the frictionless cases on meshes mirror-symmetric across the crack,
+    dualfem.experiments.pressure_mirror) and ``uniaxial`` (tau / sigma_n = tan(angle),
+    dualfem.experiments.pressure.uniaxial); --quick: the coarsest level per dimension."""
+    from dualfem.experiments import pressure as P
     from dualfem.experiments import pressure_mirror as M
 
-    cases = M.CASES if not data.get("quick") else tuple(c for c in M.CASES if c.mesh_size in (0.02, 2.0))
+    quick = bool(data.get("quick"))
+    cases = M.CASES if not quick else tuple(c for c in M.CASES if c.mesh_size in (0.02, 2.0))
     t0 = time.perf_counter()
     data["mirror"] = M.study(cases, progress=_say)
-    data["mirror_seconds"] = time.perf_counter() - t0
+    kw = dict(levels_2d=P.LEVELS_2D[:1], levels_3d=P.LEVELS_3D[:1]) if quick else {}
+    data["uniaxial"] = P.uniaxial(progress=_say, **kw)
+    data["extras_seconds"] = time.perf_counter() - t0
     return data
 
 
@@ -121,6 +127,25 @@ def scaling_lines(data: dict) -> list[str]:
     return out
 
 
+def uniaxial_table(data: dict) -> list[str]:
+    """The pressure and the Coulomb slip under tau / sigma_n = tan(angle)."""
+    rows = data.get("uniaxial") or []
+    lines = ["| dim | angle | tau / sigma_n | mesh_size / tip_size | unknowns | pressure L2 | max | max outside | "
+             "lost contact (nodes) | mu_f | slip L2 Coulomb | slip L2 Tresca g = mu_f sigma_n | difference (points) | "
+             "status |", "|---" * 14 + "|"]
+    for r in (q for q in rows if q["law"] == "none"):
+        for c in (q for q in rows if q["law"] == "coulomb" and _find([q], r, "coulomb", q["value"])):
+            t = _find(rows, r, "tresca", c["value"] * data["sigma_n"]) or {}
+            diff = 100 * (c.get("slip_l2", np.nan) - t.get("slip_l2", np.nan))
+            lines.append(f"| {r['dim']}D | {r['angle']:g} | {r['tau'] / data['sigma_n']:.3f} | {r['mesh_size']:g} / "
+                         f"{r['tip_size']:g} | {r['n']} | {_pct(r.get('pressure_l2'))} | "
+                         f"{_pct(r.get('pressure_max'))} | {_pct(r.get('pressure_outer_max'))} | "
+                         f"{r.get('lost_contact', '-')} (C {c.get('lost_contact', '-')}) | {c['value']:g} | "
+                         f"{_pct(c.get('slip_l2'))} | {_pct(t.get('slip_l2'))} | {diff:+.3f} | "
+                         f"{r['status']} / {c['status']} / {t.get('status', '-')} |")
+    return lines if len(lines) > 2 else []
+
+
 def mirror_table(data: dict) -> list[str]:
     """The frictionless pressure on meshes mirror-symmetric across the crack against the unstructured meshes."""
     if not data.get("mirror"):
@@ -178,7 +203,11 @@ def render(data: dict, report: Path) -> Path:
              *slip_table(data), "", "## Diagnosis", "", *check_lines(data), *scaling_lines(data), "",
              "The same frictionless cracks (shear included) on meshes mirror-symmetric across the crack plane "
              "(dualfem.experiments.pressure_mirror: one half meshed by gmsh with the same sizes, mirrored, turned "
-             "by the crack's angle, read back as a mesh file):", "", *mirror_table(data), "", NOTES]
+             "by the crack's angle, read back as a mesh file):", "", *mirror_table(data), "",
+             "## A steeper shear: tau / sigma_n = tan(angle) (a uniaxial compression at that angle to the crack's "
+             "normal)", "", "The error grows with the shear's ratio to the pressure; where it exceeds sigma_n near "
+             "the tips / front, nodes lose contact (lost contact: frictionless, C: with Coulomb).", "",
+             *uniaxial_table(data), "", NOTES]
     _figures(data, figdir)
     out = report / "pressure.md"
     out.write_text("\n".join(lines) + "\n")
@@ -257,16 +286,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--report", default="reports")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--render-only", action="store_true")
-    ap.add_argument("--mirror-only", action="store_true", help="rerun only the mirror-symmetric meshes' cases and "
-                    "add them to the stored JSON")
+    ap.add_argument("--extras-only", action="store_true", help="rerun only the mirror-symmetric meshes' and the "
+                    "uniaxial cases into the stored JSON")
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     js = out / "pressure.json"
     if a.render_only:
         data = json.loads(js.read_text())
-    elif a.mirror_only:
-        data = mirror(json.loads(js.read_text()))
+    elif a.extras_only:
+        data = extras(json.loads(js.read_text()))
         js.write_text(json.dumps(data))
     else:
         data = measure(a.quick)

@@ -105,6 +105,8 @@ def test_benchmark_renders_the_report(tmp_path: Path):
     data = P.study(angles_2d=(30.0,), levels_2d=P.LEVELS_2D[:1], angles_3d=(), levels_3d=(), coefficients=(),
                    check=None)
     data.update(quick=True, seconds=1.0, machine={"platform": "test", "cpus": 2, "threads": {}, "date": "now"})
+    data["uniaxial"] = P.uniaxial(levels_2d=P.LEVELS_2D[:1], levels_3d=())
+    assert {round(r["tau"], 12) for r in data["uniaxial"]} == {round(np.sqrt(3.0) * P.SIGMA_N, 12)}
     out = tmp_path / "res"
     out.mkdir()
     (out / "pressure.json").write_text(json.dumps(data))
@@ -114,5 +116,6 @@ def test_benchmark_renders_the_report(tmp_path: Path):
     assert bench.main(["--render-only", "--out", str(out), "--report", str(tmp_path)]) == 0
     text = (tmp_path / "pressure.md").read_text()
     assert "| 2D | 30 | 0.02 / 0.002 |" in text and "slip L2 Coulomb" in text
+    assert "| 2D | 60 | 1.732 | 0.02 / 0.002 |" in text                          # the uniaxial table
     assert (tmp_path / "pressure" / "convergence.png").stat().st_size > 0
     assert (tmp_path / "pressure" / "profiles.png").stat().st_size > 0

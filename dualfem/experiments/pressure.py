@@ -166,12 +166,37 @@ def measure(case: Case, solver: str = "pdas") -> dict:
     return out
 
 
-def _cases(dim: int, angle: float, level, coefficients) -> list[Case]:
+def _cases(dim: int, angle: float, level, coefficients, tau: float = TAU) -> list[Case]:
     """Frictionless, then per mu_f: Coulomb mu_f and Tresca with the exact pressure's threshold mu_f SIGMA_N."""
-    out = [Case(dim, angle, *level)]
+    out = [Case(dim, angle, *level, tau=tau)]
     for mu in coefficients:
-        out += [Case(dim, angle, *level, "coulomb", mu), Case(dim, angle, *level, "tresca", mu * SIGMA_N)]
+        out += [Case(dim, angle, *level, "coulomb", mu, tau), Case(dim, angle, *level, "tresca", mu * SIGMA_N, tau)]
     return out
+
+
+#: the uniaxial cases: a remote uniaxial compression across the unturned crack, turned with it by ``angle``
+#: puts tau / sigma_n = tan(angle) on the crack plane (here at the same sigma_n), the steepest ratio at 60 deg
+UNIAXIAL_ANGLES, UNIAXIAL_COEFFICIENTS = (60.0,), (0.3,)
+
+
+def uniaxial(angles=UNIAXIAL_ANGLES, levels_2d=LEVELS_2D, levels_3d=LEVELS_3D[:3],
+             coefficients=UNIAXIAL_COEFFICIENTS, solver: str = "pdas", progress=None) -> list[dict]:
+    """The cases of :func:`study` with tau = tan(angle) SIGMA_N (the ratio of a uniaxial compression at ``angle``
+    to the crack's normal): rows as :func:`study`'s, per-node pressure and rho kept for frictionless rows only."""
+    rows = []
+    for dim, levels in ((2, levels_2d), (3, levels_3d)):
+        for angle in angles:
+            for level in levels:
+                for case in _cases(dim, angle, level, coefficients, float(np.tan(np.radians(angle))) * SIGMA_N):
+                    row = measure(case, solver)
+                    if case.law != "none":
+                        row.pop("rho", None)
+                        row.pop("pressure", None)
+                    rows.append(row)
+                    if progress:
+                        progress(f"uniaxial {dim}D {angle:g} {level} {case.law}: {row['status']} lost "
+                                 f"{row.get('lost_contact')}")
+    return rows
 
 
 def study(angles_2d=ANGLES_2D, levels_2d=LEVELS_2D, angles_3d=ANGLES_3D, levels_3d=LEVELS_3D,
