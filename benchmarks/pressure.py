@@ -256,7 +256,8 @@ def _figures(data: dict, figdir: Path) -> None:
         ax.set_xlabel("unknowns")
         ax.set_ylabel("pressure error / sigma_n (inner part)")
         ax.set_title(f"{dim}D, frictionless, tau / sigma_n = {data['tau'] / data['sigma_n']:g}")
-        ax.legend(fontsize=7)
+        if ax.lines:
+            ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(figdir / "convergence.png", dpi=120)
     plt.close(fig)
