@@ -40,7 +40,7 @@ A_2D = 0.05
 ANGLES_2D = (20.0, 30.0, 60.0)
 LEVELS_2D = ((0.02, 0.002), (0.01, 0.001), (0.005, 0.0005))
 ANGLES_3D = (30.0, 45.0, 60.0)
-LEVELS_3D = ((2.0, 0.25), (1.0, 0.1), (0.7, 0.07), (0.5, 0.05))
+LEVELS_3D = ((2.0, 0.25), (1.0, 0.1), (0.7, 0.07))
 COEFFICIENTS = (0.2, 0.3)
 
 
@@ -179,7 +179,7 @@ def _cases(dim: int, angle: float, level, coefficients, tau: float = TAU) -> lis
 UNIAXIAL_ANGLES, UNIAXIAL_COEFFICIENTS = (60.0,), (0.3,)
 
 
-def uniaxial(angles=UNIAXIAL_ANGLES, levels_2d=LEVELS_2D, levels_3d=LEVELS_3D[:3],
+def uniaxial(angles=UNIAXIAL_ANGLES, levels_2d=LEVELS_2D, levels_3d=LEVELS_3D,
              coefficients=UNIAXIAL_COEFFICIENTS, solver: str = "pdas", progress=None) -> list[dict]:
     """The cases of :func:`study` with tau = tan(angle) SIGMA_N (the ratio of a uniaxial compression at ``angle``
     to the crack's normal): rows as :func:`study`'s, per-node pressure and rho kept for frictionless rows only."""
