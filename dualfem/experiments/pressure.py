@@ -47,7 +47,8 @@ COEFFICIENTS = (0.2, 0.3)
 @dataclass(frozen=True)
 class Case:
     """One crack: ``dim`` 2 or 3, ``angle`` (degrees), the mesh level (``mesh_size``, ``tip_size``), the shear
-    ``tau`` on the crack plane, the friction ``law`` ("none", "tresca", "coulomb") and its ``value`` (g or mu_f)."""
+    ``tau`` on the crack plane, the friction ``law`` ("none", "tresca", "coulomb") and its ``value`` (g or mu_f);
+    ``size_growth``: gmsh's size slope away from the tips (2D only; 0.3 the scenes' default)."""
 
     dim: int
     angle: float
@@ -56,6 +57,7 @@ class Case:
     law: str = "none"
     value: float = 0.0
     tau: float = TAU
+    size_growth: float = 0.3
 
     @property
     def tau_c(self) -> float:
@@ -95,7 +97,7 @@ def build(case: Case):
             "remote_stress": remote_stress(case.dim, case.angle, case.tau).tolist(), **_friction_keys(case)}
     if case.dim == 2:
         d = A_2D * R[:, 0]
-        return load_scene("f2", {"mesh": "gmsh", **keys,
+        return load_scene("f2", {"mesh": "gmsh", **keys, "size_growth": case.size_growth,
                                  "defects": [{"points": [(0.5 - d).tolist(), (0.5 + d).tolist()]}]}).build()
     return load_scene("penny", {**keys, "defects": [{"shape": "disk", "center": [5.0, 5.0, 5.0],
                                                      "normal": R[:, 2].tolist(), "radius": 1.0}]}).build()
@@ -147,8 +149,9 @@ def measure(case: Case, solver: str = "pdas") -> dict:
     sol = run(solver, qp)
     cert = sol.info.get("certificate", {}) if sol.info else {}
     out = {"dim": case.dim, "angle": case.angle, "mesh_size": case.mesh_size, "tip_size": case.tip_size,
-           "law": case.law, "value": case.value, "tau": case.tau, "solver": solver, "n": qp.n, "m": qp.m,
-           "status": str(sol.status), "certified": cert.get("value"), "seconds": time.perf_counter() - t0}
+           "size_growth": case.size_growth, "law": case.law, "value": case.value, "tau": case.tau, "solver": solver,
+           "n": qp.n, "m": qp.m, "status": str(sol.status), "certified": cert.get("value"),
+           "seconds": time.perf_counter() - t0}
     if sol.x is None or sol.multipliers is None:
         return out
     _, rho = crack_coordinates(qp, case)
@@ -243,3 +246,18 @@ def _check(case: Case, solver: str, check: str, rows: list[dict]) -> dict:
     if mine is not None and "pressure" in mine and "pressure" in other:
         res["pressure_difference"] = float(np.abs(np.asarray(mine["pressure"]) - other["pressure"]).max())
     return res
+
+
+#: the 2D crack refined along its length (size_growth 0.05 instead of 0.3: the crack's middle gets ~tip_size)
+REFINED_2D = tuple(Case(2, 30.0, 0.02, tip, size_growth=0.05) for tip in (0.002, 0.001, 0.0005))
+
+
+def refined(cases=REFINED_2D, solver: str = "pdas", progress=None) -> list[dict]:
+    """Frictionless ``cases`` (rows as :func:`study`'s): does the pressure error fall when the whole crack is
+    refined, not only its tips?"""
+    rows = []
+    for case in cases:
+        rows.append(measure(case, solver))
+        if progress:
+            progress(f"refined {case}: {rows[-1]['status']} p {rows[-1].get('pressure_l2', float('nan')):.2e}")
+    return rows
