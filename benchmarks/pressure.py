@@ -175,6 +175,19 @@ def mirror_table(data: dict) -> list[str]:
     return lines
 
 
+def convergence_lines(data: dict) -> list[str]:
+    """Per dimension and angle: the frictionless pressure L2 error level by level, and the crack nodes."""
+    out = []
+    for dim in (2, 3):
+        for angle in sorted({r["angle"] for r in data["rows"] if r["dim"] == dim}):
+            sel = sorted((r for r in data["rows"] if r["dim"] == dim and r["angle"] == angle and r["law"] == "none"
+                          and "pressure_l2" in r), key=lambda r: r["n"])
+            if sel:
+                out.append(f"* {dim}D {angle:g} deg, frictionless pressure L2 level by level: "
+                           + " -> ".join(f"{_pct(r['pressure_l2'])} ({r['m']} nodes)" for r in sel))
+    return out
+
+
 def check_lines(data: dict) -> list[str]:
     out = ["* tau = 0 (uniform compression of the closed inclined crack, coarsest level): pressure L2 error "
            + ", ".join(f"{u['dim']}D {u['angle']:g} deg {u.get('pressure_l2', float('nan')):.1e} ({u['status']})"
@@ -207,7 +220,8 @@ def render(data: dict, report: Path) -> Path:
              "nodal weights; \"max outside\": the largest error on the nodes nearer the tips / front; \"lost "
              "contact\": nodes with p <= 0 (all nodes).", "",
              "## The pressure per mesh level (frictionless; Coulomb columns: the same mesh with friction)", "",
-             *pressure_table(data), "", "![pressure error against unknowns](pressure/convergence.png)", "",
+             *pressure_table(data), "", *convergence_lines(data), "",
+             "![pressure error against unknowns](pressure/convergence.png)", "",
              "![pressure along the crack, finest level](pressure/profiles.png)", "",
              "The 2D levels refine mainly the tips (gmsh's size grows at slope 0.3 from them, so the crack's middle "
              "keeps elements of ~0.3 a: 16 -> 31 crack nodes). The same crack refined along its whole length "
