@@ -123,3 +123,15 @@ def test_a_tiny_coulomb_scene_runs_through_the_sweep_code_and_the_report(tmp_pat
     assert f"3 of {s.size} nodes stick along the crack" in text and "3D: failed (no answer to map)" in text
     assert (tmp_path / "friction_fixed_point" / "steps.png").exists()
     assert (tmp_path / "friction_fixed_point" / "stick_slip.png").exists()
+
+
+def test_the_friction_page_links_the_companion_reports_that_exist_beside_it(tmp_path):
+    from dualfem.reports.friction import _companions
+
+    assert _companions(tmp_path) == []                   # rendered elsewhere: no dangling links
+    (tmp_path / "friction_curves.md").write_text("x")
+    (tmp_path / "friction_fractured.md").write_text("x")
+    lines = _companions(tmp_path)
+    assert lines[0] == "## The solver comparison at larger scale"
+    assert [ln.split("]")[0] for ln in lines if ln.startswith("- [")] == ["- [friction_curves.md",
+                                                                          "- [friction_fractured.md"]
