@@ -107,7 +107,7 @@ def _figure_steps(rows: list[dict], path: Path) -> None:
 
     names = _solvers([r for r in rows if "steps" in r])
     st = styles(names)
-    fig, axes = plt.subplots(2, 2, figsize=(11, 7), squeeze=False)
+    fig, axes = plt.subplots(2, 2, figsize=(13, 7), squeeze=False)
     for col, dim in enumerate((2, 3)):
         for s in names:
             rs = [r for r in rows if r["dim"] == dim and r["solver"] == s and "steps" in r]
@@ -127,7 +127,7 @@ def _figure_steps(rows: list[dict], path: Path) -> None:
     hs, ls = _handles(axes[0])
     if hs:
         fig.legend(hs, ls, fontsize=7, loc="center right", frameon=False)
-    fig.tight_layout(rect=(0, 0, 0.82, 1))
+    fig.tight_layout(rect=(0, 0, 0.78, 1))
     fig.savefig(path, dpi=100)
     plt.close(fig)
 
@@ -217,8 +217,11 @@ def render(data: dict, report: Path) -> Path:
           "(`coulomb=fixed_point`), clarabel, cvxpy and osqp do; pdas (default: the radius mu_f lambda inside the "
           "semismooth Newton system) and uzawa / uzawa_auto (default: the threshold updated inside the Uzawa loop) "
           "are the monolithic comparison. rho = the observed contraction, the largest ratio of successive relative "
-          "changes of the threshold (from the second step on). Every answer certified by the runner (status column "
-          "of the detail tables).", "",
+          "changes of the threshold (from the second step on). The step counts differ between solvers by their own "
+          "stop rule of the fixed point (relative change of the threshold: pdas 1e-11, mprgp 1e-11, clarabel and "
+          "cvxpy 1e-10, osqp 1e-8, uzawa_auto 10 tol, penalty max(100 tol, 1e-8)), not by the map, which is the "
+          "same for all (the same rho). Every answer certified by the runner (status column of the detail "
+          "tables).", "",
           "## Findings", "", *findings(rows), "",
           "![fixed-point steps and contraction against mu_f](friction_fixed_point/steps.png)", ""]
     for dim in (2, 3):
