@@ -135,3 +135,20 @@ def test_the_friction_page_links_the_companion_reports_that_exist_beside_it(tmp_
     assert lines[0] == "## The solver comparison at larger scale"
     assert [ln.split("]")[0] for ln in lines if ln.startswith("- [")] == ["- [friction_curves.md",
                                                                           "- [friction_fractured.md"]
+
+
+@pytest.mark.parametrize("law", [{"friction": "tresca", "friction_bound": 0.1},
+                                 {"friction": "coulomb", "friction_coefficient": 0.2}])
+def test_a_bench_curve_of_a_frictional_qp_samples_every_iterate(law):
+    """The bench's monitor takes the multipliers of every block (m_total), as the solvers report them: a frictional
+    QP's curve is not stopped at its first iterate by a shape check against the Signorini block's m."""
+    from dualfem.core.scene import load_scene
+    from dualfem.experiments.curves import timed_runs
+
+    qp = load_scene("f2", {"N": 8, "E": 1000.0, "nu": 0.3, "delta": 1e3, "remote_stress": [[-1.0, 0.6], [0.6, -1.0]],
+                           **law}).build()
+    assert qp.m_total > qp.m
+    task = {"curves": True, "hard_limit": 60.0, "cold_setup": True, "tol": None}
+    sol, *_, monitor = timed_runs(task, qp, "uzawa", {}, lambda *a: None, False, 1)
+    assert str(sol.status) == "solved"
+    assert monitor.note == "" and len(monitor.samples) > 2
