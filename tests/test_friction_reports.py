@@ -152,3 +152,20 @@ def test_a_bench_curve_of_a_frictional_qp_samples_every_iterate(law):
     sol, *_, monitor = timed_runs(task, qp, "uzawa", {}, lambda *a: None, False, 1)
     assert str(sol.status) == "solved"
     assert monitor.note == "" and len(monitor.samples) > 2
+
+
+def test_a_cached_reference_of_a_frictional_qp_passes_its_check():
+    """The bench's check of a cached reference takes every block's multipliers (m_total): a certified frictional
+    reference is trusted, not rejected for its shape and recomputed on every resume; a Signorini-sized mu is refused."""
+    from dualfem.core.scene import load_scene
+    from dualfem.experiments.bench_execute import check_reference
+    from dualfem.experiments.runner import run
+
+    qp = load_scene("f2", {"N": 8, "E": 1000.0, "nu": 0.3, "delta": 1e3, "remote_stress": [[-1.0, 0.6], [0.6, -1.0]],
+                           "friction": "tresca", "friction_bound": 0.1}).build()
+    sol = run("pdas", qp)
+    ref = {"qp_key": qp.key(), "x": sol.x, "multipliers": sol.multipliers}
+    why, kkt, _ = check_reference(qp, ref, 1e-8)
+    assert why is None and kkt < 1e-10
+    why, _, _ = check_reference(qp, {**ref, "multipliers": sol.multipliers[:qp.m]}, 1e-8)
+    assert "are not the QP's" in why
