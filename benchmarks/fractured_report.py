@@ -78,7 +78,7 @@ def render(runs: list[dict], meta: dict, report: Path, name: str = "fractured") 
           f"(spec `{spec}`; `--render-only` re-renders). Machine: "
           f"{meta.get('cpu')}, {meta.get('cores')} cores, Python {meta.get('python')}, started "
           f"{meta.get('started_utc')}. One process per run, one run each (no medians: the machine was shared, "
-          "read ratios, +-30 %).", "",
+          "read ratios, +-30 %)." + (f" {meta['note']}" if meta.get("note") else ""), "",
           "Columns: certified error = the runner's a-posteriori energy-norm certificate of the answer "
           "(relative); energy diff = |energy - the median energy of "
           "the exact solvers (pdas, mprgp, uzawa_auto, uzawa) that solved the scene| / |that energy|; "
