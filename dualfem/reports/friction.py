@@ -214,7 +214,7 @@ def render(res: dict, out: Path, command: str | None = None) -> Path:
              f"Solver of the validation cases: `{res['solver']}` (every answer certified by dualfem's judge; the "
              f"status column says so). E = {res['E']:g}, nu = {res['nu']:g}, delta = {res['delta']:g} (a free "
              "interface: only friction holds the faces). Cases and closed forms: `dualfem.experiments.friction`; "
-             "keys and conventions: docs/friction.md.", "",
+             "keys and conventions: docs/friction.md." + (f" {res['note']}" if res.get("note") else ""), "",
              "## 2D: inclined closed crack (half-length a = 0.05 in the unit plate, gmsh)", "",
              f"Remote stress {res['stress_2d']}; on the crack plane sigma_n = -n.S.n, tau = t.S.n. Closed form "
              "(plane strain): slip 4 (1 - nu^2) (abs(tau) - tau_c) / E sqrt(a^2 - x^2), tau_c = g (Tresca) or "
