@@ -169,3 +169,14 @@ def test_a_cached_reference_of_a_frictional_qp_passes_its_check():
     assert why is None and kkt < 1e-10
     why, _, _ = check_reference(qp, {**ref, "multipliers": sol.multipliers[:qp.m]}, 1e-8)
     assert "are not the QP's" in why
+
+
+def test_a_run_killed_by_the_guard_keeps_its_scene_keys():
+    """A row without a result (time limit, crash) carries the scene's grid keys like a finished run's row, so the
+    bench report draws it in its scene's panel (a frictional scene: friction, friction_coefficient), not apart."""
+    from dualfem.experiments.harness import error_row
+
+    task = {"run_id": "r1", "kind": "run", "scene": "penny.toml", "solver": "clarabel", "tier": "low",
+            "scene_params": {"friction": "coulomb", "friction_coefficient": 0.2}}
+    row = error_row(task, "killed by the wall-clock guard", "time_limit")
+    assert row["scene_friction"] == "coulomb" and row["scene_friction_coefficient"] == 0.2
