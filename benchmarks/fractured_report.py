@@ -19,6 +19,10 @@ KINDS = {
                     "benchmarks/results/fractured3d --report reports --name fractured3d",
                     "benchmarks/fractured3d.toml", ("pdas", "mprgp", "uzawa_auto", "uzawa", "penalty", "newton_amg",
                                                     "dual_gradient", "clarabel")),
+    "friction_fractured": ("Fractured bodies under compression plus shear with Coulomb friction",
+                           "nice -n 10 python benchmarks/fractured.py --spec benchmarks/friction_fractured.toml "
+                           "--out benchmarks/results/friction_fractured --report reports --name friction_fractured",
+                           "benchmarks/friction_fractured.toml", ("pdas", "mprgp", "uzawa_auto", "uzawa", "penalty")),
 }
 
 
@@ -74,7 +78,7 @@ def render(runs: list[dict], meta: dict, report: Path, name: str = "fractured") 
           f"(spec `{spec}`; `--render-only` re-renders). Machine: "
           f"{meta.get('cpu')}, {meta.get('cores')} cores, Python {meta.get('python')}, started "
           f"{meta.get('started_utc')}. One process per run, one run each (no medians: the machine was shared, "
-          "read ratios, +-30 %).", "",
+          "read ratios, +-30 %)." + (f" {meta['note']}" if meta.get("note") else ""), "",
           "Columns: certified error = the runner's a-posteriori energy-norm certificate of the answer "
           "(relative); energy diff = |energy - the median energy of "
           "the exact solvers (pdas, mprgp, uzawa_auto, uzawa) that solved the scene| / |that energy|; "
@@ -98,6 +102,7 @@ def render(runs: list[dict], meta: dict, report: Path, name: str = "fractured") 
                    f"(meshing + assembly = {fl['assembly'] / fl['floor']:.1f} x floor); floor process peak "
                    f"{fl['peak_rss_mb'] / 1024:.2f} GB.", ""]
         entries = [e for (lab2, e) in table if lab2 == lab]
+        md += _friction_facts(lab, entries, table)
         energies = [table[(lab, e)]["result"].get("energy") for e in entries if e.split(":")[0] in EXACT
                     and table[(lab, e)]["result"].get("status") == "solved"]
         energies = sorted(e for e in energies if e is not None)
@@ -144,6 +149,20 @@ def render(runs: list[dict], meta: dict, report: Path, name: str = "fractured") 
             None if name == "fractured" else f"{title}\none point per (scene, solver), tagged with the scene's "
             "defect count; a solver's points joined in scene order")
     (report / f"{name}.md").write_text("\n".join(md) + "\n")
+
+
+def _friction_facts(lab: str, entries: list[str], table: dict) -> list[str]:
+    """One line per frictional scene: the friction nodes and how many slip in each solver's answer (the
+    ``friction`` entries of its ``--json`` result); nothing for a scene without friction."""
+    parts = []
+    for e in entries:
+        blocks = table[(lab, e)]["result"].get("friction") or []
+        if blocks:
+            nodes = sum(b.get("nodes", 0) for b in blocks)
+            slip = sum(b.get("slipping", 0) for b in blocks)
+            laws = "/".join(sorted({str(b.get("law")) for b in blocks}))
+            parts.append(f"{e} {slip:,} of {nodes:,} ({laws})")
+    return ["Friction nodes slipping in each answer: " + "; ".join(parts) + ".", ""] if parts else []
 
 
 def _target_3d(floors: dict, table: dict, label: str, solvers: tuple) -> list[str]:

@@ -202,8 +202,9 @@ class Solver:
     def report_iterate(self, iteration: int, x: Any, mu: Any) -> None:
         """Report the iterate of outer iteration ``iteration`` (call it once per iteration from ``solve``).
 
-        ``x``: the QP's unknowns, shape (n,); ``mu``: the multipliers of ``B x >= 0`` in the Solution's
-        convention (contact forces, mu >= 0 at the answer), shape (m,). Either may be a zero-argument
+        ``x``: the QP's unknowns, shape (n,); ``mu``: the multipliers in the Solution's convention (contact
+        forces, mu >= 0 at the answer), shape (m,) for ``B x >= 0`` alone and (``QP.m_total``,), every block's
+        stacked, for a QP with constraint blocks (friction). Either may be a zero-argument
         callable returning the array (e.g. ``lambda: op.x_of(mu)`` for a dual method): it is called only
         when the monitor keeps this iterate, so an unsampled iteration costs one attribute read and one
         call. Without a monitor (every ``dualfem solve``, compare, stress, a bench without ``curves``)

@@ -113,8 +113,9 @@ def check_reference(qp, ref: dict, kkt_max: float) -> tuple[str | None, float, f
     if ref.get("qp_key") != qp.key():
         return "it belongs to another QP (the scene's QP changed)", float("nan"), float("nan")
     x, mu = np.asarray(ref["x"], dtype=float), np.asarray(ref["multipliers"], dtype=float)
-    if x.shape != (qp.n,) or mu.shape != (qp.m,):
-        return f"its shapes {x.shape}, {mu.shape} are not the QP's ({qp.n},), ({qp.m},)", float("nan"), float("nan")
+    if x.shape != (qp.n,) or mu.shape != (qp.m_total,):      # m_total: every constraint block's multipliers
+        return (f"its shapes {x.shape}, {mu.shape} are not the QP's ({qp.n},), ({qp.m_total},)", float("nan"),
+                float("nan"))
     try:
         res = evaluator.residuals(qp, x, mu)
         kkt = evaluator.kkt_error(res) if res.get("finite", True) else float("nan")

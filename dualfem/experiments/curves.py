@@ -81,8 +81,9 @@ class Sample:
 class IterateMonitor:
     """Samples a solver's reported iterates (module docstring); attached by the runner for one solve.
 
-    ``n``, ``m``: the QP's unknowns and constraints (iterates of other shapes end the sampling with a
-    note); ``max_samples`` (>= 2) and ``budget`` (bytes) bound the copies kept.
+    ``n``, ``m``: the QP's unknowns and constraint rows (``QP.m_total``: every block's multipliers, as
+    solvers report them; iterates of other shapes end the sampling with a note); ``max_samples`` (>= 2)
+    and ``budget`` (bytes) bound the copies kept.
     """
 
     def __init__(self, n: int, m: int, max_samples: int = MAX_SAMPLES, budget: int = MEMORY_BUDGET) -> None:
@@ -225,7 +226,7 @@ def timed_runs(task: dict, qp, name: str, params: dict, tick, warmup: bool, repe
         if monitor is not None:             # the previous repeat keeps its times; its copies are freed first
             earlier.append([(smp.iteration, smp.time_s) for smp in monitor.samples])
         monitor = None
-        monitor = IterateMonitor(qp.n, qp.m) if task.get("curves") else None
+        monitor = IterateMonitor(qp.n, qp.m_total) if task.get("curves") else None
         sol = run(name, qp, params, tol=task.get("tol"), monitor=monitor, grades=task.get("grades"))
         setups.append(sol.time_s["setup"])
         solves.append(sol.time_s["solve"])

@@ -194,6 +194,8 @@ def error_row(task: dict, message: str, status: str = "error") -> dict:
         if task.get(k) is not None:
             row[k] = task[k]
     row.solver_params = dict(task.get("params") or {})
+    for k, v in (task.get("scene_params") or {}).items():     # as a finished run's row: the report groups by them
+        row[f"scene_{k}"] = v
     row.grade = outcome_without_answer(status)
     return row.to_dict()
 

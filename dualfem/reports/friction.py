@@ -179,6 +179,30 @@ def _figure_3d(rows: list[dict], outdir: Path) -> str | None:
     return name
 
 
+#: the friction study's other reports (each made by its own command, docs/reports.md): file, what it shows
+COMPANIONS = (
+    ("friction_curves.md", "work-precision of the dual methods, clarabel, cvxpy and osqp on a 2D crack and the "
+                           "penny, Tresca and Coulomb, three tolerance tiers"),
+    ("friction_fixed_point.md", "Coulomb by the fixed point: Tresca solves and the observed contraction against mu_f "
+                                "per solver, pdas monolithic beside them; stick/slip maps along the crack and over "
+                                "the disk"),
+    ("friction_fractured.md", "a fractured body under compression plus shear with Coulomb friction: 400 cracks (2D) "
+                              "and 100 disks (3D), every dual method, certified"),
+    ("friction_cost.md", "pdas and mprgp: the cost of Tresca and Coulomb against the frictionless solve"),
+    ("friction_uzawa.md", "uzawa, uzawa_auto, penalty: the cost of friction, Coulomb in the loop or by the fixed "
+                          "point"),
+)
+
+
+def _companions(out: Path) -> list[str]:
+    """Links to the companion reports that exist beside ``out/friction.md`` (none when rendered elsewhere)."""
+    have = [(name, what) for name, what in COMPANIONS if (out / name).is_file()]
+    if not have:
+        return []
+    return ["## The solver comparison at larger scale", "",
+            *[f"- [{name}]({name}): {what}" for name, what in have], ""]
+
+
 def render(res: dict, out: Path, command: str | None = None) -> Path:
     """Write ``out/friction.md`` and its figures; returns the Markdown path."""
     out = Path(out)
@@ -190,7 +214,7 @@ def render(res: dict, out: Path, command: str | None = None) -> Path:
              f"Solver of the validation cases: `{res['solver']}` (every answer certified by dualfem's judge; the "
              f"status column says so). E = {res['E']:g}, nu = {res['nu']:g}, delta = {res['delta']:g} (a free "
              "interface: only friction holds the faces). Cases and closed forms: `dualfem.experiments.friction`; "
-             "keys and conventions: docs/friction.md.", "",
+             "keys and conventions: docs/friction.md." + (f" {res['note']}" if res.get("note") else ""), "",
              "## 2D: inclined closed crack (half-length a = 0.05 in the unit plate, gmsh)", "",
              f"Remote stress {res['stress_2d']}; on the crack plane sigma_n = -n.S.n, tau = t.S.n. Closed form "
              "(plane strain): slip 4 (1 - nu^2) (abs(tau) - tau_c) / E sqrt(a^2 - x^2), tau_c = g (Tresca) or "
@@ -225,6 +249,7 @@ def render(res: dict, out: Path, command: str | None = None) -> Path:
                   "on the local space) and converge in a handful of Newton or outer steps; the interior point "
                   "factors the whole KKT system at each of its ~8 iterations, and for Coulomb repeats that per "
                   "fixed-point iteration (the counters above).", ""]
+    lines += _companions(out)
     md = out / "friction.md"
     atomic_write_text(md, "\n".join(lines))
     return md
