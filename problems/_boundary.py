@@ -272,6 +272,21 @@ def _measure(V: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(np.linalg.det(G), 0.0)) / math.factorial(k)
 
 
+
+def evaluate(f, X: np.ndarray, what: str) -> np.ndarray:
+    """``f(X)`` for a load expression ``f`` (its ``key`` names it; ``X`` (dim, ...) points), finite: any error
+    of the expression, or a NaN or infinite value, is one InputError naming the key and ``what`` (where)."""
+    key = getattr(f, "key", "load")
+    try:
+        vals = f(X)
+    except InputError:
+        raise
+    except Exception as exc:                           # noqa: BLE001 - an expression that breaks
+        raise InputError(f"{key} cannot be evaluated {what}: {type(exc).__name__}: {exc}") from None
+    if not np.all(np.isfinite(vals)):
+        raise InputError(f"{key} gives NaN or infinite values {what}; it must be finite there")
+    return vals
+
 def integrate(out: np.ndarray, nodes: np.ndarray, simplices: np.ndarray, f: Field | np.ndarray, scale: float,
                what: str) -> None:
     """Add the consistent P1 nodal forces of the field f (a Field, or a constant vector) over the simplices
@@ -291,14 +306,7 @@ def integrate(out: np.ndarray, nodes: np.ndarray, simplices: np.ndarray, f: Fiel
         else:
             lam, w = simplex_rule(kv - 1)
             X = np.einsum("dkf,qk->dfq", V, lam)               # (dim, ns, q)
-            try:
-                vals = f(X)
-            except InputError:
-                raise
-            except Exception as exc:                           # noqa: BLE001 - an expression that breaks
-                raise InputError(f"{f.key} cannot be evaluated {what}: {type(exc).__name__}: {exc}") from None
-            if not np.all(np.isfinite(vals)):
-                raise InputError(f"{f.key} gives NaN or infinite values {what}; it must be finite there")
+            vals = evaluate(f, X, what)
             contrib = scale * np.einsum("cfq,q,qk->ckf", vals, w, lam) * meas[None, None, :]
         for c in range(contrib.shape[0]):
             out[c] += np.bincount(s.ravel(), weights=contrib[c].ravel(), minlength=n)

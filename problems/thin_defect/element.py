@@ -176,15 +176,7 @@ def _edge_forces(F: np.ndarray, P: np.ndarray, triples: np.ndarray, fn, scale: f
     a, b = P[:, triples[0]], P[:, triples[1]]
     X = a[:, :, None] + (b - a)[:, :, None] * xi
     L = np.linalg.norm(b - a, axis=0)
-    try:
-        vals = np.broadcast_to(fn(X), X.shape)
-    except InputError:
-        raise
-    except Exception as exc:                                   # noqa: BLE001 - an expression that breaks
-        raise InputError(f"{getattr(fn, 'key', 'load')} cannot be evaluated {what}: {type(exc).__name__}: {exc}") \
-            from None
-    if not np.all(np.isfinite(vals)):
-        raise InputError(f"{getattr(fn, 'key', 'load')} gives NaN or infinite values {what}; it must be finite there")
+    vals = np.broadcast_to(bd.evaluate(fn, X, what), X.shape)
     contrib = scale * np.einsum("ckq,q,iq,k->cik", vals, wg, N, L)
     for c in range(2):
         F[c] += np.bincount(triples.ravel(), weights=contrib[c].ravel(), minlength=F.shape[1])

@@ -139,14 +139,7 @@ def integrate(out: np.ndarray, q: QuadraticTets, simplices: np.ndarray, f, scale
     if isinstance(f, np.ndarray):
         vals = np.broadcast_to(f[:, None, None], X.shape)
     else:
-        try:
-            vals = f(X)
-        except InputError:
-            raise
-        except Exception as exc:                                            # noqa: BLE001 - an expression that breaks
-            raise InputError(f"{f.key} cannot be evaluated {what}: {type(exc).__name__}: {exc}") from None
-        if not np.all(np.isfinite(vals)):
-            raise InputError(f"{f.key} gives NaN or infinite values {what}; it must be finite there")
+        vals = bd.evaluate(f, X, what)
     contrib = scale * np.einsum("cfq,q,qa->caf", vals, w, N) * meas[None, None, :]
     for c in range(out.shape[0]):
         out[c] += np.bincount(ids.ravel(), weights=contrib[c].ravel(), minlength=out.shape[1])
