@@ -11,11 +11,12 @@ P2_DISCS = DISCS[5:]
 #: PALETTE index of each discretization (2D figures: "graded 0.1" is 3D only, so its green goes to a P2 curve
 #: instead of the palette's yellow, hard to see on white)
 COLOUR = {"uniform": 0, "graded 0.3": 1, "graded 0.1": 2, "graded 0.05": 3, "adaptive": 4, "P2 graded 0.3": 5,
-          "P2-qp graded 0.3": 6, "P2-qp graded 0.1": 2, "P2 adaptive": 7, "P2-qp adaptive": 4}
+          "P2-qp graded 0.3": 6, "P2-qp graded 0.1": 2, "P2 adaptive": 7, "P2-qp adaptive": 4,
+          "P2 graded 0.5": 6}
 #: line style per discretization (the adaptive P2 curves dashed: "P2-qp adaptive" shares P1 adaptive's colour)
 DASHED = ("P2 adaptive", "P2-qp adaptive")
 #: the 3D discretizations (benchmarks/accuracy_3d.py): P1 and quadratic tetrahedra (no quarter-point in 3D)
-DISCS3 = ("uniform", "graded 0.3", "graded 0.1", "graded 0.05", "adaptive", "P2 graded 0.3")
+DISCS3 = ("uniform", "graded 0.3", "graded 0.1", "graded 0.05", "adaptive", "P2 graded 0.3", "P2 graded 0.5")
 TITLES = {"open": "open crack under tension (opening)",
           "slip": "closed crack at 30 degrees, compression + shear (slip)"}
 
