@@ -199,11 +199,18 @@ def p2_noise(b: dict) -> float:
 
 
 def _bias_p2(b: dict) -> list[str]:
-    boxes = list(next(iter(b.values())))
     out = ["", "## The box's bias measured with P2-quarter-point elements", "",
            "mesh_size min(5 a, L/4), tip_size a/20, size_growth 0.1 (the P2 rows' reference); s_L / s_200 - 1 "
            "follows c (a/L)^2 closely, which the P1 measurement's mesh noise hid:", "",
-           "| L / a | " + " | ".join(f"s_L {c}" for c in b) + " | " + " | ".join(f"s_L / s_200 - 1, {c}" for c in b)
+           *bias_table(b)]
+    return out
+
+
+def bias_table(b: dict) -> list[str]:
+    """The markdown table of a box bias {case: {L: s_L}}: s_L per case and s_L / s_(largest L) - 1."""
+    boxes = list(next(iter(b.values())))
+    big = f"{float(boxes[-1]):g}"
+    out = ["| L / a | " + " | ".join(f"s_L {c}" for c in b) + " | " + " | ".join(f"s_L / s_{big} - 1, {c}" for c in b)
            + " |", "|---|" + "---|" * (2 * len(b))]
     for L in boxes:
         s = [b[c][L] for c in b]
@@ -252,20 +259,13 @@ def _three_d(res: dict, figdir: Path) -> list[str]:
     rows = [r for r in res["rows"] if r["case"] in ("penny", "ellipse")]
     figure3(rows, figdir / "three_d.png")
     b3 = res["bias3"]
-    boxes = list(next(iter(b3.values())))
     out = ["", "## 3D: the penny and an elliptic crack (b/a = 0.5) under tension", "",
            *([f"Machine of the 3D rows: {res['machine3']} (`python benchmarks/accuracy_3d.py --report reports` "
               "re-runs them alone).", ""] if res.get("machine3") else []),
            "Problems and errors: `benchmarks/accuracy_3d.py`. The box's bias, one mesh (mesh_size 2 a, tip_size "
            "0.1 a, size_growth 0.3) per cube side L; the rows below are in the 10 a cube, their errors against "
            "s_10 / s_40 times the closed form:", "",
-           "| L / a | " + " | ".join(f"s_L {c}" for c in b3) + " | " + " | ".join(f"s_L / s_40 - 1, {c}" for c in b3)
-           + " |", "|---|" + "---|" * (2 * len(b3))]
-    for L in boxes:
-        s = [b3[c][L] for c in b3]
-        last = [b3[c][boxes[-1]] for c in b3]
-        out.append(f"| {float(L):g} | " + " | ".join(f"{x:.5f}" for x in s) + " | " +
-                   " | ".join(f"{x / y - 1:+.1e}" for x, y in zip(s, last, strict=True)) + " |")
+           *bias_table(b3)]
     out += ["", "![3D](accuracy/three_d.png)", "",
             "| crack | discretization | unknowns | opening error | energy error (rel.) | estimate eta (rel.) | "
             "effectivity eta / error | time (s) | status |", "|---|---|---|---|---|---|---|---|---|"]
