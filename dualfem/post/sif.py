@@ -90,8 +90,8 @@ def parts(qp, elements: tuple[str, ...] = ("P1",)):
                          "only the mouths of edge cracks)")
     if qp.geometry.element not in elements:
         raise InputError(f"stress intensity factors by this method need element = {' or '.join(map(repr, elements))}; "
-                         f"this QP has element = {qp.geometry.element!r} (--sif: use element = 'P1' or "
-                         f"'P2-quarter-point')")
+                         f"this QP has element = {qp.geometry.element!r} (--sif takes element = 'P1', "
+                         f"'P2-quarter-point' in 2D and 'P2' in 3D)")
     return it, qp.geometry, qp.material
 
 

@@ -46,7 +46,7 @@ def interaction3d(qp, x, r_out: float | None = None) -> StressIntensity:
     """K_I, K_II, K_III at every 3D front node by the interaction integral (module docstring); ``r_out``: the
     domain's radius (length; default an eighth of the defect's largest extent from the node, at least two
     elements)."""
-    it, g, mat = parts(qp)
+    it, g, mat = parts(qp, elements=("P1", "P2"))
     if it.dim != 3:
         raise InputError("interaction3d needs a 3D QP: use dualfem.post.sif_integral.interaction in 2D")
     if r_out is not None and not (isinstance(r_out, (int, float)) and np.isfinite(r_out) and r_out > 0):
@@ -55,23 +55,27 @@ def interaction3d(qp, x, r_out: float | None = None) -> StressIntensity:
     from dualfem.numerics.p1 import tet_gradients
     from dualfem.post.fields import nodal_displacement
 
-    pts, tets = g.nodes, g.cells
+    pts, tets = g.nodes, g.cells[:4]
     G, nu = mat.E / (2 * (1 + mat.nu)), mat.nu
     lam = 2 * G * nu / (1 - 2 * nu)
     grad, vol = tet_gradients(pts, tets)
     u = nodal_displacement(qp, x - (qp.shift.x if qp.shift is not None else 0.0))     # (nn, 3)
-    Du = np.einsum("tic,idt->tcd", u[tets.T], grad)                                    # d u_c / d x_d
+    if g.element == "P2":           # quadratic tetrahedra: the fields at the 4 points of each (their nodes 4..9)
+        Du, xq = _p2_gradients(pts, g.cells, u, grad)
+        npt = _TET4.shape[0]
+    else:                           # P1: constant per tetrahedron, one point (the centroid)
+        Du, xq, npt = np.einsum("tic,idt->tcd", u[tets.T], grad), pts[:, tets].mean(axis=1), 1  # d u_c / d x_d
     eps = 0.5 * (Du + Du.transpose(0, 2, 1))
-    body = _Body(pts, tets, grad, np.abs(vol), Du, eps,
+    body = _Body(pts, tets, grad, np.repeat(np.abs(vol) / npt, npt), Du, eps,
                  lam * np.trace(eps, axis1=1, axis2=2)[:, None, None] * np.eye(3) + 2 * G * eps,
-                 _face_tractions3d(qp, x), G, nu)
+                 _face_tractions3d(qp, x), G, nu, xq, npt)
     frames, hs, edges = front_frames_3d(it, pts)
     K = np.zeros((it.front.size, 3))
     radius = np.zeros(it.front.size)
     for d in np.unique(it.front_id):
         if edges[int(d)].size == 0:
             raise InputError(f"defect {int(d)} has no front edges (interface.faces): no 3D interaction integral")
-        geo = _FrontGeometry(it, pts, tets, edges[int(d)])              # distances to this front, computed once
+        geo = _FrontGeometry(it, pts, body.xq, edges[int(d)])            # distances to this front, computed once
         mine = np.r_[it.lower[it.defect_id == d], it.front[it.front_id == d]]
         for k in np.flatnonzero(it.front_id == d):
             P = pts[:, it.front[k]]
@@ -86,12 +90,37 @@ def interaction3d(qp, x, r_out: float | None = None) -> StressIntensity:
                            K[:, 2], frames, "interaction", radius)
 
 
-class _Body:
-    """The FE fields of the body per tetrahedron (global frame) and what the integral needs besides."""
+#: the 4-point rule on a tetrahedron (exact for quadratics): barycentric (A, B, B, B) and its permutations, weights 1/4
+_TET4 = np.full((4, 4), 0.1381966011250105) + np.eye(4) * (0.5854101966249685 - 0.1381966011250105)
+#: the corners of the mid-edge nodes 4..9 of a quadratic tetrahedron (VTK's tetra10 order, as GeometryPart holds them)
+_EDGES10 = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
 
-    def __init__(self, pts, tets, grad, vol, Du, eps, sig, traction, G, nu):
+
+def _p2_gradients(pts: np.ndarray, cells: np.ndarray, u: np.ndarray, grad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The displacement gradients (4 nt, 3, 3) (d u_c / d x_d) of the quadratic tetrahedra ``cells`` (10, nt) at the
+    4 points of :data:`_TET4` (point k of tetrahedron t at 4 t + k) and the points (3, 4 nt); ``grad`` (4, 3, nt)
+    the corners' barycentric gradients (straight-sided tetrahedra: N_i = l_i (2 l_i - 1), N_ij = 4 l_i l_j)."""
+    nt = cells.shape[1]
+    D, X = np.empty((nt, 4, 3, 3)), np.empty((3, nt, 4))
+    for k, lam in enumerate(_TET4):
+        gN = np.empty((10, 3, nt))
+        for i in range(4):
+            gN[i] = (4 * lam[i] - 1) * grad[i]
+        for e, (i, j) in enumerate(_EDGES10):
+            gN[4 + e] = 4 * (lam[i] * grad[j] + lam[j] * grad[i])
+        D[:, k] = np.einsum("tic,idt->tcd", u[cells.T], gN)
+        X[:, :, k] = np.einsum("dit,i->dt", pts[:, cells[:4]], lam)
+    return D.reshape(4 * nt, 3, 3), X.reshape(3, 4 * nt)
+
+
+class _Body:
+    """The FE fields of the body (global frame) at its integration points (``npt`` per tetrahedron: point k of
+    tetrahedron t at ``npt t + k``; ``xq`` their positions, ``vol`` their weights) and what the integral needs
+    besides; ``grad`` the corners' barycentric gradients per tetrahedron (q is P1 on the corners)."""
+
+    def __init__(self, pts, tets, grad, vol, Du, eps, sig, traction, G, nu, xq, npt):
         self.pts, self.tets, self.grad, self.vol, self.Du, self.eps, self.sig = pts, tets, grad, vol, Du, eps, sig
-        self.traction, self.G, self.nu = traction, G, nu
+        self.traction, self.G, self.nu, self.xq, self.npt = traction, G, nu, xq, npt
         self.node_tets = node_cells(tets, pts.shape[1])
         from scipy.spatial import cKDTree
 
@@ -100,14 +129,14 @@ class _Body:
 
 
 class _FrontGeometry:
-    """Distances to one defect's front (a polyline of its edges) of nodes, tetrahedron centroids and the face
+    """Distances to one defect's front (a polyline of its edges) of nodes, integration points ``xq`` and the face
     rule's points, each computed on first use and kept (they do not depend on the front node)."""
 
-    def __init__(self, it, pts, tets, edges):
-        self.it, self.pts, self.tets, self.A, self.B = it, pts, tets, pts[:, edges[:, 0]], pts[:, edges[:, 1]]
+    def __init__(self, it, pts, xq, edges):
+        self.it, self.pts, self.xq, self.A, self.B = it, pts, xq, pts[:, edges[:, 0]], pts[:, edges[:, 1]]
         self.edges = edges
         self.r_node, self.foot_node = np.full(pts.shape[1], np.nan), np.zeros((3, pts.shape[1]))
-        self.r_tet, self.foot_tet = np.full(tets.shape[1], np.nan), np.zeros((3, tets.shape[1]))
+        self.r_tet, self.foot_tet = np.full(xq.shape[1], np.nan), np.zeros((3, xq.shape[1]))
         self.face_cache: dict[int, tuple] = {}
 
     def _fill(self, ids, r, foot, points):
@@ -119,8 +148,8 @@ class _FrontGeometry:
     def nodes(self, ids):
         return self._fill(ids, self.r_node, self.foot_node, lambda i: self.pts[:, i])
 
-    def centroids(self, ids):
-        return self._fill(ids, self.r_tet, self.foot_tet, lambda i: self.pts[:, self.tets[:, i]].mean(axis=1))
+    def points(self, ids):
+        return self._fill(ids, self.r_tet, self.foot_tet, lambda i: self.xq[:, i])
 
     def faces(self):
         """The face rule of the defect's triangles (:func:`_face_rule`), computed once."""
@@ -131,7 +160,7 @@ class _FrontGeometry:
 
 def _node_integral(body: _Body, geo: _FrontGeometry, it, F: np.ndarray, P: np.ndarray, ro: float) -> np.ndarray:
     """(K_I, K_II, K_III) at the front node at P with frame F (rows e1, e2, e3) and domain radius ro."""
-    pts, tets, q = body.pts, body.tets, body.q
+    tets, q = body.tets, body.q
     near = np.asarray(body.tree.query_ball_point(P, 1.5 * ro), dtype=np.int64)
     r_n, foot = geo.nodes(near)
     q[near] = np.clip(1 - r_n / ro, 0, 1) * np.clip(1 - np.abs(F[2] @ (foot - P[:, None])) / ro, 0, 1)
@@ -142,17 +171,19 @@ def _node_integral(body: _Body, geo: _FrontGeometry, it, F: np.ndarray, P: np.nd
         raise InputError(f"the domain of the front node at {P.round(6).tolist()} holds no front")
     T = np.unique(np.concatenate([body.node_tets[n] for n in near[q[near] > 0]]))
     gq = np.einsum("it,idt->td", q[tets[:, T]], body.grad[:, :, T]) @ F.T                  # grad q, tip frame
-    rc, fc = geo.centroids(T)
-    dv = F @ (pts[:, tets[:, T]].mean(axis=1) - fc)
+    Q = (T[:, None] * body.npt + np.arange(body.npt)).ravel()                              # their points
+    gq = np.repeat(gq, body.npt, axis=0)
+    rc, fc = geo.points(Q)
+    dv = F @ (body.xq[:, Q] - fc)
     th = np.arctan2(dv[1], dv[0])
-    S, D, Ep = (F @ f[T] @ F.T for f in (body.sig, body.Du, body.eps))          # FE fields in the tip frame
+    S, D, Ep = (F @ f[Q] @ F.T for f in (body.sig, body.Du, body.eps))          # FE fields in the tip frame
     faces = _face_points(geo.faces(), it, q, body.traction, F) if body.traction is not None else None
     K = np.zeros(3)
     for mode in (1, 2, 3):
         Sa, Ua = _aux(np.maximum(rc, 1e-300), th, mode, body.G, body.nu)
         integrand = (Ua[:, None, :] @ S)[:, 0] + (D[:, None, :, 0] @ Sa)[:, 0]
         integrand[:, 0] -= (Sa * Ep).sum(axis=(1, 2))
-        I = float(body.vol[T] @ (integrand * gq).sum(axis=1))
+        I = float(body.vol[Q] @ (integrand * gq).sum(axis=1))
         if faces is not None:
             wq, rq, tq, side = faces
             c = np.stack([_aux(np.ones(1), np.array([sd * np.pi]), mode, body.G, body.nu)[1][0] for sd in (1.0, -1.0)])

@@ -29,10 +29,12 @@ def stress_intensity(qp, x, method: str = "auto", **options) -> StressIntensity:
     g = getattr(qp, "geometry", None)
     if method == "quarter-point":
         return quarter_point(qp, x)
+    dim = getattr(getattr(qp, "interface", None), "dim", None)
+    if method == "auto" and g is not None and g.element == "P2" and dim == 3:
+        return interaction3d(qp, x, **options)       # quadratic tetrahedra: the domain integral at 4 points each
     if method == "series" or (method == "auto" and g is not None and g.element in P2_ELEMENTS):
         return series_fit(qp, x, **options)
     if method in ("auto", "interaction"):
-        dim = getattr(getattr(qp, "interface", None), "dim", None)
         return (interaction3d if dim == 3 else interaction)(qp, x, **options)
     return correlation(qp, x, method, **options)
 
