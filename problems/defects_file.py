@@ -63,6 +63,19 @@ def _dim(dim: Any) -> int:
 
 
 # --------------------------------------------------------------------------------------- reading
+def file_or_tables(defects_file, tables, dim: int) -> tuple[list | None, str]:
+    """The defect tables of a scene: those of ``defects_file`` (:func:`read_defects`) when it is set, with the
+    words naming it in messages; else ``tables`` (the ``[[defects]]`` key as given, None when not given) and ''.
+    Both set, or a ``defects_file`` that is not a path: InputError."""
+    if defects_file is None or (isinstance(defects_file, str) and not defects_file.strip()):
+        return tables, ""
+    if not isinstance(defects_file, str):
+        raise InputError(f"defects_file must be a path to a .csv or .json file, got {defects_file!r}")
+    if tables is not None:
+        raise InputError("give either [[defects]] tables or defects_file, not both")
+    return read_defects(defects_file, dim), f"defects_file {defects_file!r}"
+
+
 def read_defects(path: str | Path, dim: int, name: str = "defects_file") -> list[dict]:
     """The defects of a CSV or JSON file (module docstring) as ``[[defects]]`` tables.
 

@@ -8,7 +8,7 @@ from dualfem.errors import InputError, check_positive
 from .._boundary import parse_scalar
 from .._friction_keys import KEYS as FRICTION_KEYS
 from .._friction_keys import table_keys
-from ..defects_file import MAX_DEFECTS, read_defects
+from ..defects_file import MAX_DEFECTS, file_or_tables
 
 CURVES = ("polyline", "spline")
 #: points of one defect. The number of defects is bounded by the mesh they need (the gmsh triangle
@@ -139,15 +139,10 @@ def parse_defects(tables, defect: np.ndarray, delta: float, width: float, height
 
 def read_file_tables(defects_file, tables) -> tuple[list | None, str]:
     """The defect tables of a scene and what to call them in messages: those of ``defects_file`` (a CSV
-    or JSON file, :func:`dualfem.problems.defects_file.read_defects`) when it is set, else ``tables``
+    or JSON file, :func:`dualfem.problems.defects_file.file_or_tables`) when it is set, else ``tables``
     (the ``[[defects]]`` key as given, None when not given). Both set: InputError."""
-    if defects_file is None or (isinstance(defects_file, str) and not defects_file.strip()):
-        return tables, "[[defects]] tables"
-    if not isinstance(defects_file, str):
-        raise InputError(f"defects_file must be a path to a .csv or .json file, got {defects_file!r}")
-    if tables is not None:
-        raise InputError("give either [[defects]] tables or defects_file, not both")
-    return read_defects(defects_file, 2), f"defects_file {defects_file!r}"
+    tables, where = file_or_tables(defects_file, tables, 2)
+    return tables, where or "[[defects]] tables"
 
 
 def defects_label(defects: list[dict]) -> str:

@@ -60,7 +60,7 @@ from .._defect_geometry import check_growth
 from .._interface import delta_free_part, interface, local_unknowns, with_delta
 from ..adaptive import Adaptive
 from ..adaptive import check_keys as check_adaptive
-from ..defects_file import read_defects
+from ..defects_file import file_or_tables
 from ..loads import check_load_model
 from . import quadratic as p2
 from .assemble import free_dofs, stiffness
@@ -91,18 +91,6 @@ def _vector3(key: str, value) -> np.ndarray:
     if not np.all(np.isfinite(v)) or not np.linalg.norm(v) > 0:
         raise InputError(f"{key} must be a finite non-zero vector [x, y, z], got {value!r}")
     return v
-
-
-def _file_tables(defects_file, tables) -> tuple[list | None, str]:
-    """The tables of ``defects_file`` (a CSV or JSON file of disks and ellipses) when set, with the words
-    naming it in messages; else ``tables`` as given and ''. Both set: InputError."""
-    if defects_file is None or (isinstance(defects_file, str) and not defects_file.strip()):
-        return tables, ""
-    if not isinstance(defects_file, str):
-        raise InputError(f"defects_file must be a path to a .csv or .json file, got {defects_file!r}")
-    if tables is not None:
-        raise InputError("give either [[defects]] tables or defects_file, not both")
-    return read_defects(defects_file, 3), f"defects_file {defects_file!r}"
 
 
 @register_problem
@@ -208,7 +196,7 @@ class ThreeD(Adaptive, Problem):
                 tables = json.loads(tables)
             except ValueError:
                 raise InputError(f"defects must be a list of tables (from --set: JSON), got {tables!r}") from None
-        tables, where = _file_tables(p["defects_file"], tables)
+        tables, where = file_or_tables(p["defects_file"], tables, 3)
         if tables is None:          # not given: the default disk; an empty list is an uncracked body
             tables = [{"shape": "disk", "center": [w / 2 for w in box], "normal": [0.0, 0.0, 1.0],
                        "radius": 0.25 * min(box[0], box[1])}]
