@@ -48,6 +48,17 @@ def double_nodes(points: np.ndarray, lower: np.ndarray) -> tuple[np.ndarray, np.
     return np.hstack([points, points[:, lower]]), nn + np.arange(lower.size)
 
 
+def cut_faults(n_points: int, cells: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> tuple[bool, np.ndarray]:
+    """What makes a cut mesh wrong (``cells`` (k, nc) node ids, ``lower``/``upper`` the copies of the doubled nodes):
+    whether a cell touches both copies of one node, and the pairs j whose ``lower[j]`` or ``upper[j]`` is in no
+    cell (the node has cells on one side only)."""
+    base = np.arange(n_points)
+    base[upper] = lower
+    orig = np.sort(base[cells], axis=0)
+    count = np.bincount(cells.ravel(), minlength=n_points)
+    return bool(np.any(orig[1:] == orig[:-1])), np.flatnonzero((count[lower] == 0) | (count[upper] == 0))
+
+
 def jump_operators(node_dofs: np.ndarray, lower: np.ndarray, upper: np.ndarray, n: int) -> list[sp.csr_matrix]:
     """The jumps ``J_c`` (m x n, CSR), ``J_c x = u_c(upper[j]) - u_c(lower[j])``, one per component c.
 

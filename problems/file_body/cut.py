@@ -28,7 +28,7 @@ from scipy.sparse.csgraph import connected_components
 
 from dualfem.errors import InputError
 
-from .._interface import DoubledNodes, double_nodes
+from .._interface import DoubledNodes, cut_faults, double_nodes
 from .body import BodyMesh, cell_faces, face_index
 from .orient import chain, orient_surface
 
@@ -232,13 +232,9 @@ def _plus_side(pts, cells, inc_c, inc_t, j, comp, normals, ids, names, nodes) ->
 
 def _check(c: FileCut, names: list[str]) -> None:
     """No cell touches both copies of a node; every doubled node has cells on both sides."""
-    base = np.arange(c.points.shape[1])
-    base[c.upper] = c.lower
-    orig = np.sort(base[c.cells], axis=0)
-    if np.any(orig[1:] == orig[:-1]):
+    both, lonely = cut_faults(c.points.shape[1], c.cells, c.lower, c.upper)
+    if both:
         raise InputError("a cell touches both copies of a doubled node: the mesh is too coarse at a defect")
-    count = np.bincount(c.cells.ravel(), minlength=c.points.shape[1])
-    lonely = np.flatnonzero((count[c.lower] == 0) | (count[c.upper] == 0))
     if lonely.size:
         j = int(lonely[0])
         raise InputError(f"defects[{int(c.defect_id[j])}] (group {names[int(c.defect_id[j])]!r}): the doubled node at "

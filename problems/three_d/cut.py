@@ -32,7 +32,7 @@ from scipy.sparse.csgraph import connected_components
 
 from dualfem.errors import InputError
 
-from .._interface import DoubledNodes, double_nodes
+from .._interface import DoubledNodes, cut_faults, double_nodes
 from .geometry import Surface
 
 _FACES = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])     # face k of a tetrahedron: without corner k
@@ -190,13 +190,9 @@ def _sides(points, tets, slot, normals, ids, defect_faces, nn) -> np.ndarray:
 def check_cut(c: Cut3) -> None:
     """No tetrahedron touches both copies of a node; every doubled node has tetrahedra on both sides."""
     n0 = c.points.shape[1] - c.upper.size
-    base = np.arange(c.points.shape[1])
-    base[c.upper] = c.lower
-    orig = np.sort(base[c.tets], axis=0)
-    if np.any(orig[1:] == orig[:-1]):
+    both, lonely = cut_faults(c.points.shape[1], c.tets, c.lower, c.upper)
+    if both:
         raise CutError("a tetrahedron touches both copies of a doubled node")
-    count = np.bincount(c.tets.ravel(), minlength=c.points.shape[1])
-    lonely = np.flatnonzero((count[c.lower] == 0) | (count[c.upper] == 0))
     if lonely.size or c.upper.size and c.upper.min() < n0:
         j = int(lonely[0]) if lonely.size else 0
         raise CutError(f"defects[{int(c.defect_id[j])}]: the doubled node at "
