@@ -77,64 +77,74 @@ def render(res: dict, md: Path) -> None:
              "the closed form, so the curves show the discretization alone. Left: the 200 a box's own bias (about "
              "(a/L)^2 = 2.5e-5) and the noise of s_L from one gmsh mesh to the next (the slip's s_L is not "
              "monotone in L: about 2e-3), which bounds the smallest error these curves resolve.", "",
-             "| L / a | " + " | ".join(f"s_L {c}" for c in res["bias"]) + " | " +
-             " | ".join(f"s_L / s_200 - 1, {c}" for c in res["bias"]) + " |",
-             "|---|" + "---|" * (2 * len(res["bias"]))]
-    boxes = list(next(iter(res["bias"].values())))
-    for L in boxes:
-        s = [res["bias"][c][L] for c in res["bias"]]
-        last = [res["bias"][c][boxes[-1]] for c in res["bias"]]
-        lines.append(f"| {float(L):g} | " + " | ".join(f"{x:.5f}" for x in s) + " | " +
-                     " | ".join(f"{x / y - 1:+.1e}" for x, y in zip(s, last, strict=True)) + " |")
+             *bias_table(res["bias"])]
     summary = []
     for case in ("open", "slip"):
         rows = [r for r in res["rows"] if r["case"] == case]
-        if not rows:
-            continue
-        b = res["bias"][case]
-        noise = max(abs(v / b[boxes[-1]] - 1) for k, v in b.items() if float(k) >= 50)
-        noise2 = p2_noise(res["bias_p2"][case]) if res.get("bias_p2") else noise
-        for r in rows:
-            n = noise2 if r["disc"] in P2_DISCS else noise
-            r["floor"] = r["jump_error"] < n or r["energy_rel"] ** 2 < n
-        figure(res["rows"], case, figdir / f"{case}.png")
-        lines += ["", f"## {TITLES[case].capitalize()}", "", f"![{case}](accuracy/{case}.png)", "",
-                  "| discretization | box L/a | unknowns | jump error | energy error (rel.) | estimate eta (rel.) | "
-                  "effectivity eta / error | time (s) | status |", "|---|---|---|---|---|---|---|---|---|"]
-        for r in rows:
-            star = " *" if r["floor"] else ""
-            lines.append(f"| {r['disc']} | {r['L']:g} | {r['unknowns']:,} | {_fmt(r['jump_error'])}{star} | "
-                         f"{_fmt(r['energy_rel'])}{star} | {_fmt(r['eta_rel'])} | "
-                         f"{_fmt(r['effectivity'], '.2f')}{star} | "
-                         f"{r['time_s']:.2f} | {r['status']} |")
-        eff = [r["effectivity"] for r in rows if not r["floor"] and np.isfinite(r["effectivity"])
-               and r["disc"] not in P2_DISCS]
-        lines += ["", f"\\* below the bias noise n = {noise:.1e} of this case (the largest |s_L / s_200 - 1| for L >= "
-                  f"50 a): a jump error under n or an energy error under sqrt(n) is not resolved, nor its "
-                  f"effectivity. Effectivity index where resolved (P1): {min(eff):.2f} to {max(eff):.2f}."]
-        if res.get("bias_p2"):
-            lines += ["", f"P2 rows (errors against the P2 bias): n = {noise2:.1e}, the 200 a box's own bias "
-                      "c (a/200)^2 plus the largest departure of s_L / s_200 - 1 from c ((a/L)^2 - (a/200)^2) for "
-                      "L >= 50 a (c fitted there). " + _eff_p2(rows)]
-        summary.append((case, rows))
-        lines += _sif_p2(case, rows)
+        if rows:
+            lines += _two_d(res, case, rows, figdir)
+            summary.append((case, rows, DISCS))
     if res.get("bias3"):
         lines += _three_d(res, figdir)
     if res.get("bias_p2"):
         lines += _bias_p2(res["bias_p2"])
-    lines += ["", "## Per unknown", "", "The best of each discretization at or below 50,000 unknowns and overall "
-              "(the targets of issue 38: 2D opening <= 1e-3 with <= 50 k unknowns):", "",
-              "| case | discretization | unknowns (<= 50 k) | jump error | energy error | unknowns (any) | "
-              "jump error | energy error |", "|---|---|---|---|---|---|---|---|"]
     for case in ("penny", "ellipse"):
         rows = [r for r in res["rows"] if r["case"] == case]
         for r in rows:
             r.setdefault("energy_rel", float("nan"))
             r.setdefault("floor", False)
         if rows:
-            summary.append((case, rows))
-    for case, rows in summary:
-        for d in DISCS:
+            summary.append((case, rows, DISCS3))
+    lines += _per_unknown(summary)
+    lines += ["", "## What is not here", "",
+              "No compression plus shear case in 3D. "
+              "The estimate eta (rel.) is relative to the whole body's energy (the uniform "
+              "field included), the scene key target_error's measure; the energy error column is relative to the "
+              "crack's part of the solution. Quarter-point elements in 2D only (no quarter-point tetrahedra); the 2D "
+              "P2 stress intensity factors by the jumps only (no interaction integral with P2 gradients in 2D; in 3D "
+              "the interaction integral takes the P2 fields); no estimator on P2 tetrahedra.", ""]
+    md.write_text("\n".join(lines), encoding="utf-8")
+
+
+def _two_d(res: dict, case: str, rows: list[dict], figdir: Path) -> list[str]:
+    """The section of one 2D case: its figure, its rows (errors under the bias noise marked), the effectivity."""
+    b = res["bias"][case]
+    last = list(b)[-1]
+    noise = max(abs(v / b[last] - 1) for k, v in b.items() if float(k) >= 50)
+    noise2 = p2_noise(res["bias_p2"][case]) if res.get("bias_p2") else noise
+    for r in rows:
+        n = noise2 if r["disc"] in P2_DISCS else noise
+        r["floor"] = r["jump_error"] < n or r["energy_rel"] ** 2 < n
+    figure(res["rows"], case, figdir / f"{case}.png")
+    lines = ["", f"## {TITLES[case].capitalize()}", "", f"![{case}](accuracy/{case}.png)", "",
+             "| discretization | box L/a | unknowns | jump error | energy error (rel.) | estimate eta (rel.) | "
+             "effectivity eta / error | time (s) | status |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        star = " *" if r["floor"] else ""
+        lines.append(f"| {r['disc']} | {r['L']:g} | {r['unknowns']:,} | {_fmt(r['jump_error'])}{star} | "
+                     f"{_fmt(r['energy_rel'])}{star} | {_fmt(r['eta_rel'])} | "
+                     f"{_fmt(r['effectivity'], '.2f')}{star} | "
+                     f"{r['time_s']:.2f} | {r['status']} |")
+    eff = [r["effectivity"] for r in rows if not r["floor"] and np.isfinite(r["effectivity"])
+           and r["disc"] not in P2_DISCS]
+    lines += ["", f"\\* below the bias noise n = {noise:.1e} of this case (the largest |s_L / s_200 - 1| for L >= "
+              f"50 a): a jump error under n or an energy error under sqrt(n) is not resolved, nor its "
+              f"effectivity. Effectivity index where resolved (P1): {min(eff):.2f} to {max(eff):.2f}."]
+    if res.get("bias_p2"):
+        lines += ["", f"P2 rows (errors against the P2 bias): n = {noise2:.1e}, the 200 a box's own bias "
+                  "c (a/200)^2 plus the largest departure of s_L / s_200 - 1 from c ((a/L)^2 - (a/200)^2) for "
+                  "L >= 50 a (c fitted there). " + _eff_p2(rows)]
+    return lines + _sif_p2(case, rows)
+
+
+def _per_unknown(summary: list[tuple[str, list[dict], tuple[str, ...]]]) -> list[str]:
+    """The best row of each discretization at or below 50,000 unknowns and overall, per case."""
+    lines = ["", "## Per unknown", "", "The best of each discretization at or below 50,000 unknowns and overall "
+             "(the targets of issue 38: 2D opening <= 1e-3 with <= 50 k unknowns):", "",
+             "| case | discretization | unknowns (<= 50 k) | jump error | energy error | unknowns (any) | "
+             "jump error | energy error |", "|---|---|---|---|---|---|---|---|"]
+    for case, rows, discs in summary:
+        for d in discs:
             r = [x for x in rows if x["disc"] == d]
             if not r:
                 continue
@@ -145,14 +155,7 @@ def render(res: dict, md: Path) -> None:
                     f"{_fmt(a['energy_rel'])}") if a else "- | - | -"
             lines.append(f"| {case} | {d} | {cell} | {z['unknowns']:,} | {_fmt(z['jump_error'])}"
                          f"{' *' if z['floor'] else ''} | {_fmt(z['energy_rel'])} |")
-    lines += ["", "## What is not here", "",
-              "No compression plus shear case in 3D. "
-              "The estimate eta (rel.) is relative to the whole body's energy (the uniform "
-              "field included), the scene key target_error's measure; the energy error column is relative to the "
-              "crack's part of the solution. Quadratic elements in 2D only here (no P2 tetrahedra), graded and "
-              "adaptive (the P2 ZZ estimator, order 2 in the size rule); their stress intensity factors by the "
-              "jumps only (no interaction integral with P2 gradients).", ""]
-    md.write_text("\n".join(lines), encoding="utf-8")
+    return lines
 
 
 def _eff_p2(rows: list[dict]) -> str:
