@@ -30,7 +30,7 @@ import scipy.sparse as sp
 from dualfem.errors import InputError
 from dualfem.laws import conic_rows
 from dualfem.numerics.coulomb import coulomb_blocks
-from dualfem.numerics.coulomb_run import coulomb_by_tresca
+from dualfem.numerics.coulomb_run import coulomb_solution
 from dualfem.numerics.epigraph import epigraph, norm_blocks
 from dualfem.numerics.face_polish import polish_if_better as face_polish_if_better
 from dualfem.numerics.polish import polish_if_better
@@ -151,10 +151,7 @@ class ClarabelSolver(Solver):
             self._build(tq)
             return self._run()
 
-        c = coulomb_by_tresca(self.qp, tresca, float(self.params["coulomb_tol"]),
-                              int(self.params["coulomb_max_iter"]), "clarabel")
-        return Solution(solver=self.name, status=c.status, x=c.x, multipliers=c.mu, iterations=c.iterations,
-                        message=f"clarabel: {c.message}", info=c.info)
+        return coulomb_solution(self, tresca, "clarabel")
 
     def _run(self) -> Solution:
         """Clarabel on the QP of the last :meth:`_build`, unscaled and polished."""

@@ -37,7 +37,7 @@ from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.errors import InputError
 from dualfem.laws import conic_rows
 from dualfem.numerics.coulomb import coulomb_blocks
-from dualfem.numerics.coulomb_run import coulomb_by_tresca
+from dualfem.numerics.coulomb_run import coulomb_solution
 from dualfem.numerics.epigraph import norm_blocks, uniform_scaling
 from dualfem.numerics.face_polish import polish_if_better as face_polish_if_better
 from dualfem.numerics.polish import active_set_polish
@@ -236,10 +236,7 @@ class CvxpySolver(Solver):
                 self._setup_friction(tq)
                 return self._solve_built()
 
-            c = coulomb_by_tresca(self.qp, tresca, float(self.params["coulomb_tol"]),
-                                  int(self.params["coulomb_max_iter"]), "cvxpy")
-            return Solution(solver=self.name, status=c.status, x=c.x, multipliers=c.mu, iterations=c.iterations,
-                            message=f"cvxpy: {c.message}", info=c.info)
+            return coulomb_solution(self, tresca, "cvxpy")
         return self._solve_built()
 
     def _solve_built(self) -> Solution:

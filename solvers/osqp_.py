@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.laws import upper_bounds
 from dualfem.numerics.coulomb import coulomb_blocks
-from dualfem.numerics.coulomb_run import coulomb_by_tresca
+from dualfem.numerics.coulomb_run import coulomb_solution
 from dualfem.numerics.epigraph import epigraph, norm_blocks, not_linear
 from dualfem.numerics.scaling import scale
 from dualfem.registry import register_solver
@@ -115,10 +115,7 @@ class OSQPSolver(Solver):
                 self._build(tq)
                 return self._run()
 
-            c = coulomb_by_tresca(self.qp, tresca, float(self.params["coulomb_tol"]),
-                                  int(self.params["coulomb_max_iter"]), "osqp")
-            return Solution(solver=self.name, status=c.status, x=c.x, multipliers=c.mu, iterations=c.iterations,
-                            message=f"osqp: {c.message}", info=c.info)
+            return coulomb_solution(self, tresca, "osqp")
         return self._run()
 
     def _run(self) -> Solution:

@@ -55,7 +55,7 @@ import numpy as np
 from dualfem.core.quiet import c_stdout_to_stderr
 from dualfem.laws import conic_rows
 from dualfem.numerics.coulomb import coulomb_blocks
-from dualfem.numerics.coulomb_run import coulomb_by_tresca
+from dualfem.numerics.coulomb_run import coulomb_solution
 from dualfem.numerics.epigraph import epigraph, norm_blocks, not_linear
 from dualfem.numerics.face_polish import polish_if_better as face_polish_if_better
 from dualfem.numerics.polish import polish_if_better
@@ -298,10 +298,7 @@ class QpsolversSolver(Solver):
             self._build(tq)
             return self._run()
 
-        c = coulomb_by_tresca(self.qp, tresca, float(self.params["coulomb_tol"]),
-                              int(self.params["coulomb_max_iter"]), self.name)
-        return Solution(solver=self.name, status=c.status, x=c.x, multipliers=c.mu, iterations=c.iterations,
-                        message=f"{self.backend}: {c.message}", info=c.info)
+        return coulomb_solution(self, tresca, self.name, prefix=self.backend)
 
     def _run(self) -> Solution:
         """The backend on the Problem of the last :meth:`_build`, unscaled (and polished on request)."""

@@ -1,7 +1,8 @@
 """Coulomb friction for a solver that handles Tresca: the fixed point of :mod:`dualfem.numerics.coulomb` over the
 solver's own Tresca solves, returned as the fields of one answer (the conic and QP backends use it).
 
-``coulomb_by_tresca(qp, solve_one, tol, max_iter, label)``: ``solve_one(qp_tresca) -> Solution`` is the solver's
+``coulomb_by_tresca(qp, solve_one, tol, max_iter, label)`` (a plugin's whole answer: ``coulomb_solution``):
+``solve_one(qp_tresca) -> Solution`` is the solver's
 Tresca path on the QP whose Coulomb blocks the fixed point replaced by Tresca blocks of the current threshold
 (same rows and multiplier layout). A Tresca solve that is not ``solved`` stops the loop (status
 ``numerical_error``, its message kept); a fixed point that reaches ``max_iter`` or stalls is ``max_iter``, never
@@ -64,3 +65,14 @@ def coulomb_by_tresca(qp: QP, solve_one: Callable[[QP], Solution], tol: float, m
     msg = (f"Coulomb fixed point: {res.iterations} Tresca solve(s), last relative change of the threshold "
            f"{last:.1e}{why}")
     return CoulombOutcome(status, res.x, res.mu, {**_whole(res.counters), "coulomb": res.iterations}, info, msg)
+
+
+def coulomb_solution(solver, build_and_solve: Callable[[QP], Solution], label: str,
+                     prefix: str | None = None) -> Solution:
+    """The Solution of a solver plugin (``solver.name``, ``solver.qp``, its ``coulomb_tol`` and
+    ``coulomb_max_iter`` parameters) on a Coulomb QP: :func:`coulomb_by_tresca` over ``build_and_solve`` (one
+    Tresca problem set up and solved by the plugin), its message led by ``prefix`` (default ``label``)."""
+    c = coulomb_by_tresca(solver.qp, build_and_solve, float(solver.params["coulomb_tol"]),
+                          int(solver.params["coulomb_max_iter"]), label)
+    return Solution(solver=solver.name, status=c.status, x=c.x, multipliers=c.mu, iterations=c.iterations,
+                    message=f"{prefix or label}: {c.message}", info=c.info)
