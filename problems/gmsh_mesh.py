@@ -160,17 +160,19 @@ def _build(gmsh, width: float, height: float, parsed, right_split: tuple[float, 
     return sides, surface, curves, tips
 
 
-def _size_view(gmsh, view: tuple[np.ndarray, np.ndarray, np.ndarray], scale: float) -> int:
-    """A gmsh post-processing view of a per-triangle size (list data "ST", the size constant on each
-    triangle), coordinates and sizes times ``scale``, set as the background mesh (a ``PostView`` field)."""
-    pts, tri, sizes = (np.asarray(a) for a in view)
-    tri = tri.astype(np.int64)
-    xy = pts[:, tri] * scale                                            # (2, 3, nt)
-    nt = tri.shape[1]
-    data = np.concatenate([xy[0].T, xy[1].T, np.zeros((nt, 3)), np.repeat(np.asarray(sizes, float)[:, None] * scale,
-                                                                           3, axis=1)], axis=1)
+def background_sizes(gmsh, view: tuple[np.ndarray, np.ndarray, np.ndarray], scale: float = 1.0) -> int:
+    """A gmsh post-processing view of a per-element size (``view`` = (points (dim, n), cells (3 or 4, nc),
+    sizes (nc,)): list data "ST" on triangles, "SS" on tetrahedra, the size constant on each), coordinates and
+    sizes times ``scale``, set as the background mesh (a ``PostView`` field); its tag."""
+    pts, cells, sizes = (np.asarray(a) for a in view)
+    cells = cells.astype(np.int64)
+    nv, nc = cells.shape
+    xyz = np.zeros((3, nv, nc))
+    xyz[:pts.shape[0]] = pts[:, cells] * scale                            # (3, nv, nc)
+    data = np.concatenate([xyz[0].T, xyz[1].T, xyz[2].T,
+                           np.repeat(np.asarray(sizes, float)[:, None] * scale, nv, axis=1)], axis=1)
     tag = gmsh.view.add("dualfem_size")
-    gmsh.view.addListData(tag, "ST", nt, data.ravel().tolist())
+    gmsh.view.addListData(tag, "ST" if nv == 3 else "SS", nc, data.ravel().tolist())
     fld = gmsh.model.mesh.field
     f = fld.add("PostView")
     fld.setNumber(f, "ViewTag", tag)
@@ -327,7 +329,7 @@ def mesh_with_defects(width: float, height: float, defects: list[dict], mesh_siz
                          2.0 ** refine, size_growth)
         else:
             gmsh.option.setNumber("Mesh.MeshSizeMax", float(mesh_size) / L * 2.0 ** refine)
-            view = _size_view(gmsh, size_view, 2.0 ** refine / L)
+            view = background_sizes(gmsh, size_view, 2.0 ** refine / L)
         try:
             gmsh.model.mesh.generate(2)
         except Exception as exc:  # gmsh raises a bare Exception with its last error message

@@ -24,6 +24,7 @@ import numpy as np
 
 from dualfem.errors import InputError, MissingDependency
 
+from ..gmsh_mesh import background_sizes
 from .body import BodyMesh, Group, make_body
 
 SUFFIXES = (".geo", ".step", ".stp", ".brep")
@@ -112,7 +113,7 @@ def mesh_geometry(path: Path, mesh_size: float, tip_size: float, defect_groups: 
         if mesh_size > 0:
             gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
         if size_view is not None:
-            _view(gmsh, dim, size_view)
+            _view(gmsh, size_view)
         elif tip_size > 0:
             _tip_field(gmsh, dim, tip_size, mesh_size or max(info.box), defect_groups)
         try:
@@ -122,21 +123,10 @@ def mesh_geometry(path: Path, mesh_size: float, tip_size: float, defect_groups: 
         return _extract(gmsh, dim, f"geometry_file {path.name!r}")
 
 
-def _view(gmsh, dim: int, view: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
-    """A per-element size (list data "ST" on triangles, "SS" on tetrahedra, constant on each) as gmsh's
-    background mesh (a ``PostView`` field), the sizes of points and curves not taken from the geometry."""
-    pts, cells, sizes = (np.asarray(a) for a in view)
-    xyz = np.zeros((3, *cells.shape))
-    xyz[:dim] = pts[:, cells.astype(np.int64)]                            # (3, dim + 1, nc)
-    nc, nv = cells.shape[1], cells.shape[0]
-    data = np.concatenate([xyz[0].T, xyz[1].T, xyz[2].T, np.repeat(np.asarray(sizes, float)[:, None], nv, axis=1)],
-                          axis=1)
-    tag = gmsh.view.add("dualfem_size")
-    gmsh.view.addListData(tag, "ST" if dim == 2 else "SS", nc, data.ravel().tolist())
-    fld = gmsh.model.mesh.field
-    f = fld.add("PostView")
-    fld.setNumber(f, "ViewTag", tag)
-    fld.setAsBackgroundMesh(f)
+def _view(gmsh, view: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
+    """A per-element size as gmsh's background mesh (:func:`dualfem.problems.gmsh_mesh.background_sizes`), the
+    sizes of points and curves not taken from the geometry."""
+    background_sizes(gmsh, view)
     for key in ("Mesh.MeshSizeExtendFromBoundary", "Mesh.MeshSizeFromPoints", "Mesh.MeshSizeFromCurvature"):
         gmsh.option.setNumber(key, 0)
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from dualfem.errors import InputError, MissingDependency
 
+from ..gmsh_mesh import background_sizes
 from .geometry import Surface
 
 MAX_TETRAHEDRA = 4_000_000
@@ -187,7 +188,7 @@ def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | N
             _fields(gmsh, mesh_size, tip_size, front, surface_size, [p[0] for p in pieces], grade)
         else:
             gmsh.option.setNumber("Mesh.MeshSizeMax", mesh_size)
-            _view(gmsh, size_view)
+            background_sizes(gmsh, size_view)
         try:
             gmsh.model.mesh.generate(3)
         except Exception as exc:  # noqa: BLE001 - gmsh raises a bare Exception with its last error message
@@ -199,22 +200,6 @@ def mesh_box(box, surfaces: list[Surface], mesh_size: float, tip_size: float | N
             gmsh.finalize()
         else:
             gmsh.model.remove()
-
-
-def _view(gmsh, view: tuple[np.ndarray, np.ndarray, np.ndarray]) -> None:
-    """A post-processing view of a per-tetrahedron size (list data "SS", constant on each tetrahedron) as
-    gmsh's background mesh (a ``PostView`` field)."""
-    pts, tets, sizes = (np.asarray(a) for a in view)
-    xyz = pts[:, tets.astype(np.int64)]                                   # (3, 4, nt)
-    nt = xyz.shape[2]
-    data = np.concatenate([xyz[0].T, xyz[1].T, xyz[2].T, np.repeat(np.asarray(sizes, float)[:, None], 4, axis=1)],
-                          axis=1)
-    tag = gmsh.view.add("dualfem_size")
-    gmsh.view.addListData(tag, "SS", nt, data.ravel().tolist())
-    fld = gmsh.model.mesh.field
-    f = fld.add("PostView")
-    fld.setNumber(f, "ViewTag", tag)
-    fld.setAsBackgroundMesh(f)
 
 
 def _fields(gmsh, mesh_size: float, tip_size: float | None, front: list[int],
